@@ -41,10 +41,12 @@ class LinearModel:
     D: Optional[np.ndarray] = None
     state_names: tuple = field(default_factory=tuple)
 
-    def make_filter(self, transition: str = 'euler') -> TimeScaleKalmanFilter:
+    def make_filter(self, transition: str = 'euler',
+                    allow_nonregressive: bool = False) -> TimeScaleKalmanFilter:
         """A fresh TimeScaleKalmanFilter for this model."""
         return TimeScaleKalmanFilter(self.A, self.C, Q=self.Q, R=self.R, G=self.G, B=self.B,
-                                     D=self.D, x0=self.x0, P0=self.P0, transition=transition)
+                                     D=self.D, x0=self.x0, P0=self.P0, transition=transition,
+                                     allow_nonregressive=allow_nonregressive)
 
 
 def spring_mass() -> LinearModel:
@@ -133,9 +135,9 @@ class FilterRun:
 
 
 def run_filter(model: LinearModel, ts: TimeScale, y: np.ndarray, *,
-               transition: str = 'euler') -> FilterRun:
+               transition: str = 'euler', allow_nonregressive: bool = False) -> FilterRun:
     """Run the time-scale filter over ts with measurements y (NaN rows = missing)."""
-    kf = model.make_filter(transition)
+    kf = model.make_filter(transition, allow_nonregressive)
     N, n = len(ts), kf.n
     mu = ts.mu()
     x_pred = np.zeros((N, n))

@@ -143,7 +143,8 @@ class TimeScaleKalmanFilter:
 
     def __init__(self, A: ArrayLike, C: ArrayLike, *, Q: ArrayLike, R: ArrayLike,
                  G: ArrayLike = None, B: ArrayLike = None, D: ArrayLike = None,
-                 x0: ArrayLike, P0: ArrayLike, transition: str = 'euler') -> None:
+                 x0: ArrayLike, P0: ArrayLike, transition: str = 'euler',
+                 allow_nonregressive: bool = False) -> None:
         self.A = as_matrix(A, 'A')
         n = self.A.shape[0]
         if self.A.shape != (n, n):
@@ -177,6 +178,10 @@ class TimeScaleKalmanFilter:
         if transition not in TRANSITIONS:
             raise FilterError(f'transition must be one of {TRANSITIONS}, got {transition!r}')
         self.transition = transition
+        # Definition 2.12 asks I + mu A to be invertible; Table 3 itself never inverts it,
+        # so a user who knowingly runs a non-regressive model (as Cai et al. do with
+        # system (1) at mu = 1) can say so.  Off by default: such a step is refused.
+        self.allow_nonregressive = bool(allow_nonregressive)
         self.GQGt = self.G @ self.Q @ self.G.T
         self.x = self._vector(x0, n, 'x0')
         P0m = as_matrix(P0, 'P0')
@@ -248,7 +253,7 @@ class TimeScaleKalmanFilter:
         n = self.n
         if self.transition == 'euler':
             I_muA = np.eye(n) + mu * A
-            if np.linalg.cond(I_muA) > 1e12:
+            if not self.allow_nonregressive and np.linalg.cond(I_muA) > 1e12:
                 raise FilterError(
                     f'I + mu A is singular at mu = {mu}: A is not regressive on this time '
                     'scale (Bohner & Wintz Definition 2.12); the step is refused')
