@@ -16,6 +16,7 @@ def _replace_from_temp(path: Path, write) -> Path:
     try:
         with os.fdopen(fd, 'wb') as f:
             write(f)
+        os.chmod(tmp, 0o644)          # mkstemp makes 0600; outputs are for reading
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
