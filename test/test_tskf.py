@@ -9,7 +9,7 @@ from tskf_ros.tskf import FilterError, TimeScaleKalmanFilter, van_loan
 
 
 def random_model(rng, n=3, p=2, r=2):
-    """A random stable-ish model with SPD covariances."""
+    """Draw a random stable-ish model with SPD covariances."""
     A = rng.normal(size=(n, n)) * 0.5 - np.eye(n)
     C = rng.normal(size=(p, n))
     G = rng.normal(size=(n, r))
@@ -22,7 +22,7 @@ def random_model(rng, n=3, p=2, r=2):
     x0 = rng.normal(size=n)
     M0 = rng.normal(size=(n, n))
     P0 = M0 @ M0.T + np.eye(n)
-    return dict(A=A, C=C, G=G, Q=Q, R=R, B=B, D=D, x0=x0, P0=P0)
+    return {'A': A, 'C': C, 'G': G, 'Q': Q, 'R': R, 'B': B, 'D': D, 'x0': x0, 'P0': P0}
 
 
 def textbook_predictive_step(x, P, y, u, mu, m):
@@ -113,7 +113,7 @@ def test_dare_fixed_point_and_limit_to_care_as_mu_goes_to_zero():
 
 
 def scalar_riccati_closed_form(t, a, c, g2q, r, p0):
-    """p' = 2 a p + g2q - c^2 p^2 / r: p = (p+ - p- k e^{-gt}) / (1 - k e^{-gt})."""
+    """Solve p' = 2 a p + g2q - c^2 p^2 / r: p = (p+ - p- k e^{-gt}) / (1 - k e^{-gt})."""
     s = c * c / r
     disc = np.sqrt(a * a + s * g2q)
     p_plus, p_minus = (a + disc) / s, (a - disc) / s
@@ -183,20 +183,20 @@ def test_scalars_and_nested_lists_are_accepted_and_shapes_are_canonical():
 
 
 @pytest.mark.parametrize('kwargs, message', [
-    (dict(A=np.eye(2), C=[[1, 0, 0]]), 'C must have 2 columns'),
-    (dict(A=np.ones((2, 3)), C=[[1, 0, 0]]), 'A must be square'),
-    (dict(P0=[[1, 0.5], [0.0, 1]]), 'P0 is not symmetric'),
-    (dict(P0=[[1, 2], [2, 1]]), 'P0 is indefinite'),
-    (dict(Q=[[-1.0]]), 'Q is indefinite'),
-    (dict(R=0.0), 'R must be positive definite'),
-    (dict(R=[[1, 0], [0, 1]]), 'R must have shape'),
-    (dict(x0=[1, 2, 3]), 'x0 must have 2 entries'),
-    (dict(G=[1, 0, 0]), 'G must have 2 rows'),
-    (dict(transition='rk4'), 'transition must be one of'),
+    ({'A': np.eye(2), 'C': [[1, 0, 0]]}, 'C must have 2 columns'),
+    ({'A': np.ones((2, 3)), 'C': [[1, 0, 0]]}, 'A must be square'),
+    ({'P0': [[1, 0.5], [0.0, 1]]}, 'P0 is not symmetric'),
+    ({'P0': [[1, 2], [2, 1]]}, 'P0 is indefinite'),
+    ({'Q': [[-1.0]]}, 'Q is indefinite'),
+    ({'R': 0.0}, 'R must be positive definite'),
+    ({'R': [[1, 0], [0, 1]]}, 'R must have shape'),
+    ({'x0': [1, 2, 3]}, 'x0 must have 2 entries'),
+    ({'G': [1, 0, 0]}, 'G must have 2 rows'),
+    ({'transition': 'rk4'}, 'transition must be one of'),
 ])
 def test_bad_models_are_refused_with_a_named_reason(kwargs, message):
-    base = dict(A=[[0, 1], [-1, -2]], C=[[1, 0]], Q=1.0, R=2.0, G=[0, 1], x0=[1, 1],
-                P0=np.diag([2.0, 3.0]))
+    base = {'A': [[0, 1], [-1, -2]], 'C': [[1, 0]], 'Q': 1.0, 'R': 2.0, 'G': [0, 1],
+            'x0': [1, 1], 'P0': np.diag([2.0, 3.0])}
     base.update(kwargs)
     A, C = base.pop('A'), base.pop('C')
     with pytest.raises(FilterError, match=message):

@@ -1,4 +1,5 @@
-"""The papers' linear models, truth simulation on a time scale, and an offline filter run.
+"""
+The papers' linear models, truth simulation on a time scale, and an offline filter run.
 
 Models:
 - Bohner & Wintz Example 3.20 / Cai et al. system (1): spring-mass, A = [[0, 1], [-1, -2]],
@@ -43,7 +44,7 @@ class LinearModel:
 
     def make_filter(self, transition: str = 'euler',
                     allow_nonregressive: bool = False) -> TimeScaleKalmanFilter:
-        """A fresh TimeScaleKalmanFilter for this model."""
+        """Make a fresh TimeScaleKalmanFilter for this model."""
         return TimeScaleKalmanFilter(self.A, self.C, Q=self.Q, R=self.R, G=self.G, B=self.B,
                                      D=self.D, x0=self.x0, P0=self.P0, transition=transition,
                                      allow_nonregressive=allow_nonregressive)
@@ -73,7 +74,8 @@ def owc(a: float = 1.0, theta0: float = 0.5435, p0: float = 0.01) -> LinearModel
 def simulate(model: LinearModel, ts: TimeScale, rng: np.random.Generator, *,
              noise_scaling: str = 'theory', x_true0: Optional[np.ndarray] = None
              ) -> tuple[np.ndarray, np.ndarray]:
-    """Simulate the model on ts: x(sigma) = (I + mu A) x + mu B u + noise; y = C x + D + v.
+    """
+    Simulate the model on ts: x(sigma) = (I + mu A) x + mu B u + noise; y = C x + D + v.
 
     Returns (x, y) with x of shape (N, n) and y of shape (N, p).  The truth starts at
     x_true0 (default: drawn from N(x0, P0)).  The measurement at the last point uses
@@ -108,7 +110,8 @@ def simulate(model: LinearModel, ts: TimeScale, rng: np.random.Generator, *,
 
 def ou_angle(points: np.ndarray, rng: np.random.Generator, *, mean: float = 0.5435,
              std: float = 0.04, tau: float = 2.0) -> np.ndarray:
-    """A bounded vibration angle: an Ornstein-Uhlenbeck process sampled exactly at points.
+    """
+    Simulate a bounded vibration angle: an Ornstein-Uhlenbeck process sampled exactly at points.
 
     Used as the true theta for Cai's OWC model, whose printed dynamics x^Delta = x
     grow without bound (see README); clipped to the linear range of eq. (2).

@@ -1,4 +1,5 @@
-"""Time scales: forward jump, graininess, the papers' time scales, and a gap classifier.
+"""
+Time scales: forward jump, graininess, the papers' time scales, and a gap classifier.
 
 Definitions (Bohner & Wintz Definition 2.3; Cai et al. Definition 2):
     sigma(t) = inf{s in T : s > t},   mu(t) = sigma(t) - t,
@@ -54,7 +55,7 @@ class TimeScale:
         return self.points.size
 
     def sigma(self) -> np.ndarray:
-        """Forward jump at each point (sigma(max T) = max T)."""
+        """Return the forward jump at each point (the last point jumps to itself)."""
         return forward_jump(self.points)
 
     def mu(self) -> np.ndarray:
@@ -72,12 +73,12 @@ class TimeScale:
         return m
 
     def until(self, t_max: float) -> 'TimeScale':
-        """The part with t <= t_max."""
+        """Return the part with t <= t_max."""
         k = int(np.searchsorted(self.points, t_max, side='right'))
         return TimeScale(self.points[:k], self.dense[:max(k - 1, 0)])
 
     def head(self, count: int) -> 'TimeScale':
-        """The first count points."""
+        """Return the first count points."""
         return TimeScale(self.points[:count], self.dense[:max(count - 1, 0)])
 
 
@@ -100,7 +101,7 @@ def backward_graininess(points: Sequence[float]) -> np.ndarray:
 
 
 def discrete(points: Iterable[float]) -> TimeScale:
-    """A purely discrete (isolated) time scale from points."""
+    """Build a time scale of isolated points only (no dense stretch)."""
     pts = np.asarray(sorted(points), dtype=float)
     return TimeScale(pts, np.zeros(max(pts.size - 1, 0), dtype=bool))
 
@@ -132,7 +133,8 @@ def squares(count: int) -> TimeScale:
 
 
 def from_segments(segments: Sequence[tuple], dense_step: float) -> TimeScale:
-    """Build a time scale from ('dense', a, b) and ('discrete', [points]) segments.
+    """
+    Build a time scale from ('dense', a, b) and ('discrete', [points]) segments.
 
     A dense segment [a, b] is realised as a, a + h, ..., b with h <= dense_step
     chosen so that b is hit exactly.  Whether the paper writes an end open or closed
@@ -168,7 +170,7 @@ def p_ab(a: float, b: float, periods: int, dense_step: float) -> TimeScale:
 
 
 def concatenate(first: TimeScale, second: TimeScale, switch: float) -> TimeScale:
-    """first for t <= switch, then second for t > switch (e.g. Cai's T_3)."""
+    """Join two time scales: first for t <= switch, second for t > switch (Cai's T_3)."""
     a = first.until(switch)
     k = int(np.searchsorted(second.points, switch, side='right'))
     b = TimeScale(second.points[k:], second.dense[k:] if k < second.points.size else
@@ -219,13 +221,14 @@ class Segment:
 
     @property
     def length(self) -> float:
-        """end - start; for a jump this is J."""
+        """Return end - start; for a jump this is J."""
         return self.end - self.start
 
 
 def classify(stamps: Sequence[float], *, period: float, dense_fraction: float = 0.5,
              jump_factor: float = 1.5) -> list[Segment]:
-    """Split sorted stamps into dense runs, discrete runs and jumps (gaps), from data.
+    """
+    Split sorted stamps into dense runs, discrete runs and jumps (gaps), from data.
 
     An interval dt between neighbours is dense when dt < dense_fraction * period,
     discrete when it is up to jump_factor * period, and a jump (a gap of length
@@ -259,4 +262,3 @@ def jumps(stamps: Sequence[float], *, period: float,
     """(point after the jump, J) for every gap longer than jump_factor * period."""
     return [(s.end, s.length) for s in classify(stamps, period=period, jump_factor=jump_factor)
             if s.kind == 'jump']
-

@@ -1,4 +1,5 @@
-"""The Kalman filter on time scales (Bohner & Wintz 2013, Table 3; Cai et al., Table I).
+"""
+The Kalman filter on time scales (Bohner & Wintz 2013, Table 3; Cai et al., Table I).
 
 System on a time scale T, with graininess mu(t) = sigma(t) - t:
 
@@ -55,7 +56,8 @@ class FilterError(ValueError):
 
 def as_matrix(value: ArrayLike, name: str, shape: Optional[tuple] = None, *,
               column: bool = False) -> np.ndarray:
-    """Return value as a finite float 2-D array.
+    """
+    Return value as a finite float 2-D array.
 
     Scalars become 1x1; a 1-D sequence becomes a row (or a column with column=True,
     as for G = [0, 1] in Bohner & Wintz Example 3.20).
@@ -95,7 +97,8 @@ def check_covariance(m: np.ndarray, name: str, *, definite: bool = False,
 
 
 def van_loan(A: np.ndarray, GQGt: np.ndarray, mu: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact (F, Q_d) of x' = A x + G w over mu: F = e^{A mu}, Q_d = int_0^mu F(s) GQG^T F(s)^T.
+    """
+    Exact (F, Q_d) of x' = A x + G w over mu: F = e^{A mu}, Q_d = int_0^mu F(s) GQG^T F(s)^T.
 
     Van Loan (1978): expm([[-A, GQG^T], [0, A^T]] mu) = [[., F^-1 Q_d], [0, F^T]].
     """
@@ -133,7 +136,8 @@ class StepResult:
 
 
 class TimeScaleKalmanFilter:
-    """Kalman filter on a time scale: Bohner & Wintz Table 3 with Cai's offset D.
+    """
+    Kalman filter on a time scale: Bohner & Wintz Table 3 with Cai's offset D.
 
     After construction `x`, `P` hold the estimate at the first point t0.  Each
     `step(mu, y)` uses the measurement at the current point t and moves `x`, `P`
@@ -242,7 +246,8 @@ class TimeScaleKalmanFilter:
         return mu
 
     def step(self, mu: float, y: ArrayLike, u: ArrayLike = None) -> StepResult:
-        """Advance from t to sigma(t) = t + mu with the measurement y(t); Table 3 verbatim.
+        """
+        Advance from t to sigma(t) = t + mu with the measurement y(t); Table 3 verbatim.
 
         `y=None` is an explicit missing measurement: only the time update is made
         (K = 0), which is what Table 3 gives as R -> infinity.
@@ -302,7 +307,8 @@ class TimeScaleKalmanFilter:
     def integrate(self, duration: float, y: Callable[[float], ArrayLike],
                   u: Optional[Callable[[float], ArrayLike]] = None, *,
                   rtol: float = 1e-9, atol: float = 1e-12) -> None:
-        """Run the Kalman-Bucy filter (Table 2) over a right-dense stretch [t, t + duration].
+        """
+        Run the Kalman-Bucy filter (Table 2) over a right-dense stretch [t, t + duration].
 
         y(s) and u(s) give the continuous measurement and input at s in [0, duration]
         (time from the start of the stretch).  The ODEs for xhat and P are solved
@@ -339,7 +345,7 @@ class TimeScaleKalmanFilter:
         self.x, self.P = zf[:n], (P + P.T) / 2
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
-        """A copy of (x, P), for history and rewinding."""
+        """Return a copy of (x, P), for history and rewinding."""
         return self.x.copy(), self.P.copy()
 
     def set_state(self, x: ArrayLike, P: ArrayLike) -> None:

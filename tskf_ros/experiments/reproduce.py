@@ -1,4 +1,5 @@
-"""Reproduce the papers' numerical examples: B&W Example 3.20 and Cai et al. Section V.
+"""
+Reproduce the papers' numerical examples: B&W Example 3.20 and Cai et al. Section V.
 
     python -m tskf_ros.experiments.reproduce --out results/
 
@@ -71,7 +72,8 @@ def plot_series(s: Series, title: str, marks: Optional[list] = None):
     fig, ax = plt.subplots(2, 2, figsize=(12, 6.5), sharex='col')
     it = np.arange(s.t.size)
     for col, (x, xlabel) in enumerate([(it, 'iteration'), (s.t, 'time t on the time scale')]):
-        style = dict(marker='.', ms=3, lw=0.8) if col == 0 else dict(ls='none', marker='.', ms=3)
+        style = {'marker': '.', 'ms': 3}
+        style.update({'lw': 0.8} if col == 0 else {'ls': 'none'})
         a = ax[0, col]
         a.plot(x, s.measured, color='0.6', label='measurement', **style)
         a.plot(x, s.truth, color='k', label='true', **style)
@@ -106,7 +108,7 @@ EXAMPLE_320_SCALES = ('2Z', 'H_n', 'P_1,2', '2Z_then_H_n')
 
 
 def example_320_timescale(name: str, count: int, p12_step: float) -> timescale.TimeScale:
-    """The four time scales of Example 3.20 / Cai Fig. 2, count points each."""
+    """Build one of the four time scales of Example 3.20 / Cai Fig. 2, count points."""
     if name == '2Z':
         return timescale.h_integers(2.0, count)
     if name == 'H_n':
@@ -144,7 +146,7 @@ def post_jump_report(s: Series, jumps: list) -> list:
 
 
 def worst_points(s: Series, count: int = 5) -> list:
-    """The count largest |estimation errors|, with the graininess that led into each."""
+    """Return the count largest |estimation errors|, with the graininess before each."""
     e = np.abs(s.pred - s.truth)
     nu = timescale.backward_graininess(s.t)
     idx = np.argsort(e)[::-1][:count]
@@ -257,9 +259,8 @@ def main(argv: Optional[list] = None) -> int:
         res = td_summary(series)
         summary['cai_td'][system] = res
         write_json(out / f'cai_td_{system}.json', res)
-        save_figure(plot_series(series['euler'], f'Cai T_d, {system} (I + mu A), '
-                                                  f'{args.noise_scaling} noise', marks),
-                    out / f'cai_td_{system}.png')
+        title = f'Cai T_d, {system} (I + mu A), {args.noise_scaling} noise'
+        save_figure(plot_series(series['euler'], title, marks), out / f'cai_td_{system}.png')
         e = res['euler']
         pj = ', '.join(f"t={p['t']:g} J={p['J']:g}: {p['estimation_error']:+.3f}/"
                        f"{p['corrected_error']:+.3f}" for p in e['post_jump_points'])
