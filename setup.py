@@ -1,0 +1,55 @@
+from glob import glob
+import os
+
+from setuptools import find_packages
+from setuptools import setup
+
+package_name = 'tskf_ros'
+
+
+def _files(pattern):
+    """Return the files (not directories) matching a glob pattern, sorted."""
+    return sorted(path for path in glob(pattern, recursive=True) if os.path.isfile(path))
+
+
+def _tree(top):
+    """Map every file below top to a share/<package>/<relative dir> data_files entry."""
+    entries = {}
+    for path in _files(os.path.join(top, '**', '*')):
+        target = os.path.join('share', package_name, os.path.dirname(path))
+        entries.setdefault(target, []).append(path)
+    return sorted(entries.items())
+
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', _files('config/*.yaml')),
+    ] + _tree('bags'),
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='tskf_ros maintainers',
+    maintainer_email='tskf@example.com',
+    keywords=['ROS'],
+    classifiers=[
+        'Intended Audience :: Developers',
+        'License :: OSI Approved :: Apache Software License',
+        'Programming Language :: Python',
+        'Topic :: Software Development',
+    ],
+    description='Two-stage Kalman filter (TSKF) with ROS 2 Jazzy nodes and experiments.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    # One executable per line; test/test_colcon_build.py checks each of them.
+    entry_points={
+        'console_scripts': [
+            'reproduce = tskf_ros.experiments.reproduce:main',
+            'power_meter_simulator = tskf_ros.nodes.power_meter_simulator:main',
+            'timescale_estimator = tskf_ros.nodes.timescale_estimator:main',
+        ],
+    },
+)

@@ -1,0 +1,40 @@
+"""Shared pytest setup: an isolated ROS 2 environment for every test run."""
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+# Generated trees at the repository root that the linters never check.
+NOT_LINTED = {'build', 'install', 'log', 'results'}
+
+# Set at import time, before any test starts a subprocess or imports rclpy, so that every
+# process of this run talks only on this machine and only in this run's own domain.
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+if not os.environ.get('ROS_DOMAIN_ID'):
+    os.environ['ROS_DOMAIN_ID'] = str(os.getpid() % 100 + 1)
+
+
+@pytest.fixture
+def ros_context():
+    """Yield an initialized rclpy context of its own; shut it down afterwards."""
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        yield context
+    finally:
+        context.try_shutdown()
+
+
+@pytest.fixture
+def lint_paths():
+    """Return the repository's top-level source paths (no hidden, venv or generated trees)."""
+    return sorted(
+        str(path) for path in REPO_ROOT.iterdir()
+        if not path.name.startswith('.') and path.name not in NOT_LINTED
+        and not path.name.endswith('.egg-info')
+        and (path.is_dir() or path.suffix == '.py'))

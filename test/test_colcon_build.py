@@ -1,0 +1,98 @@
+"""Build the package with colcon and run each executable the way `ros2 run` finds it."""
+
+import ast
+import os
+from pathlib import Path
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = 'tskf_ros'
+NOT_COPIED = shutil.ignore_patterns(
+    '.git', '.venv', '.pytest_cache', 'results', 'build', 'install', 'log', '__pycache__',
+    '*.egg-info')
+# What `ros2 run PACKAGE EXE` does: look EXE up in <package prefix>/lib/PACKAGE.
+LIB_DIR = (
+    'import os, sys; '
+    'from ament_index_python.packages import get_package_prefix; '
+    "print(os.path.join(get_package_prefix(sys.argv[1]), 'lib', sys.argv[1]))"
+)
+
+pytestmark = pytest.mark.colcon
+
+
+def console_scripts():
+    """Return the executable names declared in setup.py's console_scripts entry points."""
+    tree = ast.parse((REPO_ROOT / 'setup.py').read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.keyword) and node.arg == 'entry_points':
+            specs = ast.literal_eval(node.value).get('console_scripts', [])
+            return [spec.split('=', 1)[0].strip() for spec in specs]
+    return []
+
+
+def in_sourced_workspace(install, *command, timeout=120):
+    """Run command in bash after sourcing install/setup.bash, as a user of the workspace would."""
+    return subprocess.run(
+        ['bash', '-c', 'source "$0/setup.bash" && exec "$@"', str(install), *command],
+        env=build_env(install.parent), capture_output=True, text=True, timeout=timeout)
+
+
+def build_env(workspace):
+    """Return the environment for colcon and the built executables: this interpreter first."""
+    env = dict(os.environ)
+    env['PATH'] = os.path.dirname(sys.executable) + os.pathsep + env.get('PATH', '')
+    env['COLCON_HOME'] = str(workspace / 'colcon_home')  # ignore the user's colcon defaults
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 1))
+    return env
+
+
+@pytest.fixture(scope='module')
+def install(tmp_path_factory):
+    """Build a workspace with this package in src/ using colcon; return its install dir."""
+    workspace = tmp_path_factory.mktemp('ws')
+    shutil.copytree(REPO_ROOT, workspace / 'src' / PACKAGE, ignore=NOT_COPIED)
+    result = subprocess.run(
+        [sys.executable, '-m', 'colcon', '--log-base', str(workspace / 'log'), 'build',
+         '--base-paths', str(workspace / 'src'),
+         '--build-base', str(workspace / 'build'),
+         '--install-base', str(workspace / 'install'),
+         '--event-handlers', 'console_direct+'],
+        cwd=workspace, env=build_env(workspace), capture_output=True, text=True, timeout=900)
+    assert result.returncode == 0, 'colcon build failed:\n' + result.stdout + result.stderr
+    return workspace / 'install'
+
+
+def test_setup_declares_executables():
+    assert console_scripts(), 'setup.py declares no console_scripts'
+
+
+def test_package_files_installed(install):
+    assert (install / 'setup.bash').is_file()
+    share = install / PACKAGE / 'share'
+    assert (share / PACKAGE / 'package.xml').is_file()
+    assert (share / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
+
+
+def test_package_found_through_ament_index(install):
+    result = in_sourced_workspace(install, sys.executable, '-c', LIB_DIR, PACKAGE)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert Path(result.stdout.strip()) == install / PACKAGE / 'lib' / PACKAGE
+
+
+@pytest.mark.parametrize('executable', console_scripts())
+def test_executable_runs_like_ros2_run(install, executable):
+    result = in_sourced_workspace(install, sys.executable, '-c', LIB_DIR, PACKAGE)
+    assert result.returncode == 0, result.stdout + result.stderr
+    path = Path(result.stdout.strip()) / executable
+    assert path.is_file(), f'{path} is not installed'
+    assert os.access(path, os.X_OK), f'{path} is not executable'
+
+    result = in_sourced_workspace(install, str(path), '--help')
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    assert 'usage' in output.lower(), output

@@ -1,0 +1,1 @@
+"""Reproducible experiments for the TSKF (pure Python, no ROS needed)."""
