@@ -41,7 +41,7 @@ setup(
         'Programming Language :: Python',
         'Topic :: Software Development',
     ],
-    description='Two-stage Kalman filter (TSKF) with ROS 2 Jazzy nodes and experiments.',
+    description='Kalman filtering on time scales for intermittent optical wireless links (ROS 2).',
     license='Apache-2.0',
     tests_require=['pytest'],
     # One executable per line; test/test_colcon_build.py checks each of them.
