@@ -1,0 +1,378 @@
+"""
+Monte Carlo comparison of LED alignment algorithms (Solanki et al. 2018, Fig. 8-10).
+
+    python -m tskf_ros.experiments.alignment_mc --runs 1000 --json a.json --png fig10.png
+
+For each noise level (standard deviation of v in volts; peak intensity 3 V) it runs the
+scanning EKF, hill-climbing and three-point averaging in closed loop with eq. (25), all
+runs of one algorithm at once (numpy arrays with a runs axis), and reports the tracking
+percentage by angle (|phi| <= 15 deg) and by clean measurement (>= 20% of 3 V): mean
+and standard deviation over runs.  Every algorithm at every point of a sweep starts
+from the same seed, so all see the same standard-normal draws for w and v (scaled by the
+noise level) and the same uniform draws behind the dropouts (nested as the probability
+grows): common random numbers, which make the differences between curves and between
+points smoother than independent draws would.
+
+Also: --fig8 PATH (one EKF run at beta = 1.2 deg/s, Fig. 8), --fig9 PATH (one run at a
+beta where the EKF fails, Fig. 9), and --dropout-png/--dropout-json PATH (tracking
+percentage against the probability of a missing measurement, 0 to 50%, which no paper
+shows; with the EKF also fed a held last value, the naive way to keep a regular-sample
+filter going).  Outputs are written atomically (temporary file, then os.replace).
+"""
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+from pathlib import Path
+import sys
+import tempfile
+import time
+from typing import Callable, Optional, Sequence
+
+from matplotlib.figure import Figure
+import numpy as np
+
+from tskf_ros import led
+
+DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
+DEFAULT_DROPOUTS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
+FAIL_BETA = 16.0        # deg/s: the EKF loses every run at 50 ms steps (8 deg/s still tracks)
+DROPOUT_BETA = 2.8      # deg/s: the disturbance of the paper's experiments (Fig. 14)
+LABELS = {'ekf': 'EKF', 'hill_climbing': 'Hill', 'three_point': '3Point',
+          'ekf_hold': 'EKF, last value held'}
+COLORS = {'ekf': 'tab:blue', 'hill_climbing': 'tab:orange', 'three_point': 'tab:green',
+          'ekf_hold': 'tab:purple'}
+Progress = Callable[[str], None]
+
+
+class HoldLast:
+    """
+    A regular-sample view of an aligner: a missing measurement repeats the last one.
+
+    This is what a filter that assumes regular samples gets from a sample-and-hold
+    driver; the comparison shows what stamp-aware prediction over gaps buys.
+    """
+
+    def __init__(self, aligner: led.Aligner) -> None:
+        self.aligner = aligner
+        self.runs = aligner.runs
+        self.last = np.full(self.runs, np.nan)
+
+    @property
+    def scan_offset(self) -> float:
+        """Return the wrapped aligner's scan offset."""
+        return self.aligner.scan_offset
+
+    def step(self, stamp: float, z: led.Measurement) -> np.ndarray:
+        """Replace missing entries by the last measurement and step the wrapped aligner."""
+        z = led.as_measurement(z, self.runs)
+        self.last = np.where(np.isfinite(z), z, self.last)
+        return self.aligner.step(stamp, self.last)
+
+
+def build(name: str, runs: int, link: led.LinkConfig, response: led.IncidenceResponse,
+          ekf: led.EKFConfig, clip: bool) -> led.Aligner:
+    """Build the aligner for `name` (led.ALGORITHMS or 'ekf_hold')."""
+    if name == 'ekf_hold':
+        return HoldLast(led.make_aligner('ekf', runs=runs, dt=link.dt, response=response,
+                                         ekf=ekf))
+    return led.make_aligner(name, runs=runs, dt=link.dt, response=response, ekf=ekf, clip=clip)
+
+
+def evaluate(name: str, runs: int, link: led.LinkConfig, rng: np.random.Generator,
+             response: led.IncidenceResponse, ekf: led.EKFConfig, clip: bool
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the tracking % (angular, measure) per run of one algorithm on one link."""
+    traj = led.simulate(build(name, runs, link, response, ekf, clip), link, rng, response)
+    return led.tracking(traj, threshold=led.TRACKING_LEVEL * link.max_intensity)
+
+
+def _empty(algorithms: Sequence[str]) -> dict:
+    return {name: {metric: {'mean': [], 'std': []} for metric in ('angular', 'measure')}
+            for name in algorithms}
+
+
+def _record(results: dict, name: str, angular: np.ndarray, measure: np.ndarray) -> None:
+    for metric, values in (('angular', angular), ('measure', measure)):
+        results[name][metric]['mean'].append(float(np.mean(values)))
+        results[name][metric]['std'].append(float(np.std(values)))
+
+
+def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.LinkConfig,
+          seed: int, response: led.IncidenceResponse, ekf: led.EKFConfig,
+          algorithms: Sequence[str] = led.ALGORITHMS, clip: bool = False,
+          progress: Optional[Progress] = None) -> dict:
+    """Run every algorithm at each value of a LinkConfig field ('noise' or 'dropout')."""
+    results = _empty(algorithms)
+    start = time.perf_counter()
+    for i, value in enumerate(values):
+        tic = time.perf_counter()
+        cfg = dataclasses.replace(link, **{parameter: float(value)})
+        parts = []
+        for name in algorithms:
+            rng = np.random.default_rng(seed)     # common random numbers, see the docstring
+            angular, measure = evaluate(name, runs, cfg, rng, response, ekf, clip)
+            _record(results, name, angular, measure)
+            parts.append(f'{name} {np.mean(angular):5.1f}%')
+        if progress is not None:
+            progress(f'{parameter} {value:.2f} ({i + 1}/{len(values)}): ' + '  '.join(parts)
+                     + f'  [{runs} runs, {time.perf_counter() - tic:.1f} s]')
+    elapsed = time.perf_counter() - start
+    return {'results': results, 'elapsed_s': elapsed}
+
+
+def _config_record(args: argparse.Namespace, response: led.IncidenceResponse) -> dict:
+    return {'runs': args.runs, 'beta_deg_per_s': args.beta, 'steps': args.steps, 'dt_s': args.dt,
+            'seed': args.seed, 'x2_0_deg': args.x2_0, 'max_intensity_v': led.MAX_INTENSITY,
+            'units_per_degree': response.units_per_degree, 'x1_floor': args.x1_floor,
+            'clip_three_point': args.clip_three_point,
+            'tracking': {'angle_deg': led.TRACKING_ANGLE,
+                         'level_v': led.TRACKING_LEVEL * led.MAX_INTENSITY}}
+
+
+# ---------------------------------------------------------------------------------------
+# Output
+
+
+def _atomic(path: Path, write: Callable[[str], None]) -> None:
+    """Call write(temp_path) in path's directory, then os.replace it onto path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.', suffix=path.suffix)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def write_json(path: Path, data: dict) -> None:
+    """Write data as JSON, atomically."""
+    def dump(tmp: str) -> None:
+        with open(tmp, 'w', encoding='utf-8') as f:
+            json.dump(data, f, indent=1)
+            f.write('\n')
+    _atomic(path, dump)
+
+
+def save_figure(fig: Figure, path: Path) -> None:
+    """Save a matplotlib figure as PNG, atomically."""
+    _atomic(path, lambda tmp: fig.savefig(tmp, format='png', dpi=120))
+
+
+def plot_tracking(x: Sequence[float], results: dict, *, xlabel: str, title: str,
+                  std_scale: float = 5.0) -> Figure:
+    """Fig. 10 style: mean tracking % with error bars of std / std_scale, both metrics."""
+    fig = Figure(figsize=(7.5, 4.8))
+    ax = fig.add_subplot()
+    for name, res in results.items():
+        for metric, style in (('angular', '-o'), ('measure', '--s')):
+            mean = np.asarray(res[metric]['mean'])
+            std = np.asarray(res[metric]['std']) / std_scale
+            ax.errorbar(x, mean, yerr=std, fmt=style, ms=3.5, capsize=2, lw=1.2,
+                        color=COLORS.get(name), label=f'{LABELS.get(name, name)}-{metric}')
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel('tracking percentage (%)')
+    ax.set_ylim(0, 102)
+    ax.grid(alpha=0.3)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, ncol=2, loc='lower left')
+    fig.tight_layout()
+    return fig
+
+
+def plot_run(traj: led.Trajectory, *, title: str, threshold: float) -> Figure:
+    """Fig. 8/9 style: x1 and x1hat, x2 and x2hat (with phi), measured and clean intensity."""
+    fig = Figure(figsize=(7.5, 7.0))
+    axes = fig.subplots(3, 1, sharex=True)
+    t = traj.t
+    axes[0].plot(t, traj.x1[:, 0], 'k', lw=1.2, label='$x_1$')
+    axes[0].plot(t, traj.estimate[:, 0, 0], 'tab:blue', lw=1.0, label=r'$\hat{x}_1$')
+    axes[0].set_ylabel('$x_1$ (V)')
+    axes[1].plot(t, traj.phi[:, 0], color='0.7', lw=0.8, label=r'$\phi = x_2 + \psi$')
+    axes[1].plot(t, traj.x2[:, 0], 'k', lw=1.2, label='$x_2$')
+    axes[1].plot(t, traj.estimate[:, 0, 1], 'tab:blue', lw=1.0, label=r'$\hat{x}_2$')
+    for s in (-led.TRACKING_ANGLE, led.TRACKING_ANGLE):
+        axes[1].axhline(s, color='tab:red', ls=':', lw=0.8)
+    axes[1].set_ylabel('angle (deg)')
+    axes[2].plot(t, traj.z[:, 0], color='0.6', lw=0.7, label='measured')
+    axes[2].plot(t, traj.clean[:, 0], 'k', lw=1.0, label='clean')
+    axes[2].axhline(threshold, color='tab:red', ls=':', lw=0.8, label='20% of 3 V')
+    axes[2].set_ylabel('intensity (V)')
+    axes[2].set_xlabel('time (s)')
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc='upper right')
+    axes[0].set_title(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def single_run(beta: float, args: argparse.Namespace, response: led.IncidenceResponse,
+               ekf: led.EKFConfig) -> tuple[led.Trajectory, float, float]:
+    """Run the EKF once (default noise: R_sys); return it and its tracking %."""
+    link = led.LinkConfig(beta=beta, dt=args.dt, steps=args.steps, noise=args.run_noise,
+                          x2_0=args.x2_0, dropout=args.dropout)
+    aligner = build('ekf', 1, link, response, ekf, False)
+    traj = led.simulate(aligner, link, np.random.default_rng(args.seed), response)
+    angular, measure = led.tracking(traj)
+    return traj, float(angular[0]), float(measure[0])
+
+
+# ---------------------------------------------------------------------------------------
+# Command line
+
+
+def floats(text: str) -> list[float]:
+    """Parse a comma-separated list of floats."""
+    try:
+        values = [float(part) for part in text.split(',') if part.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a comma-separated list of numbers: {text!r}')
+    if not values or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f'need finite numbers, got {text!r}')
+    return values
+
+
+def parser() -> argparse.ArgumentParser:
+    """Build the command-line interface."""
+    p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.alignment_mc',
+                                description=__doc__.split('\n\n')[0])
+    p.add_argument('--runs', type=int, default=1000, help='runs per noise level (1000)')
+    p.add_argument('--noise-levels', type=floats, default=list(DEFAULT_NOISE_LEVELS),
+                   help='comma list of noise standard deviations in volts (0,0.25,...,2.5)')
+    p.add_argument('--beta', type=float, default=1.2, help='disturbance rate, deg/s (1.2)')
+    p.add_argument('--steps', type=int, default=400, help='steps per run (400 = 20 s)')
+    p.add_argument('--dt', type=float, default=led.PAPER_DT, help='time step, s (0.05)')
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--dropout', type=float, default=0.0,
+                   help='probability that a measurement is missing (0)')
+    p.add_argument('--x2-0', type=float, default=5.0, help='initial scan mean, deg (5)')
+    units = p.add_mutually_exclusive_group()
+    units.add_argument('--units-per-degree', type=float, default=None,
+                       help='fit units per degree of g (default: the 20%%-at-15-deg unit)')
+    units.add_argument('--literal-units', action='store_true',
+                       help='read g with phi in degrees, as printed (1 unit per degree)')
+    p.add_argument('--x1-floor', type=float, default=None,
+                   help='keep x1hat >= this (not in the paper; default off)')
+    p.add_argument('--clip-three-point', action='store_true',
+                   help='clip gamma_p of eq. (26) to [-gamma, gamma] (not in the paper)')
+    p.add_argument('--json', type=Path, help='write the comparison as JSON')
+    p.add_argument('--png', type=Path, help='write the comparison figure (Fig. 10)')
+    p.add_argument('--no-comparison', action='store_true', help='skip the noise-level sweep')
+    p.add_argument('--fig8', type=Path, help='write the beta = --beta tracking run (Fig. 8)')
+    p.add_argument('--fig9', type=Path, help='write the failing run (Fig. 9)')
+    p.add_argument('--fig9-beta', type=float, default=FAIL_BETA,
+                   help=f'beta of the failing run, deg/s ({FAIL_BETA:g})')
+    p.add_argument('--run-noise', type=float, default=math.sqrt(led.PAPER_R_SYS[0][0]),
+                   help='noise of the Fig. 8/9 runs, V (0.2: Table I R_sys)')
+    p.add_argument('--dropout-png', type=Path, help='write tracking vs dropout probability')
+    p.add_argument('--dropout-json', type=Path, help='write the dropout sweep as JSON')
+    p.add_argument('--dropout-levels', type=floats, default=list(DEFAULT_DROPOUTS))
+    p.add_argument('--dropout-noise', type=float, default=1.0,
+                   help='noise level of the dropout sweep, V (1.0)')
+    p.add_argument('--dropout-beta', type=float, default=DROPOUT_BETA,
+                   help=f'beta of the dropout sweep, deg/s ({DROPOUT_BETA:g}, as in Fig. 14)')
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the requested experiments; return the exit status."""
+    args = parser().parse_args(argv)
+    if args.runs < 1 or args.steps < 1:
+        parser().error('--runs and --steps must be positive')
+    if not 0.0 <= args.dropout < 1.0 or any(not 0.0 <= d < 1.0 for d in args.dropout_levels):
+        parser().error('dropout probabilities must be in [0, 1)')
+
+    def progress(line: str) -> None:
+        print(f'[alignment_mc] {line}', file=sys.stderr, flush=True)
+
+    try:
+        scale = led.LITERAL_UNITS_PER_DEGREE if args.literal_units else args.units_per_degree
+        response = led.IncidenceResponse(units_per_degree=scale)
+        ekf = led.EKFConfig(dt=args.dt, x1_floor=args.x1_floor)
+        led.check_observability(ekf.gain, ekf.scan)
+    except led.AlignmentError as exc:
+        print(f'alignment_mc: {exc}', file=sys.stderr)
+        return 2
+    link = led.LinkConfig(beta=args.beta, dt=args.dt, steps=args.steps, x2_0=args.x2_0,
+                          dropout=args.dropout)
+    common = {'runs': args.runs, 'seed': args.seed, 'response': response, 'ekf': ekf,
+              'clip': args.clip_three_point, 'progress': progress}
+    progress(f'g at {response.units_per_degree:.4g} fit units per degree; beta {args.beta:g} '
+             f'deg/s; {args.steps} steps of {args.dt:g} s; {args.runs} runs per point')
+
+    if not args.no_comparison:
+        out = sweep('noise', args.noise_levels, link=link, **common)
+        progress(f'comparison done in {out["elapsed_s"]:.1f} s')
+        data = {'noise_levels': list(args.noise_levels), 'results': out['results'],
+                'config': {**_config_record(args, response), 'dropout': args.dropout},
+                'elapsed_s': out['elapsed_s']}
+        print(table('noise', args.noise_levels, out['results']))
+        if args.json:
+            write_json(args.json, data)
+            progress(f'wrote {args.json}')
+        if args.png:
+            fig = plot_tracking(
+                args.noise_levels, out['results'], xlabel='noise level (std of v, V)',
+                title=f'beta = {args.beta:g} deg/s, {args.runs} runs, dropout {args.dropout:g}'
+                      ' (error bars: std / 5)')
+            save_figure(fig, args.png)
+            progress(f'wrote {args.png}')
+
+    for path, beta in ((args.fig8, args.beta), (args.fig9, args.fig9_beta)):
+        if path is None:
+            continue
+        traj, angular, measure = single_run(beta, args, response, ekf)
+        fig = plot_run(traj, threshold=led.TRACKING_LEVEL * led.MAX_INTENSITY,
+                       title=f'EKF, beta = {beta:g} deg/s, noise {args.run_noise:g} V: '
+                             f'tracking {angular:.1f}% (angle), {measure:.1f}% (measure)')
+        save_figure(fig, path)
+        progress(f'wrote {path} (beta {beta:g} deg/s: tracking {angular:.1f}%)')
+
+    if args.dropout_png or args.dropout_json:
+        names = (*led.ALGORITHMS, 'ekf_hold')
+        dlink = dataclasses.replace(link, noise=args.dropout_noise, beta=args.dropout_beta)
+        out = sweep('dropout', args.dropout_levels, link=dlink, algorithms=names, **common)
+        progress(f'dropout sweep done in {out["elapsed_s"]:.1f} s')
+        print(table('dropout', args.dropout_levels, out['results']))
+        data = {'dropout_levels': list(args.dropout_levels), 'results': out['results'],
+                'config': {**_config_record(args, response), 'noise': args.dropout_noise,
+                           'beta_deg_per_s': args.dropout_beta},
+                'elapsed_s': out['elapsed_s']}
+        if args.dropout_json:
+            write_json(args.dropout_json, data)
+            progress(f'wrote {args.dropout_json}')
+        if args.dropout_png:
+            fig = plot_tracking(
+                [100.0 * d for d in args.dropout_levels], out['results'],
+                xlabel='probability of a missing measurement (%)',
+                title=f'noise {args.dropout_noise:g} V, beta = {args.dropout_beta:g} deg/s, '
+                      f'{args.runs} runs (error bars: std / 5)')
+            save_figure(fig, args.dropout_png)
+            progress(f'wrote {args.dropout_png}')
+    return 0
+
+
+def table(parameter: str, values: Sequence[float], results: dict) -> str:
+    """Format a plain-text table of mean (std) angular and measure tracking %."""
+    names = list(results)
+    head = f'{parameter:>8} | ' + ' | '.join(f'{n + " ang/meas":>24}' for n in names)
+    lines = [head, '-' * len(head)]
+    for i, value in enumerate(values):
+        cells = []
+        for n in names:
+            a, m = results[n]['angular'], results[n]['measure']
+            cells.append(f'{a["mean"][i]:5.1f} ({a["std"][i]:4.1f}) / {m["mean"][i]:5.1f}'
+                         f' ({m["std"][i]:4.1f})'.rjust(24))
+        lines.append(f'{value:8.2f} | ' + ' | '.join(cells))
+    return '\n'.join(lines)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
