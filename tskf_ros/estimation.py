@@ -1,0 +1,432 @@
+"""
+A streaming estimator session: stamped samples in, time-scale filter estimates out.
+
+The time scale is read from the stamps (Cai et al., Section IV-C): every valid sample is a
+point t_k, and its graininess is mu(t_k) = t_{k+1} - t_k (Definition 2; Bohner & Wintz
+Definition 2.3).  mu(t_k) is known only when t_{k+1} arrives, so sample k+1 triggers
+
+    step(mu(t_k), y(t_k)):  corrected estimate x(t_k | t_k)  and  predictor xhat(t_{k+1})
+
+of the TimeScaleKalmanFilter (Bohner & Wintz Table 3, Cai Table I; see tskf_ros.tskf).
+Readings at or below zero are not points (Section IV-C: an interruption, a time jump J).
+
+Bad input never reaches the filter: non-finite values, zero stamps, duplicates and stamps
+too old for the history are rejected with a reason; a late sample within the history is
+inserted into the time scale, which changes mu of its left neighbour, and the filter is
+re-run from there (the revised estimates are returned separately); a clock jump forward
+or backward beyond a bound re-initialises the filter.  Nothing non-finite is returned and
+P stays symmetric positive semi-definite.  The module never imports rclpy.
+"""
+
+from collections import Counter, deque
+from dataclasses import dataclass, field, replace
+from math import isqrt
+from typing import Optional, Sequence
+
+import numpy as np
+
+from tskf_ros.models import LinearModel
+from tskf_ros.tskf import check_covariance, FilterError, TRANSITIONS
+
+NS = 1_000_000_000
+
+# reasons a sample is not used; each is a diagnostics counter
+REJECT_REASONS = ('zero_stamp', 'non_finite', 'bad_variance', 'invalid_power', 'future',
+                  'duplicate', 'too_old', 'filter_error')
+RESET_REASONS = ('forward_jump', 'backward_jump', 'clock_jump', 'reconfigured')
+
+
+class ConfigError(ValueError):
+    """Estimator parameters that cannot be used; the message says why."""
+
+
+def _flat(values: Sequence[float], name: str) -> np.ndarray:
+    v = np.asarray(list(values), dtype=float).reshape(-1)
+    if not np.all(np.isfinite(v)):
+        raise ConfigError(f'{name} has non-finite entries')
+    return v
+
+
+def model_from_flat(*, A: Sequence[float], C: Sequence[float], Q: Sequence[float],
+                    R: Sequence[float], x0: Sequence[float], P0: Sequence[float],
+                    G: Sequence[float] = (), B: Sequence[float] = (),
+                    D: Sequence[float] = (), name: str = 'model',
+                    state_names: Sequence[str] = ()) -> LinearModel:
+    """
+    Build a LinearModel from row-major flat lists, inferring the shapes (ROS parameters).
+
+    A is n x n, C is p x n, G is n x r (empty: I), Q is r x r, R is p x p, B is n x m
+    (empty: none), D has p entries (empty: 0), x0 has n and P0 n x n entries.
+    """
+    a = _flat(A, 'A')
+    n = isqrt(a.size)
+    if n == 0 or n * n != a.size:
+        raise ConfigError(f'A must have n^2 entries for some n >= 1, got {a.size}')
+    c = _flat(C, 'C')
+    if c.size == 0 or c.size % n:
+        raise ConfigError(f'C must have p * {n} entries (p x n, row-major), got {c.size}')
+    p = c.size // n
+    g = _flat(G, 'G')
+    if g.size and g.size % n:
+        raise ConfigError(f'G must have {n} * r entries (n x r), got {g.size}')
+    r = g.size // n if g.size else n
+    arrays = {'Q': (_flat(Q, 'Q'), r * r), 'R': (_flat(R, 'R'), p * p),
+              'x0': (_flat(x0, 'x0'), n), 'P0': (_flat(P0, 'P0'), n * n)}
+    for key, (v, size) in arrays.items():
+        if v.size != size:
+            raise ConfigError(f'{key} must have {size} entries to match A and C, got {v.size}')
+    b = _flat(B, 'B')
+    if b.size % n:
+        raise ConfigError(f'B must have {n} * m entries (n x m), got {b.size}')
+    d = _flat(D, 'D')
+    if d.size not in (0, p):
+        raise ConfigError(f'D must have {p} entries (or none), got {d.size}')
+    names = tuple(state_names) or tuple(f'x{i}' for i in range(n))
+    if len(names) != n:
+        raise ConfigError(f'state_names must have {n} names, got {len(names)}')
+    return LinearModel(name, A=a.reshape(n, n), C=c.reshape(p, n),
+                       Q=arrays['Q'][0].reshape(r, r), R=arrays['R'][0].reshape(p, p),
+                       x0=arrays['x0'][0], P0=arrays['P0'][0].reshape(n, n),
+                       G=g.reshape(n, r) if g.size else None,
+                       B=b.reshape(n, -1) if b.size else None,
+                       D=d if d.size else None, state_names=names)
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Everything the session needs: the model, the jump form and the input bounds (s)."""
+
+    model: LinearModel
+    transition: str = 'euler'
+    period: float = 1.0             # nominal sample period: classifies dense/discrete/jump
+    dense_fraction: float = 0.5     # dt < dense_fraction * period: a dense stretch
+    jump_factor: float = 1.5        # dt > jump_factor * period: a gap, J = dt
+    max_gap: float = 5.0            # a gap longer than this raises diagnostics to WARN
+    history_window: float = 10.0    # how far back a late sample may still be inserted
+    history_size: int = 1000        # points kept for rewinding
+    max_jump: float = 60.0          # a forward jump beyond this re-initialises
+    max_backward: float = 30.0      # a backward jump beyond this re-initialises
+    max_future: float = 0.0         # stamp ahead of the receiver clock by more: rejected (0 off)
+    nonpositive_is_gap: bool = True  # a reading <= 0 is an interruption (a power, Cai IV-C)
+
+    def __post_init__(self) -> None:
+        """Check the bounds and that the model makes a filter; raise ConfigError if not."""
+        if self.transition not in TRANSITIONS:
+            raise ConfigError(f'transition must be one of {TRANSITIONS}, '
+                              f'got {self.transition!r}')
+        for name in ('period', 'dense_fraction', 'jump_factor', 'max_gap', 'history_window',
+                     'max_jump', 'max_backward', 'max_future'):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise ConfigError(f'{name} must be finite and >= 0, got {value}')
+        if not self.period > 0:
+            raise ConfigError(f'period must be > 0, got {self.period}')
+        if self.history_size < 2:
+            raise ConfigError(f'history_size must be >= 2, got {self.history_size}')
+        if not self.max_jump > 0:
+            raise ConfigError(f'max_jump must be > 0, got {self.max_jump}')
+        if self.max_backward < self.history_window:
+            raise ConfigError(f'max_backward ({self.max_backward} s) must be at least '
+                              f'history_window ({self.history_window} s)')
+        try:
+            self.model.make_filter(self.transition)
+        except FilterError as exc:
+            raise ConfigError(str(exc)) from None
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One estimate: 'predicted' (xhat(t) from data before t) or 'corrected' (x(t|t))."""
+
+    kind: str
+    stamp_ns: int
+    x: np.ndarray
+    P: np.ndarray
+    revised: bool = False
+
+
+@dataclass(frozen=True)
+class Jump:
+    """The graininess used at a point: mu(t) = sigma(t) - t."""
+
+    stamp_ns: int
+    sigma_ns: int
+    revised: bool = False
+
+    @property
+    def mu(self) -> float:
+        """Return mu in seconds."""
+        return (self.sigma_ns - self.stamp_ns) / NS
+
+
+@dataclass
+class Outcome:
+    """What one sample did: status, reason and message, and what to publish."""
+
+    status: str                  # 'accepted', 'inserted', 'gap', 'rejected' or 'reset'
+    reason: str = ''
+    message: str = ''
+    estimates: list = field(default_factory=list)
+    jumps: list = field(default_factory=list)
+
+
+@dataclass
+class Stats:
+    """Counters for diagnostics."""
+
+    received: int = 0
+    accepted: int = 0
+    inserted: int = 0
+    rejected: Counter = field(default_factory=Counter)
+    resets: Counter = field(default_factory=Counter)
+    mu_current: float = 0.0
+    mu_max: float = 0.0
+    gaps: dict = field(default_factory=dict)     # stamp after the gap (ns) -> J (s)
+    gaps_total: int = 0
+    covariance_trace: float = 0.0
+    last_stamp_ns: int = 0
+    # since the last diagnostics report
+    gaps_over_bound: int = 0
+    rejected_since: int = 0
+
+
+@dataclass
+class _Point:
+    stamp_ns: int
+    y: np.ndarray
+    x: np.ndarray          # the predictor at this point (before stepping from it)
+    P: np.ndarray
+
+
+def _finite(*arrays: np.ndarray) -> bool:
+    return all(bool(np.all(np.isfinite(a))) for a in arrays)
+
+
+class EstimatorSession:
+    """The filter fed from a stream of stamped samples; see the module docstring."""
+
+    GAP_MEMORY = 1000       # gaps remembered individually for diagnostics
+
+    def __init__(self, config: EstimatorConfig) -> None:
+        self.config = config
+        self.stats = Stats()
+        self.kf = config.model.make_filter(config.transition)
+        self.points: deque = deque()
+
+    # -- public API -----------------------------------------------------------------------
+
+    def add(self, stamp_ns: int, power: float, variance: float = 0.0, *,
+            now_ns: Optional[int] = None) -> Outcome:
+        """Take one sample (stamp in ns, measurement, its variance); say what it did."""
+        st = self.stats
+        st.received += 1
+        stamp_ns = int(stamp_ns)
+        cfg = self.config
+        y = np.atleast_1d(np.asarray(power, dtype=float)).reshape(-1)
+        if stamp_ns <= 0:
+            return self._reject('zero_stamp', 'the header stamp is unset (0)')
+        if not _finite(y):
+            return self._reject('non_finite', f'measurement {y} is not finite')
+        if not (np.isfinite(variance) and variance >= 0):
+            return self._reject('bad_variance', f'variance {variance} is not a finite value '
+                                '>= 0')
+        if y.size != self.kf.p:
+            return self._reject('non_finite', f'measurement has {y.size} entries, the model '
+                                f'{self.kf.p}')
+        if cfg.nonpositive_is_gap and np.any(y <= 0):
+            # Cai et al. IV-C: a reading at or below zero is an interruption, not a point
+            st.rejected['invalid_power'] += 1
+            return Outcome('gap', 'invalid_power', f'reading {y} <= 0: an interruption')
+        if (now_ns is not None and cfg.max_future > 0
+                and stamp_ns - int(now_ns) > cfg.max_future * NS):
+            return self._reject('future', f'stamp {stamp_ns / NS:.9f} s is '
+                                f'{(stamp_ns - now_ns) / NS:.3f} s ahead of the clock')
+        if not self.points:
+            return self._start(stamp_ns, y)
+        last = self.points[-1].stamp_ns
+        dt = stamp_ns - last
+        if dt == 0:
+            return self._reject('duplicate', f'stamp {stamp_ns / NS:.9f} s repeats the last')
+        if dt > cfg.max_jump * NS:
+            return self._restart('forward_jump', stamp_ns, y,
+                                 f'stamp jumped {dt / NS:.3f} s forward (> max_jump)')
+        if dt > 0:
+            return self._append(stamp_ns, y)
+        if -dt > cfg.max_backward * NS:
+            return self._restart('backward_jump', stamp_ns, y,
+                                 f'stamp jumped {-dt / NS:.3f} s backward (> max_backward)')
+        if any(p.stamp_ns == stamp_ns for p in self.points):
+            return self._reject('duplicate', f'stamp {stamp_ns / NS:.9f} s is already a point')
+        if -dt > cfg.history_window * NS or stamp_ns < self.points[0].stamp_ns:
+            return self._reject('too_old', f'stamp {stamp_ns / NS:.9f} s is {-dt / NS:.3f} s '
+                                'late, older than the history')
+        return self._insert(stamp_ns, y)
+
+    def reset(self, reason: str, message: str = '') -> Outcome:
+        """Forget the history; the next sample starts a new time scale from x0, P0."""
+        self.stats.resets[reason] += 1
+        self.kf = self.config.model.make_filter(self.config.transition)
+        self.points.clear()
+        return Outcome('reset', reason, message or f'filter re-initialised ({reason})')
+
+    def reconfigure(self, config: EstimatorConfig) -> Outcome:
+        """Switch to a new (already validated) config, keeping the estimate if n is unchanged."""
+        old_n = self.kf.n
+        kf = config.model.make_filter(config.transition)
+        self.config = config
+        if kf.n != old_n:
+            return self.reset('reconfigured', f'state dimension changed {old_n} -> {kf.n}')
+        kf.set_state(self.kf.x, self.kf.P)
+        self.kf = kf
+        return Outcome('accepted', 'reconfigured', 'new parameters in use')
+
+    def pending(self) -> Optional[int]:
+        """Stamp of the last point, whose corrected estimate waits for the next point."""
+        return self.points[-1].stamp_ns if self.points else None
+
+    def diagnostics(self, *, consume: bool = True) -> tuple[str, str, dict]:
+        """
+        Return (level 'OK' or 'WARN', message, values) for a diagnostics status.
+
+        consume=True resets the since-last-report counters (gaps over the bound, rejects).
+        """
+        st, cfg = self.stats, self.config
+        level, msgs = 'OK', []
+        if st.gaps_over_bound:
+            level = 'WARN'
+            msgs.append(f'{st.gaps_over_bound} gap(s) longer than max_gap = {cfg.max_gap} s')
+        if st.rejected_since:
+            msgs.append(f'{st.rejected_since} sample(s) rejected')
+        lengths = list(st.gaps.values())
+        values = {
+            'received': st.received, 'accepted': st.accepted, 'inserted_late': st.inserted,
+            'points_in_history': len(self.points),
+            'mu_current_s': st.mu_current, 'mu_max_s': st.mu_max,
+            'gaps': st.gaps_total,
+            'gap_max_s': max(lengths) if lengths else 0.0,
+            'gap_lengths_s': ' '.join(f'{j:g}' for j in lengths[-20:]),
+            'covariance_trace': st.covariance_trace,
+            'last_stamp_s': st.last_stamp_ns / NS,
+            'transition': cfg.transition,
+        }
+        for reason in REJECT_REASONS:
+            values[f'rejected_{reason}'] = st.rejected[reason]
+        for reason in RESET_REASONS:
+            values[f'resets_{reason}'] = st.resets[reason]
+        if consume:
+            st.gaps_over_bound = 0
+            st.rejected_since = 0
+        return level, '; '.join(msgs) or 'ok', values
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _reject(self, reason: str, message: str) -> Outcome:
+        self.stats.rejected[reason] += 1
+        self.stats.rejected_since += 1
+        return Outcome('rejected', reason, message)
+
+    def _start(self, stamp_ns: int, y: np.ndarray) -> Outcome:
+        x, P = self.kf.state()
+        self.points.append(_Point(stamp_ns, y, x, P))
+        self._accepted(stamp_ns, P)
+        return Outcome('accepted', estimates=[Estimate('predicted', stamp_ns, x, P)])
+
+    def _restart(self, reason: str, stamp_ns: int, y: np.ndarray, message: str) -> Outcome:
+        self.reset(reason)
+        out = self._start(stamp_ns, y)
+        out.status, out.reason, out.message = 'reset', reason, message + '; re-initialised'
+        return out
+
+    def _accepted(self, stamp_ns: int, P: np.ndarray) -> None:
+        st = self.stats
+        st.accepted += 1
+        st.last_stamp_ns = max(st.last_stamp_ns, stamp_ns)
+        st.covariance_trace = float(np.trace(P))
+
+    def _record_gap(self, start_ns: int, end_ns: int, *, add: bool = True) -> None:
+        """Keep the gap statistics: an interval longer than jump_factor * period is a jump."""
+        st, cfg = self.stats, self.config
+        J = (end_ns - start_ns) / NS
+        if not add:
+            if st.gaps.pop(end_ns, None) is not None:
+                st.gaps_total -= 1
+            return
+        if J > cfg.jump_factor * cfg.period:
+            st.gaps[end_ns] = J
+            st.gaps_total += 1
+            if J > cfg.max_gap:
+                st.gaps_over_bound += 1
+            while len(st.gaps) > self.GAP_MEMORY:
+                st.gaps.pop(next(iter(st.gaps)))
+
+    def _step(self, point: _Point, sigma_ns: int, revised: bool
+              ) -> tuple[list, Jump, np.ndarray, np.ndarray]:
+        """step(mu, y) from point to sigma; raises FilterError on a bad step."""
+        mu = (sigma_ns - point.stamp_ns) / NS
+        res = self.kf.step(mu, point.y)
+        P_c = (res.P_corrected + res.P_corrected.T) / 2
+        P_p = res.P_predicted
+        if not _finite(res.x_corrected, P_c, res.x_predicted, P_p):
+            raise FilterError(f'non-finite estimate at mu = {mu}')
+        for P in (P_c, P_p):
+            check_covariance(P, 'P', tol=1e-9)
+        est = [Estimate('corrected', point.stamp_ns, res.x_corrected, P_c, revised),
+               Estimate('predicted', sigma_ns, res.x_predicted, P_p, revised)]
+        return est, Jump(point.stamp_ns, sigma_ns, revised), res.x_predicted, P_p
+
+    def _append(self, stamp_ns: int, y: np.ndarray) -> Outcome:
+        last = self.points[-1]
+        saved = self.kf.state()
+        try:
+            est, jump, x, P = self._step(last, stamp_ns, False)
+        except FilterError as exc:
+            self.kf.set_state(*saved)       # the step may have moved it before the check
+            return self._reject('filter_error', f'step refused: {exc}')
+        self.points.append(_Point(stamp_ns, y, x, P))
+        self._record_gap(last.stamp_ns, stamp_ns)
+        self.stats.mu_current = jump.mu
+        self.stats.mu_max = max(self.stats.mu_max, jump.mu)
+        self._accepted(stamp_ns, P)
+        self._trim()
+        return Outcome('accepted', estimates=est, jumps=[jump])
+
+    def _insert(self, stamp_ns: int, y: np.ndarray) -> Outcome:
+        """Insert a late point after points[j], rewind to t_j and re-run to the newest point."""
+        stamps = [p.stamp_ns for p in self.points]
+        j = int(np.searchsorted(stamps, stamp_ns)) - 1
+        old_points = [replace(p) for p in self.points]
+        saved = self.kf.state()
+        new = _Point(stamp_ns, y, np.zeros(0), np.zeros((0, 0)))
+        points = list(self.points)[:j + 1] + [new] + list(self.points)[j + 1:]
+        estimates, jumps = [], []
+        try:
+            self.kf.set_state(points[j].x, points[j].P)
+            for i in range(j, len(points) - 1):
+                est, jump, x, P = self._step(points[i], points[i + 1].stamp_ns, True)
+                points[i + 1] = replace(points[i + 1], x=x, P=P)
+                estimates += est
+                jumps.append(jump)
+        except FilterError as exc:
+            self.points = deque(old_points)
+            self.kf.set_state(*saved)
+            return self._reject('filter_error', f're-run after a late sample refused: {exc}')
+        self.points = deque(points)
+        # the interval (t_j, t_j+1) is now two intervals
+        self._record_gap(points[j].stamp_ns, points[j + 2].stamp_ns, add=False)
+        self._record_gap(points[j].stamp_ns, stamp_ns)
+        self._record_gap(stamp_ns, points[j + 2].stamp_ns)
+        self.stats.inserted += 1
+        self.stats.mu_current = jumps[-1].mu
+        self.stats.mu_max = max(self.stats.mu_max, max(jp.mu for jp in jumps))
+        self._accepted(stamp_ns, self.kf.P)
+        self._trim()
+        return Outcome('inserted', 'late', f'late sample {stamp_ns / NS:.9f} s inserted; '
+                       f'{len(estimates)} estimates revised', estimates, jumps)
+
+    def _trim(self) -> None:
+        cfg = self.config
+        newest = self.points[-1].stamp_ns
+        while len(self.points) > 2 and (
+                len(self.points) > cfg.history_size
+                or newest - self.points[1].stamp_ns > cfg.history_window * NS):
+            self.points.popleft()

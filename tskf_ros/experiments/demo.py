@@ -1,0 +1,192 @@
+"""
+The live demo: simulator and estimator as separate processes over DDS, then a summary.
+
+    python -m tskf_ros.experiments.demo --duration-scale 0.05
+
+runs Cai et al.'s 300 s, 1 Hz experiment (Section IV-C) with the simulated link, played
+20 times faster (300 s of stamps in 15 s of wall time), and prints: messages, the gaps
+found with their J (Section IV-C), the RMS error of the predictor (Table I / B&W Table 3)
+and of the corrected estimate against the true angle, and the five worst points.
+
+This module stays ROS-free at import; the collecting client (tskf_ros.nodes.demo_collector)
+is imported when the demo runs.  `run_in_process` there runs the same pipeline in one
+process on one executor, for tests.
+"""
+
+import argparse
+from dataclasses import dataclass
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+from typing import Optional
+
+import numpy as np
+
+from tskf_ros.models import OWC_LINEAR_RANGE
+from tskf_ros.timescale import jumps
+
+NS = 1_000_000_000
+
+
+@dataclass
+class Summary:
+    """The demo's figures."""
+
+    samples: int
+    published: int
+    predicted: int
+    corrected: int
+    gaps: list            # (point after the gap s, J s)
+    rms_predicted: float
+    rms_corrected: float
+    rms_predicted_linear: float
+    rms_corrected_linear: float
+    worst: list           # (t s, J before t or 0, truth, predicted, corrected)
+
+
+def _by_stamp(store: dict) -> dict:
+    return {k: (v[0] if isinstance(v, tuple) else v) for k, v in store.items()}
+
+
+def summarise(record, *, period: float = 1.0) -> Summary:
+    """Compare the estimates with the truth at the estimates' stamps (a demo Record)."""
+    truth = _by_stamp(record.truth)
+    pred, corr = _by_stamp(record.predicted), _by_stamp(record.corrected)
+    stamps = sorted(record.power)
+    t_s = np.array(stamps, dtype=float) / NS
+    gaps = jumps(t_s, period=period) if t_s.size >= 2 else []
+    jump_at = {round(t * NS): J for t, J in gaps}
+    common = [k for k in sorted(pred) if k in truth and k in corr]
+
+    def rms(est: dict, keys: list) -> float:
+        e = np.array([est[k] - truth[k] for k in keys])
+        return float(np.sqrt(np.mean(e ** 2))) if e.size else float('nan')
+
+    lo, hi = OWC_LINEAR_RANGE
+    linear = [k for k in common if lo <= truth[k] <= hi]
+    worst = sorted(common, key=lambda k: -abs(pred[k] - truth[k]))[:5]
+    return Summary(
+        samples=len(truth), published=len(stamps), predicted=len(pred), corrected=len(corr),
+        gaps=gaps, rms_predicted=rms(pred, common), rms_corrected=rms(corr, common),
+        rms_predicted_linear=rms(pred, linear), rms_corrected_linear=rms(corr, linear),
+        worst=[(k / NS, jump_at.get(k, 0.0), truth[k], pred[k], corr[k]) for k in worst])
+
+
+def format_summary(s: Summary) -> str:
+    """Format the summary as the demo prints it."""
+    lines = [
+        f'messages: {s.samples} true angles, {s.published} received-power samples '
+        f'({s.samples - s.published} gaps or drops), {s.predicted} predicted and '
+        f'{s.corrected} corrected estimates',
+        f'gaps (J > 1.5 s): {len(s.gaps)}' + (': ' + ', '.join(
+            f'J = {J:g} s before t = {t:g}' for t, J in s.gaps) if s.gaps else ''),
+        f'RMS error vs true angle (rad): predictor {s.rms_predicted:.4f}, '
+        f'corrected {s.rms_corrected:.4f}',
+        f'  where theta is in the linear range of eq. (2): predictor '
+        f'{s.rms_predicted_linear:.4f}, corrected {s.rms_corrected_linear:.4f}',
+        'five worst points (predictor error):',
+        '  t (s)     J before   theta    predicted  corrected',
+    ]
+    for t, J, th, p, c in s.worst:
+        lines.append(f'  {t:8.2f}  {J:8g}  {th:8.4f}  {p:9.4f}  {c:9.4f}')
+    return '\n'.join(lines)
+
+
+def config_dir() -> Path:
+    """config/ of the source tree, else the installed package's share/tskf_ros/config."""
+    here = Path(__file__).resolve().parents[2] / 'config'
+    if here.is_dir():
+        return here
+    from ament_index_python.packages import get_package_share_directory
+    return Path(get_package_share_directory('tskf_ros')) / 'config'
+
+
+def node_command(module: str, params_file: Path, **params: object) -> list:
+    """`python -m tskf_ros.nodes.<module> --ros-args --params-file ... -p k:=v`."""
+    cmd = [sys.executable, '-m', f'tskf_ros.nodes.{module}', '--ros-args',
+           '--params-file', str(params_file)]
+    for k, v in params.items():
+        cmd += ['-p', f'{k}:={str(v).lower() if isinstance(v, bool) else v}']
+    return cmd
+
+
+def run_processes(args: argparse.Namespace) -> Summary:
+    """Start both nodes as processes, collect in this process, stop them; summarise."""
+    from tskf_ros.nodes.demo_collector import collect
+
+    cfg = config_dir()
+    time_factor = 1.0 / args.duration_scale
+    env = dict(os.environ)
+    procs = []
+
+    def start_simulator() -> None:
+        procs.append(subprocess.Popen(node_command(
+            'power_meter_simulator', cfg / 'power_meter_simulator.yaml',
+            rate=float(args.rate), seed=args.seed, duration=float(args.duration),
+            time_factor=float(time_factor), start_time=1.0, wait_for_subscribers=2,
+            blockage=args.blockage, drop_probability=float(args.drop_probability)),
+            env=env))
+
+    procs.append(subprocess.Popen(node_command(
+        'timescale_estimator', cfg / 'owc_estimator.yaml', transition=args.transition),
+        env=env))
+    try:
+        samples = int(round(args.duration * args.rate))
+        timeout = args.duration * args.duration_scale * 3 + 30
+        record = collect(samples, timeout=timeout, on_ready=start_simulator)
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        for p in procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+    return summarise(record, period=1.0 / args.rate)
+
+
+def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
+    """Command line of the demo."""
+    parser = argparse.ArgumentParser(
+        prog='python -m tskf_ros.experiments.demo', description=__doc__.split('\n')[0])
+    parser.add_argument('--duration', type=float, default=300.0,
+                        help='seconds of stamped data (default: 300, as Cai IV-C)')
+    parser.add_argument('--duration-scale', type=float, default=0.05,
+                        help='wall time per stamped second (default 0.05: 300 s in 15 s)')
+    parser.add_argument('--rate', type=float, default=1.0, help='samples per second')
+    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--transition', choices=('euler', 'exact'), default='euler')
+    parser.add_argument('--blockage', choices=('none', 'bernoulli', 'gilbert_elliott'),
+                        default='none')
+    parser.add_argument('--drop-probability', type=float, default=0.0)
+    parser.add_argument('--domain-id', type=int, default=None,
+                        help='ROS_DOMAIN_ID for all processes (default: from the '
+                        'environment, else derived from the process id)')
+    args = parser.parse_args(argv)
+    if not args.duration_scale > 0:
+        parser.error('--duration-scale must be > 0')
+    return args
+
+
+def main(argv: Optional[list] = None) -> int:
+    """Run the demo and print the summary."""
+    args = parse_args(argv)
+    # every process of the demo talks only on this machine and in one domain
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    if args.domain_id is not None:
+        os.environ['ROS_DOMAIN_ID'] = str(args.domain_id)
+    os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 1))
+    print(f'demo: {args.duration:g} s at {args.rate:g} Hz played in about '
+          f'{args.duration * args.duration_scale:g} s, ROS_DOMAIN_ID='
+          f'{os.environ["ROS_DOMAIN_ID"]}, seed {args.seed}', flush=True)
+    summary = run_processes(args)
+    print(format_summary(summary), flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,142 @@
+"""
+Messages to and from the core: the only place where ROS messages meet numpy arrays.
+
+Types (all from common_interfaces, no custom messages):
+
+- received power, input: sensor_msgs/msg/Illuminance.  A stamped scalar with a variance is
+  what that type is, whatever its name: header.stamp = sample time, illuminance = power
+  in mW, variance = its variance in mW^2 (0 if unknown).
+- true angle, simulator output: sensor_msgs/msg/JointState with one joint named after
+  the state (position in rad): a stamped, named angle is what JointState carries.
+- estimates: geometry_msgs/msg/TwistWithCovarianceStamped used as a stamped state vector
+  with its covariance.  No common_interfaces type is "a stamped n-vector with an n x n
+  covariance"; the six unconstrained slots (linear.x, .y, .z, angular.x, .y, .z) with a
+  full 6 x 6 row-major covariance are the closest, and lossless for n <= 6 (the paper's
+  models have n = 1 and 2).  State i goes to slot i (for model (3): theta in linear.x,
+  its variance in covariance[0]); unused slots and their covariance are 0.  Pose types
+  would force the state through a unit quaternion; JointState has no covariance;
+  std_msgs arrays have no stamp.
+- graininess: sensor_msgs/msg/TimeReference with header.stamp = t and time_ref =
+  sigma(t), source = 'sigma': mu(t) = time_ref - stamp exactly, in integer nanoseconds.
+- diagnostics: diagnostic_msgs/msg/DiagnosticArray (the ROS convention).
+"""
+
+from typing import Mapping, Sequence
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import TwistWithCovarianceStamped
+import numpy as np
+from sensor_msgs.msg import Illuminance, JointState, TimeReference
+
+NS = 1_000_000_000
+SLOTS = 6
+LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
+          'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
+
+
+def stamp_to_ns(stamp: Time) -> int:
+    """Convert builtin_interfaces/Time -> integer nanoseconds."""
+    return int(stamp.sec) * NS + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int) -> Time:
+    """Convert Integer nanoseconds (>= 0) -> builtin_interfaces/Time."""
+    sec, nanosec = divmod(int(ns), NS)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def power_to_msg(stamp_ns: int, power: float, variance: float = 0.0, *,
+                 frame_id: str = 'power_meter') -> Illuminance:
+    """Convert (stamp, power mW, variance mW^2) -> Illuminance."""
+    msg = Illuminance(illuminance=float(power), variance=float(variance))
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = frame_id
+    return msg
+
+
+def msg_to_power(msg: Illuminance) -> tuple[int, float, float]:
+    """Convert Illuminance -> (stamp ns, power mW, variance mW^2)."""
+    return stamp_to_ns(msg.header.stamp), float(msg.illuminance), float(msg.variance)
+
+
+def angle_to_msg(stamp_ns: int, angles: Sequence[float], names: Sequence[str], *,
+                 frame_id: str = '') -> JointState:
+    """Convert True angle(s) (rad) -> JointState with the given joint names."""
+    msg = JointState(name=list(names), position=[float(a) for a in angles])
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = frame_id
+    return msg
+
+
+def msg_to_angle(msg: JointState) -> tuple[int, np.ndarray]:
+    """Convert JointState -> (stamp ns, positions)."""
+    return stamp_to_ns(msg.header.stamp), np.array(msg.position, dtype=float)
+
+
+def estimate_to_msg(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
+                    frame_id: str = '') -> TwistWithCovarianceStamped:
+    """Convert State x (n <= 6) and covariance P -> TwistWithCovarianceStamped (slot i = x[i])."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    n = x.size
+    if n > SLOTS:
+        raise ValueError(f'a state of {n} > {SLOTS} entries does not fit the message')
+    v = np.zeros(SLOTS)
+    v[:n] = x
+    cov = np.zeros((SLOTS, SLOTS))
+    cov[:n, :n] = np.asarray(P, dtype=float).reshape(n, n)
+    msg = TwistWithCovarianceStamped()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = frame_id
+    t = msg.twist.twist
+    t.linear.x, t.linear.y, t.linear.z = float(v[0]), float(v[1]), float(v[2])
+    t.angular.x, t.angular.y, t.angular.z = float(v[3]), float(v[4]), float(v[5])
+    msg.twist.covariance = cov.reshape(-1)
+    return msg
+
+
+def msg_to_estimate(msg: TwistWithCovarianceStamped, n: int
+                    ) -> tuple[int, np.ndarray, np.ndarray]:
+    """Convert TwistWithCovarianceStamped -> (stamp ns, x of n entries, P n x n)."""
+    t = msg.twist.twist
+    v = np.array([t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z])
+    cov = np.asarray(msg.twist.covariance, dtype=float).reshape(SLOTS, SLOTS)
+    return stamp_to_ns(msg.header.stamp), v[:n], cov[:n, :n]
+
+
+def jump_to_msg(stamp_ns: int, sigma_ns: int) -> TimeReference:
+    """Convert the point t and sigma(t) -> TimeReference (mu = time_ref - stamp)."""
+    msg = TimeReference(time_ref=ns_to_stamp(sigma_ns), source='sigma')
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    return msg
+
+
+def msg_to_jump(msg: TimeReference) -> tuple[int, float]:
+    """Convert TimeReference -> (stamp ns, mu in s)."""
+    t = stamp_to_ns(msg.header.stamp)
+    return t, (stamp_to_ns(msg.time_ref) - t) / NS
+
+
+def diagnostics_to_msg(stamp_ns: int, name: str, level: str, message: str,
+                       values: Mapping[str, object], *,
+                       hardware_id: str = '') -> DiagnosticArray:
+    """Build a one-status DiagnosticArray; floats printed with repr precision."""
+    status = DiagnosticStatus(level=LEVELS[level], name=name, message=message,
+                              hardware_id=hardware_id)
+    status.values = [KeyValue(key=k, value=repr(v) if isinstance(v, float) else str(v))
+                     for k, v in values.items()]
+    msg = DiagnosticArray(status=[status])
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    return msg
+
+
+def msg_to_diagnostics(msg: DiagnosticArray) -> dict:
+    """Convert DiagnosticArray -> {status name: {key: value string, level, message}}."""
+    out = {}
+    for s in msg.status:
+        values = {kv.key: kv.value for kv in s.values}
+        values['level'] = int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) \
+            else int(s.level)
+        values['message'] = s.message
+        out[s.name] = values
+    return out

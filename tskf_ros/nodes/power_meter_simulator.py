@@ -1,0 +1,226 @@
+"""
+power_meter_simulator: the intermittent OWC link of Cai et al. IV-A/B as a sensor driver.
+
+Publishes `received_power` (sensor_msgs/msg/Illuminance, sensor-data QoS, as a power meter
+driver would) and the evaluation truth `true_angle` (sensor_msgs/msg/JointState).  The
+samples come from tskf_ros.owc_link.OwcLink; sample k is stamped start + k / rate, and is
+published when the node's clock says (k / rate) / time_factor seconds have passed.
+"""
+
+import argparse
+from dataclasses import dataclass, fields
+import sys
+from typing import Optional
+
+from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
+                                SetParametersResult)
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import Illuminance, JointState
+
+from tskf_ros.nodes import conversions
+from tskf_ros.owc_link import BLOCKAGES, LinkConfig, LinkError, OwcLink, Samples
+
+NODE_NAME = 'power_meter_simulator'
+NS = 1_000_000_000
+MAX_BATCH = 10_000      # samples published per timer tick at most (catching up)
+
+LINK_HELP = {
+    'rate': ('samples per second (Cai IV-C: 1 Hz; 1 kHz works)', (1e-3, 10_000.0)),
+    'seed': ('seed of every random stream: same parameters and seed, same samples', None),
+    'vibration_frequency': ('Hz of the random vibration signal (Cai IV-A: 2 Hz)',
+                            (0.0, 1000.0)),
+    'phase_diffusion': ('rad^2/s: phase noise that makes the 2 Hz signal random',
+                        (0.0, 1e4)),
+    'rest_angle': ('rad: relative angle with the table at rest (0.4141: start of eq. (2))',
+                   (-1.6, 1.6)),
+    'knob_min': ('rad: smallest vibration amplitude the gain knob gives', (0.0, 3.0)),
+    'knob_max': ('rad: largest vibration amplitude the gain knob gives', (0.0, 3.0)),
+    'knob_initial': ('rad: vibration amplitude at the start', (0.0, 3.0)),
+    'knob_rate': ('random turns of the gain knob per second (Poisson)', (0.0, 1e3)),
+    'knob_step': ('rad: standard deviation of one knob turn', (0.0, 3.0)),
+    'noise_std': ('mW: power meter noise (system (3): v ~ N(0, 100))', (0.0, 1e3)),
+    'blockage': ('link blockages: ' + ', '.join(BLOCKAGES), None),
+    'drop_probability': ('Bernoulli drop probability per sample', (0.0, 1.0)),
+    'ge_p_gb': ('Gilbert-Elliott P(good -> bad) per sample', (0.0, 1.0)),
+    'ge_p_bg': ('Gilbert-Elliott P(bad -> good) per sample', (0.0, 1.0)),
+    'ge_loss_good': ('Gilbert-Elliott loss probability in the good state', (0.0, 1.0)),
+    'ge_loss_bad': ('Gilbert-Elliott loss probability in the bad state', (0.0, 1.0)),
+}
+
+
+@dataclass(frozen=True)
+class SimulatorConfig:
+    """The node's settings, read once: the link and how it is played out."""
+
+    link: LinkConfig
+    time_factor: float
+    duration: float
+    start_time: float
+    publish_invalid: bool
+    wait_for_subscribers: int
+    frame_id: str
+    angle_name: str
+
+
+def _descriptor(name: str, text: str, rng: Optional[tuple], type_: int, *,
+                read_only: bool = True) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=text, type=type_, read_only=read_only)
+    if rng is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1])]
+    return d
+
+
+class PowerMeterSimulator(Node):
+    """Publish simulated received power and the true angle at `rate` (times time_factor)."""
+
+    def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
+                 node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
+        super().__init__(node_name, context=context, namespace=namespace,
+                         parameter_overrides=parameter_overrides)
+        self._declare()
+        self.config = self._read()
+        self.link = OwcLink(self.config.link)
+        self.add_on_set_parameters_callback(self._validate)
+        self.power_pub = self.create_publisher(Illuminance, 'received_power',
+                                               qos_profile_sensor_data)
+        self.angle_pub = self.create_publisher(
+            JointState, 'true_angle',
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        link = self.config.link
+        self.total = int(round(self.config.duration * link.rate)) or None
+        self.published = 0
+        self.start_ns: Optional[int] = None
+        self.stamp0_ns = int(round(self.config.start_time * NS))
+        period = max(1.0 / (link.rate * self.config.time_factor), 1e-3)
+        self.timer = self.create_timer(period, self._tick)
+        self.get_logger().info(
+            f'simulating the OWC link at {link.rate:g} Hz x {self.config.time_factor:g}, '
+            f'seed {link.seed}, blockage {link.blockage}'
+            + (f', {self.total} samples' if self.total else ''))
+
+    def _declare(self) -> None:
+        defaults = LinkConfig()
+        for f in fields(LinkConfig):
+            text, rng = LINK_HELP[f.name]
+            value = getattr(defaults, f.name)
+            type_ = {int: ParameterType.PARAMETER_INTEGER, str: ParameterType.PARAMETER_STRING,
+                     float: ParameterType.PARAMETER_DOUBLE}[type(value)]
+            self.declare_parameter(f.name, value, _descriptor(f.name, text, rng, type_))
+        D = ParameterType.PARAMETER_DOUBLE
+        self.declare_parameter('time_factor', 1.0, _descriptor(
+            'time_factor', 'play the stream this many times faster than the stamps advance '
+            '(a 300 s run at 1 Hz with 30: 10 s)', (1e-3, 1e4), D))
+        self.declare_parameter('duration', 0.0, _descriptor(
+            'duration', 'seconds of stamped data to publish, then stop; 0: forever',
+            (0.0, 1e9), D))
+        self.declare_parameter('start_time', 0.0, _descriptor(
+            'start_time', 'stamp (s) of sample 0; 0: the node clock at the first tick',
+            (0.0, 1e10), D))
+        self.declare_parameter('wait_for_subscribers', 0, ParameterDescriptor(
+            description='hold sample 0 until received_power has this many subscribers',
+            type=ParameterType.PARAMETER_INTEGER, read_only=True))
+        self.declare_parameter('publish_invalid', False, ParameterDescriptor(
+            description='publish readings <= 0 as they are (true) or leave a gap (false)',
+            type=ParameterType.PARAMETER_BOOL))
+        self.declare_parameter('frame_id', 'power_meter', _descriptor(
+            'frame_id', 'frame_id of received_power', None, ParameterType.PARAMETER_STRING))
+        self.declare_parameter('angle_name', 'theta', _descriptor(
+            'angle_name', 'joint name of the angle on true_angle', None,
+            ParameterType.PARAMETER_STRING))
+
+    def _read(self) -> SimulatorConfig:
+        p = {name: value.value for name, value in self._parameters_by_name().items()}
+        try:
+            link = LinkConfig(**{f.name: p[f.name] for f in fields(LinkConfig)})
+        except LinkError as exc:
+            raise LinkError(f'bad simulator parameters: {exc}') from None
+        return SimulatorConfig(link, p['time_factor'], p['duration'], p['start_time'],
+                               p['publish_invalid'], p['wait_for_subscribers'], p['frame_id'],
+                               p['angle_name'])
+
+    def _parameters_by_name(self) -> dict:
+        names = [f.name for f in fields(LinkConfig)] + [
+            'time_factor', 'duration', 'start_time', 'publish_invalid', 'wait_for_subscribers',
+            'frame_id', 'angle_name']
+        return {n: self.get_parameter(n) for n in names}
+
+    def _validate(self, changes: list) -> SetParametersResult:
+        """Only publish_invalid changes at run time; the seeded stream is fixed at start."""
+        for p in changes:
+            if p.name == 'publish_invalid':
+                if not isinstance(p.value, bool):
+                    return SetParametersResult(successful=False,
+                                               reason='publish_invalid must be a bool')
+                self.config = SimulatorConfig(**{**self.config.__dict__,
+                                                 'publish_invalid': p.value})
+        return SetParametersResult(successful=True)
+
+    def _tick(self) -> None:
+        now = self.get_clock().now().nanoseconds
+        if self.start_ns is None:
+            if self.power_pub.get_subscription_count() < self.config.wait_for_subscribers:
+                return
+            self.start_ns = now
+            if not self.stamp0_ns:
+                self.stamp0_ns = now
+        link, factor = self.config.link, self.config.time_factor
+        due = int((now - self.start_ns) / NS * factor * link.rate) + 1
+        if self.total is not None:
+            due = min(due, self.total)
+        n = min(due - self.published, MAX_BATCH)
+        if n > 0:
+            self.publish_samples(self.link.generate(n))
+        if self.total is not None and self.published >= self.total:
+            self.timer.cancel()
+            self.get_logger().info(f'published all {self.total} samples; stopping')
+
+    def publish_samples(self, s: Samples) -> None:
+        """Publish a batch of samples: the truth always, the power unless it is a gap."""
+        cfg = self.config
+        var = cfg.link.noise_std ** 2
+        for i in range(len(s)):
+            stamp = self.stamp0_ns + int(round(int(s.index[i]) * NS / cfg.link.rate))
+            self.angle_pub.publish(conversions.angle_to_msg(stamp, [s.theta[i]],
+                                                            [cfg.angle_name]))
+            if s.blocked[i] or not (s.reading[i] > 0 or cfg.publish_invalid):
+                continue
+            self.power_pub.publish(conversions.power_to_msg(stamp, s.reading[i], var,
+                                                            frame_id=cfg.frame_id))
+        self.published += len(s)
+
+
+def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
+    """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
+    parser = argparse.ArgumentParser(
+        prog=NODE_NAME, description='Simulated power meter of the vibration-induced '
+        'intermittent OWC link (Cai et al. IV). Parameters: --ros-args --params-file '
+        'config/power_meter_simulator.yaml or -p name:=value')
+    args = remove_ros_args(sys.argv if argv is None else argv)[1:]
+    return parser.parse_known_args(args)[0]
+
+
+def main(args: Optional[list] = None) -> None:
+    """Run the node until Ctrl-C or shutdown."""
+    parse_args(args)
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = PowerMeterSimulator()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except LinkError as exc:
+        print(f'{NODE_NAME}: {exc}', file=sys.stderr)
+        sys.exit(1)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

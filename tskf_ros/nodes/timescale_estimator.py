@@ -1,0 +1,298 @@
+"""
+timescale_estimator: the time-scale Kalman filter on a stream of received-power samples.
+
+Subscribes to `received_power` (sensor_msgs/msg/Illuminance, best effort so that both
+reliable and best-effort publishers match), feeds tskf_ros.estimation.EstimatorSession,
+and publishes what the session returns; see tskf_ros.nodes.conversions for the types.
+"""
+
+import argparse
+from dataclasses import dataclass
+import sys
+from typing import Optional, Sequence
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TwistWithCovarianceStamped
+import numpy as np
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType, SetParametersResult)
+import rclpy
+from rclpy.clock import ClockChange, JumpThreshold, TimeJump
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import Illuminance, TimeReference
+
+from tskf_ros.estimation import (ConfigError, EstimatorConfig, EstimatorSession,
+                                 model_from_flat, Outcome)
+from tskf_ros.models import owc
+from tskf_ros.nodes import conversions
+from tskf_ros.tskf import FilterError, TRANSITIONS
+
+NODE_NAME = 'timescale_estimator'
+MATRICES = ('A', 'B', 'C', 'D', 'G', 'Q', 'R', 'x0', 'P0')
+MATRIX_HELP = {
+    'A': 'x^Delta = A x + B u + G w: A, n x n row-major (model (3): [1.0])',
+    'B': 'input matrix, n x m row-major; empty for none (no input topic yet)',
+    'C': 'y = C x + D + v: C, p x n row-major (model (3): [-637.35])',
+    'D': 'output offset, p entries; empty for 0 (model (3): [511.97])',
+    'G': 'process noise input, n x r row-major; empty for identity',
+    'Q': 'process noise intensity, r x r, symmetric positive semi-definite',
+    'R': 'measurement noise intensity, p x p, symmetric positive definite',
+    'x0': 'initial estimate, n entries',
+    'P0': 'initial covariance, n x n, symmetric positive semi-definite',
+}
+# name -> (default, description, (lo, hi))
+SCALARS = {
+    'period': (1.0, 'nominal sample period (s): sorts intervals into dense, discrete and '
+               'jumps (Cai IV-C)', (1e-6, 3600.0)),
+    'dense_fraction': (0.5, 'an interval shorter than dense_fraction * period is dense',
+                       (0.0, 1.0)),
+    'jump_factor': (1.5, 'an interval longer than jump_factor * period is a gap (a jump J)',
+                    (1.0, 1000.0)),
+    'max_gap': (5.0, 'a gap longer than this (s) sets the diagnostics level to WARN',
+                (0.0, 1e6)),
+    'history_window': (10.0, 'a late sample at most this much (s) older than the newest is '
+                       'inserted and the filter re-run', (0.0, 3600.0)),
+    'max_jump': (60.0, 'a stamp further ahead (s) of the last point re-initialises the '
+                 'filter', (1e-6, 1e6)),
+    'max_backward': (30.0, 'a stamp further behind (s) the last point re-initialises the '
+                     'filter (clock reset, looped bag); >= history_window', (0.0, 1e6)),
+    'max_future': (0.0, "a stamp further ahead (s) of this node's clock is rejected; 0: "
+                   'off (replayed or time-compressed streams)', (0.0, 1e6)),
+    'diagnostics_period': (1.0, 'seconds between /diagnostics messages', (0.01, 3600.0)),
+}
+PARAMETERS = MATRICES + tuple(SCALARS) + (
+    'model_name', 'state_names', 'transition', 'history_size', 'queue_depth', 'frame_id',
+    'nonpositive_is_gap')
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """The node's own settings, read once; the filter's are in `estimator`."""
+
+    estimator: EstimatorConfig
+    frame_id: str
+    diagnostics_period: float
+    queue_depth: int
+
+
+def parameters_to_config(values: dict) -> NodeConfig:
+    """Build the config from parameter values; raise ConfigError with the reason if bad."""
+    flat = {}
+    for key in MATRICES:
+        v = values[key]
+        if isinstance(v, (str, bytes)) or any(isinstance(e, (bool, str)) for e in v):
+            raise ConfigError(f'{key} must be a list of numbers, got {v!r}')
+        flat[key] = [float(e) for e in v]
+    model = model_from_flat(name=values['model_name'],
+                            state_names=tuple(values['state_names']), **flat)
+    estimator = EstimatorConfig(
+        model, transition=values['transition'], period=values['period'],
+        dense_fraction=values['dense_fraction'], jump_factor=values['jump_factor'],
+        max_gap=values['max_gap'], history_window=values['history_window'],
+        history_size=values['history_size'], max_jump=values['max_jump'],
+        max_backward=values['max_backward'], max_future=values['max_future'],
+        nonpositive_is_gap=values['nonpositive_is_gap'])
+    return NodeConfig(estimator, values['frame_id'], values['diagnostics_period'],
+                      values['queue_depth'])
+
+
+def _range(lo: float, hi: float) -> dict:
+    return {'floating_point_range': [FloatingPointRange(from_value=lo, to_value=hi)]}
+
+
+class TimescaleEstimator(Node):
+    """Node wrapping EstimatorSession: received power in, estimates and diagnostics out."""
+
+    def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
+                 node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
+        super().__init__(node_name, context=context, namespace=namespace,
+                         parameter_overrides=parameter_overrides)
+        self._declare()
+        self.config = parameters_to_config(self._values())
+        self.session = EstimatorSession(self.config.estimator)
+        self._pending: Optional[NodeConfig] = None
+        self.add_on_set_parameters_callback(self._validate)
+        self.add_post_set_parameters_callback(self._apply)
+
+        # received power: best effort matches reliable and best-effort publishers alike
+        qos_in = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.config.queue_depth,
+                            reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.sub = self.create_subscription(Illuminance, 'received_power', self._on_power,
+                                            qos_in)
+        qos_out = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.config.queue_depth,
+                             reliability=ReliabilityPolicy.RELIABLE)
+        est, ref = TwistWithCovarianceStamped, TimeReference
+        self.pubs = {
+            ('predicted', False): self.create_publisher(est, 'estimate/predicted', qos_out),
+            ('corrected', False): self.create_publisher(est, 'estimate/corrected', qos_out),
+            ('mu', False): self.create_publisher(ref, 'estimate/mu', qos_out),
+            ('predicted', True): self.create_publisher(est, 'estimate/revised/predicted',
+                                                       qos_out),
+            ('corrected', True): self.create_publisher(est, 'estimate/revised/corrected',
+                                                       qos_out),
+            ('mu', True): self.create_publisher(ref, 'estimate/revised/mu', qos_out),
+        }
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.diag_timer = self.create_timer(self.config.diagnostics_period,
+                                            self.publish_diagnostics)
+        # use_sim_time: a clock that jumps back (a looped bag) or changes source restarts
+        self._jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1_000_000),
+                          on_clock_change=True),
+            post_callback=self._on_clock_jump)
+        m = self.config.estimator.model
+        self.get_logger().info(
+            f'estimating {m.name} (n = {m.A.shape[0]}, states {", ".join(m.state_names)}) '
+            f'with the {self.config.estimator.transition} transition')
+
+    # -- parameters -----------------------------------------------------------------------
+
+    def _declare(self) -> None:
+        d = owc()
+        defaults = {'A': d.A, 'B': (), 'C': d.C, 'D': d.D, 'G': d.G, 'Q': d.Q, 'R': d.R,
+                    'x0': d.x0, 'P0': d.P0}
+        for key in MATRICES:
+            value = [float(v) for v in np.ravel(defaults[key])]
+            self.declare_parameter(key, value, ParameterDescriptor(
+                description=MATRIX_HELP[key], dynamic_typing=True))
+        self.declare_parameter('model_name', d.name, ParameterDescriptor(
+            description="name of the model, used as the estimates' frame_id if that is empty",
+            type=ParameterType.PARAMETER_STRING))
+        self.declare_parameter('state_names', list(d.state_names), ParameterDescriptor(
+            description='one name per state; the order of the estimate message slots',
+            type=ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter('transition', 'euler', ParameterDescriptor(
+            description="how a jump mu is discretised: euler = the paper's I + mu A; "
+            'exact = expm(A mu) with Van Loan process noise',
+            additional_constraints='one of ' + ', '.join(TRANSITIONS),
+            type=ParameterType.PARAMETER_STRING))
+        for name, (default, text, (lo, hi)) in SCALARS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(
+                description=text, type=ParameterType.PARAMETER_DOUBLE, **_range(lo, hi)))
+        self.declare_parameter('history_size', 1000, ParameterDescriptor(
+            description='points (and filter states) kept for rewinding on a late sample',
+            type=ParameterType.PARAMETER_INTEGER,
+            integer_range=[IntegerRange(from_value=2, to_value=1_000_000)]))
+        self.declare_parameter('queue_depth', 100, ParameterDescriptor(
+            description='depth of the input and output queues', read_only=True,
+            type=ParameterType.PARAMETER_INTEGER,
+            integer_range=[IntegerRange(from_value=1, to_value=100_000)]))
+        self.declare_parameter('nonpositive_is_gap', True, ParameterDescriptor(
+            description='a measurement <= 0 is an invalid reading, a gap (Cai IV-C: power); '
+            'false for models whose output may be negative',
+            type=ParameterType.PARAMETER_BOOL))
+        self.declare_parameter('frame_id', '', ParameterDescriptor(
+            description='frame_id of the estimates (empty: model_name)',
+            type=ParameterType.PARAMETER_STRING))
+
+    def _values(self, changes: Sequence[Parameter] = ()) -> dict:
+        values = {name: self.get_parameter(name).value for name in PARAMETERS}
+        values.update({p.name: p.value for p in changes})
+        return values
+
+    def _validate(self, changes: list) -> SetParametersResult:
+        """Refuse a change that does not make a working filter; the old values stay."""
+        try:
+            config = parameters_to_config(self._values(changes))
+        except (ConfigError, FilterError, KeyError, TypeError, ValueError) as exc:
+            self.get_logger().warning(f'parameter change refused: {exc}')
+            return SetParametersResult(successful=False, reason=str(exc))
+        self._pending = config
+        return SetParametersResult(successful=True)
+
+    def _apply(self, changes: list) -> None:
+        if self._pending is None:
+            return
+        config, self._pending = self._pending, None
+        if config.diagnostics_period != self.config.diagnostics_period:
+            self.diag_timer.timer_period_ns = int(config.diagnostics_period * 1e9)
+            self.diag_timer.reset()
+        self.config = config
+        out = self.session.reconfigure(config.estimator)
+        self.get_logger().info(f'parameters changed ({", ".join(p.name for p in changes)}): '
+                               f'{out.message}')
+
+    # -- data -----------------------------------------------------------------------------
+
+    def _on_power(self, msg: Illuminance) -> None:
+        stamp_ns, power, variance = conversions.msg_to_power(msg)
+        out = self.session.add(stamp_ns, power, variance,
+                               now_ns=self.get_clock().now().nanoseconds)
+        self._report(out)
+        self._publish(out)
+
+    def _report(self, out: Outcome) -> None:
+        log = self.get_logger()
+        if out.status == 'rejected':
+            log.warning(f'sample rejected ({out.reason}): {out.message}')
+        elif out.status == 'reset':
+            log.warning(f'filter re-initialised ({out.reason}): {out.message}')
+        elif out.status == 'inserted':
+            log.info(out.message)
+        elif out.status == 'gap':
+            log.debug(out.message)
+
+    def _publish(self, out: Outcome) -> None:
+        frame = self.config.frame_id or self.config.estimator.model.name
+        for e in out.estimates:
+            self.pubs[e.kind, e.revised].publish(
+                conversions.estimate_to_msg(e.stamp_ns, e.x, e.P, frame_id=frame))
+        for j in out.jumps:
+            self.pubs['mu', j.revised].publish(conversions.jump_to_msg(j.stamp_ns, j.sigma_ns))
+
+    def _on_clock_jump(self, jump: TimeJump) -> None:
+        if self.session.pending() is None:
+            return
+        if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED,
+                                 ClockChange.ROS_TIME_DEACTIVATED):
+            why = f'clock source changed ({jump.clock_change.name})'
+        else:
+            why = f'clock jumped {jump.delta.nanoseconds / 1e9:.3f} s'
+        out = self.session.reset('clock_jump', why)
+        self.get_logger().warning(f'filter re-initialised: {out.message}')
+
+    def publish_diagnostics(self) -> DiagnosticArray:
+        """Publish (and return) the session's counters on /diagnostics."""
+        level, message, values = self.session.diagnostics()
+        msg = conversions.diagnostics_to_msg(
+            self.get_clock().now().nanoseconds, f'{self.get_name()}: time-scale filter',
+            level, message, values, hardware_id=self.config.estimator.model.name)
+        self.diag_pub.publish(msg)
+        return msg
+
+
+def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
+    """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
+    parser = argparse.ArgumentParser(
+        prog=NODE_NAME, description='Time-scale Kalman filter on received power. Parameters '
+        'come from a YAML file: --ros-args --params-file config/owc_estimator.yaml')
+    args = remove_ros_args(sys.argv if argv is None else argv)[1:]
+    return parser.parse_known_args(args)[0]
+
+
+def main(args: Optional[list] = None) -> None:
+    """Run the node until Ctrl-C or shutdown."""
+    parse_args(args)
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = TimescaleEstimator()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ConfigError as exc:
+        print(f'{NODE_NAME}: bad parameters: {exc}', file=sys.stderr)
+        sys.exit(1)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
