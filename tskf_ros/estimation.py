@@ -26,7 +26,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from tskf_ros.models import LinearModel
-from tskf_ros.tskf import check_covariance, FilterError, TRANSITIONS
+from tskf_ros.tskf import FilterError, is_psd, TRANSITIONS
 
 NS = 1_000_000_000
 
@@ -368,8 +368,9 @@ class EstimatorSession:
         P_p = res.P_predicted
         if not _finite(res.x_corrected, P_c, res.x_predicted, P_p):
             raise FilterError(f'non-finite estimate at mu = {mu}')
-        for P in (P_c, P_p):
-            check_covariance(P, 'P', tol=1e-9)
+        for name, P in (('P(t|t)', P_c), ('P(sigma(t))', P_p)):
+            if not is_psd(P):
+                raise FilterError(f'{name} lost positive semi-definiteness at mu = {mu}')
         est = [Estimate('corrected', point.stamp_ns, res.x_corrected, P_c, revised),
                Estimate('predicted', sigma_ns, res.x_predicted, P_p, revised)]
         return est, Jump(point.stamp_ns, sigma_ns, revised), res.x_predicted, P_p

@@ -96,6 +96,42 @@ def check_covariance(m: np.ndarray, name: str, *, definite: bool = False,
     return (m + m.T) / 2
 
 
+def is_invertible(M: np.ndarray, rtol: float = 1e-12) -> bool:
+    """
+    Tell whether a small square matrix is numerically invertible.
+
+    |det M| is compared with Hadamard's bound prod_i |row_i| (|det M| <= that bound, with
+    equality for orthogonal rows), so the test does not depend on the scale of M.
+    """
+    bound = float(np.prod(np.linalg.norm(M, axis=1)))
+    return bound > 0 and abs(float(np.linalg.det(M))) > rtol * bound
+
+
+def is_psd(P: np.ndarray, tol: float = 1e-9) -> bool:
+    """
+    Tell whether a symmetric matrix is positive semi-definite within tol (relative).
+
+    Up to 2 x 2 the eigenvalue test is done in closed form (the filter's hot path runs it
+    twice per step); larger P goes through a Cholesky factorisation of P + tol * scale * I,
+    which succeeds exactly when the smallest eigenvalue of P is above -tol * scale.
+    """
+    n = P.shape[0]
+    d = np.diag(P)
+    scale = max(1.0, float(np.max(np.abs(d))))
+    eps = tol * scale
+    if n == 1:
+        return float(P[0, 0]) >= -eps
+    if n == 2:
+        a, b, c = float(P[0, 0]), float(P[0, 1]), float(P[1, 1])
+        # smallest eigenvalue of [[a, b], [b, c]]: (a + c) / 2 - sqrt(((a - c) / 2)^2 + b^2)
+        return (a + c) / 2 - ((a - c) ** 2 / 4 + b * b) ** 0.5 >= -eps
+    try:
+        np.linalg.cholesky(P + eps * np.eye(n))
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
 def van_loan(A: np.ndarray, GQGt: np.ndarray, mu: float) -> tuple[np.ndarray, np.ndarray]:
     """
     Exact (F, Q_d) of x' = A x + G w over mu: F = e^{A mu}, Q_d = int_0^mu F(s) GQG^T F(s)^T.
@@ -187,6 +223,7 @@ class TimeScaleKalmanFilter:
         # system (1) at mu = 1) can say so.  Off by default: such a step is refused.
         self.allow_nonregressive = bool(allow_nonregressive)
         self.GQGt = self.G @ self.Q @ self.G.T
+        self._I = np.eye(n)
         self.x = self._vector(x0, n, 'x0')
         P0m = as_matrix(P0, 'P0')
         if P0m.shape != (n, n):
@@ -227,7 +264,7 @@ class TimeScaleKalmanFilter:
         n = self.n
         if self.transition == 'euler':
             # x(sigma) = (I + mu A) x + mu B u + mu G w, Var(mu G w) = mu GQG^T
-            return np.eye(n) + mu * self.A, mu * self.GQGt, mu * self.B
+            return self._I + mu * self.A, mu * self.GQGt, mu * self.B
         F, Qd = van_loan(self.A, self.GQGt, mu)
         return F, Qd, exact_input_matrix(self.A, self.B, mu)
 
@@ -254,11 +291,10 @@ class TimeScaleKalmanFilter:
         """
         mu = self.check_mu(mu)
         u = self._input(u)
-        x, P, A, C = self.x, self.P, self.A, self.C
-        n = self.n
+        x, P, A, C, I = self.x, self.P, self.A, self.C, self._I
         if self.transition == 'euler':
-            I_muA = np.eye(n) + mu * A
-            if not self.allow_nonregressive and np.linalg.cond(I_muA) > 1e12:
+            I_muA = I + mu * A
+            if not self.allow_nonregressive and not is_invertible(I_muA):
                 raise FilterError(
                     f'I + mu A is singular at mu = {mu}: A is not regressive on this time '
                     'scale (Bohner & Wintz Definition 2.12); the step is refused')
@@ -273,32 +309,36 @@ class TimeScaleKalmanFilter:
             y = self._vector(y, self.p, 'y')
             # innovation y - C xhat - D
             innovation = y - C @ x - self.D
+            CP = C @ P
+            # R + mu C P C^T
+            RmuCPC = self.R + mu * (CP @ C.T)
+            # W = (R + mu C P C^T)^-1 C P, shared by K, P^Delta and the corrected estimate
+            W = np.linalg.solve(RmuCPC, CP)
             if self.transition == 'euler':
-                # R + mu C P C^T
-                RmuCPC = self.R + mu * C @ P @ C.T
-                # K = (I + mu A) P C^T (R + mu C P C^T)^-1
-                K = I_muA @ P @ C.T @ np.linalg.inv(RmuCPC)
+                I_muA_P = I_muA @ P
+                # K = (I + mu A) P C^T (R + mu C P C^T)^-1 = (I + mu A) W^T
+                K = I_muA @ W.T
                 # xhat^Delta = A xhat + B u + K [y - C xhat - D]
                 x_delta = A @ x + self.B @ u + K @ innovation
                 # P^Delta = AP + (I+muA) P A^T + GQG^T - (I+muA) P C^T (R+muCPC^T)^-1 C P (I+muA^T)
-                P_delta = (A @ P + I_muA @ P @ A.T + self.GQGt
-                           - I_muA @ P @ C.T @ np.linalg.solve(RmuCPC, C @ P @ I_muA.T))
+                P_delta = A @ P + I_muA_P @ A.T + self.GQGt - K @ CP @ I_muA.T
                 # f(sigma) = f + mu f^Delta
                 x_new = x + mu * x_delta
                 P_new = P + mu * P_delta
-            # corrected estimate at t: measurement update with R_d = R / mu
+            # corrected estimate at t: measurement update with R_d = R / mu;
+            # S = C P C^T + R / mu = (R + mu C P C^T) / mu, so L = P C^T S^-1 = mu W^T
             Rd = self.R / mu
-            S = C @ P @ C.T + Rd
-            L = np.linalg.solve(S, C @ P).T
+            S = RmuCPC / mu
+            L = mu * W.T
             x_c = x + L @ innovation
             # Joseph form keeps P(t|t) symmetric positive semi-definite in floating point
-            I_LC = np.eye(n) - L @ C
+            I_LC = I - L @ C
             P_c = I_LC @ P @ I_LC.T + L @ Rd @ L.T
             if self.transition == 'exact':
                 x_new = F @ x_c + Bd @ u
                 P_new = F @ P_c @ F.T + Qd
         P_new = (P_new + P_new.T) / 2
-        if not (np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))):
+        if not (np.isfinite(x_new).all() and np.isfinite(P_new).all()):
             raise FilterError(f'step with mu = {mu} overflowed; the filter state is unchanged')
         self.x, self.P = x_new, P_new
         self.x_corrected, self.P_corrected = x_c, P_c
