@@ -261,7 +261,6 @@ class TimeScaleKalmanFilter:
 
     def transition_matrices(self, mu: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(F, Q_d, B_d) for a jump of mu: the paper's Euler form or the exact sampled plant."""
-        n = self.n
         if self.transition == 'euler':
             # x(sigma) = (I + mu A) x + mu B u + mu G w, Var(mu G w) = mu GQG^T
             return self._I + mu * self.A, mu * self.GQGt, mu * self.B
@@ -291,9 +290,9 @@ class TimeScaleKalmanFilter:
         """
         mu = self.check_mu(mu)
         u = self._input(u)
-        x, P, A, C, I = self.x, self.P, self.A, self.C, self._I
+        x, P, A, C, eye = self.x, self.P, self.A, self.C, self._I
         if self.transition == 'euler':
-            I_muA = I + mu * A
+            I_muA = eye + mu * A
             if not self.allow_nonregressive and not is_invertible(I_muA):
                 raise FilterError(
                     f'I + mu A is singular at mu = {mu}: A is not regressive on this time '
@@ -332,7 +331,7 @@ class TimeScaleKalmanFilter:
             L = mu * W.T
             x_c = x + L @ innovation
             # Joseph form keeps P(t|t) symmetric positive semi-definite in floating point
-            I_LC = I - L @ C
+            I_LC = eye - L @ C
             P_c = I_LC @ P @ I_LC.T + L @ Rd @ L.T
             if self.transition == 'exact':
                 x_new = F @ x_c + Bd @ u
