@@ -2,10 +2,11 @@
 
 import numpy as np
 import pytest
+from tskf_ros import irregular
 
 from tskf_ros.estimation import (ConfigError, EstimatorConfig, EstimatorSession,
                                  model_from_flat, NS)
-from tskf_ros.models import owc, run_filter, spring_mass
+from tskf_ros.models import LinearModel, owc, OWC_SLOPE, run_filter, spring_mass
 from tskf_ros.timescale import discrete
 
 # 1 Hz with gaps J = 3 (after 4) and J = 4 (after 12), and a dense stretch at 0.25 s
@@ -180,3 +181,32 @@ def test_reconfigure_keeps_the_estimate():
     assert session.kf.transition == 'exact'
     out = session.reconfigure(EstimatorConfig(spring_mass()))
     assert out.status == 'reset' and session.pending() is None
+
+
+def test_sampling_intervals_are_checked_against_fang_section_iii():
+    # a scalar unstable model: no pathological interval; Theorem 2 bounds for 1..4 periods
+    cfg = EstimatorConfig(model=owc(), max_gap=100.0)
+    s = EstimatorSession(cfg)
+    t = 10 * NS
+    for dt in (1, 1, 3, 1, 4, 2):
+        t += dt * NS
+        s.add(t, 200.0)
+    level, _, values = s.diagnostics()
+    assert values['intervals_seen_periods'] == '1 2 3 4'
+    assert values['interval_warnings'] == ''
+    F, Qd, _ = s.kf.transition_matrices(1.0)
+    lo, hi = irregular.scalar_peak_bounds(F[0, 0], OWC_SLOPE, Qd[0, 0], 100.0, 1, 4)
+    assert values['theorem2_peak_bound_low'] == pytest.approx(lo)
+    assert values['theorem2_peak_bound_high'] == pytest.approx(hi)
+    # eigenvalues +-2 of the one-period transition: every even interval is pathological
+    # (I + h A = diag(2, -2) with h = 1), and C = [1, 1] cannot tell the modes apart
+    model = LinearModel('pm2', A=np.diag([1.0, -3.0]), C=np.array([[1.0, 1.0]]),
+                               Q=np.eye(2), R=np.eye(1), x0=np.zeros(2), P0=np.eye(2))
+    s = EstimatorSession(EstimatorConfig(model=model, nonpositive_is_gap=False))
+    t = 10 * NS
+    for dt in (1, 1, 2, 1):
+        t += dt * NS
+        s.add(t, 0.5)
+    level, message, values = s.diagnostics()
+    assert level == 'WARN' and 'interval(s) 2' in message
+    assert values['interval_warnings'].startswith('2: degenerate')

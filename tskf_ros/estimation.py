@@ -25,6 +25,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from tskf_ros import irregular
 from tskf_ros.models import LinearModel
 from tskf_ros.tskf import FilterError, is_psd, TRANSITIONS
 
@@ -188,6 +189,10 @@ class Stats:
     # since the last diagnostics report
     gaps_over_bound: int = 0
     rejected_since: int = 0
+    # sampling intervals seen, in whole nominal periods (Fang & de Callafon's kappa)
+    intervals: set = field(default_factory=set)
+    interval_warnings: list = field(default_factory=list)
+    peak_bounds: Optional[tuple] = None
 
 
 @dataclass
@@ -278,6 +283,7 @@ class EstimatorSession:
             return self.reset('reconfigured', f'state dimension changed {old_n} -> {kf.n}')
         kf.set_state(self.kf.x, self.kf.P)
         self.kf = kf
+        self._check_intervals()          # the same intervals may mean something else now
         return Outcome('accepted', 'reconfigured', 'new parameters in use')
 
     def pending(self) -> Optional[int]:
@@ -297,6 +303,11 @@ class EstimatorSession:
             msgs.append(f'{st.gaps_over_bound} gap(s) longer than max_gap = {cfg.max_gap} s')
         if st.rejected_since:
             msgs.append(f'{st.rejected_since} sample(s) rejected')
+        if st.interval_warnings:
+            level = 'WARN'
+            msgs.append('sampling interval(s) ' + ', '.join(
+                str(k) for k, _ in st.interval_warnings) + ' break observability (Fang & '
+                'de Callafon Section III)')
         lengths = list(st.gaps.values())
         values = {
             'received': st.received, 'accepted': st.accepted, 'inserted_late': st.inserted,
@@ -308,7 +319,14 @@ class EstimatorSession:
             'covariance_trace': st.covariance_trace,
             'last_stamp_s': st.last_stamp_ns / NS,
             'transition': cfg.transition,
+            'intervals_seen_periods': ' '.join(str(k) for k in sorted(st.intervals)),
+            'interval_warnings': ' | '.join(f'{k}: {why}' for k, why in st.interval_warnings),
         }
+        if st.peak_bounds is not None:
+            # Theorem 2 next to the covariance the filter runs (scalar models only)
+            values['theorem2_peak_bound_low'] = st.peak_bounds[0]
+            values['theorem2_peak_bound_high'] = st.peak_bounds[1]
+            values['covariance'] = float(self.kf.P[0, 0])
         for reason in REJECT_REASONS:
             values[f'rejected_{reason}'] = st.rejected[reason]
         for reason in RESET_REASONS:
@@ -351,6 +369,7 @@ class EstimatorSession:
             if st.gaps.pop(end_ns, None) is not None:
                 st.gaps_total -= 1
             return
+        self._record_interval(J)
         if J > cfg.jump_factor * cfg.period:
             st.gaps[end_ns] = J
             st.gaps_total += 1
@@ -358,6 +377,38 @@ class EstimatorSession:
                 st.gaps_over_bound += 1
             while len(st.gaps) > self.GAP_MEMORY:
                 st.gaps.pop(next(iter(st.gaps)))
+
+    def _record_interval(self, dt: float) -> None:
+        """
+        Keep the set of sampling intervals in nominal periods and re-check it when it grows.
+
+        Fang & de Callafon view the stream as the discrete system of one nominal period,
+        A_h = the filter's transition over `period`, measured after kappa periods.  A new
+        kappa triggers the Section III checks (pathological, Definition 2; degenerate,
+        Definition 3) and, for a scalar model, the Theorem 2 bounds for kappa in
+        [min, max] seen.  Those bounds are for Fang's filter: a measurement variance of
+        R / period at every sample, where Table 3 uses R / mu.
+        """
+        st, cfg = self.stats, self.config
+        kappa = int(round(dt / cfg.period))
+        if kappa < 1 or kappa in st.intervals:
+            return
+        st.intervals.add(kappa)
+        self._check_intervals()
+
+    def _check_intervals(self) -> None:
+        """Run the interval checks and the scalar bounds for the intervals seen so far."""
+        st, cfg, kf = self.stats, self.config, self.kf
+        st.interval_warnings, st.peak_bounds = [], None
+        if not st.intervals:
+            return
+        A_h, Q_h, _ = kf.transition_matrices(cfg.period)
+        st.interval_warnings = irregular.interval_warnings(A_h, kf.C, st.intervals)
+        if kf.n == 1 and kf.p == 1:
+            lo, hi = min(st.intervals), max(st.intervals)
+            st.peak_bounds = irregular.scalar_peak_bounds(
+                float(A_h[0, 0]), float(kf.C[0, 0]), float(Q_h[0, 0]),
+                float(kf.R[0, 0]) / cfg.period, lo, hi)
 
     def _step(self, point: _Point, sigma_ns: int, revised: bool
               ) -> tuple[list, Jump, np.ndarray, np.ndarray]:
