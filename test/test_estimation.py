@@ -201,7 +201,7 @@ def test_sampling_intervals_are_checked_against_fang_section_iii():
     # eigenvalues +-2 of the one-period transition: every even interval is pathological
     # (I + h A = diag(2, -2) with h = 1), and C = [1, 1] cannot tell the modes apart
     model = LinearModel('pm2', A=np.diag([1.0, -3.0]), C=np.array([[1.0, 1.0]]),
-                               Q=np.eye(2), R=np.eye(1), x0=np.zeros(2), P0=np.eye(2))
+                        Q=np.eye(2), R=np.eye(1), x0=np.zeros(2), P0=np.eye(2))
     s = EstimatorSession(EstimatorConfig(model=model, nonpositive_is_gap=False))
     t = 10 * NS
     for dt in (1, 1, 2, 1):

@@ -220,21 +220,32 @@ class OwcLink:
     def _channel_states(self, u: np.ndarray) -> np.ndarray:
         """Gilbert-Elliott states of the next samples; u[k] < p decides the switch after k."""
         c = self.config
-        n = u.size
-        bad = np.zeros(n, dtype=bool)
-        leave_good = np.flatnonzero(u < c.ge_p_gb)
-        leave_bad = np.flatnonzero(u < c.ge_p_bg)
-        pos, state = 0, self._bad
-        while pos < n:
-            switches = leave_bad if state else leave_good
-            i = int(np.searchsorted(switches, pos))
-            end = int(switches[i]) + 1 if i < switches.size else n
-            bad[pos:end] = state
-            if i < switches.size:
-                state = not state
-            pos = end
-        self._bad = state
+        bad, self._bad = gilbert_elliott_states(u, c.ge_p_gb, c.ge_p_bg, self._bad)
         return bad
+
+
+def gilbert_elliott_states(u: np.ndarray, p_gb: float, p_bg: float,
+                           bad: bool) -> tuple[np.ndarray, bool]:
+    """
+    Return the channel states (True: bad) of the next u.size samples, and the state after.
+
+    The channel is in state `bad` at the first sample; u[k] < p_gb (in the good state) or
+    u[k] < p_bg (in the bad state) switches it after sample k.
+    """
+    n = u.size
+    out = np.zeros(n, dtype=bool)
+    leave_good = np.flatnonzero(u < p_gb)
+    leave_bad = np.flatnonzero(u < p_bg)
+    pos, state = 0, bool(bad)
+    while pos < n:
+        switches = leave_bad if state else leave_good
+        i = int(np.searchsorted(switches, pos))
+        end = int(switches[i]) + 1 if i < switches.size else n
+        out[pos:end] = state
+        if i < switches.size:
+            state = not state
+        pos = end
+    return out, state
 
 
 def simulate_link(config: LinkConfig, n: int, *, start: Optional[int] = None) -> Samples:
