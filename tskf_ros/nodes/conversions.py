@@ -28,6 +28,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TwistWithCovarianceStamped
 import numpy as np
 from sensor_msgs.msg import Illuminance, JointState, TimeReference
+from std_msgs.msg import Float64MultiArray
 
 NS = 1_000_000_000
 SLOTS = 6
@@ -140,3 +141,75 @@ def msg_to_diagnostics(msg: DiagnosticArray) -> dict:
         values['message'] = s.message
         out[s.name] = values
     return out
+
+
+# -- LED active alignment (Solanki et al.): tskf_ros.led_link and tskf_ros.alignment ------
+#
+# Angles in messages are radians (REP 103); the core and the parameters use the paper's
+# degrees.  Types, all from common_interfaces:
+#
+# - intensity: sensor_msgs/msg/Illuminance as for the received power, illuminance = the
+#   photodiode voltage V_d of eq. (5) in volts, variance = noise^2 in V^2.
+# - base command: std_msgs/msg/Float64MultiArray with one entry, the base joint's absolute
+#   position in rad: what a ros2_control forward_command_controller (position interface,
+#   one joint) takes on <controller>/commands.
+# - truth: sensor_msgs/msg/JointState with the joints LED_JOINTS (rad).
+# - estimate: TwistWithCovarianceStamped as for the time-scale estimates, x1 (V) in
+#   linear.x and x2 (rad) in linear.y, with their 2 x 2 covariance (V^2, V rad, rad^2).
+
+LED_JOINTS = ('incidence', 'base', 'transmitter')
+
+
+def _degree_scaling() -> np.ndarray:
+    """Return diag(1, pi/180): [x1 V, x2 deg] -> [x1 V, x2 rad]."""
+    return np.diag([1.0, np.pi / 180.0])
+
+
+def intensity_to_msg(stamp_ns: int, volts: float, variance: float = 0.0, *,
+                     frame_id: str = 'photodiode') -> Illuminance:
+    """Convert (stamp, intensity V, variance V^2) -> Illuminance."""
+    return power_to_msg(stamp_ns, volts, variance, frame_id=frame_id)
+
+
+def msg_to_intensity(msg: Illuminance) -> tuple[int, float, float]:
+    """Convert Illuminance -> (stamp ns, intensity V, variance V^2)."""
+    return msg_to_power(msg)
+
+
+def base_command_to_msg(angle_deg: float) -> Float64MultiArray:
+    """Convert a base position command (deg) -> Float64MultiArray [rad]."""
+    return Float64MultiArray(data=[float(np.deg2rad(angle_deg))])
+
+
+def msg_to_base_command(msg: Float64MultiArray) -> np.ndarray:
+    """Convert Float64MultiArray (rad, one entry per joint) -> angles in degrees."""
+    return np.rad2deg(np.array(msg.data, dtype=float))
+
+
+def led_truth_to_msg(stamp_ns: int, phi_deg: float, base_deg: float,
+                     bearing_deg: float) -> JointState:
+    """Convert (angle of incidence, base angle, transmitter bearing) deg -> JointState (rad)."""
+    return angle_to_msg(stamp_ns, np.deg2rad([phi_deg, base_deg, bearing_deg]), LED_JOINTS)
+
+
+def msg_to_led_truth(msg: JointState) -> tuple[int, dict]:
+    """Convert JointState -> (stamp ns, {joint name: angle deg})."""
+    stamp, positions = msg_to_angle(msg)
+    return stamp, dict(zip(msg.name, np.rad2deg(positions)))
+
+
+def alignment_estimate_to_msg(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
+                              frame_id: str = '') -> TwistWithCovarianceStamped:
+    """Convert EKF state [x1 V, x2 deg] and covariance -> TwistWithCovarianceStamped (rad)."""
+    D = _degree_scaling()
+    return estimate_to_msg(stamp_ns, D @ np.asarray(x, dtype=float).reshape(2),
+                           D @ np.asarray(P, dtype=float).reshape(2, 2) @ D,
+                           frame_id=frame_id)
+
+
+def msg_to_alignment_estimate(msg: TwistWithCovarianceStamped
+                              ) -> tuple[int, np.ndarray, np.ndarray]:
+    """Convert TwistWithCovarianceStamped -> (stamp ns, [x1 V, x2 deg], P in V and deg)."""
+    stamp, x, P = msg_to_estimate(msg, 2)
+    Dinv = np.linalg.inv(_degree_scaling())
+    return stamp, Dinv @ x, Dinv @ P @ Dinv
