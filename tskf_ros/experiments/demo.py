@@ -8,6 +8,10 @@ runs Cai et al.'s 300 s, 1 Hz experiment (Section IV-C) with the simulated link,
 found with their J (Section IV-C), the RMS error of the predictor (Table I / B&W Table 3)
 and of the corrected estimate against the true angle, and the five worst points.
 
+Beside it, the LED active alignment loop of Solanki et al. runs live (led_link_simulator
+and alignment as two more processes, in the namespace /led) and the demo prints its
+tracking percentage: the share of samples with the angle of incidence within +-15 deg.
+
 This module stays ROS-free at import; the collecting client (tskf_ros.nodes.demo_collector)
 is imported when the demo runs.  `run_in_process` there runs the same pipeline in one
 process on one executor, for tests.
@@ -24,10 +28,13 @@ from typing import Optional
 
 import numpy as np
 
+from tskf_ros.led import PAPER_DT, TRACKING_ANGLE
 from tskf_ros.models import OWC_LINEAR_RANGE
 from tskf_ros.timescale import jumps
 
 NS = 1_000_000_000
+LED_NAMESPACE = '/led'
+LED_DT = PAPER_DT          # s: the LED link's sample period (config/led_link_simulator.yaml)
 
 
 @dataclass
@@ -149,6 +156,100 @@ def run_processes(args: argparse.Namespace) -> Summary:
     return summarise(record, period=1.0 / args.rate)
 
 
+@dataclass
+class AlignmentSummary:
+    """The LED alignment loop's figures (Solanki et al.): tracking by angle."""
+
+    algorithm: str
+    samples: int
+    delivered: int
+    commands: int
+    tracking: float            # % of samples with |phi| <= 15 deg
+    tracking_converged: float  # the same from 2 s on
+    worst: float               # max |phi| (deg) from 2 s on
+    diagnostics: dict
+
+
+def start_alignment(args: argparse.Namespace) -> dict:
+    """
+    Start the LED loop (led_link_simulator + alignment in /led) beside the estimator demo.
+
+    The monitor runs on its own thread and context; `finish_alignment` joins it.
+    """
+    import threading
+
+    from tskf_ros.nodes.alignment_monitor import monitor
+
+    cfg = config_dir()
+    ns = ['-r', f'__ns:={LED_NAMESPACE}']
+    samples = int(round(args.led_duration / LED_DT))
+    procs = [subprocess.Popen(node_command(
+        'alignment', cfg / 'alignment.yaml', algorithm=args.led_algorithm,
+        diagnostics_period=0.25) + ns, env=dict(os.environ))]
+    out: dict = {'procs': procs, 'args': args, 'samples': samples}
+
+    def start_simulator() -> None:
+        procs.append(subprocess.Popen(node_command(
+            'led_link_simulator', cfg / 'led_link_simulator.yaml', seed=args.seed,
+            beta=float(args.led_beta), noise=float(args.led_noise),
+            blockage=args.led_blockage, duration=float(args.led_duration),
+            time_factor=float(args.led_time_factor), start_time=1.0,
+            wait_for_subscribers=2) + ns, env=dict(os.environ)))
+
+    def run() -> None:
+        try:
+            out['record'] = monitor(samples, namespace=LED_NAMESPACE,
+                                    timeout=args.led_duration / args.led_time_factor * 3 + 30,
+                                    on_ready=start_simulator)
+        except Exception as exc:  # noqa: B902 - reported by finish_alignment
+            out['error'] = exc
+
+    out['thread'] = threading.Thread(target=run, name='alignment-monitor', daemon=True)
+    out['thread'].start()
+    return out
+
+
+def finish_alignment(handle: dict) -> AlignmentSummary:
+    """Wait for the LED loop, stop its processes, and summarise its tracking."""
+    handle['thread'].join()
+    _stop(handle['procs'])
+    if 'error' in handle:
+        raise handle['error']
+    r = handle['record']
+    phi = np.array([r.phi[k] for k in sorted(r.phi)])
+    start = int(round(2.0 / LED_DT))
+    tail = np.abs(phi[start:])
+    return AlignmentSummary(
+        algorithm=handle['args'].led_algorithm, samples=phi.size, delivered=len(r.intensity),
+        commands=r.commands, tracking=100.0 * float(np.mean(np.abs(phi) <= TRACKING_ANGLE)),
+        tracking_converged=100.0 * float(np.mean(tail <= TRACKING_ANGLE)) if tail.size
+        else float('nan'), worst=float(tail.max()) if tail.size else float('nan'),
+        diagnostics=r.diagnostics)
+
+
+def format_alignment(s: AlignmentSummary, args: argparse.Namespace) -> str:
+    """Format the alignment loop's summary line(s)."""
+    d = s.diagnostics
+    return (f'alignment ({s.algorithm}, beta {args.led_beta:g} deg/s, noise '
+            f'{args.led_noise:g} V, dropouts: {args.led_blockage}): tracking '
+            f'{s.tracking:.1f}% of {s.samples} samples (|phi| <= {TRACKING_ANGLE:g} deg), '
+            f'{s.tracking_converged:.1f}% from 2 s on (max |phi| {s.worst:.1f} deg); '
+            f'{s.delivered} intensities, {s.commands} base commands, '
+            f'gaps {d.get("gaps", "?")}, largest mu {float(d.get("mu_max", "nan")):g}')
+
+
+def _stop(procs: list) -> None:
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
 def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
     """Command line of the demo."""
     parser = argparse.ArgumentParser(
@@ -166,6 +267,18 @@ def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
     parser.add_argument('--domain-id', type=int, default=None,
                         help='ROS_DOMAIN_ID for all processes (default: from the '
                         'environment, else derived from the process id)')
+    parser.add_argument('--led-duration', type=float, default=60.0,
+                        help='seconds of stamped data of the LED alignment loop (default 60)')
+    parser.add_argument('--led-time-factor', type=float, default=4.0,
+                        help='the LED loop plays this many times faster than its stamps')
+    parser.add_argument('--led-algorithm', choices=('ekf', 'hill_climbing', 'three_point'),
+                        default='ekf')
+    parser.add_argument('--led-beta', type=float, default=1.2, help='deg/s (Fig. 8: 1.2)')
+    parser.add_argument('--led-noise', type=float, default=0.2, help='V (R_sys: 0.2)')
+    parser.add_argument('--led-blockage', choices=('none', 'bernoulli', 'gilbert_elliott'),
+                        default='none')
+    parser.add_argument('--no-alignment', action='store_true',
+                        help='run the estimator demo only')
     args = parser.parse_args(argv)
     if not args.duration_scale > 0:
         parser.error('--duration-scale must be > 0')
@@ -183,8 +296,11 @@ def main(argv: Optional[list] = None) -> int:
     print(f'demo: {args.duration:g} s at {args.rate:g} Hz played in about '
           f'{args.duration * args.duration_scale:g} s, ROS_DOMAIN_ID='
           f'{os.environ["ROS_DOMAIN_ID"]}, seed {args.seed}', flush=True)
+    led = None if args.no_alignment else start_alignment(args)
     summary = run_processes(args)
     print(format_summary(summary), flush=True)
+    if led is not None:
+        print(format_alignment(finish_alignment(led), args), flush=True)
     return 0
 
 

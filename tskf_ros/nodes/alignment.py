@@ -1,0 +1,275 @@
+"""
+alignment: LED active alignment (Solanki et al.) on a stream of stamped intensity samples.
+
+Subscribes to `intensity` (sensor_msgs/msg/Illuminance, volts, best effort so that both
+reliable and best-effort publishers match), feeds tskf_ros.alignment.AlignmentSession,
+and publishes for every sample it uses: the base position command on
+`base_position_controller/commands` (std_msgs/msg/Float64MultiArray, one entry in rad,
+as a ros2_control forward_command_controller takes it) and, with the EKF, the estimate
+[x1, x2] before and after the update on `estimate/predicted` and `estimate/corrected`
+(geometry_msgs/msg/TwistWithCovarianceStamped); see tskf_ros.nodes.conversions.  Counters
+go to /diagnostics.
+"""
+
+import argparse
+from dataclasses import dataclass, fields
+import sys
+from typing import Optional, Sequence
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TwistWithCovarianceStamped
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType, SetParametersResult)
+import rclpy
+from rclpy.clock import ClockChange, JumpThreshold, TimeJump
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import Illuminance
+from std_msgs.msg import Float64MultiArray
+
+from tskf_ros import led
+from tskf_ros.alignment import AlignmentConfig, AlignmentSession, AlignOutcome
+from tskf_ros.nodes import conversions
+
+NODE_NAME = 'alignment'
+COMMAND_TOPIC = 'base_position_controller/commands'
+D, DA = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY
+B = ParameterType.PARAMETER_BOOL
+# AlignmentConfig field -> (type, description, (lo, hi) or None, read_only)
+SESSION_PARAMETERS = {
+    'algorithm': (ParameterType.PARAMETER_STRING, 'ekf (the scanning EKF of Section IV), '
+                  'hill_climbing or three_point (the baselines of Section V)', None, False),
+    'dt': (D, 's: nominal sample period; the EKF predicts over mu = elapsed / dt steps',
+           (1e-6, 3600.0), False),
+    'gain': (D, 'G of the P controller u = -G x2hat (21); needs G > 1/91 for 2 deg scan '
+             'steps (observability, eq. (24)) and G < 2', None, False),
+    'x0': (DA, 'initial estimate [x1 (V), x2 (deg)] (Table I: [2, 0])', None, False),
+    'P0': (DA, 'initial covariance, 2 x 2 row-major (Table I: diag(100, 1000))', None, False),
+    'Q': (DA, 'EKF process noise per dt, 2 x 2 row-major (Table I: diag(0.25, 1))', None,
+          False),
+    'R': (DA, 'EKF measurement noise of a pair, 2 x 2 row-major (Table I: diag(1, 1))',
+          None, False),
+    'scan': (DA, 'deg: the scan set Psi, visited cyclically (Section IV: +-10 in 2 steps)',
+             None, False),
+    'x1_floor': (D, 'V: keep x1hat at least this (Section IV assumes x1 > 0); 0: off, '
+                 'as in the paper', (0.0, 1e6), False),
+    'gamma': (D, 'deg: step of hill-climbing and three-point averaging (Section V: 2)',
+              (1e-6, 180.0), False),
+    'clip': (B, 'three-point: gamma_p = 0 if V1 + V2 + V3 <= 0, clipped to +-gamma '
+             '(not in the paper)', None, False),
+    'units_per_degree': (D, 'fit units of g (eq. (4)) per degree; 0: the unit for which '
+                         '+-15 deg is 20% of the peak (17.7)', (0.0, 1e4), False),
+    'base_initial': (D, 'deg: the base angle when the node starts (commands are absolute)',
+                     (-1e6, 1e6), True),
+    'negative_is_missing': (B, 'a negative intensity is a missing sample (true), or used as '
+                            'it is (false: the paper simulation)', None, False),
+    'max_gap': (D, 's: a longer gap between samples sets the diagnostics level to WARN',
+                (0.0, 1e6), False),
+    'max_backward': (D, 's: a stamp further behind the last restarts the aligner (clock '
+                     'reset, looped bag); closer: dropped as stale', (0.0, 1e6), False),
+}
+PARAMETERS = tuple(SESSION_PARAMETERS) + ('frame_id', 'diagnostics_period', 'queue_depth')
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """The node's own settings, read once; the session's are in `session`."""
+
+    session: AlignmentConfig
+    frame_id: str
+    diagnostics_period: float
+    queue_depth: int
+
+
+def parameters_to_config(values: dict) -> NodeConfig:
+    """Build the config from parameter values; raise AlignmentError with the reason if bad."""
+    kwargs = {}
+    for f in fields(AlignmentConfig):
+        v = values[f.name]
+        if SESSION_PARAMETERS[f.name][0] == DA:
+            if isinstance(v, (str, bytes)) or any(isinstance(e, (bool, str)) for e in v):
+                raise led.AlignmentError(f'{f.name} must be a list of numbers, got {v!r}')
+            v = tuple(float(e) for e in v)
+        kwargs[f.name] = v
+    return NodeConfig(AlignmentConfig(**kwargs), values['frame_id'],
+                      values['diagnostics_period'], values['queue_depth'])
+
+
+class Alignment(Node):
+    """Node wrapping AlignmentSession: intensity in, base commands, estimates, diagnostics out."""
+
+    def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
+                 node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
+        super().__init__(node_name, context=context, namespace=namespace,
+                         parameter_overrides=parameter_overrides)
+        self._declare()
+        self.config = parameters_to_config(self._values())
+        self.session = AlignmentSession(self.config.session)
+        self._pending: Optional[NodeConfig] = None
+        self.add_on_set_parameters_callback(self._validate)
+        self.add_post_set_parameters_callback(self._apply)
+
+        depth = self.config.queue_depth
+        qos_in = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                            reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.sub = self.create_subscription(Illuminance, 'intensity', self._on_intensity,
+                                            qos_in)
+        # what forward_command_controller subscribes with: the system default (reliable, 10)
+        self.command_pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, 10)
+        qos_out = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                             reliability=ReliabilityPolicy.RELIABLE)
+        est = TwistWithCovarianceStamped
+        self.predicted_pub = self.create_publisher(est, 'estimate/predicted', qos_out)
+        self.corrected_pub = self.create_publisher(est, 'estimate/corrected', qos_out)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.diag_timer = self.create_timer(self.config.diagnostics_period,
+                                            self.publish_diagnostics)
+        # use_sim_time: a clock that jumps back (a looped bag) or changes source restarts
+        self._jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1_000_000),
+                          on_clock_change=True),
+            post_callback=self._on_clock_jump)
+        cfg = self.config.session
+        self.get_logger().info(
+            f'aligning with {cfg.algorithm}'
+            + (f' (G = {cfg.gain:g}, {len(cfg.scan)} scan angles)'
+               if cfg.algorithm == 'ekf' else f' (gamma = {cfg.gamma:g} deg)')
+            + f', base starting at {cfg.base_initial:g} deg')
+
+    # -- parameters -----------------------------------------------------------------------
+
+    def _declare(self) -> None:
+        defaults = AlignmentConfig()
+        for name, (type_, text, rng, read_only) in SESSION_PARAMETERS.items():
+            value = getattr(defaults, name)
+            if type_ == DA:
+                value = [float(v) for v in value]
+            d = ParameterDescriptor(description=text, type=type_, read_only=read_only)
+            if rng is not None:
+                d.floating_point_range = [FloatingPointRange(from_value=rng[0],
+                                                             to_value=rng[1])]
+            if name == 'algorithm':
+                d.additional_constraints = 'one of ' + ', '.join(led.ALGORITHMS)
+            self.declare_parameter(name, value, d)
+        self.declare_parameter('frame_id', 'receiver', ParameterDescriptor(
+            description='frame_id of the estimates', type=ParameterType.PARAMETER_STRING))
+        self.declare_parameter('diagnostics_period', 1.0, ParameterDescriptor(
+            description='seconds between /diagnostics messages', type=D,
+            floating_point_range=[FloatingPointRange(from_value=0.01, to_value=3600.0)]))
+        self.declare_parameter('queue_depth', 100, ParameterDescriptor(
+            description='depth of the input and estimate queues', read_only=True,
+            type=ParameterType.PARAMETER_INTEGER,
+            integer_range=[IntegerRange(from_value=1, to_value=100_000)]))
+
+    def _values(self, changes: Sequence[Parameter] = ()) -> dict:
+        values = {name: self.get_parameter(name).value for name in PARAMETERS}
+        values.update({p.name: p.value for p in changes})
+        return values
+
+    def _validate(self, changes: list) -> SetParametersResult:
+        """Refuse a change that does not make a working aligner; the old values stay."""
+        try:
+            config = parameters_to_config(self._values(changes))
+        except (led.AlignmentError, KeyError, TypeError, ValueError) as exc:
+            self.get_logger().warning(f'parameter change refused: {exc}')
+            return SetParametersResult(successful=False, reason=str(exc))
+        self._pending = config
+        return SetParametersResult(successful=True)
+
+    def _apply(self, changes: list) -> None:
+        if self._pending is None:
+            return
+        config, self._pending = self._pending, None
+        if config.diagnostics_period != self.config.diagnostics_period:
+            self.diag_timer.timer_period_ns = int(config.diagnostics_period * 1e9)
+            self.diag_timer.reset()
+        self.config = config
+        message = self.session.reconfigure(config.session)
+        self.get_logger().info(f'parameters changed ({", ".join(p.name for p in changes)}): '
+                               f'{message}')
+
+    # -- data -----------------------------------------------------------------------------
+
+    def _on_intensity(self, msg: Illuminance) -> None:
+        stamp_ns, volts, _ = conversions.msg_to_intensity(msg)
+        out = self.session.add(stamp_ns, volts)
+        self._report(out)
+        self._publish(out)
+
+    def _report(self, out: AlignOutcome) -> None:
+        log = self.get_logger()
+        if out.status == 'rejected':
+            log.warning(f'sample dropped ({out.reason}): {out.message}')
+        elif out.status == 'missing':
+            log.warning(f'sample at {out.stamp_ns / 1e9:.3f} s treated as missing '
+                        f'({out.reason}): {out.message}', throttle_duration_sec=1.0)
+        elif out.status == 'reset':
+            log.warning(f'aligner restarted ({out.reason}): {out.message}')
+
+    def _publish(self, out: AlignOutcome) -> None:
+        if out.command is None:
+            return
+        frame = self.config.frame_id
+        if out.prior is not None:
+            self.predicted_pub.publish(conversions.alignment_estimate_to_msg(
+                out.stamp_ns, *out.prior, frame_id=frame))
+            self.corrected_pub.publish(conversions.alignment_estimate_to_msg(
+                out.stamp_ns, *out.posterior, frame_id=frame))
+        self.command_pub.publish(conversions.base_command_to_msg(out.command))
+
+    def _on_clock_jump(self, jump: TimeJump) -> None:
+        if self.session.last_ns is None:
+            return
+        if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED,
+                                 ClockChange.ROS_TIME_DEACTIVATED):
+            why = f'clock source changed ({jump.clock_change.name})'
+        else:
+            why = f'clock jumped {jump.delta.nanoseconds / 1e9:.3f} s'
+        self.session.reset('clock_jump')
+        self.get_logger().warning(f'aligner restarted: {why}')
+
+    def publish_diagnostics(self) -> DiagnosticArray:
+        """Publish (and return) the session's counters on /diagnostics."""
+        level, message, values = self.session.diagnostics()
+        msg = conversions.diagnostics_to_msg(
+            self.get_clock().now().nanoseconds, f'{self.get_name()}: LED alignment',
+            level, message, values, hardware_id=self.config.frame_id)
+        self.diag_pub.publish(msg)
+        return msg
+
+
+def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
+    """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
+    parser = argparse.ArgumentParser(
+        prog=NODE_NAME, description='LED active alignment (Solanki et al.): scanning EKF, '
+        'hill-climbing or three-point averaging on the intensity, commanding a rotating '
+        'base. Parameters: --ros-args --params-file config/alignment.yaml or -p name:=value')
+    args = remove_ros_args(sys.argv if argv is None else argv)[1:]
+    return parser.parse_known_args(args)[0]
+
+
+def main(args: Optional[list] = None) -> None:
+    """Run the node until Ctrl-C or shutdown."""
+    parse_args(args)
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = Alignment()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except led.AlignmentError as exc:
+        print(f'{NODE_NAME}: bad parameters: {exc}', file=sys.stderr)
+        sys.exit(1)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,88 @@
+"""The demo's client for the LED alignment loop: collect the truth, commands and diagnostics."""
+
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+from diagnostic_msgs.msg import DiagnosticArray
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from sensor_msgs.msg import Illuminance, JointState
+from std_msgs.msg import Float64MultiArray
+
+from tskf_ros.nodes import conversions
+from tskf_ros.nodes.alignment import COMMAND_TOPIC
+from tskf_ros.nodes.demo_collector import spin_until
+
+
+@dataclass
+class AlignmentRecord:
+    """What the monitor saw (angles in degrees)."""
+
+    phi: dict = field(default_factory=dict)          # stamp ns -> true angle of incidence
+    intensity: dict = field(default_factory=dict)    # stamp ns -> V
+    commands: int = 0
+    diagnostics: dict = field(default_factory=dict)  # the alignment node's last status
+
+
+class AlignmentMonitor(Node):
+    """Subscribe to the loop's topics (in `namespace`); keep them in an AlignmentRecord."""
+
+    def __init__(self, *, context: Optional[Context] = None, namespace: str = '') -> None:
+        super().__init__('alignment_monitor', context=context, namespace=namespace or None)
+        self.record = AlignmentRecord()
+        self.create_subscription(JointState, 'true_angle', self._on_truth,
+                                 QoSProfile(depth=10_000))
+        self.create_subscription(Illuminance, 'intensity', self._on_intensity,
+                                 qos_profile_sensor_data)
+        self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command,
+                                 QoSProfile(depth=10_000))
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+
+    def _on_truth(self, msg: JointState) -> None:
+        t, angles = conversions.msg_to_led_truth(msg)
+        self.record.phi[t] = float(angles['incidence'])
+
+    def _on_intensity(self, msg: Illuminance) -> None:
+        t, v, _ = conversions.msg_to_intensity(msg)
+        self.record.intensity[t] = v
+
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        self.record.commands += 1
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for name, values in conversions.msg_to_diagnostics(msg).items():
+            if name.endswith(': LED alignment'):
+                self.record.diagnostics = values
+
+    def peers_ready(self) -> bool:
+        """Tell whether the alignment node's command publisher is discovered."""
+        return self.count_publishers(COMMAND_TOPIC) > 0
+
+
+def monitor(samples: int, *, namespace: str, timeout: float, on_ready: Callable[[], None],
+            discovery_timeout: float = 30.0) -> AlignmentRecord:
+    """Collect the loop in its own context: call on_ready() once the alignment node is seen."""
+    context = Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    node = AlignmentMonitor(context=context, namespace=namespace)
+    executor.add_node(node)
+    try:
+        if not spin_until(executor, node.peers_ready, discovery_timeout):
+            raise TimeoutError('the alignment process was not discovered')
+        on_ready()
+        if not spin_until(executor, lambda: len(node.record.phi) >= samples, timeout):
+            raise TimeoutError(f'the alignment loop did not finish {samples} samples in '
+                               f'{timeout} s (saw {len(node.record.phi)})')
+        # the answer to the last sample, and a diagnostics report after it
+        spin_until(executor, lambda: node.record.commands >= len(node.record.intensity)
+                   and node.record.diagnostics.get('received') == str(
+                       len(node.record.intensity)), 3.0)
+        return node.record
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        context.try_shutdown()

@@ -1,0 +1,275 @@
+"""
+led_link_simulator: the LED link of Solanki et al. Section V, with a commanded rotating base.
+
+Publishes `intensity` (sensor_msgs/msg/Illuminance, sensor-data QoS: the photodiode
+voltage in volts) and the evaluation truth `true_angle` (sensor_msgs/msg/JointState:
+incidence, base and transmitter angles in rad), and takes the base's position command on
+`base_position_controller/commands` (std_msgs/msg/Float64MultiArray, one entry in rad,
+system-default QoS), as a ros2_control forward_command_controller would.  The samples
+come from tskf_ros.led_link.LedLink; sample k is stamped start + k dt.
+
+Pacing: sample k is due when the node's clock says k dt / time_factor seconds have passed
+(time_factor 0: no pacing).  With `lockstep` (the default) a delivered sample is also
+held until the command answering the previous one has arrived (or `command_timeout` has
+passed), so that the same parameters and seed give the same stream however fast the
+loop runs.
+"""
+
+import argparse
+from dataclasses import dataclass, fields
+import sys
+from typing import Optional
+
+import numpy as np
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType)
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import Illuminance, JointState
+from std_msgs.msg import Float64MultiArray
+
+from tskf_ros.led_link import LedLink, LedLinkConfig, LedLinkError, LedSample, sample_offset_ns
+from tskf_ros.nodes import conversions
+from tskf_ros.owc_link import BLOCKAGES
+
+NODE_NAME = 'led_link_simulator'
+NS = 1_000_000_000
+MAX_BATCH = 10_000      # samples taken per callback at most (catching up)
+COMMAND_TOPIC = 'base_position_controller/commands'
+
+LINK_HELP = {
+    'beta': ('deg/s: rate of the transmitter revolving around the receiver (Fig. 8: 1.2)',
+             (-1e4, 1e4)),
+    'dt': ('s between samples (Section VI: about 50 ms per iteration)', (1e-6, 3600.0)),
+    'noise': ('V: standard deviation of the measurement noise v (R_sys = 0.04: 0.2)',
+              (0.0, 1e3)),
+    'max_intensity': ('V: the intensity at the peak of g at the start (Section V: 3)',
+                      (1e-9, 1e6)),
+    'phi0': ('deg: angle of incidence at sample 0', (-180.0, 180.0)),
+    'angle_noise': ('deg per sample: std of w2 of eq. (25) (Q_sys: 0.1)', (0.0, 180.0)),
+    'intensity_walk': ('V per sample: std of w1 of eq. (25) (Q_sys: 0.05)', (0.0, 1e3)),
+    'max_speed': ('deg/s the base turns at most; 0: it reaches each command within a sample',
+                  (0.0, 1e6)),
+    'units_per_degree': ('fit units of g (eq. (4)) per degree; 0: the unit for which '
+                         '+-15 deg is 20% of the peak (17.7); 1: the printed reading',
+                         (0.0, 1e4)),
+    'seed': ('seed of every random stream: same parameters, seed and commands, same samples',
+             None),
+    'blockage': ('dropouts: ' + ', '.join(BLOCKAGES), None),
+    'drop_probability': ('Bernoulli drop probability per sample', (0.0, 1.0)),
+    'ge_p_gb': ('Gilbert-Elliott P(good -> bad) per sample', (0.0, 1.0)),
+    'ge_p_bg': ('Gilbert-Elliott P(bad -> good) per sample', (0.0, 1.0)),
+    'ge_loss_good': ('Gilbert-Elliott loss probability in the good state', (0.0, 1.0)),
+    'ge_loss_bad': ('Gilbert-Elliott loss probability in the bad state', (0.0, 1.0)),
+}
+
+
+@dataclass(frozen=True)
+class LedSimulatorConfig:
+    """The node's settings, read once: the link and how it is played out."""
+
+    link: LedLinkConfig
+    time_factor: float
+    lockstep: bool
+    command_timeout: float
+    duration: float
+    start_time: float
+    wait_for_subscribers: int
+    frame_id: str
+
+
+def _descriptor(text: str, rng: Optional[tuple], type_: int) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=text, type=type_, read_only=True)
+    if rng is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1])]
+    return d
+
+
+class LedLinkSimulator(Node):
+    """Publish simulated intensity and truth; turn the base as commanded."""
+
+    def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
+                 node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
+        super().__init__(node_name, context=context, namespace=namespace,
+                         parameter_overrides=parameter_overrides)
+        self._declare()
+        self.config = self._read()
+        self.link = LedLink(self.config.link)
+        link = self.config.link
+        self.intensity_pub = self.create_publisher(Illuminance, 'intensity',
+                                                   qos_profile_sensor_data)
+        self.truth_pub = self.create_publisher(
+            JointState, 'true_angle',
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        # forward_command_controller subscribes with the system-default QoS (reliable, 10)
+        self.command_sub = self.create_subscription(Float64MultiArray, COMMAND_TOPIC,
+                                                    self._on_command, 10)
+        self.total = int(round(self.config.duration / link.dt)) or None
+        self.commands = 0
+        self.bad_commands = 0
+        self.timeouts = 0
+        self.start_ns: Optional[int] = None
+        self.stamp0_ns = int(round(self.config.start_time * NS))
+        self._waiting_since: Optional[int] = None    # lockstep: a delivered sample's time
+        self._answered = True
+        self._finished = False
+        factor = self.config.time_factor
+        period = max(link.dt / factor, 1e-3) if factor > 0 else 0.01
+        self.timer = self.create_timer(period, self._tick)
+        self.get_logger().info(
+            f'simulating the LED link: beta {link.beta:g} deg/s, noise {link.noise:g} V, '
+            f'dt {link.dt:g} s x {factor:g}{" (lockstep)" if self.config.lockstep else ""}, '
+            f'seed {link.seed}, blockage {link.blockage}'
+            + (f', {self.total} samples' if self.total else ''))
+
+    @property
+    def taken(self) -> int:
+        """Return the number of samples taken so far (published or dropped)."""
+        return self.link.count
+
+    def _declare(self) -> None:
+        defaults = LedLinkConfig()
+        for f in fields(LedLinkConfig):
+            text, rng = LINK_HELP[f.name]
+            value = getattr(defaults, f.name)
+            type_ = {int: ParameterType.PARAMETER_INTEGER, str: ParameterType.PARAMETER_STRING,
+                     float: ParameterType.PARAMETER_DOUBLE}[type(value)]
+            self.declare_parameter(f.name, value, _descriptor(text, rng, type_))
+        D = ParameterType.PARAMETER_DOUBLE
+        self.declare_parameter('time_factor', 1.0, _descriptor(
+            'play this many times faster than the stamps advance; 0: as fast as the loop '
+            'goes (with lockstep)', (0.0, 1e6), D))
+        self.declare_parameter('lockstep', True, _descriptor(
+            'hold each sample until the command answering the previous delivered one has '
+            'arrived (deterministic closed loop)', None, ParameterType.PARAMETER_BOOL))
+        self.declare_parameter('command_timeout', 1.0, _descriptor(
+            's (node clock) to wait for that command before going on without it',
+            (1e-3, 3600.0), D))
+        self.declare_parameter('duration', 0.0, _descriptor(
+            'seconds of stamped data to publish, then stop; 0: forever', (0.0, 1e9), D))
+        self.declare_parameter('start_time', 0.0, _descriptor(
+            'stamp (s) of sample 0; 0: the node clock at the first sample', (0.0, 1e10), D))
+        self.declare_parameter('wait_for_subscribers', 0, ParameterDescriptor(
+            description='hold sample 0 until intensity has this many subscribers (and, in '
+            'lockstep, the command topic a publisher)', type=ParameterType.PARAMETER_INTEGER,
+            read_only=True, integer_range=[IntegerRange(from_value=0, to_value=1000)]))
+        self.declare_parameter('frame_id', 'photodiode', _descriptor(
+            'frame_id of intensity', None, ParameterType.PARAMETER_STRING))
+
+    def _read(self) -> LedSimulatorConfig:
+        p = {name: self.get_parameter(name).value for name in
+             [f.name for f in fields(LedLinkConfig)] + [
+                 'time_factor', 'lockstep', 'command_timeout', 'duration', 'start_time',
+                 'wait_for_subscribers', 'frame_id']}
+        try:
+            link = LedLinkConfig(**{f.name: p[f.name] for f in fields(LedLinkConfig)})
+        except LedLinkError as exc:
+            raise LedLinkError(f'bad simulator parameters: {exc}') from None
+        return LedSimulatorConfig(link, p['time_factor'], p['lockstep'], p['command_timeout'],
+                                  p['duration'], p['start_time'], p['wait_for_subscribers'],
+                                  p['frame_id'])
+
+    # -- the loop ---------------------------------------------------------------------------
+
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        angles = conversions.msg_to_base_command(msg)
+        if angles.size != 1 or not np.isfinite(angles[0]):
+            self.bad_commands += 1
+            self.get_logger().warning(
+                f'base command ignored: expected one finite joint position (rad), got '
+                f'{list(msg.data)}', throttle_duration_sec=1.0)
+            return
+        self.link.command(float(angles[0]))
+        self.commands += 1
+        self._answered = True
+        if self.start_ns is not None:
+            self._advance(self.get_clock().now().nanoseconds)
+
+    def _tick(self) -> None:
+        now = self.get_clock().now().nanoseconds
+        if self.start_ns is None:
+            cfg = self.config
+            if self.intensity_pub.get_subscription_count() < cfg.wait_for_subscribers:
+                return
+            if (cfg.lockstep and cfg.wait_for_subscribers
+                    and self.count_publishers(self.command_sub.topic_name) < 1):
+                return
+            self.start_ns = now
+            if not self.stamp0_ns:
+                self.stamp0_ns = now
+        self._advance(now)
+
+    def _advance(self, now: int) -> None:
+        """Take every sample that is due and, in lockstep, answered; stop at the end."""
+        cfg = self.config
+        for _ in range(MAX_BATCH):
+            if self._finished:
+                return
+            if self.total is not None and self.taken >= self.total:
+                self._finished = True
+                self.timer.cancel()
+                self.get_logger().info(f'took all {self.total} samples; stopping')
+                return
+            if self._waiting_since is not None:
+                if not self._answered:
+                    if now - self._waiting_since < cfg.command_timeout * NS:
+                        return
+                    self.timeouts += 1
+                    self.get_logger().warning(
+                        f'no base command within {cfg.command_timeout:g} s of sample '
+                        f'{self.taken - 1}; going on without it', throttle_duration_sec=1.0)
+                self._waiting_since = None
+            if cfg.time_factor > 0:
+                elapsed = (now - self.start_ns) / NS * cfg.time_factor
+                if self.taken > elapsed / cfg.link.dt:
+                    return
+            self._publish(self.link.sample(), now)
+
+    def _publish(self, s: LedSample, now: int) -> None:
+        """Publish one sample: the truth always, the intensity unless it was dropped."""
+        cfg = self.config
+        stamp = self.stamp0_ns + sample_offset_ns(s.index, cfg.link.dt)
+        self.truth_pub.publish(conversions.led_truth_to_msg(stamp, s.phi, s.base, s.bearing))
+        if s.blocked:
+            return
+        if cfg.lockstep:
+            self._answered = False
+            self._waiting_since = now
+        self.intensity_pub.publish(conversions.intensity_to_msg(
+            stamp, s.reading, cfg.link.noise ** 2, frame_id=cfg.frame_id))
+
+
+def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
+    """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
+    parser = argparse.ArgumentParser(
+        prog=NODE_NAME, description='Simulated LED link with a commanded rotating receiver '
+        'base (Solanki et al. V). Parameters: --ros-args --params-file '
+        'config/led_link_simulator.yaml or -p name:=value')
+    args = remove_ros_args(sys.argv if argv is None else argv)[1:]
+    return parser.parse_known_args(args)[0]
+
+
+def main(args: Optional[list] = None) -> None:
+    """Run the node until Ctrl-C or shutdown."""
+    parse_args(args)
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = LedLinkSimulator()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except LedLinkError as exc:
+        print(f'{NODE_NAME}: {exc}', file=sys.stderr)
+        sys.exit(1)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
