@@ -11,29 +11,25 @@ as a ros2_control forward_command_controller takes it) and, with the EKF, the es
 go to /diagnostics.
 """
 
-import argparse
 from dataclasses import dataclass, fields
-import sys
 from typing import Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
-import rclpy
 from rclpy.clock import ClockChange, JumpThreshold, TimeJump
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import Illuminance
 from std_msgs.msg import Float64MultiArray
 
 from tskf_ros import led
 from tskf_ros.alignment import AlignmentConfig, AlignmentSession, AlignOutcome
 from tskf_ros.nodes import conversions
+from tskf_ros.nodes.common import run_node
 
 NODE_NAME = 'alignment'
 COMMAND_TOPIC = 'base_position_controller/commands'
@@ -242,33 +238,15 @@ class Alignment(Node):
         return msg
 
 
-def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
-    """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
-    parser = argparse.ArgumentParser(
-        prog=NODE_NAME, description='LED active alignment (Solanki et al.): scanning EKF, '
-        'hill-climbing or three-point averaging on the intensity, commanding a rotating '
-        'base. Parameters: --ros-args --params-file config/alignment.yaml or -p name:=value')
-    args = remove_ros_args(sys.argv if argv is None else argv)[1:]
-    return parser.parse_known_args(args)[0]
+DESCRIPTION = ('LED active alignment (Solanki et al.): scanning EKF, hill-climbing or '
+               'three-point averaging on the intensity, commanding a rotating base. '
+               'Parameters: --ros-args --params-file config/alignment.yaml or -p name:=value')
 
 
 def main(args: Optional[list] = None) -> None:
     """Run the node until Ctrl-C or shutdown."""
-    parse_args(args)
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = Alignment()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except led.AlignmentError as exc:
-        print(f'{NODE_NAME}: bad parameters: {exc}', file=sys.stderr)
-        sys.exit(1)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(Alignment, name=NODE_NAME, description=DESCRIPTION,
+             startup_errors=(led.AlignmentError,), args=args)
 
 
 if __name__ == '__main__':

@@ -15,24 +15,20 @@ passed), so that the same parameters and seed give the same stream however fast 
 loop runs.
 """
 
-import argparse
 from dataclasses import dataclass, fields
-import sys
 from typing import Optional
 
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
-from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.led_link import LedLink, LedLinkConfig, LedLinkError, LedSample, sample_offset_ns
 from tskf_ros.nodes import conversions
+from tskf_ros.nodes.common import run_node
 from tskf_ros.owc_link import BLOCKAGES
 
 NODE_NAME = 'led_link_simulator'
@@ -242,33 +238,15 @@ class LedLinkSimulator(Node):
             stamp, s.reading, cfg.link.noise ** 2, frame_id=cfg.frame_id))
 
 
-def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
-    """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
-    parser = argparse.ArgumentParser(
-        prog=NODE_NAME, description='Simulated LED link with a commanded rotating receiver '
-        'base (Solanki et al. V). Parameters: --ros-args --params-file '
-        'config/led_link_simulator.yaml or -p name:=value')
-    args = remove_ros_args(sys.argv if argv is None else argv)[1:]
-    return parser.parse_known_args(args)[0]
+DESCRIPTION = ('Simulated LED link with a commanded rotating receiver '
+               'base (Solanki et al. V). Parameters: --ros-args --params-file '
+               'config/led_link_simulator.yaml or -p name:=value')
 
 
 def main(args: Optional[list] = None) -> None:
     """Run the node until Ctrl-C or shutdown."""
-    parse_args(args)
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = LedLinkSimulator()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except LedLinkError as exc:
-        print(f'{NODE_NAME}: {exc}', file=sys.stderr)
-        sys.exit(1)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(LedLinkSimulator, name=NODE_NAME, description=DESCRIPTION,
+             startup_errors=(LedLinkError,), args=args)
 
 
 if __name__ == '__main__':

@@ -7,21 +7,17 @@ samples come from tskf_ros.owc_link.OwcLink; sample k is stamped start + k / rat
 published when the node's clock says (k / rate) / time_factor seconds have passed.
 """
 
-import argparse
 from dataclasses import dataclass, fields
-import sys
 from typing import Optional
 
 from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
-from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import Illuminance, JointState
 
 from tskf_ros.nodes import conversions
+from tskf_ros.nodes.common import run_node
 from tskf_ros.owc_link import BLOCKAGES, LinkConfig, LinkError, OwcLink, Samples
 
 NODE_NAME = 'power_meter_simulator'
@@ -193,33 +189,15 @@ class PowerMeterSimulator(Node):
         self.published += len(s)
 
 
-def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
-    """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
-    parser = argparse.ArgumentParser(
-        prog=NODE_NAME, description='Simulated power meter of the vibration-induced '
-        'intermittent OWC link (Cai et al. IV). Parameters: --ros-args --params-file '
-        'config/power_meter_simulator.yaml or -p name:=value')
-    args = remove_ros_args(sys.argv if argv is None else argv)[1:]
-    return parser.parse_known_args(args)[0]
+DESCRIPTION = ('Simulated power meter of the vibration-induced '
+               'intermittent OWC link (Cai et al. IV). Parameters: --ros-args --params-file '
+               'config/power_meter_simulator.yaml or -p name:=value')
 
 
 def main(args: Optional[list] = None) -> None:
     """Run the node until Ctrl-C or shutdown."""
-    parse_args(args)
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = PowerMeterSimulator()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except LinkError as exc:
-        print(f'{NODE_NAME}: {exc}', file=sys.stderr)
-        sys.exit(1)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(PowerMeterSimulator, name=NODE_NAME, description=DESCRIPTION,
+             startup_errors=(LinkError,), args=args)
 
 
 if __name__ == '__main__':

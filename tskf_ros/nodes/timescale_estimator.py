@@ -6,30 +6,26 @@ reliable and best-effort publishers match), feeds tskf_ros.estimation.EstimatorS
 and publishes what the session returns; see tskf_ros.nodes.conversions for the types.
 """
 
-import argparse
 from dataclasses import dataclass
-import sys
 from typing import Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistWithCovarianceStamped
 import numpy as np
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                ParameterType, SetParametersResult)
-import rclpy
+from rcl_interfaces.msg import (IntegerRange, ParameterDescriptor, ParameterType,
+                                SetParametersResult)
 from rclpy.clock import ClockChange, JumpThreshold, TimeJump
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import Illuminance, TimeReference
 
 from tskf_ros.estimation import (ConfigError, EstimatorConfig, EstimatorSession,
                                  model_from_flat, Outcome)
 from tskf_ros.models import owc
 from tskf_ros.nodes import conversions
+from tskf_ros.nodes.common import float_range, run_node
 from tskf_ros.tskf import FilterError, TRANSITIONS
 
 NODE_NAME = 'timescale_estimator'
@@ -101,10 +97,6 @@ def parameters_to_config(values: dict) -> NodeConfig:
                       values['queue_depth'])
 
 
-def _range(lo: float, hi: float) -> dict:
-    return {'floating_point_range': [FloatingPointRange(from_value=lo, to_value=hi)]}
-
-
 class TimescaleEstimator(Node):
     """Node wrapping EstimatorSession: received power in, estimates and diagnostics out."""
 
@@ -173,7 +165,7 @@ class TimescaleEstimator(Node):
             type=ParameterType.PARAMETER_STRING))
         for name, (default, text, (lo, hi)) in SCALARS.items():
             self.declare_parameter(name, default, ParameterDescriptor(
-                description=text, type=ParameterType.PARAMETER_DOUBLE, **_range(lo, hi)))
+                description=text, type=ParameterType.PARAMETER_DOUBLE, **float_range(lo, hi)))
         self.declare_parameter('history_size', 1000, ParameterDescriptor(
             description='points (and filter states) kept for rewinding on a late sample',
             type=ParameterType.PARAMETER_INTEGER,
@@ -266,32 +258,14 @@ class TimescaleEstimator(Node):
         return msg
 
 
-def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
-    """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
-    parser = argparse.ArgumentParser(
-        prog=NODE_NAME, description='Time-scale Kalman filter on received power. Parameters '
-        'come from a YAML file: --ros-args --params-file config/owc_estimator.yaml')
-    args = remove_ros_args(sys.argv if argv is None else argv)[1:]
-    return parser.parse_known_args(args)[0]
+DESCRIPTION = ('Time-scale Kalman filter on received power. Parameters '
+               'come from a YAML file: --ros-args --params-file config/owc_estimator.yaml')
 
 
 def main(args: Optional[list] = None) -> None:
     """Run the node until Ctrl-C or shutdown."""
-    parse_args(args)
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = TimescaleEstimator()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ConfigError as exc:
-        print(f'{NODE_NAME}: bad parameters: {exc}', file=sys.stderr)
-        sys.exit(1)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(TimescaleEstimator, name=NODE_NAME, description=DESCRIPTION,
+             startup_errors=(ConfigError,), args=args)
 
 
 if __name__ == '__main__':
