@@ -28,7 +28,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', _files('config/*.yaml')),
+        ('share/' + package_name + '/config', _files('config/*.yaml') + _files('config/*.json')),
     ] + _tree('bags'),
     install_requires=['setuptools'],
     zip_safe=True,
@@ -50,6 +50,13 @@ setup(
             'reproduce = tskf_ros.experiments.reproduce:main',
             'power_meter_simulator = tskf_ros.nodes.power_meter_simulator:main',
             'timescale_estimator = tskf_ros.nodes.timescale_estimator:main',
+            'record = tskf_ros.bag.recorder:console_main',
+            'play = tskf_ros.bag.player:console_main',
+            'replay_offline = tskf_ros.bag.offline:console_main',
+            'plot_bag = tskf_ros.bag.plot:console_main',
+            'make_sample_bags = tskf_ros.bag.samples:console_main',
+            'led_link_simulator = tskf_ros.nodes.led_link_simulator:main',
+            'alignment = tskf_ros.nodes.alignment:main',
         ],
     },
 )

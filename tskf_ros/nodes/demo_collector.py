@@ -34,8 +34,10 @@ class Collector(Node):
         super().__init__('demo_collector', context=context)
         self.record = Record()
         deep = QoSProfile(depth=10_000)
-        self.create_subscription(Illuminance, 'received_power', self._on_power,
-                                 qos_profile_sensor_data)
+        # best effort to match the sensor-data publisher, but a deep queue: the demo process
+        # also spins other nodes and must not drop what DDS delivered
+        lossless = QoSProfile(depth=10_000, reliability=qos_profile_sensor_data.reliability)
+        self.create_subscription(Illuminance, 'received_power', self._on_power, lossless)
         self.create_subscription(JointState, 'true_angle', self._on_truth, deep)
         self.create_subscription(TwistWithCovarianceStamped, 'estimate/predicted',
                                  self._on_estimate(self.record.predicted), deep)
