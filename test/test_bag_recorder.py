@@ -1,0 +1,193 @@
+"""The recorder: raw MCAP bags that rosbags and mcap read, no losses, clean interruption."""
+
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import Reader
+from sensor_msgs.msg import Illuminance, JointState
+
+from tskf_ros.bag.reader import BagReader
+from tskf_ros.bag.recorder import Recorder
+from tskf_ros.bag.writer import BagExistsError
+from tskf_ros.nodes import conversions
+import yaml
+
+NS = 1_000_000_000
+TIMEOUT = 30.0
+T0 = 1_700_000_000 * NS
+WINDOW = 2000
+
+
+def spin_until(executor, condition, what):
+    """Spin until condition(); fail after TIMEOUT (a bound on DDS, not a timing assertion)."""
+    deadline = time.monotonic() + TIMEOUT
+    while not condition():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        executor.spin_once(timeout_sec=0.01)
+
+
+def test_recorder_writes_a_bag_rosbags_and_mcap_read(ros_context, tmp_path):
+    pub_node = rclpy.create_node('source', context=ros_context)
+    power = pub_node.create_publisher(Illuminance, 'received_power', qos_profile_sensor_data)
+    angle = pub_node.create_publisher(JointState, 'true_angle',
+                                      QoSProfile(depth=100,
+                                                 reliability=ReliabilityPolicy.RELIABLE))
+    bag = tmp_path / 'rec'
+    rec = Recorder(bag, topics=['/received_power', '/true_angle'], context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(rec)
+    executor.add_node(pub_node)
+    try:
+        spin_until(executor, lambda: len(rec.counts) == 2, 'subscriptions')
+        spin_until(executor, lambda: power.get_subscription_count() == 1
+                   and angle.get_subscription_count() == 1, 'matching')
+        for k in range(50):
+            stamp = T0 + k * NS
+            power.publish(conversions.power_to_msg(stamp, 100.0 + k, 4.0))
+            angle.publish(conversions.angle_to_msg(stamp, [0.5 + k / 1000], ['theta']))
+            executor.spin_once(timeout_sec=0.001)
+        spin_until(executor, lambda: rec.counts == {'/received_power': 50, '/true_angle': 50},
+                   'all 100 messages')
+        assert not bag.exists(), 'the bag appears under its name only when closed'
+        assert rec.close() == bag
+    finally:
+        executor.shutdown()
+        rec.destroy_node()
+        pub_node.destroy_node()
+    # rosbags: metadata (topics, types, counts, QoS, start, duration)
+    with Reader(bag) as reader:
+        assert reader.message_count == 100
+        topics = reader.topics
+        assert topics['/received_power'].msgtype == 'sensor_msgs/msg/Illuminance'
+        assert topics['/received_power'].msgcount == 50
+        assert topics['/true_angle'].msgtype == 'sensor_msgs/msg/JointState'
+        qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+        assert qos['/received_power'][0].reliability.name == 'BEST_EFFORT'
+        assert qos['/true_angle'][0].reliability.name == 'RELIABLE'
+        times = [t for _, t, _ in reader.messages()]
+    meta = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert meta['storage_identifier'] == 'mcap'
+    assert meta['message_count'] == 100
+    assert meta['starting_time']['nanoseconds_since_epoch'] == min(times)
+    # rosbags writes max - min + 1 (the end is exclusive)
+    assert meta['duration']['nanoseconds'] in (max(times) - min(times),
+                                               max(times) - min(times) + 1)
+    with AnyReader([bag]) as reader:
+        values = [reader.deserialize(raw, c.msgtype).illuminance
+                  for c, _, raw in reader.messages() if c.topic == '/received_power']
+    assert values == [100.0 + k for k in range(50)]
+    # mcap + mcap_ros2's decoder
+    with (bag / 'rec.mcap').open('rb') as f:
+        decoded = [(ch.topic, m) for _, ch, _, m in
+                   make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()]
+    stamps = [conversions.stamp_to_ns(m.header.stamp) for t, m in decoded
+              if t == '/received_power']
+    assert stamps == [T0 + k * NS for k in range(50)]
+
+
+def test_recorder_loses_nothing_at_1khz_for_a_minute_of_stamps(ros_context, tmp_path):
+    """
+    Record 60 000 messages stamped 1 ms apart, published as fast as the publisher can.
+
+    Not in real time (a minute is too long for the suite): the publisher thread runs as
+    fast as the recorder takes them (about 5x 1 kHz here), so the rate is exceeded.
+    """
+    n = 60_000
+    pub_node = rclpy.create_node('fast_source', context=ros_context)
+    # reliable, with a history that holds the whole run: the writer never blocks or drops,
+    # so a message missing from the bag would be the recorder's loss
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=n,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    pub = pub_node.create_publisher(Illuminance, 'fast_power', qos)
+    bag = tmp_path / 'fast'
+    rec = Recorder(bag, topics=['/fast_power'], context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(rec)
+    try:
+        spin_until(executor, lambda: '/fast_power' in rec.counts, 'subscription')
+        spin_until(executor, lambda: pub.get_subscription_count() == 1, 'matching')
+        msgs = [conversions.power_to_msg(T0 + k * 1_000_000, 1.0 + k, 0.0) for k in range(n)]
+
+        def publish():
+            # stay at most WINDOW messages ahead of the recorder (application-level flow
+            # control: Python's GIL would otherwise starve the recorder's executor); a lost
+            # message would stall the window and fail the test
+            for k, m in enumerate(msgs):
+                while k - rec.counts['/fast_power'] > WINDOW:
+                    time.sleep(0.0005)
+                pub.publish(m)
+        thread = threading.Thread(target=publish)
+        t0 = time.monotonic()
+        thread.start()
+        spin_until(executor, lambda: rec.counts['/fast_power'] == n, f'{n} messages')
+        elapsed = time.monotonic() - t0
+        thread.join()
+        rec.close()
+    finally:
+        executor.shutdown()
+        rec.destroy_node()
+        pub_node.destroy_node()
+    print(f'recorded {n} messages in {elapsed:.1f} s ({n / elapsed:,.0f} msgs/s)')
+    reader = BagReader(bag)
+    assert reader.topics['/fast_power'].count == n
+    got = [conversions.stamp_to_ns(m.header.stamp) for m in
+           (deserialize_message(r.data, Illuminance)
+            for r in reader.messages())]
+    assert got == [T0 + k * 1_000_000 for k in range(n)]
+
+
+def test_recorder_refuses_to_overwrite(ros_context, tmp_path):
+    bag = tmp_path / 'exists'
+    bag.mkdir()
+    with pytest.raises(BagExistsError, match='exists already'):
+        Recorder(bag, topics=['/x'], context=ros_context)
+    rec = Recorder(bag, topics=['/x'], overwrite=True, context=ros_context)
+    rec.destroy_node()
+    assert (bag / 'metadata.yaml').is_file()
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_record_command_closes_the_bag_on_a_signal(tmp_path, sig):
+    bag = tmp_path / 'sig'
+    env = dict(os.environ)
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag),
+         '/sig_power:sensor_msgs/msg/Illuminance'], env=env,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('sig_source', context=context)
+    pub = node.create_publisher(Illuminance, 'sig_power', QoSProfile(depth=100))
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while pub.get_subscription_count() == 0:
+            assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read()
+            time.sleep(0.05)
+        for k in range(20):
+            pub.publish(conversions.power_to_msg(T0 + k * NS, 1.0, 0.0))
+        time.sleep(1.0)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=TIMEOUT)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        node.destroy_node()
+        context.try_shutdown()
+    assert proc.returncode == 0, err
+    assert 'wrote' in err
+    with Reader(bag) as reader:
+        assert reader.message_count == 20
+    assert not [p for p in Path(tmp_path).iterdir() if p.name.startswith('.')]

@@ -1,0 +1,165 @@
+"""Live replay (player + estimator node) against offline replay; the player's options."""
+
+from pathlib import Path
+import time
+
+from geometry_msgs.msg import TwistWithCovarianceStamped
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Illuminance, TimeReference
+
+from tskf_ros.bag import estimator_io
+from tskf_ros.bag.offline import replay
+from tskf_ros.bag.player import Player, PlayerError
+from tskf_ros.bag.reader import BagReader
+from tskf_ros.nodes import conversions
+from tskf_ros.nodes.timescale_estimator import PARAMETERS, TimescaleEstimator
+import yaml
+
+REPO = Path(__file__).resolve().parent.parent
+BAG = REPO / 'bags' / 'owc_cai_td_1hz'
+PARAMS = REPO / 'config' / 'owc_estimator.yaml'
+TIMEOUT = 30.0
+
+
+def spin_until(executor, condition, what):
+    """Spin until condition(); fail after TIMEOUT (a bound on DDS, not a timing assertion)."""
+    deadline = time.monotonic() + TIMEOUT
+    while not condition():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        executor.spin_once(timeout_sec=0.005)
+
+
+def yaml_overrides(path):
+    """Return the node's parameters in a YAML file as Parameter overrides."""
+    section = yaml.safe_load(path.read_text())['timescale_estimator']['ros__parameters']
+    return [Parameter(k, value=v) for k, v in section.items()]
+
+
+def offline_estimates(bag):
+    """Return {topic: [(stamp, x, P or mu)]} of the offline replay, collected in memory."""
+    res = replay(bag, None, params_file=PARAMS, diagnostics=False)
+    out = {}
+    for topic, _, msg in res.outputs:
+        if isinstance(msg, TwistWithCovarianceStamped):
+            out.setdefault(topic, []).append(conversions.msg_to_estimate(msg, 1))
+        elif isinstance(msg, TimeReference):
+            out.setdefault(topic, []).append(conversions.msg_to_jump(msg))
+    return res, out
+
+
+def test_node_defaults_are_the_adapters(ros_context):
+    node = TimescaleEstimator(context=ros_context)
+    try:
+        live = {name: node.get_parameter(name).value for name in PARAMETERS}
+    finally:
+        node.destroy_node()
+    mine = estimator_io.default_parameters()
+    assert set(live) == set(mine)
+    for key, value in live.items():
+        if isinstance(value, (list, tuple, np.ndarray)) or hasattr(value, 'tolist'):
+            assert list(value) == list(mine[key]), key
+        else:
+            assert value == mine[key], key
+
+
+def test_live_replay_equals_offline_replay(ros_context):
+    res, offline = offline_estimates(BAG)
+    assert res.samples == 288 and res.statuses == {'accepted': 288}
+    est = TimescaleEstimator(context=ros_context, parameter_overrides=yaml_overrides(PARAMS)
+                             + [Parameter('use_sim_time', value=True)])
+    player = Player(BAG, rate=100.0, clock_hz=200.0, topics=['/received_power'],
+                    context=ros_context)
+    client = rclpy.create_node('replay_client', context=ros_context)
+    live = {t: [] for t in offline}
+    for topic in live:
+        cls = TimeReference if topic.endswith('mu') else TwistWithCovarianceStamped
+        client.create_subscription(cls, topic, live[topic].append, QoSProfile(depth=1000))
+    executor = SingleThreadedExecutor(context=ros_context)
+    for node in (est, client):
+        executor.add_node(node)
+    try:
+        spin_until(executor, lambda: all(
+            est.count_publishers(t) and client.count_publishers(t) for t in live)
+            and player.pubs['/received_power'].get_subscription_count(), 'matching')
+        executor.add_node(player)
+        spin_until(executor, lambda: player.done.done() and all(
+            len(live[t]) >= len(offline[t]) for t in live), 'the live estimates')
+        spin_until(executor, lambda: True, 'flush')
+        sim_now = est.get_clock().now().nanoseconds
+    finally:
+        executor.shutdown()
+        for node in (player, est, client):
+            node.destroy_node()
+    # the estimator ran on the bag's clock
+    assert abs(sim_now - 1_700_000_300 * 10**9) < 5 * 10**9
+    assert est.session.stats.accepted == 288
+    for topic, expected in offline.items():
+        got = live[topic]
+        assert len(got) == len(expected), topic
+        if topic.endswith('mu'):
+            got = [conversions.msg_to_jump(m) for m in got]
+            assert got == expected, topic
+            continue
+        got = [conversions.msg_to_estimate(m, 1) for m in got]
+        assert [g[0] for g in got] == [e[0] for e in expected], topic
+        for g, e in zip(got, expected):
+            np.testing.assert_allclose(g[1], e[1], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(g[2], e[2], rtol=0, atol=1e-12)
+
+
+def test_player_selects_remaps_offsets_and_loops(ros_context):
+    received = []
+    clocks = []
+    player = Player(BAG, rate=1000.0, loop=True, start_offset=250.0, clock_hz=500.0,
+                    topics=['/received_power'], remap={'/received_power': '/power'},
+                    context=ros_context)
+    client = rclpy.create_node('loop_client', context=ros_context)
+    # the bag recorded a best-effort (sensor data) publisher; the player offers the same
+    client.create_subscription(Illuminance, '/power', received.append,
+                               QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT))
+    client.create_subscription(Clock, '/clock', clocks.append, QoSProfile(depth=1000))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(client)
+    try:
+        spin_until(executor, lambda: player.pubs['/received_power'].get_subscription_count()
+                   and player.clock_pub.get_subscription_count(), 'matching')
+        executor.add_node(player)
+        spin_until(executor, lambda: player.loops >= 2, 'two loops')
+    finally:
+        executor.shutdown()
+        player.destroy_node()
+        client.destroy_node()
+    assert set(player.published) == {'/power'}
+    stamps = [conversions.stamp_to_ns(m.header.stamp) // 10**9 - 1_700_000_000
+              for m in received]
+    # 250 s into a bag that starts at t = 0: t = 250..300 (all of T_d's seconds there)
+    first = stamps[:stamps.index(300) + 1]
+    assert first == list(range(250, 301))
+    assert stamps[len(first)] == 250, 'the loop starts again at the offset'
+    times = [conversions.stamp_to_ns(c.clock) for c in clocks]
+    assert min(times) >= 1_700_000_250 * 10**9
+    assert any(b < a for a, b in zip(times, times[1:])), '/clock jumps back at the loop'
+
+
+def test_player_refuses_bad_options(ros_context):
+    with pytest.raises(PlayerError, match='no topic /nope'):
+        Player(BAG, topics=['/nope'], context=ros_context)
+    with pytest.raises(PlayerError, match='past the end'):
+        Player(BAG, start_offset=1000.0, context=ros_context)
+    with pytest.raises(PlayerError, match='rate'):
+        Player(BAG, rate=0.0, context=ros_context)
+
+
+def test_sample_bag_metadata_matches_its_messages():
+    reader = BagReader(BAG)
+    counts = {}
+    for m in reader.messages():
+        counts[m.topic] = counts.get(m.topic, 0) + 1
+    assert counts == {t: i.count for t, i in reader.topics.items()}
+    assert reader.damage is None

@@ -1,0 +1,1 @@
+"""Recorded bags: rosbag2 MCAP (and sqlite3) reading and writing, record, play, offline replay."""

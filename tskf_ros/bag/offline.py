@@ -1,0 +1,302 @@
+"""
+replay_offline: run the time-scale estimator over a bag as fast as possible, without DDS.
+
+    replay_offline bags/owc_cai_td_1hz /tmp/owc_estimated --params-file config/owc_estimator.yaml
+
+Reads the measurement topic (default /received_power), feeds every message to the same
+EstimatorSession the live timescale_estimator node runs, and writes a new bag with all the
+input topics and every topic the live node would publish (estimate/predicted,
+estimate/corrected, estimate/mu, their revised/ versions and /diagnostics), with the same
+message types and header stamps.  An output message's log time is the log time of the
+input message that produced it (the live node publishes on receipt); /diagnostics is
+emitted every diagnostics_period seconds of log time, as the node's timer would.
+
+Bags from elsewhere: --topic picks the measurement topic; the stamped scalars of
+common_interfaces in INPUT_TYPES are taken (Range has no variance: 0; std_msgs Float64 /
+Float32 have no stamp: the log time is used, with a warning); sqlite3 bags work too.
+
+Exit status: 0 done; 1 the bag (or parameters) could not be used (one-line error);
+3 the input was damaged: the messages before the damage were processed and written,
+the damage is reported, and the output's metadata says so (custom_data).
+"""
+
+import argparse
+from collections import Counter
+from dataclasses import dataclass, field
+import os
+from pathlib import Path
+import sys
+import time
+from typing import Callable, Optional
+
+from rclpy.serialization import deserialize_message, serialize_message
+
+from tskf_ros.bag.estimator_io import (DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, ESTIMATE_TYPE,
+                                       extractor, INPUT_TYPES, JUMP_TYPE, load_config,
+                                       outcome_messages, output_qos, OUTPUT_TOPICS,
+                                       ParamsError, POWER_TOPIC)
+from tskf_ros.bag.reader import BagError, BagReader, Damage
+from tskf_ros.bag.types import BagTypeError, message_class, qos_from_rclpy, typestore
+from tskf_ros.bag.writer import BagWriter
+from tskf_ros.estimation import EstimatorSession, NS
+from tskf_ros.nodes import conversions
+from tskf_ros.nodes.timescale_estimator import NodeConfig
+
+PROG = 'replay_offline'
+EXIT_DAMAGED = 3
+# exceptions rclpy's deserializer raises on bytes that are not the type
+DESERIALIZE_ERRORS = (RuntimeError, ValueError, TypeError)
+
+
+class InputError(BagError):
+    """The bag has no usable measurement topic, or it has an unsupported type."""
+
+
+@dataclass
+class ReplayResult:
+    """What a replay did: counts, statuses, assumptions, damage, and collected outputs."""
+
+    topic: str = ''
+    msgtype: str = ''
+    read: int = 0
+    samples: int = 0
+    written: Counter = field(default_factory=Counter)
+    statuses: Counter = field(default_factory=Counter)
+    assumptions: list = field(default_factory=list)
+    damage: Optional[Damage] = None
+    seconds: float = 0.0
+    outputs: list = field(default_factory=list)     # (topic, log_ns, msg) when collecting
+
+
+def choose_topic(reader: BagReader, topic: Optional[str]) -> tuple[str, str, list]:
+    """
+    Pick the measurement topic and its type; return (topic, type, assumptions).
+
+    Without --topic: /received_power if present, else the only topic of a known type.
+    """
+    assumptions = []
+    if topic is None:
+        if POWER_TOPIC in reader.topics:
+            topic = POWER_TOPIC
+        else:
+            known = [t for t, i in reader.topics.items() if i.msgtype in INPUT_TYPES]
+            if len(known) != 1:
+                raise InputError(
+                    f'{reader.path}: no {POWER_TOPIC} topic and '
+                    f'{"no" if not known else len(known)} stamped scalar topics '
+                    f'({", ".join(known) or "none"}); choose one with --topic')
+            topic = known[0]
+            assumptions.append(f'no {POWER_TOPIC}: using {topic}, the only stamped scalar '
+                               'topic of the bag')
+    info = reader.topics.get(topic)
+    if info is None:
+        raise InputError(f'{reader.path}: no topic {topic} (topics: '
+                         f'{", ".join(sorted(reader.topics)) or "none"})')
+    if info.msgtype not in INPUT_TYPES:
+        raise InputError(f'{reader.path}: topic {topic} has type {info.msgtype or "unknown"}, '
+                         f'not one this replay takes ({", ".join(INPUT_TYPES)})')
+    kind = INPUT_TYPES[info.msgtype]
+    field_text = f'{info.msgtype}.{kind.value}'
+    assumptions.append(f'{topic} ({field_text}) is the measurement y of the model')
+    if kind.variance is None and kind.stamped:
+        assumptions.append(f'{info.msgtype} has no variance field: variance 0 (unknown)')
+    if not kind.stamped:
+        assumptions.append(f"WARNING: {info.msgtype} has no header stamp: the bag's log "
+                           '(receive) time is used as the sample time, so mu includes '
+                           'transport and recording jitter')
+    if reader.storage == 'sqlite3':
+        assumptions.append('sqlite3 storage (older rosbag2): read with rosbags')
+    return topic, info.msgtype, assumptions
+
+
+class OfflineEstimator:
+    """The live node's work on one message at a time, without DDS or a clock."""
+
+    def __init__(self, config: NodeConfig, msgtype: str) -> None:
+        self.config = config
+        self.session = EstimatorSession(config.estimator)
+        self.cls = message_class(msgtype)
+        self.extract = extractor(msgtype)
+        self.period_ns = int(round(config.diagnostics_period * NS))
+        self.next_diag: Optional[int] = None
+
+    def diagnostics_due(self, log_ns: int) -> list:
+        """Return the /diagnostics messages the node's timer would have sent up to log_ns."""
+        out = []
+        if self.next_diag is None:
+            self.next_diag = log_ns + self.period_ns
+        while log_ns >= self.next_diag:
+            level, message, values = self.session.diagnostics()
+            out.append((self.next_diag, conversions.diagnostics_to_msg(
+                self.next_diag, 'timescale_estimator: time-scale filter', level, message,
+                values, hardware_id=self.config.estimator.model.name)))
+            self.next_diag += self.period_ns
+        return out
+
+    def process(self, data: bytes, log_ns: int) -> tuple[str, list]:
+        """Deserialize one measurement and run it; return (status, [(topic, msg)])."""
+        msg = deserialize_message(data, self.cls)
+        stamp_ns, value, variance = self.extract(msg, log_ns)
+        out = self.session.add(stamp_ns, value, variance, now_ns=log_ns)
+        return out.status, outcome_messages(out, self.config)
+
+
+def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
+           params_file: Optional[os.PathLike] = None, topic: Optional[str] = None,
+           overwrite: bool = False, compress: bool = False, diagnostics: bool = True,
+           log: Callable[[str], None] = lambda s: None) -> ReplayResult:
+    """
+    Run the estimator over `bag`; write `output` (a new bag) or, if None, collect in memory.
+
+    Raises BagError / ParamsError / BagTypeError before anything is written if the bag or
+    the parameters cannot be used.  Damage met while reading stops the replay; what came
+    before is processed and written, and `result.damage` says where it stopped.
+    """
+    t0 = time.perf_counter()
+    reader = BagReader(bag)
+    config = load_config(params_file)
+    result = ReplayResult()
+    result.topic, result.msgtype, result.assumptions = choose_topic(reader, topic)
+    for line in result.assumptions:
+        log(line)
+    est = OfflineEstimator(config, result.msgtype)
+    writer = None
+    store = typestore()
+    if output is not None:
+        writer = BagWriter(output, overwrite=overwrite, compress=compress)
+        writer.open()
+    try:
+        if writer is not None:
+            for name, info in reader.topics.items():
+                if info.msgtype in store.fielddefs or info.msgdef:
+                    writer.add_topic(name, info.msgtype, qos=info.qos, msgdef=info.msgdef)
+                else:
+                    log(f'{name}: type {info.msgtype} has no definition here; not copied')
+            qos = [qos_from_rclpy(output_qos(config))]
+            for (kind, _), name in OUTPUT_TOPICS.items():
+                if not writer.has_topic(name):
+                    writer.add_topic(name, JUMP_TYPE if kind == 'mu' else ESTIMATE_TYPE,
+                                     qos=qos)
+            if diagnostics and not writer.has_topic(DIAGNOSTICS_TOPIC):
+                writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, qos=qos)
+        damage = _run(reader, est, writer, result, diagnostics)
+        if damage is not None:
+            result.damage = damage
+            if writer is not None:
+                writer._writer.set_custom_data('tskf_ros.input_damage', str(damage))
+        if writer is not None:
+            writer.close()
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
+    result.seconds = time.perf_counter() - t0
+    return result
+
+
+def _run(reader: BagReader, est: OfflineEstimator, writer: Optional[BagWriter],
+         result: ReplayResult, diagnostics: bool) -> Optional[Damage]:
+    """Read, estimate, write; return the damage that stopped the reading, if any."""
+    topic = result.topic
+    collect = writer is None
+    for raw in reader.messages():
+        result.read += 1
+        log_ns = raw.log_time_ns
+        if diagnostics:
+            for t, msg in est.diagnostics_due(log_ns):
+                _emit(writer, result, DIAGNOSTICS_TOPIC, t, msg, collect)
+        if writer is not None and writer.has_topic(raw.topic):
+            writer.write(raw.topic, log_ns, raw.data)
+        if raw.topic != topic:
+            if collect:
+                result.outputs.append((raw.topic, log_ns, raw))
+            continue
+        try:
+            status, msgs = est.process(raw.data, log_ns)
+        except DESERIALIZE_ERRORS as exc:
+            return Damage(str(reader.path), -1, f'message {result.read} on {topic} does '
+                          f'not deserialize as {result.msgtype} ({exc})', result.read - 1)
+        result.samples += 1
+        result.statuses[status] += 1
+        if collect:
+            result.outputs.append((raw.topic, log_ns, raw))
+        for name, msg in msgs:
+            _emit(writer, result, name, log_ns, msg, collect)
+    if result.samples == 0 and reader.damage is None:
+        raise InputError(f'{reader.path}: no messages on {topic}')
+    return reader.damage
+
+
+def _emit(writer: Optional[BagWriter], result: ReplayResult, topic: str, log_ns: int,
+          msg: object, collect: bool) -> None:
+    result.written[topic] += 1
+    if collect:
+        result.outputs.append((topic, log_ns, msg))
+    else:
+        writer.write(topic, log_ns, serialize_message(msg))
+
+
+def default_output(bag: Path) -> Path:
+    """Return <bag>_estimated next to the bag (for a .mcap file: without the suffix)."""
+    bag = Path(bag)
+    stem = bag.stem if bag.suffix == '.mcap' else bag.name
+    return bag.parent / f'{stem}_estimated'
+
+
+def main(argv: Optional[list] = None) -> int:
+    """Run the command line; return the exit status."""
+    parser = argparse.ArgumentParser(
+        prog=PROG, description='Run the time-scale estimator over a bag without DDS and '
+        "write a bag with the inputs and the estimator's outputs.")
+    parser.add_argument('bag', type=Path, help='bag directory (metadata.yaml + .mcap or '
+                        '.db3) or a bare .mcap file')
+    parser.add_argument('output', type=Path, nargs='?',
+                        help='output bag directory (default: <bag>_estimated)')
+    parser.add_argument('--params-file', type=Path,
+                        help='estimator parameters (as for the node), e.g. '
+                        "config/owc_estimator.yaml; default: the node's defaults (OWC (3))")
+    parser.add_argument('--topic', help=f'measurement topic (default {POWER_TOPIC}); types: '
+                        + ', '.join(INPUT_TYPES))
+    parser.add_argument('--overwrite', action='store_true', help='replace an existing output')
+    parser.add_argument('--compress', action='store_true', help='zstd-compress the chunks')
+    parser.add_argument('--no-diagnostics', action='store_true',
+                        help='do not write /diagnostics')
+    parser.add_argument('-q', '--quiet', action='store_true', help='only errors')
+    args = parser.parse_args(argv)
+    output = args.output or default_output(args.bag)
+
+    def log(line: str) -> None:
+        if line.startswith('WARNING') or not args.quiet:
+            print(f'{PROG}: {line}', file=sys.stderr if line.startswith('WARNING')
+                  else sys.stdout, flush=True)
+    try:
+        res = replay(args.bag, output, params_file=args.params_file, topic=args.topic,
+                     overwrite=args.overwrite, compress=args.compress,
+                     diagnostics=not args.no_diagnostics, log=log)
+    except (BagError, ParamsError, BagTypeError) as exc:
+        print(f'{PROG}: error: {exc}', file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(f'{PROG}: error: {exc.filename or args.bag}: {exc.strerror or exc}',
+              file=sys.stderr)
+        return 1
+    rate = res.read / res.seconds if res.seconds else float('nan')
+    statuses = ', '.join(f'{k} {v}' for k, v in sorted(res.statuses.items()))
+    log(f'{res.read} messages read, {res.samples} samples on {res.topic} ({statuses}); '
+        f'{sum(res.written.values())} output messages; {res.seconds:.2f} s '
+        f'({rate:,.0f} msgs/s)')
+    log(f'wrote {output}')
+    if res.damage is not None:
+        print(f'{PROG}: input damaged: {res.damage}; the output holds what came before',
+              file=sys.stderr)
+        return EXIT_DAMAGED
+    return 0
+
+
+def console_main() -> None:
+    """Entry point of the console script."""
+    sys.exit(main())
+
+
+if __name__ == '__main__':
+    console_main()

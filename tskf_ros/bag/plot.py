@@ -1,0 +1,234 @@
+"""
+plot_bag: turn a bag into PNGs.
+
+    plot_bag /tmp/owc_estimated --out results/plots        # a replay_offline output
+    plot_bag bags/owc_cai_td_1hz --out results/plots       # raw: estimated in memory first
+    plot_bag bags/led_alignment --out results/plots
+
+Estimator bags (estimate/* topics, or a measurement topic that is then run through the
+estimator offline, in memory): estimator.png, with Cai Fig. 2's two styles side by side,
+"plot in iteration" (left) and "plot in time scale" (right); rows: the true angle (when
+/true_angle is present), the angle each measurement implies (y - D) / C, the predictor and
+the corrected estimate with +-2 sigma bands; their errors against the truth; mu.
+Alignment bags (/alignment/*): alignment.png as Solanki et al. Fig. 8: x1hat and x1,
+x2hat and the true scan mean, the true angle of incidence, and the measured intensity.
+"""
+
+import argparse
+from pathlib import Path
+import sys
+from typing import Optional
+
+import matplotlib
+import numpy as np
+from rclpy.serialization import deserialize_message
+
+from tskf_ros.bag.estimator_io import load_config, ParamsError, TRUTH_TOPIC
+from tskf_ros.bag.offline import replay
+from tskf_ros.bag.reader import BagError, BagReader
+from tskf_ros.bag.types import BagTypeError, message_class
+from tskf_ros.nodes import conversions
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402, I100, I202
+
+PROG = 'plot_bag'
+NS = 1_000_000_000
+
+
+def _decode(reader: BagReader, topics: set) -> dict:
+    """Return {topic: [(log ns, message)]} for the wanted topics."""
+    out: dict = {t: [] for t in topics}
+    classes = {}
+    for raw in reader.messages(topics):
+        cls = classes.get(raw.msgtype) or classes.setdefault(raw.msgtype,
+                                                             message_class(raw.msgtype))
+        out[raw.topic].append((raw.log_time_ns, deserialize_message(raw.data, cls)))
+    return out
+
+
+def _series(msgs: list, kind: str) -> tuple:
+    """Turn estimate or jump messages into arrays (t in s)."""
+    if kind == 'estimate':
+        rows = [conversions.msg_to_estimate(m, 2) for _, m in msgs]
+        t = np.array([r[0] for r in rows], dtype=float) / NS
+        x = np.array([r[1] for r in rows]).reshape(-1, 2)
+        var = np.array([r[2][0, 0] for r in rows])
+        return t, x[:, 0], var
+    rows = [conversions.msg_to_jump(m) for _, m in msgs]
+    return np.array([r[0] for r in rows], dtype=float) / NS, np.array([r[1] for r in rows])
+
+
+def estimator_figure(data: dict, measurement: list, C: float, D: float, title: str):
+    """Draw Cai Fig. 2's two styles of an estimator run; return the figure."""
+    tp, xp, vp = _series(data['/estimate/predicted'], 'estimate')
+    tc, xc, vc = _series(data['/estimate/corrected'], 'estimate')
+    tm, mu = _series(data['/estimate/mu'], 'jump')
+    ty = np.array([conversions.msg_to_power(m)[0] for _, m in measurement], float) / NS
+    y = np.array([conversions.msg_to_power(m)[1] for _, m in measurement])
+    truth = data.get(TRUTH_TOPIC) or []
+    t_true = np.array([conversions.stamp_to_ns(m.header.stamp) for _, m in truth]) / NS
+    x_true = np.array([m.position[0] for _, m in truth]) if truth else np.zeros(0)
+    t0 = min(tp.min(), ty.min()) if ty.size else tp.min()
+    fig, axes = plt.subplots(3, 2, figsize=(14, 10), sharex='col')
+    for col, style in enumerate(('iteration', 'time scale')):
+        def pos(t, stamps=tc):
+            if style == 'time scale':
+                return t - t0
+            return np.searchsorted(stamps, t, side='left')
+        ax = axes[0, col]
+        if t_true.size:
+            keep = (t_true >= tc.min()) & (t_true <= tc.max()) if style == 'iteration' \
+                else np.ones(t_true.size, bool)
+            ax.plot(pos(t_true[keep]), x_true[keep], 'k-', lw=1, label='true angle')
+        ax.plot(pos(ty), (y - D) / C, '.', color='0.6', ms=3,
+                label='implied by measurement (y - D) / C')
+        for t, x, v, color, name in ((tp, xp, vp, 'C0', 'predictor xhat(t)'),
+                                     (tc, xc, vc, 'C3', 'corrected x(t|t)')):
+            s = 2 * np.sqrt(np.maximum(v, 0))
+            ax.plot(pos(t), x, '-', color=color, lw=1, label=name)
+            ax.fill_between(pos(t), x - s, x + s, color=color, alpha=0.2,
+                            label=f'{name} +-2 sigma')
+        lo, hi = np.percentile(np.concatenate([xc, x_true]) if x_true.size else xc, [1, 99])
+        pad = max(hi - lo, 1e-3)
+        ax.set_ylim(lo - pad, hi + pad)
+        ax.set_ylabel('angle (rad)')
+        ax.set_title(f'plot in {style}')
+        if col == 0:
+            ax.legend(fontsize=7, loc='upper right')
+        ax = axes[1, col]
+        if t_true.size:
+            for t, x, v, color, name in ((tp, xp, vp, 'C0', 'predictor'),
+                                         (tc, xc, vc, 'C3', 'corrected')):
+                err = x - np.interp(t, t_true, x_true)
+                ax.plot(pos(t), err, '.-', color=color, lw=0.6, ms=2,
+                        label=f'{name}: RMS {np.sqrt(np.mean(err ** 2)):.3g} rad')
+            ax.legend(fontsize=7)
+        else:
+            ax.text(0.5, 0.5, 'no true angle in the bag', ha='center',
+                    transform=ax.transAxes)
+        ax.set_ylabel('estimation error (rad)')
+        ax = axes[2, col]
+        ax.step(pos(tm), mu, where='post', color='C2')
+        ax.set_ylabel('mu (s)')
+        ax.set_xlabel('iteration k' if style == 'iteration' else 'time t - t0 (s)')
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def alignment_figure(data: dict, title: str):
+    """Draw Solanki et al. Fig. 8 from an alignment bag; return the figure."""
+    est = data['/alignment/estimate']
+    rows = [conversions.msg_to_estimate(m, 2) for _, m in est]
+    t = np.array([r[0] for r in rows], float) / NS
+    x = np.array([r[1] for r in rows])
+    sd = np.sqrt(np.array([[r[2][0, 0], r[2][1, 1]] for r in rows]).clip(0))
+    truth = data.get('/alignment/truth') or []
+    tt = np.array([conversions.stamp_to_ns(m.header.stamp) for _, m in truth], float) / NS
+    pos = {n: i for i, n in enumerate(truth[0][1].name)} if truth else {}
+    tv = np.array([m.position for _, m in truth]) if truth else np.zeros((0, 3))
+    z = data.get('/photodiode') or []
+    tz = np.array([conversions.msg_to_power(m)[0] for _, m in z], float) / NS
+    vz = np.array([conversions.msg_to_power(m)[1] for _, m in z])
+    t0 = t.min()
+    fig, axes = plt.subplots(4, 1, figsize=(10, 11), sharex=True)
+    for ax, i, name, key, unit in ((axes[0], 0, 'x1hat', 'intensity_factor_v', 'V'),
+                                   (axes[1], 1, 'x2hat', 'scan_mean_deg', 'deg')):
+        ax.plot(t - t0, x[:, i], 'C3-', lw=1, label=f'{name} (EKF)')
+        ax.fill_between(t - t0, x[:, i] - 2 * sd[:, i], x[:, i] + 2 * sd[:, i], color='C3',
+                        alpha=0.2, label='+-2 sigma')
+        if key in pos:
+            ax.plot(tt - t0, tv[:, pos[key]], 'k-', lw=1, label=f'true {key}')
+        ax.set_ylabel(f'{name} ({unit})')
+        ax.legend(fontsize=7)
+    if 'incidence_angle_deg' in pos:
+        axes[2].plot(tt - t0, tv[:, pos['incidence_angle_deg']], 'k-', lw=1)
+    axes[2].axhspan(-15, 15, color='C2', alpha=0.1, label='tracking zone +-15 deg')
+    axes[2].set_ylabel('true angle of incidence (deg)')
+    axes[2].legend(fontsize=7)
+    axes[3].plot(tz - t0, vz, '.', color='C0', ms=3, label='measured intensity V_d')
+    axes[3].set_ylabel('intensity (V)')
+    axes[3].set_xlabel('time (s)')
+    axes[3].legend(fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
+         topic: Optional[str] = None, log=print) -> list:
+    """Write the PNGs of a bag into `out`; return their paths."""
+    reader = BagReader(bag)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    if '/alignment/estimate' in reader.topics:
+        data = _decode(reader, {t for t in reader.topics if t.startswith('/alignment/')}
+                       | ({'/photodiode'} & set(reader.topics)))
+        fig = alignment_figure(data, f'{bag.name}: scanning-EKF alignment (Fig. 8 style)')
+        written.append(_save(fig, out / 'alignment.png'))
+        return written
+    config = load_config(params_file)
+    model = config.estimator.model
+    C, D = float(model.C[0, 0]), float(model.D[0]) if model.D is not None else 0.0
+    if '/estimate/corrected' in reader.topics:
+        meas_topic = topic or '/received_power'
+        wanted = {'/estimate/predicted', '/estimate/corrected', '/estimate/mu', meas_topic}
+        data = _decode(reader, (wanted | {TRUTH_TOPIC}) & set(reader.topics))
+        measurement = data.get(meas_topic, [])
+    else:
+        log(f'{bag}: no estimates in the bag: running the estimator offline first')
+        res = replay(bag, None, params_file=params_file, topic=topic, diagnostics=False,
+                     log=log)
+        data = {}
+        measurement = []
+        for t, log_ns, msg in res.outputs:
+            if t == res.topic or t == TRUTH_TOPIC:
+                msg = deserialize_message(msg.data, message_class(msg.msgtype))
+            if t == res.topic:
+                measurement.append((log_ns, msg))
+            else:
+                data.setdefault(t, []).append((log_ns, msg))
+        if res.msgtype != 'sensor_msgs/msg/Illuminance':
+            measurement = []
+    fig = estimator_figure(data, measurement, C, D,
+                           f'{bag.name}: time-scale filter, {model.name} model')
+    written.append(_save(fig, out / 'estimator.png'))
+    return written
+
+
+def _save(fig, path: Path) -> Path:
+    tmp = path.with_name(f'.{path.name}.partial.png')
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+    return path
+
+
+def main(argv: Optional[list] = None) -> int:
+    """Run the command line; return the exit status."""
+    parser = argparse.ArgumentParser(prog=PROG, description='Plot a bag into PNGs.')
+    parser.add_argument('bag', type=Path)
+    parser.add_argument('--out', type=Path, default=Path('results') / 'plots')
+    parser.add_argument('--params-file', type=Path, help='estimator parameters (for C, D '
+                        'and, on a raw bag, the estimator)')
+    parser.add_argument('--topic', help='measurement topic (default /received_power)')
+    args = parser.parse_args(argv)
+    try:
+        paths = plot(args.bag, args.out, params_file=args.params_file, topic=args.topic,
+                     log=lambda s: print(f'{PROG}: {s}'))
+    except (BagError, ParamsError, BagTypeError) as exc:
+        print(f'{PROG}: error: {exc}', file=sys.stderr)
+        return 1
+    for p in paths:
+        print(f'{PROG}: wrote {p}')
+    return 0
+
+
+def console_main() -> None:
+    """Entry point of the console script."""
+    sys.exit(main())
+
+
+if __name__ == '__main__':
+    console_main()

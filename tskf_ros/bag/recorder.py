@@ -1,0 +1,194 @@
+"""
+record: write chosen topics to a rosbag2 MCAP bag, as `ros2 bag record -s mcap` would.
+
+    record -o /tmp/run1 /received_power /true_angle
+    record -o /tmp/run1 --all
+    record -o /tmp/run1 /received_power:sensor_msgs/msg/Illuminance   # type given, no wait
+
+Subscribes raw (the serialized CDR bytes are written as they arrive, never deserialized),
+with the node clock's time of arrival as the log time (bag time follows /clock with
+use_sim_time).  Topic types come from the graph (or NAME:TYPE); a topic is subscribed as
+soon as a publisher appears, with a QoS compatible with every publisher's (reliable if all
+offer reliable, else best effort; history KEEP_ALL so that a reliable publisher is never
+dropped), and the publishers' offered QoS goes to metadata.yaml.  The bag is written into
+a hidden .partial directory and renamed when it is closed: on Ctrl-C / SIGTERM the recorder
+closes the bag properly, and a bag that was not closed is never left under the final name.
+"""
+
+import argparse
+from pathlib import Path
+import sys
+from typing import Optional, Sequence
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
+
+from tskf_ros.bag.reader import BagError
+from tskf_ros.bag.types import BagTypeError, message_class, qos_from_rclpy
+from tskf_ros.bag.writer import BagWriter
+
+NODE_NAME = 'recorder'
+# not recorded by --all unless named
+INTERNAL_TOPICS = ('/rosout', '/parameter_events')
+
+
+class Recorder(Node):
+    """
+    Record topics to a bag; `close()` finishes the bag.
+
+    topics: names to record (None: all but INTERNAL_TOPICS); types: name -> type for
+    topics to subscribe without waiting for the graph.
+    """
+
+    def __init__(self, output: Path, *, topics: Optional[Sequence[str]] = None,
+                 types: Optional[dict] = None, overwrite: bool = False,
+                 compress: bool = False, discovery_period: float = 0.2,
+                 context=None, node_name: str = NODE_NAME,
+                 parameter_overrides: Optional[list] = None) -> None:
+        super().__init__(node_name, context=context, parameter_overrides=parameter_overrides)
+        self.writer = BagWriter(output, overwrite=overwrite, compress=compress)
+        self.writer.open()
+        self.wanted = None if topics is None else set(topics) | set(types or {})
+        self.counts: dict[str, int] = {}
+        self.subs: dict = {}
+        for topic, msgtype in (types or {}).items():
+            self._subscribe(topic, msgtype)
+        self.discovery = self.create_timer(discovery_period, self.discover)
+        self.discover()
+        what = 'all topics' if self.wanted is None else ', '.join(sorted(self.wanted))
+        self.get_logger().info(f'recording {what} to {output}')
+
+    def discover(self) -> None:
+        """Subscribe to wanted topics that have appeared in the graph."""
+        for topic, msgtypes in self.get_topic_names_and_types():
+            if topic in self.subs:
+                continue
+            if self.wanted is None and topic in INTERNAL_TOPICS:
+                continue
+            if self.wanted is not None and topic not in self.wanted:
+                continue
+            if len(msgtypes) != 1:
+                self.get_logger().warning(f'{topic} has several types {msgtypes}; skipped')
+                self.subs[topic] = None
+                continue
+            if not self.get_publishers_info_by_topic(topic):
+                continue
+            self._subscribe(topic, msgtypes[0])
+
+    def _subscribe(self, topic: str, msgtype: str) -> None:
+        try:
+            cls = message_class(msgtype)
+        except BagTypeError as exc:
+            self.get_logger().error(f'{topic}: {exc}; not recorded')
+            self.subs[topic] = None
+            return
+        infos = self.get_publishers_info_by_topic(topic)
+        offered = [i.qos_profile for i in infos]
+        reliable = bool(offered) and all(
+            p.reliability == ReliabilityPolicy.RELIABLE for p in offered)
+        latched = bool(offered) and all(
+            p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in offered)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_ALL, depth=1000,
+            reliability=ReliabilityPolicy.RELIABLE if reliable
+            else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
+            else DurabilityPolicy.VOLATILE)
+        self.writer.add_topic(topic, msgtype, qos=[qos_from_rclpy(p) for p in offered])
+        self.counts[topic] = 0
+        clock = self.get_clock()
+        write = self.writer.write
+
+        def on_message(data: bytes) -> None:
+            write(topic, clock.now().nanoseconds, data)
+            self.counts[topic] += 1
+        self.subs[topic] = self.create_subscription(cls, topic, on_message, qos, raw=True)
+        self.get_logger().info(f'subscribed to {topic} ({msgtype}, '
+                               f'{"reliable" if reliable else "best effort"})')
+
+    def close(self) -> Optional[Path]:
+        """Stop recording and finish the bag; return its path (None if already closed)."""
+        if self.writer is None:
+            return None
+        for sub in self.subs.values():
+            if sub is not None:
+                self.destroy_subscription(sub)
+        self.subs.clear()
+        self.discovery.cancel()
+        path = self.writer.close()
+        self.writer = None
+        return path
+
+    def destroy_node(self) -> None:
+        """Close the bag, then destroy the node."""
+        self.close()
+        super().destroy_node()
+
+
+def parse_topics(specs: Sequence[str]) -> tuple[list, dict]:
+    """Split NAME or NAME:TYPE specs into names and a name -> type map."""
+    names, types = [], {}
+    for spec in specs:
+        name, _, msgtype = spec.partition(':')
+        if not name.startswith('/'):
+            name = '/' + name
+        if msgtype:
+            types[name] = msgtype
+        else:
+            names.append(name)
+    return names, types
+
+
+def main(args: Optional[list] = None) -> int:
+    """Record until Ctrl-C, SIGTERM or --max-duration; return the exit status."""
+    argv = remove_ros_args(sys.argv if args is None else args)[1:]
+    parser = argparse.ArgumentParser(prog='record', description='Record topics to a rosbag2 '
+                                     'MCAP bag (raw, receive time as log time).')
+    parser.add_argument('topics', nargs='*', help='NAME or NAME:TYPE (type from the graph '
+                        'if not given)')
+    parser.add_argument('-o', '--output', type=Path, required=True, help='bag directory')
+    parser.add_argument('-a', '--all', action='store_true', help='record every topic')
+    parser.add_argument('--overwrite', action='store_true', help='replace an existing bag')
+    parser.add_argument('--compress', action='store_true', help='zstd chunk compression')
+    parser.add_argument('--max-duration', type=float, default=0.0,
+                        help='stop after this many seconds (0: until interrupted)')
+    opts = parser.parse_args(argv)
+    if not opts.topics and not opts.all:
+        parser.error('name topics to record, or --all')
+    names, types = parse_topics(opts.topics)
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = Recorder(opts.output, topics=None if opts.all else names, types=types,
+                        overwrite=opts.overwrite, compress=opts.compress)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        if opts.max_duration > 0:
+            node.create_timer(opts.max_duration, lambda: rclpy.try_shutdown())
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (BagError, BagTypeError) as exc:
+        print(f'record: error: {exc}', file=sys.stderr)
+        return 1
+    finally:
+        if node is not None:
+            counts = dict(node.counts)
+            path = node.close()
+            print(f'record: wrote {path}: ' + ', '.join(
+                f'{t} {n}' for t, n in sorted(counts.items())), file=sys.stderr)
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def console_main() -> None:
+    """Entry point of the console script."""
+    sys.exit(main())
+
+
+if __name__ == '__main__':
+    console_main()

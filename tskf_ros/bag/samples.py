@@ -1,0 +1,167 @@
+"""
+make_sample_bags: generate the sample bags of bags/ deterministically from a seed.
+
+    make_sample_bags --out bags --seed 2013            # all three
+    make_sample_bags --out /tmp/b --only owc_cai_td_1hz
+
+The bags hold what the drivers would publish (no estimates; `replay_offline` adds them):
+
+- owc_cai_td_1hz: Cai et al.'s 300 s experiment at 1 Hz.  The power meter samples at
+  every whole second; the received-power messages are exactly the whole seconds of Cai's
+  T_d (tskf_ros.timescale.CAI_TD_SEGMENTS realised at 1 s), i.e. t = 1..300 without the
+  five interruptions 31, 127, 132-134, 210-211 and 219-223 (the jumps J = 2, 2, 4, 3, 6 of
+  Fig. 6(b)).  The vibration amplitude is kept below 0.5 rad so that the power never
+  drops to zero by itself: the only gaps are T_d's.  /true_angle has all 301 samples.
+- owc_ge_1khz: one minute at 1 kHz through a Gilbert-Elliott channel (good -> bad 0.002,
+  bad -> good 0.05 per sample: bursts of 20 ms on average, 3.8 % of the time blocked) on
+  top of the vibration's own dropouts (readings at or below zero are not published).
+- led_alignment: the scanning-EKF alignment of Solanki et al. (tskf_ros.led.simulate,
+  Table I parameters, 400 steps of 50 ms, 5 % missing measurements).
+
+Stamps start at START_S (2023-11-14T22:13:20Z) plus the sample time; log time = stamp.
+Topics and types are listed in bags/README.md.
+"""
+
+import argparse
+from pathlib import Path
+import sys
+from typing import Callable, Optional
+
+import numpy as np
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
+
+from tskf_ros import led
+from tskf_ros.bag.types import qos_from_rclpy
+from tskf_ros.bag.writer import BagError, BagWriter
+from tskf_ros.nodes import conversions
+from tskf_ros.owc_link import LinkConfig, OwcLink
+from tskf_ros.timescale import cai_td
+
+PROG = 'make_sample_bags'
+NS = 1_000_000_000
+START_S = 1_700_000_000
+DEFAULT_SEED = 2013
+ILLUMINANCE = 'sensor_msgs/msg/Illuminance'
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+ESTIMATE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
+SENSOR_QOS = [qos_from_rclpy(qos_profile_sensor_data)]
+RELIABLE_QOS = [qos_from_rclpy(QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))]
+# Gilbert-Elliott parameters of owc_ge_1khz
+GE = {'ge_p_gb': 0.002, 'ge_p_bg': 0.05, 'ge_loss_good': 0.0, 'ge_loss_bad': 1.0}
+LED_DROPOUT = 0.05
+
+
+def td_seconds() -> np.ndarray:
+    """Return the whole seconds of Cai's T_d (its points realised at a 1 s step)."""
+    points = np.asarray(cai_td(1.0).points, dtype=float)
+    return np.unique(np.round(points).astype(int))
+
+
+def _owc(writer: BagWriter, link: LinkConfig, n: int,
+         keep: Callable[[np.ndarray], np.ndarray]) -> None:
+    """Write n link samples: the truth always, the power where keep() and not blocked."""
+    writer.add_topic('/received_power', ILLUMINANCE, qos=SENSOR_QOS)
+    writer.add_topic('/true_angle', JOINT_STATE, qos=RELIABLE_QOS)
+    s = OwcLink(link).generate(n)
+    publish = keep(s.index) & ~s.blocked & (s.reading > 0)
+    var = link.noise_std ** 2
+    for i in range(n):
+        stamp = START_S * NS + int(round(int(s.index[i]) * NS / link.rate))
+        writer.write('/true_angle', stamp, serialize_message(
+            conversions.angle_to_msg(stamp, [s.theta[i]], ['theta'])))
+        if publish[i]:
+            writer.write('/received_power', stamp, serialize_message(
+                conversions.power_to_msg(stamp, s.reading[i], var)))
+
+
+def owc_cai_td_1hz(writer: BagWriter, seed: int) -> None:
+    """Cai's 300 s experiment at 1 Hz with the interruptions of T_d (see the module doc)."""
+    link = LinkConfig(rate=1.0, seed=seed, knob_max=0.5, knob_initial=0.3)
+    td = set(td_seconds().tolist())
+    _owc(writer, link, 301, lambda k: np.isin(k, list(td)))
+
+
+def owc_ge_1khz(writer: BagWriter, seed: int) -> None:
+    """One minute at 1 kHz through a Gilbert-Elliott channel."""
+    link = LinkConfig(rate=1000.0, seed=seed, blockage='gilbert_elliott', **GE)
+    _owc(writer, link, 60_000, lambda k: np.ones(k.shape, dtype=bool))
+
+
+class _RecordingEKF(led.ScanningEKF):
+    """The scanning EKF that also keeps its posterior covariance after every step."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.P_history: list = []
+
+    def step(self, stamp: float, z: led.Measurement) -> np.ndarray:
+        cmd = super().step(stamp, z)
+        self.P_history.append(self.P[0].copy())
+        return cmd
+
+
+def led_alignment(writer: BagWriter, seed: int) -> None:
+    """Simulate one scanning-EKF alignment run of Solanki et al. Section V."""
+    aligner = _RecordingEKF(led.EKFConfig(), runs=1)
+    link = led.LinkConfig(dropout=LED_DROPOUT)
+    traj = led.simulate(aligner, link, np.random.default_rng(seed))
+    writer.add_topic('/photodiode', ILLUMINANCE, qos=SENSOR_QOS)
+    writer.add_topic('/alignment/truth', JOINT_STATE, qos=RELIABLE_QOS)
+    writer.add_topic('/alignment/estimate', ESTIMATE, qos=RELIABLE_QOS)
+    writer.add_topic('/alignment/command', JOINT_STATE, qos=RELIABLE_QOS)
+    var = link.noise ** 2
+    for k, t in enumerate(traj.t):
+        stamp = START_S * NS + int(round(t * NS))
+        truth = [traj.phi[k, 0], traj.x2[k, 0], traj.x1[k, 0]]
+        writer.write('/alignment/truth', stamp, serialize_message(conversions.angle_to_msg(
+            stamp, truth, ['incidence_angle_deg', 'scan_mean_deg', 'intensity_factor_v'])))
+        z = traj.z[k, 0]
+        if np.isfinite(z):
+            writer.write('/photodiode', stamp, serialize_message(
+                conversions.power_to_msg(stamp, z, var, frame_id='photodiode')))
+        writer.write('/alignment/estimate', stamp, serialize_message(
+            conversions.estimate_to_msg(stamp, traj.estimate[k, 0], aligner.P_history[k],
+                                        frame_id='scanning_ekf')))
+        writer.write('/alignment/command', stamp, serialize_message(conversions.angle_to_msg(
+            stamp, [traj.command[k, 0]], ['motor_command_deg'])))
+
+
+SAMPLES = {'owc_cai_td_1hz': owc_cai_td_1hz, 'owc_ge_1khz': owc_ge_1khz,
+           'led_alignment': led_alignment}
+
+
+def make(name: str, out: Path, seed: int = DEFAULT_SEED, *, overwrite: bool = False) -> Path:
+    """Generate one sample bag as out/name (zstd-compressed MCAP); return its path."""
+    with BagWriter(Path(out) / name, overwrite=overwrite, compress=True) as writer:
+        SAMPLES[name](writer, seed)
+    return Path(out) / name
+
+
+def main(argv: Optional[list] = None) -> int:
+    """Run the command line; return the exit status."""
+    parser = argparse.ArgumentParser(prog=PROG, description='Generate the sample bags.')
+    parser.add_argument('--out', type=Path, default=Path('bags'), help='directory (bags)')
+    parser.add_argument('--seed', type=int, default=DEFAULT_SEED)
+    parser.add_argument('--only', choices=sorted(SAMPLES), action='append',
+                        help='generate only this bag (repeatable)')
+    parser.add_argument('--overwrite', action='store_true', help='replace existing bags')
+    args = parser.parse_args(argv)
+    for name in args.only or SAMPLES:
+        try:
+            path = make(name, args.out, args.seed, overwrite=args.overwrite)
+        except BagError as exc:
+            print(f'{PROG}: error: {exc}', file=sys.stderr)
+            return 1
+        size = sum(f.stat().st_size for f in path.iterdir())
+        print(f'{PROG}: wrote {path} ({size / 1e6:.2f} MB, seed {args.seed})')
+    return 0
+
+
+def console_main() -> None:
+    """Entry point of the console script."""
+    sys.exit(main())
+
+
+if __name__ == '__main__':
+    console_main()
