@@ -3,24 +3,21 @@ The timescale_estimator node's inputs and outputs, without the node: a thin adap
 
 The live node (tskf_ros.nodes.timescale_estimator) turns a received-power message into
 `EstimatorSession.add(...)` and the resulting Outcome into messages on its topics.  The
-offline replay does the same without DDS, so this module mirrors the node's private
-`_publish` (topic per estimate kind, conversions for the messages) and its parameter
-defaults; test_bag_replay checks both against a live node.  If the node grows a public
-`outcome_messages()` this module should call it instead.
+offline replay does the same without DDS through the node module's own functions
+(`default_parameters`, `outcome_messages`, `OUTPUT_TOPICS`, `output_qos`), with topic
+names resolved in '/'; test_bag_replay checks the result against a live node.
 """
 
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional, Union
 
-import numpy as np
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from tskf_ros.estimation import Outcome
-from tskf_ros.models import owc
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.timescale_estimator import (MATRICES, NODE_NAME, NodeConfig,
-                                                parameters_to_config, SCALARS)
+from tskf_ros.nodes import timescale_estimator as node
+from tskf_ros.nodes.timescale_estimator import (default_parameters, NODE_NAME, NodeConfig,
+                                                output_qos, parameters_to_config)
 import yaml
 
 __all__ = ['ESTIMATE_TYPE', 'INPUT_TYPES', 'InputType', 'JUMP_TYPE', 'OUTPUT_TOPICS',
@@ -30,15 +27,8 @@ __all__ = ['ESTIMATE_TYPE', 'INPUT_TYPES', 'InputType', 'JUMP_TYPE', 'OUTPUT_TOP
 ESTIMATE_TYPE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
 JUMP_TYPE = 'sensor_msgs/msg/TimeReference'
 DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
-# (kind, revised) -> topic, as TimescaleEstimator.pubs (relative names resolved in '/')
-OUTPUT_TOPICS = {
-    ('predicted', False): '/estimate/predicted',
-    ('corrected', False): '/estimate/corrected',
-    ('mu', False): '/estimate/mu',
-    ('predicted', True): '/estimate/revised/predicted',
-    ('corrected', True): '/estimate/revised/corrected',
-    ('mu', True): '/estimate/revised/mu',
-}
+# (kind, revised) -> topic, as the node publishes them (relative names resolved in '/')
+OUTPUT_TOPICS = {key: '/' + topic for key, topic in node.OUTPUT_TOPICS.items()}
 DIAGNOSTICS_TOPIC = '/diagnostics'
 POWER_TOPIC = '/received_power'
 TRUTH_TOPIC = '/true_angle'
@@ -82,19 +72,6 @@ def extractor(msgtype: str) -> Callable[[Any, int], tuple[int, float, float]]:
                                 float(getattr(msg, value)), float(getattr(msg, variance)))
 
 
-def default_parameters() -> dict:
-    """Return the node's declared parameter defaults (see TimescaleEstimator._declare)."""
-    d = owc()
-    matrices = {'A': d.A, 'B': (), 'C': d.C, 'D': d.D, 'G': d.G, 'Q': d.Q, 'R': d.R,
-                'x0': d.x0, 'P0': d.P0}
-    values: dict = {key: [float(v) for v in np.ravel(matrices[key])] for key in MATRICES}
-    values.update({name: spec[0] for name, spec in SCALARS.items()})
-    values.update({'model_name': d.name, 'state_names': list(d.state_names),
-                   'transition': 'euler', 'history_size': 1000, 'queue_depth': 100,
-                   'nonpositive_is_gap': True, 'frame_id': ''})
-    return values
-
-
 def load_config(params_file: Optional[Union[str, Path]] = None,
                 overrides: Optional[dict] = None) -> NodeConfig:
     """
@@ -128,18 +105,6 @@ def load_config(params_file: Optional[Union[str, Path]] = None,
         raise ParamsError(f'{where}: {exc}') from None
 
 
-def output_qos(config: NodeConfig) -> QoSProfile:
-    """Return the QoS of the node's estimate publishers (reliable, keep last queue_depth)."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=config.queue_depth,
-                      reliability=ReliabilityPolicy.RELIABLE)
-
-
 def outcome_messages(out: Outcome, config: NodeConfig) -> list[tuple[str, Any]]:
     """Return the (topic, message) pairs the live node publishes for an Outcome, in order."""
-    frame = config.frame_id or config.estimator.model.name
-    msgs = [(OUTPUT_TOPICS[e.kind, e.revised],
-             conversions.estimate_to_msg(e.stamp_ns, e.x, e.P, frame_id=frame))
-            for e in out.estimates]
-    msgs += [(OUTPUT_TOPICS['mu', j.revised], conversions.jump_to_msg(j.stamp_ns, j.sigma_ns))
-             for j in out.jumps]
-    return msgs
+    return [(OUTPUT_TOPICS[key], msg) for key, msg in node.outcome_messages(out, config)]

@@ -97,6 +97,47 @@ def parameters_to_config(values: dict) -> NodeConfig:
                       values['queue_depth'])
 
 
+# (estimate kind, revised) -> output topic
+OUTPUT_TOPICS = {
+    ('predicted', False): 'estimate/predicted',
+    ('corrected', False): 'estimate/corrected',
+    ('mu', False): 'estimate/mu',
+    ('predicted', True): 'estimate/revised/predicted',
+    ('corrected', True): 'estimate/revised/corrected',
+    ('mu', True): 'estimate/revised/mu',
+}
+
+
+def default_parameters() -> dict:
+    """Return the declared default of every parameter (the OWC model (3) of Cai et al.)."""
+    d = owc()
+    matrices = {'A': d.A, 'B': (), 'C': d.C, 'D': d.D, 'G': d.G, 'Q': d.Q, 'R': d.R,
+                'x0': d.x0, 'P0': d.P0}
+    values: dict = {key: [float(v) for v in np.ravel(matrices[key])] for key in MATRICES}
+    values.update({name: spec[0] for name, spec in SCALARS.items()})
+    values.update({'model_name': d.name, 'state_names': list(d.state_names),
+                   'transition': 'euler', 'history_size': 1000, 'queue_depth': 100,
+                   'nonpositive_is_gap': True, 'frame_id': ''})
+    return values
+
+
+def output_qos(config: NodeConfig) -> QoSProfile:
+    """Return the QoS of the estimate publishers: reliable, keep last queue_depth."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=config.queue_depth,
+                      reliability=ReliabilityPolicy.RELIABLE)
+
+
+def outcome_messages(out: Outcome, config: NodeConfig) -> list:
+    """Return the ((kind, revised), message) pairs to publish for an Outcome, in order."""
+    frame = config.frame_id or config.estimator.model.name
+    msgs = [((e.kind, e.revised),
+             conversions.estimate_to_msg(e.stamp_ns, e.x, e.P, frame_id=frame))
+            for e in out.estimates]
+    msgs += [(('mu', j.revised), conversions.jump_to_msg(j.stamp_ns, j.sigma_ns))
+             for j in out.jumps]
+    return msgs
+
+
 class TimescaleEstimator(Node):
     """Node wrapping EstimatorSession: received power in, estimates and diagnostics out."""
 
@@ -116,19 +157,11 @@ class TimescaleEstimator(Node):
                             reliability=ReliabilityPolicy.BEST_EFFORT)
         self.sub = self.create_subscription(Illuminance, 'received_power', self._on_power,
                                             qos_in)
-        qos_out = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.config.queue_depth,
-                             reliability=ReliabilityPolicy.RELIABLE)
-        est, ref = TwistWithCovarianceStamped, TimeReference
+        qos_out = output_qos(self.config)
         self.pubs = {
-            ('predicted', False): self.create_publisher(est, 'estimate/predicted', qos_out),
-            ('corrected', False): self.create_publisher(est, 'estimate/corrected', qos_out),
-            ('mu', False): self.create_publisher(ref, 'estimate/mu', qos_out),
-            ('predicted', True): self.create_publisher(est, 'estimate/revised/predicted',
-                                                       qos_out),
-            ('corrected', True): self.create_publisher(est, 'estimate/revised/corrected',
-                                                       qos_out),
-            ('mu', True): self.create_publisher(ref, 'estimate/revised/mu', qos_out),
-        }
+            key: self.create_publisher(
+                TimeReference if key[0] == 'mu' else TwistWithCovarianceStamped, topic, qos_out)
+            for key, topic in OUTPUT_TOPICS.items()}
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.diag_timer = self.create_timer(self.config.diagnostics_period,
                                             self.publish_diagnostics)
@@ -145,40 +178,38 @@ class TimescaleEstimator(Node):
     # -- parameters -----------------------------------------------------------------------
 
     def _declare(self) -> None:
-        d = owc()
-        defaults = {'A': d.A, 'B': (), 'C': d.C, 'D': d.D, 'G': d.G, 'Q': d.Q, 'R': d.R,
-                    'x0': d.x0, 'P0': d.P0}
+        defaults = default_parameters()
         for key in MATRICES:
-            value = [float(v) for v in np.ravel(defaults[key])]
-            self.declare_parameter(key, value, ParameterDescriptor(
+            self.declare_parameter(key, defaults[key], ParameterDescriptor(
                 description=MATRIX_HELP[key], dynamic_typing=True))
-        self.declare_parameter('model_name', d.name, ParameterDescriptor(
+        self.declare_parameter('model_name', defaults['model_name'], ParameterDescriptor(
             description="name of the model, used as the estimates' frame_id if that is empty",
             type=ParameterType.PARAMETER_STRING))
-        self.declare_parameter('state_names', list(d.state_names), ParameterDescriptor(
+        self.declare_parameter('state_names', defaults['state_names'], ParameterDescriptor(
             description='one name per state; the order of the estimate message slots',
             type=ParameterType.PARAMETER_STRING_ARRAY))
-        self.declare_parameter('transition', 'euler', ParameterDescriptor(
+        self.declare_parameter('transition', defaults['transition'], ParameterDescriptor(
             description="how a jump mu is discretised: euler = the paper's I + mu A; "
             'exact = expm(A mu) with Van Loan process noise',
             additional_constraints='one of ' + ', '.join(TRANSITIONS),
             type=ParameterType.PARAMETER_STRING))
-        for name, (default, text, (lo, hi)) in SCALARS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(
+        for name, (_, text, (lo, hi)) in SCALARS.items():
+            self.declare_parameter(name, defaults[name], ParameterDescriptor(
                 description=text, type=ParameterType.PARAMETER_DOUBLE, **float_range(lo, hi)))
-        self.declare_parameter('history_size', 1000, ParameterDescriptor(
+        self.declare_parameter('history_size', defaults['history_size'], ParameterDescriptor(
             description='points (and filter states) kept for rewinding on a late sample',
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=2, to_value=1_000_000)]))
-        self.declare_parameter('queue_depth', 100, ParameterDescriptor(
+        self.declare_parameter('queue_depth', defaults['queue_depth'], ParameterDescriptor(
             description='depth of the input and output queues', read_only=True,
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=1, to_value=100_000)]))
-        self.declare_parameter('nonpositive_is_gap', True, ParameterDescriptor(
-            description='a measurement <= 0 is an invalid reading, a gap (Cai IV-C: power); '
-            'false for models whose output may be negative',
-            type=ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('frame_id', '', ParameterDescriptor(
+        gap_help = ('a measurement <= 0 is an invalid reading, a gap (Cai IV-C: power); '
+                    'false for models whose output may be negative')
+        self.declare_parameter('nonpositive_is_gap', defaults['nonpositive_is_gap'],
+                               ParameterDescriptor(description=gap_help,
+                                                   type=ParameterType.PARAMETER_BOOL))
+        self.declare_parameter('frame_id', defaults['frame_id'], ParameterDescriptor(
             description='frame_id of the estimates (empty: model_name)',
             type=ParameterType.PARAMETER_STRING))
 
@@ -230,12 +261,8 @@ class TimescaleEstimator(Node):
             log.debug(out.message)
 
     def _publish(self, out: Outcome) -> None:
-        frame = self.config.frame_id or self.config.estimator.model.name
-        for e in out.estimates:
-            self.pubs[e.kind, e.revised].publish(
-                conversions.estimate_to_msg(e.stamp_ns, e.x, e.P, frame_id=frame))
-        for j in out.jumps:
-            self.pubs['mu', j.revised].publish(conversions.jump_to_msg(j.stamp_ns, j.sigma_ns))
+        for key, msg in outcome_messages(out, self.config):
+            self.pubs[key].publish(msg)
 
     def _on_clock_jump(self, jump: TimeJump) -> None:
         if self.session.pending() is None:
