@@ -204,7 +204,8 @@ class _Point:
 
 
 def _finite(*arrays: np.ndarray) -> bool:
-    return all(bool(np.all(np.isfinite(a))) for a in arrays)
+    # a sum is finite only if every entry is (or, harmlessly, rejects sums past 1e308)
+    return all(np.isfinite(a.sum()) for a in arrays)
 
 
 class EstimatorSession:
