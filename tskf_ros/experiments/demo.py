@@ -110,6 +110,29 @@ def config_dir() -> Path:
     return Path(get_package_share_directory('tskf_ros')) / 'config'
 
 
+def bags_dir() -> Path:
+    """bags/ of the source tree, else the installed package's share/tskf_ros/bags."""
+    here = Path(__file__).resolve().parents[2] / 'bags'
+    if here.is_dir():
+        return here
+    from ament_index_python.packages import get_package_share_directory
+    return Path(get_package_share_directory('tskf_ros')) / 'bags'
+
+
+def replay_sample_bag(out: Path) -> int:
+    """Replay the Cai T_d sample bag through the estimator offline and plot the result."""
+    from tskf_ros.bag import offline, plot
+    bag = bags_dir() / 'owc_cai_td_1hz'
+    params = config_dir() / 'owc_estimator.yaml'
+    estimated = out / 'owc_cai_td_1hz_estimated'
+    print(f'replaying the sample bag {bag.name} through the estimator (no DDS) -> {estimated}',
+          flush=True)
+    rc = offline.main([str(bag), str(estimated), '--params-file', str(params), '--overwrite'])
+    if rc == 0:
+        rc = plot.main([str(estimated), '--out', str(out), '--params-file', str(params)])
+    return rc
+
+
 def node_command(module: str, params_file: Path, **params: object) -> list:
     """`python -m tskf_ros.nodes.<module> --ros-args --params-file ... -p k:=v`."""
     cmd = [sys.executable, '-m', f'tskf_ros.nodes.{module}', '--ros-args',
@@ -277,6 +300,11 @@ def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
     parser.add_argument('--led-noise', type=float, default=0.2, help='V (R_sys: 0.2)')
     parser.add_argument('--led-blockage', choices=('none', 'bernoulli', 'gilbert_elliott'),
                         default='none')
+    parser.add_argument('--out', type=Path, default=Path('results'),
+                        help='the replayed sample bag and its plot go to OUT/bag/ '
+                             '(default: results/)')
+    parser.add_argument('--no-bag', action='store_true',
+                        help='skip replaying the sample bag')
     parser.add_argument('--no-alignment', action='store_true',
                         help='run the estimator demo only')
     args = parser.parse_args(argv)
@@ -301,6 +329,8 @@ def main(argv: Optional[list] = None) -> int:
     print(format_summary(summary), flush=True)
     if led is not None:
         print(format_alignment(finish_alignment(led), args), flush=True)
+    if not args.no_bag:
+        return replay_sample_bag(args.out / 'bag')
     return 0
 
 
