@@ -1,4 +1,4 @@
-"""Live replay (player + estimator node) against offline replay; the player's options."""
+"""Live replay (player + estimator or alignment node) against offline replay; the player."""
 
 from pathlib import Path
 import time
@@ -10,20 +10,26 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance, TimeReference
+from std_msgs.msg import Float64MultiArray
 
-from tskf_ros.bag import estimator_io
+from tskf_ros.bag import alignment_io, estimator_io
 from tskf_ros.bag.offline import replay
 from tskf_ros.bag.player import Player, PlayerError
 from tskf_ros.bag.reader import BagReader
+from tskf_ros.bag.types import message_class
 from tskf_ros.nodes import conversions
+from tskf_ros.nodes.alignment import Alignment, PARAMETERS as ALIGNMENT_PARAMETERS
 from tskf_ros.nodes.timescale_estimator import PARAMETERS, TimescaleEstimator
 import yaml
 
 REPO = Path(__file__).resolve().parent.parent
 BAG = REPO / 'bags' / 'owc_cai_td_1hz'
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'
+LED_BAG = REPO / 'bags' / 'led_alignment'
+LED_PARAMS = REPO / 'config' / 'alignment.yaml'
 TIMEOUT = 30.0
 
 
@@ -35,9 +41,9 @@ def spin_until(executor, condition, what):
         executor.spin_once(timeout_sec=0.005)
 
 
-def yaml_overrides(path):
+def yaml_overrides(path, key='timescale_estimator'):
     """Return the node's parameters in a YAML file as Parameter overrides."""
-    section = yaml.safe_load(path.read_text())['timescale_estimator']['ros__parameters']
+    section = yaml.safe_load(path.read_text())[key]['ros__parameters']
     return [Parameter(k, value=v) for k, v in section.items()]
 
 
@@ -111,6 +117,88 @@ def test_live_replay_equals_offline_replay(ros_context):
         for g, e in zip(got, expected):
             np.testing.assert_allclose(g[1], e[1], rtol=0, atol=1e-12)
             np.testing.assert_allclose(g[2], e[2], rtol=0, atol=1e-12)
+
+
+def test_alignment_node_defaults_are_the_adapters(ros_context):
+    node = Alignment(context=ros_context)
+    try:
+        live = {name: node.get_parameter(name).value for name in ALIGNMENT_PARAMETERS}
+    finally:
+        node.destroy_node()
+    mine = alignment_io.default_parameters()
+    assert set(live) == set(mine)
+    for key, value in live.items():
+        assert (list(value) if isinstance(value, (list, tuple)) else value) == mine[key], key
+
+
+def test_live_alignment_replay_equals_offline_replay(ros_context):
+    res = replay(LED_BAG, None, params_file=LED_PARAMS, diagnostics=False, filter='alignment')
+    assert res.topic == '/photodiode' and res.samples == 381
+    assert any('open loop' in line for line in res.assumptions)
+    topics = list(alignment_io.OUTPUT_TOPICS.values())
+    offline = {t: [m for name, _, m in res.outputs if name == t] for t in topics}
+    assert all(len(v) == 381 for v in offline.values())
+    node = Alignment(context=ros_context, parameter_overrides=yaml_overrides(
+        LED_PARAMS, '/**/alignment') + [Parameter('use_sim_time', value=True)])
+    player = Player(LED_BAG, rate=10.0, clock_hz=200.0, topics=['/photodiode'],
+                    remap={'/photodiode': '/intensity'}, context=ros_context)
+    client = rclpy.create_node('alignment_client', context=ros_context)
+    live = {t: [] for t in topics}
+    for topic in topics:
+        cls = Float64MultiArray if topic.endswith('commands') else TwistWithCovarianceStamped
+        client.create_subscription(cls, topic, live[topic].append, QoSProfile(depth=1000))
+    executor = SingleThreadedExecutor(context=ros_context)
+    for n in (node, client):
+        executor.add_node(n)
+    try:
+        spin_until(executor, lambda: all(client.count_publishers(t) for t in topics)
+                   and player.pubs['/photodiode'].get_subscription_count(), 'matching')
+        executor.add_node(player)
+        spin_until(executor, lambda: player.done.done() and all(
+            len(live[t]) >= len(offline[t]) for t in topics), 'the live outputs')
+        spin_until(executor, lambda: True, 'flush')
+        sim_now = node.get_clock().now().nanoseconds
+    finally:
+        executor.shutdown()
+        for n in (player, node, client):
+            n.destroy_node()
+    assert abs(sim_now - 1_700_000_020 * 10**9) < 5 * 10**9, 'the node ran on the bag clock'
+    assert node.session.stats.used == 381 and not node.session.stats.resets
+    for topic in topics:
+        got, expected = live[topic], offline[topic]
+        assert len(got) == len(expected), topic
+        if topic.endswith('commands'):
+            np.testing.assert_allclose([m.data for m in got], [m.data for m in expected],
+                                       rtol=0, atol=1e-9)
+            continue
+        got = [conversions.msg_to_estimate(m, 2) for m in got]
+        expected = [conversions.msg_to_estimate(m, 2) for m in expected]
+        assert [g[0] for g in got] == [e[0] for e in expected], topic
+        for g, e in zip(got, expected):
+            np.testing.assert_allclose(g[1], e[1], rtol=0, atol=1e-9)
+            np.testing.assert_allclose(g[2], e[2], rtol=0, atol=1e-9)
+
+
+def test_offline_alignment_reproduces_the_recorded_run_until_a_sample_is_missing():
+    """The bag's EKF ran closed loop; open loop the same filter agrees until the first gap."""
+    res = replay(LED_BAG, None, params_file=LED_PARAMS, diagnostics=False, filter='alignment')
+    recorded, replayed, stamps = {}, [], []
+    for topic, _, msg in res.outputs:
+        if topic == '/alignment/estimate':
+            msg = deserialize_message(msg.data, message_class(msg.msgtype))
+            stamp, x, _ = conversions.msg_to_estimate(msg, 2)
+            recorded[stamp] = x
+        elif topic == '/photodiode':
+            stamps.append(msg.log_time_ns)
+        elif topic == '/estimate/corrected':
+            replayed.append(conversions.msg_to_alignment_estimate(msg)[:2])
+    step = stamps[1] - stamps[0]
+    first_gap = next(i for i, (a, b) in enumerate(zip(stamps, stamps[1:])) if b - a > step)
+    assert first_gap >= 10
+    for stamp, x in replayed[:first_gap + 1]:
+        np.testing.assert_allclose(x, recorded[stamp], rtol=0, atol=1e-9)
+    stamp, x = replayed[first_gap + 1]
+    assert np.abs(x - recorded[stamp]).max() > 1e-3, 'the scan phase moves at a gap'
 
 
 def test_player_selects_remaps_offsets_and_loops(ros_context):

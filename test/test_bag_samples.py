@@ -8,6 +8,7 @@ import pytest
 from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag import samples
+from tskf_ros.bag.offline import main as offline_main
 from tskf_ros.bag.plot import main as plot_main
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.types import message_class
@@ -38,7 +39,7 @@ def messages(path):
     return out
 
 
-@pytest.mark.parametrize('name', ['owc_cai_td_1hz', 'led_alignment'])
+@pytest.mark.parametrize('name', ['owc_cai_td_1hz', 'led_alignment', 'drogue'])
 def test_regenerating_a_sample_bag_gives_the_same_messages(tmp_path, name):
     path = samples.make(name, tmp_path, readme_seed(name))
     assert messages(path) == messages(BAGS / name)
@@ -68,6 +69,19 @@ def test_plot_bag_writes_both_kinds(tmp_path, capsys):
         assert (tmp_path / png).stat().st_size > 20_000
     assert plot_main([str(tmp_path / 'nope'), '--out', str(tmp_path)]) == 1
     assert 'no such bag' in capsys.readouterr().err
+
+
+def test_plot_bag_on_an_offline_alignment_replay(tmp_path, capsys):
+    out = tmp_path / 'led_aligned'
+    assert offline_main(['--filter', 'alignment', str(BAGS / 'led_alignment'), str(out),
+                         '--params-file', str(REPO / 'config' / 'alignment.yaml')]) == 0
+    assert 'open loop' in capsys.readouterr().out
+    reader = BagReader(out)
+    assert {'/base_position_controller/commands', '/estimate/predicted',
+            '/estimate/corrected', '/diagnostics', '/photodiode'} <= set(reader.topics)
+    assert reader.topics['/base_position_controller/commands'].count == 381
+    assert plot_main([str(out), '--out', str(tmp_path)]) == 0
+    assert (tmp_path / 'alignment.png').stat().st_size > 20_000
 
 
 def test_foxglove_layout_refers_to_topics_the_bags_have():

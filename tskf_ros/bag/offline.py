@@ -2,6 +2,8 @@
 replay_offline: run the time-scale estimator over a bag as fast as possible, without DDS.
 
     replay_offline bags/owc_cai_td_1hz /tmp/owc_estimated --params-file config/owc_estimator.yaml
+    replay_offline --filter alignment bags/led_alignment /tmp/led_aligned \
+        --params-file config/alignment.yaml
 
 Reads the measurement topic (default /received_power), feeds every message to the same
 EstimatorSession the live timescale_estimator node runs, and writes a new bag with all the
@@ -10,6 +12,13 @@ estimate/corrected, estimate/mu, their revised/ versions and /diagnostics), with
 message types and header stamps.  An output message's log time is the log time of the
 input message that produced it (the live node publishes on receipt); /diagnostics is
 emitted every diagnostics_period seconds of log time, as the node's timer would.
+
+--filter alignment runs the alignment node's AlignmentSession instead (tskf_ros.bag.
+alignment_io) on the intensity topic (default /intensity, else the only stamped scalar
+topic, e.g. /photodiode of bags/led_alignment) and writes what that node publishes:
+base_position_controller/commands, estimate/predicted and estimate/corrected (EKF) and
+/diagnostics.  This is open loop: the commands do not move the recorded receiver, so the
+output shows the filter on the recorded intensities (the output's metadata says so).
 
 Bags from elsewhere: --topic picks the measurement topic; the stamped scalars of
 common_interfaces in INPUT_TYPES are taken (Range has no variance: 0; std_msgs Float64 /
@@ -31,6 +40,8 @@ from typing import Callable, Optional
 
 from rclpy.serialization import deserialize_message, serialize_message
 
+from tskf_ros.alignment import AlignmentSession
+from tskf_ros.bag import alignment_io
 from tskf_ros.bag.estimator_io import (DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, ESTIMATE_TYPE,
                                        extractor, INPUT_TYPES, JUMP_TYPE, load_config,
                                        outcome_messages, output_qos, OUTPUT_TOPICS,
@@ -46,6 +57,10 @@ PROG = 'replay_offline'
 EXIT_DAMAGED = 3
 # exceptions rclpy's deserializer raises on bytes that are not the type
 DESERIALIZE_ERRORS = (RuntimeError, ValueError, TypeError)
+FILTERS = ('estimator', 'alignment')
+# filter -> (default input topic, suffix of the default output)
+FILTER_INPUT = {'estimator': (POWER_TOPIC, '_estimated'),
+                'alignment': (alignment_io.INPUT_TOPIC, '_aligned')}
 
 
 class InputError(BagError):
@@ -68,25 +83,27 @@ class ReplayResult:
     outputs: list = field(default_factory=list)     # (topic, log_ns, msg) when collecting
 
 
-def choose_topic(reader: BagReader, topic: Optional[str]) -> tuple[str, str, list]:
+def choose_topic(reader: BagReader, topic: Optional[str],
+                 default: str = POWER_TOPIC) -> tuple[str, str, list]:
     """
     Pick the measurement topic and its type; return (topic, type, assumptions).
 
-    Without --topic: /received_power if present, else the only topic of a known type.
+    Without --topic: `default` (/received_power) if present, else the only topic of a
+    known type.
     """
     assumptions = []
     if topic is None:
-        if POWER_TOPIC in reader.topics:
-            topic = POWER_TOPIC
+        if default in reader.topics:
+            topic = default
         else:
             known = [t for t, i in reader.topics.items() if i.msgtype in INPUT_TYPES]
             if len(known) != 1:
                 raise InputError(
-                    f'{reader.path}: no {POWER_TOPIC} topic and '
+                    f'{reader.path}: no {default} topic and '
                     f'{"no" if not known else len(known)} stamped scalar topics '
                     f'({", ".join(known) or "none"}); choose one with --topic')
             topic = known[0]
-            assumptions.append(f'no {POWER_TOPIC}: using {topic}, the only stamped scalar '
+            assumptions.append(f'no {default}: using {topic}, the only stamped scalar '
                                'topic of the bag')
     info = reader.topics.get(topic)
     if info is None:
@@ -120,6 +137,12 @@ class OfflineEstimator:
         self.period_ns = int(round(config.diagnostics_period * NS))
         self.next_diag: Optional[int] = None
 
+    def output_topics(self) -> list:
+        """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
+        qos = output_qos(self.config)
+        return [(name, JUMP_TYPE if kind == 'mu' else ESTIMATE_TYPE, qos)
+                for (kind, _), name in OUTPUT_TOPICS.items()]
+
     def diagnostics_due(self, log_ns: int) -> list:
         """Return the /diagnostics messages the node's timer would have sent up to log_ns."""
         out = []
@@ -141,25 +164,69 @@ class OfflineEstimator:
         return out.status, outcome_messages(out, self.config)
 
 
+class OfflineAligner(OfflineEstimator):
+    """The live alignment node's work on one message at a time, without DDS or a clock."""
+
+    def __init__(self, config: alignment_io.NodeConfig, msgtype: str) -> None:
+        self.config = config
+        self.session = AlignmentSession(config.session)
+        self.cls = message_class(msgtype)
+        self.extract = extractor(msgtype)
+        self.period_ns = int(round(config.diagnostics_period * NS))
+        self.next_diag = None
+
+    def output_topics(self) -> list:
+        """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
+        return [(name, alignment_io.OUTPUT_TYPES[key], alignment_io.output_qos(self.config, key))
+                for key, name in alignment_io.OUTPUT_TOPICS.items()]
+
+    def diagnostics_due(self, log_ns: int) -> list:
+        """Return the /diagnostics messages the node's timer would have sent up to log_ns."""
+        out = []
+        if self.next_diag is None:
+            self.next_diag = log_ns + self.period_ns
+        while log_ns >= self.next_diag:
+            out.append((self.next_diag, alignment_io.diagnostics_message(
+                self.session, self.config, self.next_diag)))
+            self.next_diag += self.period_ns
+        return out
+
+    def process(self, data: bytes, log_ns: int) -> tuple[str, list]:
+        """Deserialize one intensity sample and run it; return (status, [(topic, msg)])."""
+        msg = deserialize_message(data, self.cls)
+        stamp_ns, volts, _ = self.extract(msg, log_ns)
+        out = self.session.add(stamp_ns, volts)
+        return out.status, alignment_io.outcome_messages(out, self.config)
+
+
 def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
            params_file: Optional[os.PathLike] = None, topic: Optional[str] = None,
            overwrite: bool = False, compress: bool = False, diagnostics: bool = True,
-           log: Callable[[str], None] = lambda s: None) -> ReplayResult:
+           log: Callable[[str], None] = lambda s: None,
+           filter: str = 'estimator') -> ReplayResult:  # noqa: A002 (the CLI's --filter)
     """
     Run the estimator over `bag`; write `output` (a new bag) or, if None, collect in memory.
+
+    filter='alignment' runs the alignment node's session instead (open loop, see above).
 
     Raises BagError / ParamsError / BagTypeError before anything is written if the bag or
     the parameters cannot be used.  Damage met while reading stops the replay; what came
     before is processed and written, and `result.damage` says where it stopped.
     """
     t0 = time.perf_counter()
+    if filter not in FILTERS:
+        raise ValueError(f'filter must be one of {FILTERS}, got {filter!r}')
     reader = BagReader(bag)
-    config = load_config(params_file)
+    aligning = filter == 'alignment'
+    config = (alignment_io.load_config if aligning else load_config)(params_file)
     result = ReplayResult()
-    result.topic, result.msgtype, result.assumptions = choose_topic(reader, topic)
+    result.topic, result.msgtype, result.assumptions = choose_topic(
+        reader, topic, FILTER_INPUT[filter][0])
+    if aligning:
+        result.assumptions.append(alignment_io.OPEN_LOOP_NOTE)
     for line in result.assumptions:
         log(line)
-    est = OfflineEstimator(config, result.msgtype)
+    est = (OfflineAligner if aligning else OfflineEstimator)(config, result.msgtype)
     writer = None
     store = typestore()
     if output is not None:
@@ -172,13 +239,14 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
                     writer.add_topic(name, info.msgtype, qos=info.qos, msgdef=info.msgdef)
                 else:
                     log(f'{name}: type {info.msgtype} has no definition here; not copied')
-            qos = [qos_from_rclpy(output_qos(config))]
-            for (kind, _), name in OUTPUT_TOPICS.items():
+            for name, msgtype, qos in est.output_topics():
                 if not writer.has_topic(name):
-                    writer.add_topic(name, JUMP_TYPE if kind == 'mu' else ESTIMATE_TYPE,
-                                     qos=qos)
+                    writer.add_topic(name, msgtype, qos=[qos_from_rclpy(qos)])
             if diagnostics and not writer.has_topic(DIAGNOSTICS_TOPIC):
-                writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, qos=qos)
+                writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, qos=[qos_from_rclpy(
+                    est.output_topics()[0][2])])
+            if aligning:
+                writer._writer.set_custom_data('tskf_ros.open_loop', alignment_io.OPEN_LOOP_NOTE)
         damage = _run(reader, est, writer, result, diagnostics)
         if damage is not None:
             result.damage = damage
@@ -236,26 +304,32 @@ def _emit(writer: Optional[BagWriter], result: ReplayResult, topic: str, log_ns:
         writer.write(topic, log_ns, serialize_message(msg))
 
 
-def default_output(bag: Path) -> Path:
-    """Return <bag>_estimated next to the bag (for a .mcap file: without the suffix)."""
+def default_output(bag: Path, filter: str = 'estimator') -> Path:  # noqa: A002
+    """Return <bag>_estimated (_aligned) next to the bag (a .mcap file: without the suffix)."""
     bag = Path(bag)
     stem = bag.stem if bag.suffix == '.mcap' else bag.name
-    return bag.parent / f'{stem}_estimated'
+    return bag.parent / f'{stem}{FILTER_INPUT[filter][1]}'
 
 
 def main(argv: Optional[list] = None) -> int:
     """Run the command line; return the exit status."""
     parser = argparse.ArgumentParser(
-        prog=PROG, description='Run the time-scale estimator over a bag without DDS and '
-        "write a bag with the inputs and the estimator's outputs.")
+        prog=PROG, description='Run the time-scale estimator (or the alignment filter) over a '
+        "bag without DDS and write a bag with the inputs and the node's outputs.")
     parser.add_argument('bag', type=Path, help='bag directory (metadata.yaml + .mcap or '
                         '.db3) or a bare .mcap file')
     parser.add_argument('output', type=Path, nargs='?',
-                        help='output bag directory (default: <bag>_estimated)')
+                        help='output bag directory (default: <bag>_estimated, with '
+                        '--filter alignment <bag>_aligned)')
+    parser.add_argument('--filter', choices=FILTERS, default='estimator',
+                        help='the node to run: the time-scale estimator (default) or the '
+                        'LED alignment node (open loop: its commands do not move the '
+                        'recorded receiver)')
     parser.add_argument('--params-file', type=Path,
-                        help='estimator parameters (as for the node), e.g. '
-                        "config/owc_estimator.yaml; default: the node's defaults (OWC (3))")
-    parser.add_argument('--topic', help=f'measurement topic (default {POWER_TOPIC}); types: '
+                        help='parameters of that node, e.g. config/owc_estimator.yaml or '
+                        "config/alignment.yaml; default: the node's defaults")
+    parser.add_argument('--topic', help=f'measurement topic (default {POWER_TOPIC}, with '
+                        f'--filter alignment {alignment_io.INPUT_TOPIC}); types: '
                         + ', '.join(INPUT_TYPES))
     parser.add_argument('--overwrite', action='store_true', help='replace an existing output')
     parser.add_argument('--compress', action='store_true', help='zstd-compress the chunks')
@@ -263,7 +337,7 @@ def main(argv: Optional[list] = None) -> int:
                         help='do not write /diagnostics')
     parser.add_argument('-q', '--quiet', action='store_true', help='only errors')
     args = parser.parse_args(argv)
-    output = args.output or default_output(args.bag)
+    output = args.output or default_output(args.bag, args.filter)
 
     def log(line: str) -> None:
         if line.startswith('WARNING') or not args.quiet:
@@ -272,7 +346,7 @@ def main(argv: Optional[list] = None) -> int:
     try:
         res = replay(args.bag, output, params_file=args.params_file, topic=args.topic,
                      overwrite=args.overwrite, compress=args.compress,
-                     diagnostics=not args.no_diagnostics, log=log)
+                     diagnostics=not args.no_diagnostics, log=log, filter=args.filter)
     except (BagError, ParamsError, BagTypeError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return 1

@@ -4,6 +4,7 @@ plot_bag: turn a bag into PNGs.
     plot_bag /tmp/owc_estimated --out results/plots        # a replay_offline output
     plot_bag bags/owc_cai_td_1hz --out results/plots       # raw: estimated in memory first
     plot_bag bags/led_alignment --out results/plots
+    plot_bag /tmp/led_aligned --out results/plots          # replay_offline --filter alignment
 
 Estimator bags (estimate/* topics, or a measurement topic that is then run through the
 estimator offline, in memory): estimator.png, with Cai Fig. 2's two styles side by side,
@@ -12,6 +13,9 @@ estimator offline, in memory): estimator.png, with Cai Fig. 2's two styles side 
 the corrected estimate with +-2 sigma bands; their errors against the truth; mu.
 Alignment bags (/alignment/*): alignment.png as Solanki et al. Fig. 8: x1hat and x1,
 x2hat and the true scan mean, the true angle of incidence, and the measured intensity.
+An offline alignment replay (base_position_controller/commands present) is drawn the
+same way from the node's estimate/corrected (x2 converted back to degrees), with the
+recorded run's /alignment/estimate, if any, dashed for comparison (open loop).
 """
 
 import argparse
@@ -23,6 +27,7 @@ import matplotlib
 import numpy as np
 from rclpy.serialization import deserialize_message
 
+from tskf_ros.bag import alignment_io
 from tskf_ros.bag.estimator_io import load_config, ParamsError, TRUTH_TOPIC
 from tskf_ros.bag.offline import replay
 from tskf_ros.bag.reader import BagError, BagReader
@@ -117,25 +122,47 @@ def estimator_figure(data: dict, measurement: list, C: float, D: float, title: s
     return fig
 
 
-def alignment_figure(data: dict, title: str):
-    """Draw Solanki et al. Fig. 8 from an alignment bag; return the figure."""
-    est = data['/alignment/estimate']
-    rows = [conversions.msg_to_estimate(m, 2) for _, m in est]
+def _alignment_series(msgs: list, node_units: bool) -> tuple:
+    """Turn EKF estimate messages into (t in s, x [V, deg], sd [V, deg])."""
+    convert = conversions.msg_to_alignment_estimate if node_units else \
+        (lambda m: conversions.msg_to_estimate(m, 2))
+    rows = [convert(m) for _, m in msgs]
     t = np.array([r[0] for r in rows], float) / NS
-    x = np.array([r[1] for r in rows])
-    sd = np.sqrt(np.array([[r[2][0, 0], r[2][1, 1]] for r in rows]).clip(0))
+    x = np.array([r[1] for r in rows]).reshape(-1, 2)
+    sd = np.sqrt(np.array([[r[2][0, 0], r[2][1, 1]] for r in rows]).clip(0)).reshape(-1, 2)
+    return t, x, sd
+
+
+def alignment_figure(data: dict, title: str, *, replayed: bool = False,
+                     intensity_topic: str = '/photodiode'):
+    """
+    Draw Solanki et al. Fig. 8 from an alignment bag; return the figure.
+
+    replayed: the estimates are the alignment node's (estimate/corrected, x2 in rad) of an
+    offline replay; the recorded /alignment/estimate (x2 in deg) is then dashed.
+    """
+    recorded = data.get('/alignment/estimate') or []
+    if replayed:
+        t, x, sd = _alignment_series(data[alignment_io.OUTPUT_TOPICS['corrected']], True)
+        label = 'x(t|t) of the replay (open loop)'
+    else:
+        t, x, sd = _alignment_series(recorded, False)
+        label = 'EKF'
     truth = data.get('/alignment/truth') or []
     tt = np.array([conversions.stamp_to_ns(m.header.stamp) for _, m in truth], float) / NS
     pos = {n: i for i, n in enumerate(truth[0][1].name)} if truth else {}
     tv = np.array([m.position for _, m in truth]) if truth else np.zeros((0, 3))
-    z = data.get('/photodiode') or []
+    z = data.get(intensity_topic) or []
     tz = np.array([conversions.msg_to_power(m)[0] for _, m in z], float) / NS
     vz = np.array([conversions.msg_to_power(m)[1] for _, m in z])
     t0 = t.min()
     fig, axes = plt.subplots(4, 1, figsize=(10, 11), sharex=True)
     for ax, i, name, key, unit in ((axes[0], 0, 'x1hat', 'intensity_factor_v', 'V'),
                                    (axes[1], 1, 'x2hat', 'scan_mean_deg', 'deg')):
-        ax.plot(t - t0, x[:, i], 'C3-', lw=1, label=f'{name} (EKF)')
+        ax.plot(t - t0, x[:, i], 'C3-', lw=1, label=f'{name} ({label})')
+        if replayed and recorded:
+            tr, xr, _ = _alignment_series(recorded, False)
+            ax.plot(tr - t0, xr[:, i], 'C0--', lw=0.8, label=f'{name} of the recorded run')
         ax.fill_between(t - t0, x[:, i] - 2 * sd[:, i], x[:, i] + 2 * sd[:, i], color='C3',
                         alpha=0.2, label='+-2 sigma')
         if key in pos:
@@ -162,6 +189,20 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
     reader = BagReader(bag)
     out.mkdir(parents=True, exist_ok=True)
     written = []
+    if alignment_io.OUTPUT_TOPICS['command'] in reader.topics:
+        intensity = topic or next((t for t in (alignment_io.INPUT_TOPIC, '/photodiode')
+                                   if t in reader.topics), alignment_io.INPUT_TOPIC)
+        wanted = {alignment_io.OUTPUT_TOPICS['corrected'], intensity, '/alignment/truth',
+                  '/alignment/estimate'}
+        data = _decode(reader, wanted & set(reader.topics))
+        if not data.get(alignment_io.OUTPUT_TOPICS['corrected']):
+            raise BagError(f'{bag}: no EKF estimates on {alignment_io.OUTPUT_TOPICS["corrected"]}'
+                           ' (algorithm is not ekf?): nothing to plot')
+        fig = alignment_figure(data, f'{bag.name}: alignment node replayed offline (open '
+                               'loop: the commands did not move the recorded receiver)',
+                               replayed=True, intensity_topic=intensity)
+        written.append(_save(fig, out / 'alignment.png'))
+        return written
     if '/alignment/estimate' in reader.topics:
         data = _decode(reader, {t for t in reader.topics if t.startswith('/alignment/')}
                        | ({'/photodiode'} & set(reader.topics)))

@@ -1,7 +1,7 @@
 """
 make_sample_bags: generate the sample bags of bags/ deterministically from a seed.
 
-    make_sample_bags --out bags --seed 2013            # all three
+    make_sample_bags --out bags --seed 2013            # all four
     make_sample_bags --out /tmp/b --only owc_cai_td_1hz
 
 The bags hold what the drivers would publish (no estimates; `replay_offline` adds them):
@@ -17,6 +17,11 @@ The bags hold what the drivers would publish (no estimates; `replay_offline` add
   top of the vibration's own dropouts (readings at or below zero are not published).
 - led_alignment: the scanning-EKF alignment of Solanki et al. (tskf_ros.led.simulate,
   Table I parameters, 400 steps of 50 ms, 5 % missing measurements).
+- drogue: Fang & de Callafon's drogue (tskf_ros.experiments.drogue.run with the seed, 4 h
+  at T = 5 s): the position fixes at the surface on /received_power as the estimator's
+  input (Illuminance used as a stamped scalar: displacement in m, variance gps_sd^2),
+  the measured acceleration u on /drogue/acceleration (sensor_msgs/Imu, linear x) and
+  the truth on /drogue/truth, every T.
 
 Stamps start at START_S (2023-11-14T22:13:20Z) plus the sample time; log time = stamp.
 Topics and types are listed in bags/README.md.
@@ -30,10 +35,12 @@ from typing import Callable, Optional
 import numpy as np
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
+from sensor_msgs.msg import Imu
 
 from tskf_ros import led
 from tskf_ros.bag.types import qos_from_rclpy
 from tskf_ros.bag.writer import BagError, BagWriter
+from tskf_ros.experiments import drogue as drogue_sim
 from tskf_ros.nodes import conversions
 from tskf_ros.owc_link import LinkConfig, OwcLink
 from tskf_ros.timescale import cai_td
@@ -45,6 +52,8 @@ DEFAULT_SEED = 2013
 ILLUMINANCE = 'sensor_msgs/msg/Illuminance'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 ESTIMATE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
+IMU = 'sensor_msgs/msg/Imu'
+DROGUE_TRUTH = ('displacement_m', 'velocity_m_s', 'depth_m', 'flow_velocity_m_s')
 SENSOR_QOS = [qos_from_rclpy(qos_profile_sensor_data)]
 RELIABLE_QOS = [qos_from_rclpy(QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))]
 # Gilbert-Elliott parameters of owc_ge_1khz
@@ -127,8 +136,33 @@ def led_alignment(writer: BagWriter, seed: int) -> None:
             stamp, [traj.command[k, 0]], ['motor_command_deg'])))
 
 
+def drogue(writer: BagWriter, seed: int) -> None:
+    """Simulate one drogue of Fang & de Callafon Section IV (tskf_ros.experiments.drogue)."""
+    run = drogue_sim.run(drogue_sim.DrogueConfig(seed=seed))
+    cfg, truth = run.cfg, run.truth
+    writer.add_topic('/received_power', ILLUMINANCE, qos=SENSOR_QOS)
+    writer.add_topic('/drogue/acceleration', IMU, qos=SENSOR_QOS)
+    writer.add_topic('/drogue/truth', JOINT_STATE, qos=RELIABLE_QOS)
+    for k, t in enumerate(truth.t):
+        stamp = START_S * NS + int(round(t * NS))
+        values = [truth.x[k, 0], truth.x[k, 1], truth.z[k], truth.v_flow[k]]
+        writer.write('/drogue/truth', stamp, serialize_message(
+            conversions.angle_to_msg(stamp, values, DROGUE_TRUTH)))
+        imu = Imu()
+        imu.header.stamp = conversions.ns_to_stamp(stamp)
+        imu.header.frame_id = 'drogue'
+        imu.orientation_covariance[0] = -1.0        # REP 145: no orientation
+        imu.angular_velocity_covariance[0] = -1.0   # no rates
+        imu.linear_acceleration.x = float(run.u[k])
+        imu.linear_acceleration_covariance[0] = cfg.accel_sd ** 2
+        writer.write('/drogue/acceleration', stamp, serialize_message(imu))
+        if truth.gamma[k]:
+            writer.write('/received_power', stamp, serialize_message(conversions.power_to_msg(
+                stamp, run.y[k, 0], cfg.gps_sd ** 2, frame_id='drogue_gps')))
+
+
 SAMPLES = {'owc_cai_td_1hz': owc_cai_td_1hz, 'owc_ge_1khz': owc_ge_1khz,
-           'led_alignment': led_alignment}
+           'led_alignment': led_alignment, 'drogue': drogue}
 
 
 def make(name: str, out: Path, seed: int = DEFAULT_SEED, *, overwrite: bool = False) -> Path:

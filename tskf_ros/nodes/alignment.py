@@ -9,6 +9,10 @@ as a ros2_control forward_command_controller takes it) and, with the EKF, the es
 [x1, x2] before and after the update on `estimate/predicted` and `estimate/corrected`
 (geometry_msgs/msg/TwistWithCovarianceStamped); see tskf_ros.nodes.conversions.  Counters
 go to /diagnostics.
+
+The offline replay (tskf_ros.bag.alignment_io) publishes the same messages through this
+module's `default_parameters`, `outcome_messages`, `diagnostics_message`, `OUTPUT_TOPICS`
+and `output_qos`, so live and offline replay cannot drift apart.
 """
 
 from dataclasses import dataclass, fields
@@ -32,7 +36,14 @@ from tskf_ros.nodes import conversions
 from tskf_ros.nodes.common import run_node
 
 NODE_NAME = 'alignment'
+INPUT_TOPIC = 'intensity'
 COMMAND_TOPIC = 'base_position_controller/commands'
+# output -> topic (relative: resolved in the node's namespace), in publishing order
+OUTPUT_TOPICS = {
+    'predicted': 'estimate/predicted',
+    'corrected': 'estimate/corrected',
+    'command': COMMAND_TOPIC,
+}
 D, DA = ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY
 B = ParameterType.PARAMETER_BOOL
 # AlignmentConfig field -> (type, description, (lo, hi) or None, read_only)
@@ -95,6 +106,51 @@ def parameters_to_config(values: dict) -> NodeConfig:
                       values['diagnostics_period'], values['queue_depth'])
 
 
+def default_parameters() -> dict:
+    """Return the declared default of every parameter (Table I of Solanki et al.)."""
+    defaults = AlignmentConfig()
+    values = {}
+    for name, (type_, _, _, _) in SESSION_PARAMETERS.items():
+        value = getattr(defaults, name)
+        values[name] = [float(v) for v in value] if type_ == DA else value
+    values.update({'frame_id': 'receiver', 'diagnostics_period': 1.0, 'queue_depth': 100})
+    return values
+
+
+def output_qos(config: NodeConfig, output: str) -> QoSProfile:
+    """
+    Return the QoS of an output's publisher: reliable, keep last.
+
+    The command keeps the system default depth 10 (what forward_command_controller
+    subscribes with); the estimates keep queue_depth.
+    """
+    depth = 10 if output == 'command' else config.queue_depth
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE)
+
+
+def outcome_messages(out: AlignOutcome, config: NodeConfig) -> list:
+    """Return the (output, message) pairs to publish for an outcome, in order."""
+    if out.command is None:
+        return []
+    msgs = []
+    if out.prior is not None:
+        msgs.append(('predicted', conversions.alignment_estimate_to_msg(
+            out.stamp_ns, *out.prior, frame_id=config.frame_id)))
+        msgs.append(('corrected', conversions.alignment_estimate_to_msg(
+            out.stamp_ns, *out.posterior, frame_id=config.frame_id)))
+    msgs.append(('command', conversions.base_command_to_msg(out.command)))
+    return msgs
+
+
+def diagnostics_message(session: AlignmentSession, config: NodeConfig, stamp_ns: int, *,
+                        node_name: str = NODE_NAME) -> DiagnosticArray:
+    """Return the /diagnostics message of the session's counters at stamp_ns."""
+    level, message, values = session.diagnostics()
+    return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: LED alignment', level,
+                                          message, values, hardware_id=config.frame_id)
+
+
 class Alignment(Node):
     """Node wrapping AlignmentSession: intensity in, base commands, estimates, diagnostics out."""
 
@@ -109,18 +165,15 @@ class Alignment(Node):
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
 
-        depth = self.config.queue_depth
-        qos_in = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+        qos_in = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.config.queue_depth,
                             reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.sub = self.create_subscription(Illuminance, 'intensity', self._on_intensity,
+        self.sub = self.create_subscription(Illuminance, INPUT_TOPIC, self._on_intensity,
                                             qos_in)
-        # what forward_command_controller subscribes with: the system default (reliable, 10)
-        self.command_pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, 10)
-        qos_out = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                             reliability=ReliabilityPolicy.RELIABLE)
-        est = TwistWithCovarianceStamped
-        self.predicted_pub = self.create_publisher(est, 'estimate/predicted', qos_out)
-        self.corrected_pub = self.create_publisher(est, 'estimate/corrected', qos_out)
+        self.pubs = {
+            key: self.create_publisher(
+                Float64MultiArray if key == 'command' else TwistWithCovarianceStamped, topic,
+                output_qos(self.config, key))
+            for key, topic in OUTPUT_TOPICS.items()}
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.diag_timer = self.create_timer(self.config.diagnostics_period,
                                             self.publish_diagnostics)
@@ -139,11 +192,9 @@ class Alignment(Node):
     # -- parameters -----------------------------------------------------------------------
 
     def _declare(self) -> None:
-        defaults = AlignmentConfig()
+        defaults = default_parameters()
         for name, (type_, text, rng, read_only) in SESSION_PARAMETERS.items():
-            value = getattr(defaults, name)
-            if type_ == DA:
-                value = [float(v) for v in value]
+            value = defaults[name]
             d = ParameterDescriptor(description=text, type=type_, read_only=read_only)
             if rng is not None:
                 d.floating_point_range = [FloatingPointRange(from_value=rng[0],
@@ -151,12 +202,14 @@ class Alignment(Node):
             if name == 'algorithm':
                 d.additional_constraints = 'one of ' + ', '.join(led.ALGORITHMS)
             self.declare_parameter(name, value, d)
-        self.declare_parameter('frame_id', 'receiver', ParameterDescriptor(
+        self.declare_parameter('frame_id', defaults['frame_id'], ParameterDescriptor(
             description='frame_id of the estimates', type=ParameterType.PARAMETER_STRING))
-        self.declare_parameter('diagnostics_period', 1.0, ParameterDescriptor(
-            description='seconds between /diagnostics messages', type=D,
-            floating_point_range=[FloatingPointRange(from_value=0.01, to_value=3600.0)]))
-        self.declare_parameter('queue_depth', 100, ParameterDescriptor(
+        self.declare_parameter('diagnostics_period', defaults['diagnostics_period'],
+                               ParameterDescriptor(
+                                   description='seconds between /diagnostics messages', type=D,
+                                   floating_point_range=[FloatingPointRange(
+                                       from_value=0.01, to_value=3600.0)]))
+        self.declare_parameter('queue_depth', defaults['queue_depth'], ParameterDescriptor(
             description='depth of the input and estimate queues', read_only=True,
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=1, to_value=100_000)]))
@@ -207,15 +260,8 @@ class Alignment(Node):
             log.warning(f'aligner restarted ({out.reason}): {out.message}')
 
     def _publish(self, out: AlignOutcome) -> None:
-        if out.command is None:
-            return
-        frame = self.config.frame_id
-        if out.prior is not None:
-            self.predicted_pub.publish(conversions.alignment_estimate_to_msg(
-                out.stamp_ns, *out.prior, frame_id=frame))
-            self.corrected_pub.publish(conversions.alignment_estimate_to_msg(
-                out.stamp_ns, *out.posterior, frame_id=frame))
-        self.command_pub.publish(conversions.base_command_to_msg(out.command))
+        for key, msg in outcome_messages(out, self.config):
+            self.pubs[key].publish(msg)
 
     def _on_clock_jump(self, jump: TimeJump) -> None:
         if self.session.last_ns is None:
@@ -230,10 +276,9 @@ class Alignment(Node):
 
     def publish_diagnostics(self) -> DiagnosticArray:
         """Publish (and return) the session's counters on /diagnostics."""
-        level, message, values = self.session.diagnostics()
-        msg = conversions.diagnostics_to_msg(
-            self.get_clock().now().nanoseconds, f'{self.get_name()}: LED alignment',
-            level, message, values, hardware_id=self.config.frame_id)
+        msg = diagnostics_message(self.session, self.config,
+                                  self.get_clock().now().nanoseconds,
+                                  node_name=self.get_name())
         self.diag_pub.publish(msg)
         return msg
 
