@@ -210,3 +210,135 @@ def test_sampling_intervals_are_checked_against_fang_section_iii():
     level, message, values = s.diagnostics()
     assert level == 'WARN' and 'interval(s) 2' in message
     assert values['interval_warnings'].startswith('2: degenerate')
+
+
+# -- the input u (add_input): zero-order hold, input-only points ---------------------------
+
+def double_integrator(**extra):
+    """Return the drogue's model: x = [d, d'], u = d'' (drogue_estimator.yaml, smaller R)."""
+    return model_from_flat(A=[0, 1, 0, 0], B=[0, 1], C=[1, 0], G=[0, 1], Q=[1e-3], R=[0.5],
+                           x0=[0, 0], P0=[1, 0, 0, 1], name='drogue', **extra)
+
+
+def direct_run(model, transition, points):
+    """
+    Run the core filter over (stamp s, y or None, u in force) points; return its outputs.
+
+    Returns ({stamp: predicted x, P} at every point but the first, {stamp: corrected x, P}
+    at the points with a measurement but the last).
+    """
+    kf = model.make_filter(transition)
+    pred, corr = {}, {}
+    for (t, y, u), (t_next, _, _) in zip(points, points[1:]):
+        res = kf.step(t_next - t, y, u)
+        pred[t_next] = (res.x_predicted, res.P_predicted)
+        if y is not None:
+            corr[t] = (res.x_corrected, res.P_corrected)
+    return pred, corr
+
+
+def by_stamp(outcomes, kind, revised=False):
+    """Return {stamp s: (x, P)} of one kind of estimate, checking no stamp repeats."""
+    est = [e for o in outcomes for e in o.estimates if e.kind == kind and e.revised == revised]
+    stamps = [e.stamp_ns / NS for e in est]
+    assert len(set(stamps)) == len(stamps), stamps
+    return {e.stamp_ns / NS: (e.x, e.P) for e in est}
+
+
+def assert_same(got, want):
+    assert sorted(got) == sorted(want)
+    for t in want:
+        np.testing.assert_allclose(got[t][0], want[t][0], rtol=0, atol=1e-9, err_msg=str(t))
+        np.testing.assert_allclose(got[t][1], want[t][1], rtol=0, atol=1e-9, err_msg=str(t))
+
+
+@pytest.mark.parametrize('transition', ['exact', 'euler'])
+def test_inputs_are_held_over_a_gap_like_input_only_points(transition):
+    model = double_integrator()
+    session = EstimatorSession(EstimatorConfig(model, transition=transition,
+                                               nonpositive_is_gap=False, max_gap=100.0))
+    rng = np.random.default_rng(3)
+    # (stamp, 'y' or 'u'), in arrival order: an input before the first measurement is held;
+    # the input at 2 arrives before its measurement, the one at 21 after it (both merge);
+    # the gap 3 -> 20 holds the inputs at 2.5, 5, ..., 17.5 piece by piece
+    inputs = [0.5, 2.0, 2.5] + list(np.arange(5.0, 20.0, 2.5)) + [21.0]
+    measured = [1.0, 2.0, 3.0, 20.0, 21.0, 22.0]
+    events = sorted([(t, 'u') for t in inputs] + [(t, 'y') for t in measured],
+                    key=lambda e: (e[0], e[1] == ('y' if e[0] == 2.0 else 'u')))
+    u = {t: rng.standard_normal(1) for t in inputs}
+    y = {t: rng.standard_normal(1) for t in measured}
+    out = [session.add_input(int(t * NS), u[t]) if kind == 'u' else session.add(int(t * NS),
+                                                                                y[t])
+           for t, kind in events]
+    assert [o.reason for o in out[:2]] == ['held', ''] and out[3].reason == 'merged'
+    assert [o.reason for o in out if o.reason] == ['held', 'merged', 'merged']
+    assert all(o.status == 'accepted' for o in out)
+    # the direct run: every stamp a point, the input in force held from its stamp
+    points, in_force = [], u[0.5]
+    for t in sorted(set(inputs + measured) - {0.5}):
+        in_force = u.get(t, in_force)
+        points.append((t, y.get(t), in_force))
+    pred, corr = direct_run(model, transition, points)
+    assert_same(by_stamp(out, 'predicted'), {1.0: (model.x0, model.P0), **pred})
+    assert_same(by_stamp(out, 'corrected'), corr)
+    # 'corrected' only at measurements; the time scale (mu) has the input points too
+    assert sorted(by_stamp(out, 'corrected')) == measured[:-1]
+    assert len([j for o in out for j in o.jumps]) == len(points) - 1
+    _, _, values = session.diagnostics()
+    assert values['inputs_received'] == values['inputs_accepted'] == len(inputs)
+    assert values['accepted'] == len(measured) and values['gap_lengths_s'] == '17'
+    assert values['mu_max_s'] == 2.5
+
+
+def test_late_measurement_merges_into_an_input_point_or_takes_the_held_input():
+    model = double_integrator()
+    session = EstimatorSession(EstimatorConfig(model, transition='exact',
+                                               nonpositive_is_gap=False))
+    rng = np.random.default_rng(4)
+    u = {t: rng.standard_normal(1) for t in (2.0, 3.0, 4.0)}
+    y = {t: rng.standard_normal(1) for t in (1.0, 3.0, 3.5, 5.0, 6.0)}
+    out = [session.add(1 * NS, y[1.0])]
+    out += [session.add_input(int(t * NS), u[t]) for t in (2.0, 3.0, 4.0)]
+    out += [session.add(5 * NS, y[5.0])]
+    late = [session.add(3 * NS, y[3.0]), session.add(int(3.5 * NS), y[3.5])]
+    assert [o.status for o in late] == ['inserted', 'inserted']
+    out += [session.add(6 * NS, y[6.0])]
+    points = [(1.0, y[1.0], np.zeros(1)), (2.0, None, u[2.0]), (3.0, y[3.0], u[3.0]),
+              (3.5, y[3.5], u[3.0]), (4.0, None, u[4.0]), (5.0, y[5.0], u[4.0]),
+              (6.0, y[6.0], u[4.0])]
+    pred, corr = direct_run(model, 'exact', points)
+    # the newest outputs and the last revision equal the direct run on the full scale
+    assert_same(by_stamp(late[1:], 'corrected', revised=True),
+                {t: corr[t] for t in (3.0, 3.5)})
+    assert_same(by_stamp(late[1:], 'predicted', revised=True),
+                {t: pred[t] for t in (3.5, 4.0, 5.0)})
+    np.testing.assert_allclose(out[-1].estimates[0].x, corr[5.0][0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out[-1].estimates[1].x, pred[6.0][0], rtol=0, atol=1e-9)
+    assert session.stats.inserted == 2
+
+
+def test_bad_inputs_are_rejected_without_touching_the_state():
+    session = EstimatorSession(EstimatorConfig(double_integrator(), nonpositive_is_gap=False,
+                                               max_jump=30.0))
+    session.add(1 * NS, 0.5)
+    session.add_input(2 * NS, [0.1])
+    before = session.kf.state()
+    cases = [((3 * NS, [0.1, 0.2]), 'input_size'), ((3 * NS, [np.nan]), 'input_non_finite'),
+             ((3 * NS, [np.inf]), 'input_non_finite'), ((0, [0.1]), 'input_zero_stamp'),
+             ((int(1.5 * NS), [0.1]), 'input_late'), ((2 * NS, [0.3]), 'input_duplicate')]
+    for args, reason in cases:
+        out = session.add_input(*args)
+        assert (out.status, out.reason) == ('rejected', reason) and not out.estimates
+    np.testing.assert_array_equal(session.kf.state()[0], before[0])
+    np.testing.assert_array_equal(session.u, [0.1])
+    _, _, values = session.diagnostics()
+    assert values['rejected_input_non_finite'] == 2 and values['rejected_input_late'] == 1
+    assert values['inputs_received'] == 7 and values['inputs_accepted'] == 1
+    # far ahead: a restart that keeps the input in force for the new time scale
+    out = session.add_input(100 * NS, [0.7])
+    assert (out.status, out.reason) == ('reset', 'forward_jump')
+    assert session.pending() is None and session.u.tolist() == [0.7]
+    # a model without B ignores inputs, counted
+    plain = EstimatorSession(EstimatorConfig(owc()))
+    assert plain.add_input(1 * NS, [1.0]).reason == 'no_input_matrix'
+    assert plain.diagnostics()[2]['rejected_no_input_matrix'] == 1

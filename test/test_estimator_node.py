@@ -4,7 +4,7 @@ from pathlib import Path
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import TwistWithCovarianceStamped
+from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 import numpy as np
 import pytest
 import rclpy
@@ -332,3 +332,40 @@ def test_best_effort_publisher_is_matched(make):
     for t in (1.0, 2.0, 3.0):
         h.send(t, 200.0)
     h.expect(predicted=3, corrected=2)
+
+
+def test_inputs_are_held_and_outputs_equal_the_core(make):
+    h = make(yaml_parameters('drogue_estimator.yaml'))
+    # best effort publisher: the input subscription matches it as well as a reliable one
+    pub = h.client.create_publisher(AccelStamped, 'input', qos_profile_sensor_data)
+    h.spin_until(lambda: pub.get_subscription_count() > 0, 'the input subscription')
+    rng = np.random.default_rng(6)
+    grid = np.arange(0.0, 110.0, 5.0) + 1000.0       # u every 5 s; fixes only at some
+    u = rng.standard_normal(grid.size) * 1e-3
+    fixes = {t: rng.standard_normal() for t in grid[[1, 2, 3, 19, 20, 21]]}
+    for t, uk in zip(grid, u):
+        before = h.node.session.stats.inputs_received
+        pub.publish(conversions.input_to_msg(int(t * NS), [uk]))
+        h.spin_until(lambda: h.node.session.stats.inputs_received > before, 'the input')
+        if t in fixes:
+            h.send(t, fixes[t])
+    # the core: the time-scale filter stepped at every input stamp from the first fix on
+    config = h.node.config.estimator
+    kf = config.model.make_filter(config.transition)
+    points = grid[1:]
+    pred, corr = [], []
+    for k, t in enumerate(points[:-1]):
+        res = kf.step(points[k + 1] - t, fixes.get(t), [u[k + 1]])
+        pred.append(res.x_predicted)
+        if t in fixes:
+            corr.append(res.x_corrected)
+    h.expect(predicted=points.size, corrected=len(fixes) - 1, mu=points.size - 1)
+    t, x, _ = h.estimates('predicted', 2)
+    np.testing.assert_array_equal(t, points)
+    np.testing.assert_allclose(x[1:], pred, rtol=0, atol=1e-9)
+    t, x, _ = h.estimates('corrected', 2)
+    np.testing.assert_array_equal(t, sorted(fixes)[:-1])
+    np.testing.assert_allclose(x, corr, rtol=0, atol=1e-9)
+    stats = h.node.session.stats
+    assert stats.inputs_accepted == grid.size and stats.accepted == len(fixes)
+    assert not stats.rejected

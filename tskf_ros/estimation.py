@@ -16,6 +16,22 @@ inserted into the time scale, which changes mu of its left neighbour, and the fi
 re-run from there (the revised estimates are returned separately); a clock jump forward
 or backward beyond a bound re-initialises the filter.  Nothing non-finite is returned and
 P stays symmetric positive semi-definite.  The module never imports rclpy.
+
+An input u (`add_input`) is held piecewise constant from its stamp to the next input
+(zero-order hold: u(t) is in force on [t, sigma(t)) of every point t until the next
+input).  An input stamp is a point of the time scale without a measurement: the filter
+steps through it with y = None and the new input, so a long gap is split at the input
+stamps and the input is integrated over it piece by piece (with the exact transition,
+B_d = int e^{As} ds B per piece).  An input at the stamp of the newest point merges into
+it (a measurement at the stamp of an input-only point likewise, also within the history
+through the late-sample rewind).  Outputs at an input-only point: its predictor xhat(t)
+is published on 'predicted' and its mu on the jumps, since the time scale has the point;
+no 'corrected' estimate is published there (x(t|t) would just repeat the prior), so
+'corrected' stays one estimate per measurement and no stamp is published twice on a topic.
+An input older than the newest point is rejected ('input_late') rather than inserted: it
+would change the input in force on every later interval up to the next input.  Inputs
+before the first point (or after a reset) only set the input in force.  The gap and
+sampling-interval statistics are over measurement points; mu over all points.
 """
 
 from collections import Counter, deque
@@ -33,7 +49,8 @@ NS = 1_000_000_000
 
 # reasons a sample is not used; each is a diagnostics counter
 REJECT_REASONS = ('zero_stamp', 'non_finite', 'bad_variance', 'invalid_power', 'future',
-                  'duplicate', 'too_old', 'filter_error')
+                  'duplicate', 'too_old', 'filter_error', 'input_non_finite', 'input_size',
+                  'input_late', 'input_duplicate', 'input_zero_stamp', 'no_input_matrix')
 RESET_REASONS = ('forward_jump', 'backward_jump', 'clock_jump', 'reconfigured')
 
 
@@ -193,14 +210,20 @@ class Stats:
     intervals: set = field(default_factory=set)
     interval_warnings: list = field(default_factory=list)
     peak_bounds: Optional[tuple] = None
+    # inputs (add_input)
+    inputs_received: int = 0
+    inputs_accepted: int = 0
+    last_measurement_ns: int = 0
 
 
 @dataclass
 class _Point:
     stamp_ns: int
-    y: np.ndarray
-    x: np.ndarray          # the predictor at this point (before stepping from it)
+    y: Optional[np.ndarray]    # None: an input-only point (no measurement)
+    x: np.ndarray              # the predictor at this point (before stepping from it)
     P: np.ndarray
+    u: np.ndarray              # the input in force on [t, sigma(t))
+    has_input: bool = False    # an input sample has this stamp
 
 
 def _finite(*arrays: np.ndarray) -> bool:
@@ -218,6 +241,8 @@ class EstimatorSession:
         self.stats = Stats()
         self.kf = config.model.make_filter(config.transition)
         self.points: deque = deque()
+        self.u = np.zeros(self.kf.B.shape[1])     # the input in force (zero-order hold)
+        self.u_stamp_ns = 0                         # its stamp (0: none yet)
 
     # -- public API -----------------------------------------------------------------------
 
@@ -251,6 +276,8 @@ class EstimatorSession:
             return self._start(stamp_ns, y)
         last = self.points[-1].stamp_ns
         dt = stamp_ns - last
+        if dt == 0 and self.points[-1].y is None:
+            return self._merge_measurement(stamp_ns, y)
         if dt == 0:
             return self._reject('duplicate', f'stamp {stamp_ns / NS:.9f} s repeats the last')
         if dt > cfg.max_jump * NS:
@@ -261,15 +288,70 @@ class EstimatorSession:
         if -dt > cfg.max_backward * NS:
             return self._restart('backward_jump', stamp_ns, y,
                                  f'stamp jumped {-dt / NS:.3f} s backward (> max_backward)')
-        if any(p.stamp_ns == stamp_ns for p in self.points):
+        same = [p for p in self.points if p.stamp_ns == stamp_ns]
+        if same and same[0].y is not None:
             return self._reject('duplicate', f'stamp {stamp_ns / NS:.9f} s is already a point')
         if -dt > cfg.history_window * NS or stamp_ns < self.points[0].stamp_ns:
             return self._reject('too_old', f'stamp {stamp_ns / NS:.9f} s is {-dt / NS:.3f} s '
                                 'late, older than the history')
         return self._insert(stamp_ns, y)
 
+    def add_input(self, stamp_ns: int, u: Sequence[float]) -> Outcome:
+        """
+        Take one input sample u (B's columns), held from its stamp to the next input.
+
+        See the module docstring: the stamp becomes a point without a measurement (or
+        merges into the newest point); a late input is rejected ('input_late').
+        """
+        st, cfg = self.stats, self.config
+        st.inputs_received += 1
+        stamp_ns = int(stamp_ns)
+        u = np.asarray(u, dtype=float).reshape(-1)
+        if cfg.model.B is None:
+            return self._reject('no_input_matrix', 'the model has no B: input ignored')
+        if stamp_ns <= 0:
+            return self._reject('input_zero_stamp', 'the input header stamp is unset (0)')
+        if u.size != self.u.size:
+            return self._reject('input_size', f'input has {u.size} entries, B has '
+                                f'{self.u.size} columns')
+        if not _finite(u):
+            return self._reject('input_non_finite', f'input {u} is not finite')
+        if not self.points:
+            return self._hold(stamp_ns, u, 'accepted', 'held',
+                              'input held until the first measurement')
+        last = self.points[-1]
+        dt = stamp_ns - last.stamp_ns
+        if dt > cfg.max_jump * NS:
+            self.reset('forward_jump')
+            return self._hold(stamp_ns, u, 'reset', 'forward_jump',
+                              f'input stamp jumped {dt / NS:.3f} s forward (> max_jump); '
+                              're-initialised, input held')
+        if -dt > cfg.max_backward * NS:
+            self.reset('backward_jump')
+            return self._hold(stamp_ns, u, 'reset', 'backward_jump',
+                              f'input stamp jumped {-dt / NS:.3f} s backward (> max_backward);'
+                              ' re-initialised, input held')
+        if dt < 0:
+            return self._reject('input_late', f'input stamp {stamp_ns / NS:.9f} s is '
+                                f'{-dt / NS:.3f} s older than the newest point')
+        if dt == 0:
+            if last.has_input:
+                return self._reject('input_duplicate', f'input stamp {stamp_ns / NS:.9f} s '
+                                    'repeats the last input')
+            last.u, last.has_input = u, True
+            return self._hold(stamp_ns, u, 'accepted', 'merged',
+                              'input merged into the newest point')
+        out = self._append(stamp_ns, None, u)
+        if out.status == 'accepted':
+            self._hold(stamp_ns, u, 'accepted')
+        return out
+
     def reset(self, reason: str, message: str = '') -> Outcome:
-        """Forget the history; the next sample starts a new time scale from x0, P0."""
+        """
+        Forget the history; the next sample starts a new time scale from x0, P0.
+
+        The input in force is kept: it is the plant's, not the filter's.
+        """
         self.stats.resets[reason] += 1
         self.kf = self.config.model.make_filter(self.config.transition)
         self.points.clear()
@@ -280,6 +362,10 @@ class EstimatorSession:
         old_n = self.kf.n
         kf = config.model.make_filter(config.transition)
         self.config = config
+        if kf.B.shape[1] != self.u.size:
+            self.u, self.u_stamp_ns = np.zeros(kf.B.shape[1]), 0
+            self.kf = kf
+            return self.reset('reconfigured', f'input dimension changed -> {kf.B.shape[1]}')
         if kf.n != old_n:
             return self.reset('reconfigured', f'state dimension changed {old_n} -> {kf.n}')
         kf.set_state(self.kf.x, self.kf.P)
@@ -312,6 +398,8 @@ class EstimatorSession:
         lengths = list(st.gaps.values())
         values = {
             'received': st.received, 'accepted': st.accepted, 'inserted_late': st.inserted,
+            'inputs_received': st.inputs_received, 'inputs_accepted': st.inputs_accepted,
+            'input_in_force': ' '.join(f'{v:g}' for v in self.u),
             'points_in_history': len(self.points),
             'mu_current_s': st.mu_current, 'mu_max_s': st.mu_max,
             'gaps': st.gaps_total,
@@ -346,9 +434,33 @@ class EstimatorSession:
 
     def _start(self, stamp_ns: int, y: np.ndarray) -> Outcome:
         x, P = self.kf.state()
-        self.points.append(_Point(stamp_ns, y, x, P))
+        self.points.append(_Point(stamp_ns, y, x, P, self.u,
+                                  has_input=self.u_stamp_ns == stamp_ns))
+        self.stats.last_measurement_ns = stamp_ns
         self._accepted(stamp_ns, P)
         return Outcome('accepted', estimates=[Estimate('predicted', stamp_ns, x, P)])
+
+    def _hold(self, stamp_ns: int, u: np.ndarray, status: str, reason: str = '',
+              message: str = '') -> Outcome:
+        """Make u the input in force from stamp_ns on and count it."""
+        self.u, self.u_stamp_ns = u, stamp_ns
+        self.stats.inputs_accepted += 1
+        return Outcome(status, reason, message)
+
+    def _merge_measurement(self, stamp_ns: int, y: np.ndarray) -> Outcome:
+        """Give the newest point, an input-only one, its measurement (not stepped yet)."""
+        last = self.points[-1]
+        last.y = y
+        self._measured(stamp_ns)
+        self._accepted(stamp_ns, last.P)
+        return Outcome('accepted', 'merged', 'measurement merged into an input point')
+
+    def _measured(self, stamp_ns: int) -> None:
+        """Record the interval from the previous measurement point (gaps, kappa)."""
+        st = self.stats
+        if 0 < st.last_measurement_ns < stamp_ns:
+            self._record_gap(st.last_measurement_ns, stamp_ns)
+        st.last_measurement_ns = max(st.last_measurement_ns, stamp_ns)
 
     def _restart(self, reason: str, stamp_ns: int, y: np.ndarray, message: str) -> Outcome:
         self.reset(reason)
@@ -415,7 +527,7 @@ class EstimatorSession:
               ) -> tuple[list, Jump, np.ndarray, np.ndarray]:
         """step(mu, y) from point to sigma; raises FilterError on a bad step."""
         mu = (sigma_ns - point.stamp_ns) / NS
-        res = self.kf.step(mu, point.y)
+        res = self.kf.step(mu, point.y, point.u)
         P_c = (res.P_corrected + res.P_corrected.T) / 2
         P_p = res.P_predicted
         if not _finite(res.x_corrected, P_c, res.x_predicted, P_p):
@@ -423,11 +535,14 @@ class EstimatorSession:
         for name, P in (('P(t|t)', P_c), ('P(sigma(t))', P_p)):
             if not is_psd(P):
                 raise FilterError(f'{name} lost positive semi-definiteness at mu = {mu}')
-        est = [Estimate('corrected', point.stamp_ns, res.x_corrected, P_c, revised),
-               Estimate('predicted', sigma_ns, res.x_predicted, P_p, revised)]
+        est = [Estimate('predicted', sigma_ns, res.x_predicted, P_p, revised)]
+        if point.y is not None:     # an input-only point has no corrected estimate
+            est.insert(0, Estimate('corrected', point.stamp_ns, res.x_corrected, P_c, revised))
         return est, Jump(point.stamp_ns, sigma_ns, revised), res.x_predicted, P_p
 
-    def _append(self, stamp_ns: int, y: np.ndarray) -> Outcome:
+    def _append(self, stamp_ns: int, y: Optional[np.ndarray],
+                u: Optional[np.ndarray] = None) -> Outcome:
+        """Step the newest point to a new one: a measurement (y) or an input (u)."""
         last = self.points[-1]
         saved = self.kf.state()
         try:
@@ -435,28 +550,45 @@ class EstimatorSession:
         except FilterError as exc:
             self.kf.set_state(*saved)       # the step may have moved it before the check
             return self._reject('filter_error', f'step refused: {exc}')
-        self.points.append(_Point(stamp_ns, y, x, P))
-        self._record_gap(last.stamp_ns, stamp_ns)
+        if u is None:
+            self.points.append(_Point(stamp_ns, y, x, P, self.u))
+        else:
+            self.points.append(_Point(stamp_ns, None, x, P, u, has_input=True))
         self.stats.mu_current = jump.mu
         self.stats.mu_max = max(self.stats.mu_max, jump.mu)
-        self._accepted(stamp_ns, P)
+        if y is not None:
+            self._measured(stamp_ns)
+            self._accepted(stamp_ns, P)
+        else:
+            self.stats.last_stamp_ns = max(self.stats.last_stamp_ns, stamp_ns)
+            self.stats.covariance_trace = float(np.trace(P))
         self._trim()
         return Outcome('accepted', estimates=est, jumps=[jump])
 
     def _insert(self, stamp_ns: int, y: np.ndarray) -> Outcome:
-        """Insert a late point after points[j], rewind to t_j and re-run to the newest point."""
-        stamps = [p.stamp_ns for p in self.points]
-        j = int(np.searchsorted(stamps, stamp_ns)) - 1
+        """
+        Insert a late measurement after points[j], rewind to t_j and re-run to the newest.
+
+        A late measurement at the stamp of an input-only point merges into it (j is that
+        point).  A new point takes the input in force at t_j (zero-order hold).
+        """
         old_points = [replace(p) for p in self.points]
+        points = list(old_points)
+        i = int(np.searchsorted([p.stamp_ns for p in points], stamp_ns))
+        merged = i < len(points) and points[i].stamp_ns == stamp_ns
+        if merged:
+            j = i
+            points[j] = replace(points[j], y=y)
+        else:
+            j = i - 1
+            points.insert(i, _Point(stamp_ns, y, np.zeros(0), np.zeros((0, 0)), points[j].u))
         saved = self.kf.state()
-        new = _Point(stamp_ns, y, np.zeros(0), np.zeros((0, 0)))
-        points = list(self.points)[:j + 1] + [new] + list(self.points)[j + 1:]
         estimates, jumps = [], []
         try:
             self.kf.set_state(points[j].x, points[j].P)
-            for i in range(j, len(points) - 1):
-                est, jump, x, P = self._step(points[i], points[i + 1].stamp_ns, True)
-                points[i + 1] = replace(points[i + 1], x=x, P=P)
+            for k in range(j, len(points) - 1):
+                est, jump, x, P = self._step(points[k], points[k + 1].stamp_ns, True)
+                points[k + 1] = replace(points[k + 1], x=x, P=P)
                 estimates += est
                 jumps.append(jump)
         except FilterError as exc:
@@ -464,10 +596,16 @@ class EstimatorSession:
             self.kf.set_state(*saved)
             return self._reject('filter_error', f're-run after a late sample refused: {exc}')
         self.points = deque(points)
-        # the interval (t_j, t_j+1) is now two intervals
-        self._record_gap(points[j].stamp_ns, points[j + 2].stamp_ns, add=False)
-        self._record_gap(points[j].stamp_ns, stamp_ns)
-        self._record_gap(stamp_ns, points[j + 2].stamp_ns)
+        # the interval between the measurement points around it is now two intervals
+        new = j if merged else j + 1
+        before = [p.stamp_ns for p in points[:new] if p.y is not None]
+        after = [p.stamp_ns for p in points[new + 1:] if p.y is not None]
+        if after:
+            self._record_gap(0, after[0], add=False)
+            self._record_gap(stamp_ns, after[0])
+        if before:
+            self._record_gap(before[-1], stamp_ns)
+        self.stats.last_measurement_ns = max(self.stats.last_measurement_ns, stamp_ns)
         self.stats.inserted += 1
         self.stats.mu_current = jumps[-1].mu
         self.stats.mu_max = max(self.stats.mu_max, max(jp.mu for jp in jumps))

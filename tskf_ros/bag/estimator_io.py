@@ -16,13 +16,14 @@ from typing import Any, Callable, Optional, Union
 from tskf_ros.estimation import Outcome
 from tskf_ros.nodes import conversions
 from tskf_ros.nodes import timescale_estimator as node
-from tskf_ros.nodes.timescale_estimator import (default_parameters, NODE_NAME, NodeConfig,
-                                                output_qos, parameters_to_config)
+from tskf_ros.nodes.timescale_estimator import (default_parameters, input_from_msg,
+                                                NODE_NAME, NodeConfig, output_qos,
+                                                parameters_to_config)
 import yaml
 
 __all__ = ['ESTIMATE_TYPE', 'INPUT_TYPES', 'InputType', 'JUMP_TYPE', 'OUTPUT_TOPICS',
-           'ParamsError', 'default_parameters', 'load_config', 'outcome_messages',
-           'output_qos']
+           'ParamsError', 'U_TOPIC', 'U_TYPE', 'default_parameters', 'input_from_msg',
+           'load_config', 'outcome_messages', 'output_qos']
 
 ESTIMATE_TYPE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
 JUMP_TYPE = 'sensor_msgs/msg/TimeReference'
@@ -31,6 +32,9 @@ DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 OUTPUT_TOPICS = {key: '/' + topic for key, topic in node.OUTPUT_TOPICS.items()}
 DIAGNOSTICS_TOPIC = '/diagnostics'
 POWER_TOPIC = '/received_power'
+# the model's input u (EstimatorSession.add_input), as the node subscribes to it
+U_TOPIC = '/' + node.INPUT_TOPIC
+U_TYPE = 'geometry_msgs/msg/AccelStamped'
 TRUTH_TOPIC = '/true_angle'
 
 

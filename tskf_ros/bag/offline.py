@@ -5,8 +5,10 @@ replay_offline: run the time-scale estimator over a bag as fast as possible, wit
     replay_offline --filter alignment bags/led_alignment /tmp/led_aligned \
         --params-file config/alignment.yaml
 
-Reads the measurement topic (default /received_power), feeds every message to the same
-EstimatorSession the live timescale_estimator node runs, and writes a new bag with all the
+Reads the measurement topic (default /received_power) and the input topic (--input-topic,
+default /input if the bag has it: geometry_msgs/AccelStamped, the model's u), feeds every
+message in log-time order to the same EstimatorSession the live timescale_estimator node
+runs (add and add_input), and writes a new bag with all the
 input topics and every topic the live node would publish (estimate/predicted,
 estimate/corrected, estimate/mu, their revised/ versions and /diagnostics), with the same
 message types and header stamps.  An output message's log time is the log time of the
@@ -45,13 +47,13 @@ from tskf_ros.bag import alignment_io
 from tskf_ros.bag.estimator_io import (DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, ESTIMATE_TYPE,
                                        extractor, INPUT_TYPES, JUMP_TYPE, load_config,
                                        outcome_messages, output_qos, OUTPUT_TOPICS,
-                                       ParamsError, POWER_TOPIC)
+                                       ParamsError, POWER_TOPIC, U_TOPIC, U_TYPE)
 from tskf_ros.bag.reader import BagError, BagReader, Damage
 from tskf_ros.bag.types import BagTypeError, message_class, qos_from_rclpy, typestore
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.estimation import EstimatorSession, NS
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.timescale_estimator import NodeConfig
+from tskf_ros.nodes.timescale_estimator import input_from_msg, NodeConfig
 
 PROG = 'replay_offline'
 EXIT_DAMAGED = 3
@@ -81,6 +83,9 @@ class ReplayResult:
     damage: Optional[Damage] = None
     seconds: float = 0.0
     outputs: list = field(default_factory=list)     # (topic, log_ns, msg) when collecting
+    input_topic: str = ''                           # the input u's topic ('' none)
+    inputs: int = 0
+    input_statuses: Counter = field(default_factory=Counter)
 
 
 def choose_topic(reader: BagReader, topic: Optional[str],
@@ -126,6 +131,27 @@ def choose_topic(reader: BagReader, topic: Optional[str],
     return topic, info.msgtype, assumptions
 
 
+def choose_input_topic(reader: BagReader, topic: Optional[str]) -> tuple[str, list]:
+    """
+    Pick the input u's topic; return (topic or '', assumptions).
+
+    Without --input-topic: /input if the bag has it, else none.
+    """
+    if topic is None:
+        if U_TOPIC not in reader.topics:
+            return '', []
+        topic = U_TOPIC
+    info = reader.topics.get(topic)
+    if info is None:
+        raise InputError(f'{reader.path}: no input topic {topic} (topics: '
+                         f'{", ".join(sorted(reader.topics)) or "none"})')
+    if info.msgtype != U_TYPE:
+        raise InputError(f'{reader.path}: input topic {topic} has type '
+                         f'{info.msgtype or "unknown"}, not {U_TYPE}')
+    return topic, [f'{topic} ({U_TYPE}, slot i = u[i]) is the input u of the model, held '
+                   'from each stamp to the next (zero-order hold)']
+
+
 class OfflineEstimator:
     """The live node's work on one message at a time, without DDS or a clock."""
 
@@ -161,6 +187,12 @@ class OfflineEstimator:
         msg = deserialize_message(data, self.cls)
         stamp_ns, value, variance = self.extract(msg, log_ns)
         out = self.session.add(stamp_ns, value, variance, now_ns=log_ns)
+        return out.status, outcome_messages(out, self.config)
+
+    def process_input(self, data: bytes, log_ns: int) -> tuple[str, list]:
+        """Deserialize one input u and run it; return (status, [(topic, msg)])."""
+        msg = deserialize_message(data, message_class(U_TYPE))
+        out = self.session.add_input(*input_from_msg(msg, self.session))
         return out.status, outcome_messages(out, self.config)
 
 
@@ -203,11 +235,13 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
            params_file: Optional[os.PathLike] = None, topic: Optional[str] = None,
            overwrite: bool = False, compress: bool = False, diagnostics: bool = True,
            log: Callable[[str], None] = lambda s: None,
-           filter: str = 'estimator') -> ReplayResult:  # noqa: A002 (the CLI's --filter)
+           filter: str = 'estimator',  # noqa: A002 (the CLI's --filter)
+           input_topic: Optional[str] = None) -> ReplayResult:
     """
     Run the estimator over `bag`; write `output` (a new bag) or, if None, collect in memory.
 
     filter='alignment' runs the alignment node's session instead (open loop, see above).
+    input_topic: the estimator's input u (default /input if present; see choose_input_topic).
 
     Raises BagError / ParamsError / BagTypeError before anything is written if the bag or
     the parameters cannot be used.  Damage met while reading stops the replay; what came
@@ -224,6 +258,9 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
         reader, topic, FILTER_INPUT[filter][0])
     if aligning:
         result.assumptions.append(alignment_io.OPEN_LOOP_NOTE)
+    else:
+        result.input_topic, notes = choose_input_topic(reader, input_topic)
+        result.assumptions += notes
     for line in result.assumptions:
         log(line)
     est = (OfflineAligner if aligning else OfflineEstimator)(config, result.msgtype)
@@ -275,6 +312,20 @@ def _run(reader: BagReader, est: OfflineEstimator, writer: Optional[BagWriter],
                 _emit(writer, result, DIAGNOSTICS_TOPIC, t, msg, collect)
         if writer is not None and writer.has_topic(raw.topic):
             writer.write(raw.topic, log_ns, raw.data)
+        if raw.topic == result.input_topic:
+            try:
+                status, msgs = est.process_input(raw.data, log_ns)
+            except DESERIALIZE_ERRORS as exc:
+                return Damage(str(reader.path), -1, f'message {result.read} on '
+                              f'{raw.topic} does not deserialize as {U_TYPE} ({exc})',
+                              result.read - 1)
+            result.inputs += 1
+            result.input_statuses[status] += 1
+            if collect:
+                result.outputs.append((raw.topic, log_ns, raw))
+            for name, msg in msgs:
+                _emit(writer, result, name, log_ns, msg, collect)
+            continue
         if raw.topic != topic:
             if collect:
                 result.outputs.append((raw.topic, log_ns, raw))
@@ -331,6 +382,8 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--topic', help=f'measurement topic (default {POWER_TOPIC}, with '
                         f'--filter alignment {alignment_io.INPUT_TOPIC}); types: '
                         + ', '.join(INPUT_TYPES))
+    parser.add_argument('--input-topic', help=f"the estimator's input u ({U_TYPE}); "
+                        f'default {U_TOPIC} if the bag has it')
     parser.add_argument('--overwrite', action='store_true', help='replace an existing output')
     parser.add_argument('--compress', action='store_true', help='zstd-compress the chunks')
     parser.add_argument('--no-diagnostics', action='store_true',
@@ -346,7 +399,8 @@ def main(argv: Optional[list] = None) -> int:
     try:
         res = replay(args.bag, output, params_file=args.params_file, topic=args.topic,
                      overwrite=args.overwrite, compress=args.compress,
-                     diagnostics=not args.no_diagnostics, log=log, filter=args.filter)
+                     diagnostics=not args.no_diagnostics, log=log, filter=args.filter,
+                     input_topic=args.input_topic)
     except (BagError, ParamsError, BagTypeError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return 1
@@ -356,6 +410,8 @@ def main(argv: Optional[list] = None) -> int:
         return 1
     rate = res.read / res.seconds if res.seconds else float('nan')
     statuses = ', '.join(f'{k} {v}' for k, v in sorted(res.statuses.items()))
+    if res.input_topic:
+        statuses += f'; {res.inputs} inputs on {res.input_topic}'
     log(f'{res.read} messages read, {res.samples} samples on {res.topic} ({statuses}); '
         f'{sum(res.written.values())} output messages; {res.seconds:.2f} s '
         f'({rate:,.0f} msgs/s)')

@@ -19,9 +19,10 @@ The bags hold what the drivers would publish (no estimates; `replay_offline` add
   Table I parameters, 400 steps of 50 ms, 5 % missing measurements).
 - drogue: Fang & de Callafon's drogue (tskf_ros.experiments.drogue.run with the seed, 4 h
   at T = 5 s): the position fixes at the surface on /received_power as the estimator's
-  input (Illuminance used as a stamped scalar: displacement in m, variance gps_sd^2),
-  the measured acceleration u on /drogue/acceleration (sensor_msgs/Imu, linear x) and
-  the truth on /drogue/truth, every T.
+  measurement (Illuminance used as a stamped scalar: displacement in m, variance
+  gps_sd^2), the measured acceleration u on /input (geometry_msgs/AccelStamped, linear x:
+  the estimator's input topic, held until the next sample) and the truth on
+  /drogue/truth, every T.  At a stamp with a fix, the input is written first.
 
 Stamps start at START_S (2023-11-14T22:13:20Z) plus the sample time; log time = stamp.
 Topics and types are listed in bags/README.md.
@@ -35,7 +36,6 @@ from typing import Callable, Optional
 import numpy as np
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
-from sensor_msgs.msg import Imu
 
 from tskf_ros import led
 from tskf_ros.bag.types import qos_from_rclpy
@@ -52,7 +52,7 @@ DEFAULT_SEED = 2013
 ILLUMINANCE = 'sensor_msgs/msg/Illuminance'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 ESTIMATE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
-IMU = 'sensor_msgs/msg/Imu'
+ACCEL = 'geometry_msgs/msg/AccelStamped'
 DROGUE_TRUTH = ('displacement_m', 'velocity_m_s', 'depth_m', 'flow_velocity_m_s')
 SENSOR_QOS = [qos_from_rclpy(qos_profile_sensor_data)]
 RELIABLE_QOS = [qos_from_rclpy(QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))]
@@ -141,21 +141,15 @@ def drogue(writer: BagWriter, seed: int) -> None:
     run = drogue_sim.run(drogue_sim.DrogueConfig(seed=seed))
     cfg, truth = run.cfg, run.truth
     writer.add_topic('/received_power', ILLUMINANCE, qos=SENSOR_QOS)
-    writer.add_topic('/drogue/acceleration', IMU, qos=SENSOR_QOS)
+    writer.add_topic('/input', ACCEL, qos=SENSOR_QOS)
     writer.add_topic('/drogue/truth', JOINT_STATE, qos=RELIABLE_QOS)
     for k, t in enumerate(truth.t):
         stamp = START_S * NS + int(round(t * NS))
         values = [truth.x[k, 0], truth.x[k, 1], truth.z[k], truth.v_flow[k]]
         writer.write('/drogue/truth', stamp, serialize_message(
             conversions.angle_to_msg(stamp, values, DROGUE_TRUTH)))
-        imu = Imu()
-        imu.header.stamp = conversions.ns_to_stamp(stamp)
-        imu.header.frame_id = 'drogue'
-        imu.orientation_covariance[0] = -1.0        # REP 145: no orientation
-        imu.angular_velocity_covariance[0] = -1.0   # no rates
-        imu.linear_acceleration.x = float(run.u[k])
-        imu.linear_acceleration_covariance[0] = cfg.accel_sd ** 2
-        writer.write('/drogue/acceleration', stamp, serialize_message(imu))
+        writer.write('/input', stamp, serialize_message(
+            conversions.input_to_msg(stamp, [run.u[k]], frame_id='drogue')))
         if truth.gamma[k]:
             writer.write('/received_power', stamp, serialize_message(conversions.power_to_msg(
                 stamp, run.y[k, 0], cfg.gps_sd ** 2, frame_id='drogue_gps')))

@@ -19,13 +19,14 @@ Types (all from common_interfaces, no custom messages):
 - graininess: sensor_msgs/msg/TimeReference with header.stamp = t and time_ref =
   sigma(t), source = 'sigma': mu(t) = time_ref - stamp exactly, in integer nanoseconds.
 - diagnostics: diagnostic_msgs/msg/DiagnosticArray (the ROS convention).
+- input u of the estimator: geometry_msgs/msg/AccelStamped (see input_to_msg below).
 """
 
 from typing import Mapping, Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import TwistWithCovarianceStamped
+from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 import numpy as np
 from sensor_msgs.msg import Illuminance, JointState, TimeReference
 from std_msgs.msg import Float64MultiArray
@@ -213,3 +214,41 @@ def msg_to_alignment_estimate(msg: TwistWithCovarianceStamped
     stamp, x, P = msg_to_estimate(msg, 2)
     Dinv = np.linalg.inv(_degree_scaling())
     return stamp, Dinv @ x, Dinv @ P @ Dinv
+
+
+# -- input u of the time-scale estimator (EstimatorSession.add_input) ---------------------
+#
+# Type: geometry_msgs/msg/AccelStamped, header.stamp = the time from which u is held
+# (zero-order hold until the next input), u[0..5] in accel.linear.x, .y, .z,
+# accel.angular.x, .y, .z: the same six-slot convention as the estimate's
+# TwistWithCovarianceStamped, so u[i] sits in slot i; unused slots are 0 and ignored.
+# Why this type: the inputs of the models we run are accelerations (the drogue's measured
+# d'', a spring-mass force per unit mass), and AccelStamped is common_interfaces' stamped
+# six-vector without extra semantics.  AccelWithCovarianceStamped would carry a covariance
+# the filter does not use (u enters as known); WrenchStamped says force and torque;
+# Imu forces orientation and angular velocity fields; std_msgs arrays have no stamp.
+# A model with more than six input columns does not fit: the node passes all six slots
+# and the session rejects the size ('input_size').
+
+def input_to_msg(stamp_ns: int, u: Sequence[float], *, frame_id: str = '') -> AccelStamped:
+    """Convert (stamp, u of <= 6 entries) -> AccelStamped (slot i = u[i], the rest 0)."""
+    u = np.asarray(u, dtype=float).reshape(-1)
+    if u.size > SLOTS:
+        raise ValueError(f'an input of {u.size} > {SLOTS} entries does not fit the message')
+    v = np.zeros(SLOTS)
+    v[:u.size] = u
+    msg = AccelStamped()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = frame_id
+    a = msg.accel
+    a.linear.x, a.linear.y, a.linear.z = float(v[0]), float(v[1]), float(v[2])
+    a.angular.x, a.angular.y, a.angular.z = float(v[3]), float(v[4]), float(v[5])
+    return msg
+
+
+def msg_to_input(msg: AccelStamped, m: int) -> tuple[int, np.ndarray]:
+    """Convert AccelStamped -> (stamp ns, u): the first m slots (all six if m > 6)."""
+    a = msg.accel
+    v = np.array([a.linear.x, a.linear.y, a.linear.z, a.angular.x, a.angular.y, a.angular.z],
+                 dtype=float)
+    return stamp_to_ns(msg.header.stamp), v[:m] if m <= SLOTS else v

@@ -4,13 +4,16 @@ timescale_estimator: the time-scale Kalman filter on a stream of received-power 
 Subscribes to `received_power` (sensor_msgs/msg/Illuminance, best effort so that both
 reliable and best-effort publishers match), feeds tskf_ros.estimation.EstimatorSession,
 and publishes what the session returns; see tskf_ros.nodes.conversions for the types.
+The model's input u comes on `input` (geometry_msgs/msg/AccelStamped, slot i = u[i],
+held from its stamp to the next input; best effort too); a model without B counts such
+messages as rejected ('no_input_matrix') and ignores them.
 """
 
 from dataclasses import dataclass
 from typing import Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import TwistWithCovarianceStamped
+from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 import numpy as np
 from rcl_interfaces.msg import (IntegerRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
@@ -32,7 +35,7 @@ NODE_NAME = 'timescale_estimator'
 MATRICES = ('A', 'B', 'C', 'D', 'G', 'Q', 'R', 'x0', 'P0')
 MATRIX_HELP = {
     'A': 'x^Delta = A x + B u + G w: A, n x n row-major (model (3): [1.0])',
-    'B': 'input matrix, n x m row-major; empty for none (no input topic yet)',
+    'B': 'input matrix, n x m row-major (u on the input topic, m <= 6); empty for none',
     'C': 'y = C x + D + v: C, p x n row-major (model (3): [-637.35])',
     'D': 'output offset, p entries; empty for 0 (model (3): [511.97])',
     'G': 'process noise input, n x r row-major; empty for identity',
@@ -97,6 +100,7 @@ def parameters_to_config(values: dict) -> NodeConfig:
                       values['queue_depth'])
 
 
+INPUT_TOPIC = 'input'
 # (estimate kind, revised) -> output topic
 OUTPUT_TOPICS = {
     ('predicted', False): 'estimate/predicted',
@@ -138,6 +142,11 @@ def outcome_messages(out: Outcome, config: NodeConfig) -> list:
     return msgs
 
 
+def input_from_msg(msg: AccelStamped, session: EstimatorSession) -> tuple:
+    """Return (stamp ns, u) of an input message for the session's model (B's columns)."""
+    return conversions.msg_to_input(msg, session.u.size)
+
+
 class TimescaleEstimator(Node):
     """Node wrapping EstimatorSession: received power in, estimates and diagnostics out."""
 
@@ -157,6 +166,8 @@ class TimescaleEstimator(Node):
                             reliability=ReliabilityPolicy.BEST_EFFORT)
         self.sub = self.create_subscription(Illuminance, 'received_power', self._on_power,
                                             qos_in)
+        self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
+                                                  qos_in)
         qos_out = output_qos(self.config)
         self.pubs = {
             key: self.create_publisher(
@@ -246,6 +257,11 @@ class TimescaleEstimator(Node):
         stamp_ns, power, variance = conversions.msg_to_power(msg)
         out = self.session.add(stamp_ns, power, variance,
                                now_ns=self.get_clock().now().nanoseconds)
+        self._report(out)
+        self._publish(out)
+
+    def _on_input(self, msg: AccelStamped) -> None:
+        out = self.session.add_input(*input_from_msg(msg, self.session))
         self._report(out)
         self._publish(out)
 
