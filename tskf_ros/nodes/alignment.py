@@ -16,16 +16,14 @@ and `output_qos`, so live and offline replay cannot drift apart.
 """
 
 from dataclasses import dataclass, fields
-from typing import Optional, Sequence
+from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                ParameterType, SetParametersResult)
+                                ParameterType)
 from rclpy.clock import ClockChange, JumpThreshold, TimeJump
 from rclpy.duration import Duration
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Illuminance
 from std_msgs.msg import Float64MultiArray
@@ -33,7 +31,7 @@ from std_msgs.msg import Float64MultiArray
 from tskf_ros import led
 from tskf_ros.alignment import AlignmentConfig, AlignmentSession, AlignOutcome
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import run_node
+from tskf_ros.nodes.common import ReconfigurableNode, run_node
 
 NODE_NAME = 'alignment'
 INPUT_TOPIC = 'intensity'
@@ -151,19 +149,19 @@ def diagnostics_message(session: AlignmentSession, config: NodeConfig, stamp_ns:
                                           message, values, hardware_id=config.frame_id)
 
 
-class Alignment(Node):
+class Alignment(ReconfigurableNode):
     """Node wrapping AlignmentSession: intensity in, base commands, estimates, diagnostics out."""
+
+    PARAMETERS = PARAMETERS
+    CONFIG_ERRORS = (led.AlignmentError, KeyError, TypeError, ValueError)
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
                  node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
         self._declare()
-        self.config = parameters_to_config(self._values())
+        self.config = self.start_watching_parameters()
         self.session = AlignmentSession(self.config.session)
-        self._pending: Optional[NodeConfig] = None
-        self.add_on_set_parameters_callback(self._validate)
-        self.add_post_set_parameters_callback(self._apply)
 
         qos_in = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.config.queue_depth,
                             reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -214,32 +212,13 @@ class Alignment(Node):
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=1, to_value=100_000)]))
 
-    def _values(self, changes: Sequence[Parameter] = ()) -> dict:
-        values = {name: self.get_parameter(name).value for name in PARAMETERS}
-        values.update({p.name: p.value for p in changes})
-        return values
+    def make_config(self, values: dict) -> NodeConfig:
+        """Build the node's config; raises with the reason if it makes no working aligner."""
+        return parameters_to_config(values)
 
-    def _validate(self, changes: list) -> SetParametersResult:
-        """Refuse a change that does not make a working aligner; the old values stay."""
-        try:
-            config = parameters_to_config(self._values(changes))
-        except (led.AlignmentError, KeyError, TypeError, ValueError) as exc:
-            self.get_logger().warning(f'parameter change refused: {exc}')
-            return SetParametersResult(successful=False, reason=str(exc))
-        self._pending = config
-        return SetParametersResult(successful=True)
-
-    def _apply(self, changes: list) -> None:
-        if self._pending is None:
-            return
-        config, self._pending = self._pending, None
-        if config.diagnostics_period != self.config.diagnostics_period:
-            self.diag_timer.timer_period_ns = int(config.diagnostics_period * 1e9)
-            self.diag_timer.reset()
-        self.config = config
-        message = self.session.reconfigure(config.session)
-        self.get_logger().info(f'parameters changed ({", ".join(p.name for p in changes)}): '
-                               f'{message}')
+    def reconfigure(self, config: NodeConfig) -> str:
+        """Switch the session to a validated config; return what it did."""
+        return self.session.reconfigure(config.session)
 
     # -- data -----------------------------------------------------------------------------
 

@@ -28,8 +28,7 @@ from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.led_link import LedLink, LedLinkConfig, LedLinkError, LedSample, sample_offset_ns
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import run_node
-from tskf_ros.owc_link import BLOCKAGES
+from tskf_ros.nodes.common import BLOCKAGE_HELP, run_node
 
 NODE_NAME = 'led_link_simulator'
 NS = 1_000_000_000
@@ -54,12 +53,7 @@ LINK_HELP = {
                          (0.0, 1e4)),
     'seed': ('seed of every random stream: same parameters, seed and commands, same samples',
              None),
-    'blockage': ('dropouts: ' + ', '.join(BLOCKAGES), None),
-    'drop_probability': ('Bernoulli drop probability per sample', (0.0, 1.0)),
-    'ge_p_gb': ('Gilbert-Elliott P(good -> bad) per sample', (0.0, 1.0)),
-    'ge_p_bg': ('Gilbert-Elliott P(bad -> good) per sample', (0.0, 1.0)),
-    'ge_loss_good': ('Gilbert-Elliott loss probability in the good state', (0.0, 1.0)),
-    'ge_loss_bad': ('Gilbert-Elliott loss probability in the bad state', (0.0, 1.0)),
+    **BLOCKAGE_HELP,
 }
 
 

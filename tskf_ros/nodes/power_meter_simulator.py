@@ -17,8 +17,8 @@ from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Illuminance, JointState
 
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import run_node
-from tskf_ros.owc_link import BLOCKAGES, LinkConfig, LinkError, OwcLink, Samples
+from tskf_ros.nodes.common import BLOCKAGE_HELP, run_node
+from tskf_ros.owc_link import LinkConfig, LinkError, OwcLink, Samples
 
 NODE_NAME = 'power_meter_simulator'
 NS = 1_000_000_000
@@ -39,12 +39,7 @@ LINK_HELP = {
     'knob_rate': ('random turns of the gain knob per second (Poisson)', (0.0, 1e3)),
     'knob_step': ('rad: standard deviation of one knob turn', (0.0, 3.0)),
     'noise_std': ('mW: power meter noise (system (3): v ~ N(0, 100))', (0.0, 1e3)),
-    'blockage': ('link blockages: ' + ', '.join(BLOCKAGES), None),
-    'drop_probability': ('Bernoulli drop probability per sample', (0.0, 1.0)),
-    'ge_p_gb': ('Gilbert-Elliott P(good -> bad) per sample', (0.0, 1.0)),
-    'ge_p_bg': ('Gilbert-Elliott P(bad -> good) per sample', (0.0, 1.0)),
-    'ge_loss_good': ('Gilbert-Elliott loss probability in the good state', (0.0, 1.0)),
-    'ge_loss_bad': ('Gilbert-Elliott loss probability in the bad state', (0.0, 1.0)),
+    **BLOCKAGE_HELP,
 }
 
 

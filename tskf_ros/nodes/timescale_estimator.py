@@ -10,17 +10,14 @@ messages as rejected ('no_input_matrix') and ignores them.
 """
 
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 import numpy as np
-from rcl_interfaces.msg import (IntegerRange, ParameterDescriptor, ParameterType,
-                                SetParametersResult)
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.clock import ClockChange, JumpThreshold, TimeJump
 from rclpy.duration import Duration
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Illuminance, TimeReference
 
@@ -28,7 +25,7 @@ from tskf_ros.estimation import (ConfigError, EstimatorConfig, EstimatorSession,
                                  model_from_flat, Outcome)
 from tskf_ros.models import owc
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import float_range, run_node
+from tskf_ros.nodes.common import float_range, ReconfigurableNode, run_node
 from tskf_ros.tskf import FilterError, TRANSITIONS
 
 NODE_NAME = 'timescale_estimator'
@@ -147,19 +144,19 @@ def input_from_msg(msg: AccelStamped, session: EstimatorSession) -> tuple:
     return conversions.msg_to_input(msg, session.u.size)
 
 
-class TimescaleEstimator(Node):
+class TimescaleEstimator(ReconfigurableNode):
     """Node wrapping EstimatorSession: received power in, estimates and diagnostics out."""
+
+    PARAMETERS = PARAMETERS
+    CONFIG_ERRORS = (ConfigError, FilterError, KeyError, TypeError, ValueError)
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
                  node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
         self._declare()
-        self.config = parameters_to_config(self._values())
+        self.config = self.start_watching_parameters()
         self.session = EstimatorSession(self.config.estimator)
-        self._pending: Optional[NodeConfig] = None
-        self.add_on_set_parameters_callback(self._validate)
-        self.add_post_set_parameters_callback(self._apply)
 
         # received power: best effort matches reliable and best-effort publishers alike
         qos_in = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.config.queue_depth,
@@ -224,32 +221,13 @@ class TimescaleEstimator(Node):
             description='frame_id of the estimates (empty: model_name)',
             type=ParameterType.PARAMETER_STRING))
 
-    def _values(self, changes: Sequence[Parameter] = ()) -> dict:
-        values = {name: self.get_parameter(name).value for name in PARAMETERS}
-        values.update({p.name: p.value for p in changes})
-        return values
+    def make_config(self, values: dict) -> NodeConfig:
+        """Build the node's config; raises with the reason if it makes no working filter."""
+        return parameters_to_config(values)
 
-    def _validate(self, changes: list) -> SetParametersResult:
-        """Refuse a change that does not make a working filter; the old values stay."""
-        try:
-            config = parameters_to_config(self._values(changes))
-        except (ConfigError, FilterError, KeyError, TypeError, ValueError) as exc:
-            self.get_logger().warning(f'parameter change refused: {exc}')
-            return SetParametersResult(successful=False, reason=str(exc))
-        self._pending = config
-        return SetParametersResult(successful=True)
-
-    def _apply(self, changes: list) -> None:
-        if self._pending is None:
-            return
-        config, self._pending = self._pending, None
-        if config.diagnostics_period != self.config.diagnostics_period:
-            self.diag_timer.timer_period_ns = int(config.diagnostics_period * 1e9)
-            self.diag_timer.reset()
-        self.config = config
-        out = self.session.reconfigure(config.estimator)
-        self.get_logger().info(f'parameters changed ({", ".join(p.name for p in changes)}): '
-                               f'{out.message}')
+    def reconfigure(self, config: NodeConfig) -> str:
+        """Switch the session to a validated config; return what it did."""
+        return self.session.reconfigure(config.estimator).message
 
     # -- data -----------------------------------------------------------------------------
 
