@@ -18,11 +18,10 @@ from typing import Any, Optional, Union
 
 from tskf_ros import led
 from tskf_ros.alignment import AlignOutcome
-from tskf_ros.bag.estimator_io import ParamsError
+from tskf_ros.bag.params import parameter_values, ParamsError
 from tskf_ros.nodes import alignment as node
 from tskf_ros.nodes.alignment import (default_parameters, diagnostics_message, NODE_NAME,
                                       NodeConfig, output_qos, parameters_to_config)
-import yaml
 
 __all__ = ['COMMAND_TYPE', 'ESTIMATE_TYPE', 'INPUT_TOPIC', 'OPEN_LOOP_NOTE', 'OUTPUT_TOPICS',
            'OUTPUT_TYPES', 'ParamsError', 'default_parameters', 'diagnostics_message',
@@ -39,7 +38,6 @@ OPEN_LOOP_NOTE = ('open loop: the commands on ' + OUTPUT_TOPICS['command'] + ' d
                   'the recorded receiver; the estimates are the filter on the recorded '
                   'intensities')
 # keys of a parameter file the node takes besides its own parameters
-_ACCEPTED = {'use_sim_time'}
 
 
 def load_config(params_file: Optional[Union[str, Path]] = None,
@@ -50,29 +48,11 @@ def load_config(params_file: Optional[Union[str, Path]] = None,
     The file's `alignment`, `/alignment`, `/**/alignment` or `/**` ros__parameters override
     the defaults.  Raises ParamsError naming the file and the problem.
     """
-    values = default_parameters()
-    where = str(params_file) if params_file else 'defaults'
-    if params_file:
-        try:
-            doc = yaml.safe_load(Path(params_file).read_text()) or {}
-        except (OSError, yaml.YAMLError) as exc:
-            raise ParamsError(f'{params_file}: cannot read parameters ({exc})') from None
-        section = None
-        for key in (NODE_NAME, '/' + NODE_NAME, '/**/' + NODE_NAME, '/**'):
-            if isinstance(doc.get(key), dict) and 'ros__parameters' in doc[key]:
-                section = doc[key]['ros__parameters']
-                break
-        if section is None:
-            raise ParamsError(f'{params_file}: no {NODE_NAME}: ros__parameters section')
-        unknown = sorted(set(section) - set(values) - _ACCEPTED)
-        if unknown:
-            raise ParamsError(f'{params_file}: unknown parameter(s) {", ".join(unknown)}')
-        values.update({k: v for k, v in section.items() if k not in _ACCEPTED})
-    values.update(overrides or {})
+    values = parameter_values(params_file, NODE_NAME, default_parameters(), overrides)
     try:
         return parameters_to_config(values)
     except (led.AlignmentError, ValueError, TypeError, KeyError) as exc:
-        raise ParamsError(f'{where}: {exc}') from None
+        raise ParamsError(f'{params_file or "defaults"}: {exc}') from None
 
 
 def outcome_messages(out: AlignOutcome, config: NodeConfig) -> list[tuple[str, Any]]:

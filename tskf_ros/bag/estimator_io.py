@@ -13,13 +13,13 @@ from pathlib import Path
 from typing import Any, Callable, Optional, Union
 
 
+from tskf_ros.bag.params import parameter_values, ParamsError
 from tskf_ros.estimation import Outcome
 from tskf_ros.nodes import conversions
 from tskf_ros.nodes import timescale_estimator as node
 from tskf_ros.nodes.timescale_estimator import (default_parameters, input_from_msg,
                                                 NODE_NAME, NodeConfig, output_qos,
                                                 parameters_to_config)
-import yaml
 
 __all__ = ['ESTIMATE_TYPE', 'INPUT_TYPES', 'InputType', 'JUMP_TYPE', 'OUTPUT_TOPICS',
            'ParamsError', 'U_TOPIC', 'U_TYPE', 'default_parameters', 'input_from_msg',
@@ -36,10 +36,6 @@ POWER_TOPIC = '/received_power'
 U_TOPIC = '/' + node.INPUT_TOPIC
 U_TYPE = 'geometry_msgs/msg/AccelStamped'
 TRUTH_TOPIC = '/true_angle'
-
-
-class ParamsError(ValueError):
-    """A parameter file that cannot configure the estimator."""
 
 
 @dataclass(frozen=True)
@@ -84,29 +80,11 @@ def load_config(params_file: Optional[Union[str, Path]] = None,
     The file's `timescale_estimator` (or `/**`) ros__parameters override the defaults.
     Raises ParamsError naming the file and the problem.
     """
-    values = default_parameters()
-    where = str(params_file) if params_file else 'defaults'
-    if params_file:
-        try:
-            doc = yaml.safe_load(Path(params_file).read_text()) or {}
-        except (OSError, yaml.YAMLError) as exc:
-            raise ParamsError(f'{params_file}: cannot read parameters ({exc})') from None
-        section = None
-        for key in (NODE_NAME, '/' + NODE_NAME, '/**'):
-            if isinstance(doc.get(key), dict) and 'ros__parameters' in doc[key]:
-                section = doc[key]['ros__parameters']
-                break
-        if section is None:
-            raise ParamsError(f'{params_file}: no {NODE_NAME}: ros__parameters section')
-        unknown = sorted(set(section) - set(values) - {'use_sim_time', 'diagnostics_period'})
-        if unknown:
-            raise ParamsError(f'{params_file}: unknown parameter(s) {", ".join(unknown)}')
-        values.update(section)
-    values.update(overrides or {})
+    values = parameter_values(params_file, NODE_NAME, default_parameters(), overrides)
     try:
         return parameters_to_config(values)
     except (ValueError, TypeError, KeyError) as exc:
-        raise ParamsError(f'{where}: {exc}') from None
+        raise ParamsError(f'{params_file or "defaults"}: {exc}') from None
 
 
 def outcome_messages(out: Outcome, config: NodeConfig) -> list[tuple[str, Any]]:

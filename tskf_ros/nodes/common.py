@@ -4,7 +4,8 @@ import argparse
 import sys
 from typing import Callable, Optional, Sequence
 
-from rcl_interfaces.msg import FloatingPointRange, SetParametersResult
+from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
+                                SetParametersResult)
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -23,6 +24,16 @@ BLOCKAGE_HELP = {
     'ge_loss_good': ('Gilbert-Elliott loss probability in the good state', (0.0, 1.0)),
     'ge_loss_bad': ('Gilbert-Elliott loss probability in the bad state', (0.0, 1.0)),
 }
+
+
+def descriptor(text: str, rng: Optional[tuple] = None,
+               type_: int = ParameterType.PARAMETER_DOUBLE, *,
+               read_only: bool = True) -> ParameterDescriptor:
+    """Describe a parameter: its text, type, optional float range (lo, hi) and read-only flag."""
+    d = ParameterDescriptor(description=text, type=type_, read_only=read_only)
+    if rng is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1])]
+    return d
 
 
 def float_range(lo: float, hi: float) -> dict:

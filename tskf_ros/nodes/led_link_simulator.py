@@ -19,8 +19,7 @@ from dataclasses import dataclass, fields
 from typing import Optional
 
 import numpy as np
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                ParameterType)
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Illuminance, JointState
@@ -28,7 +27,7 @@ from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.led_link import LedLink, LedLinkConfig, LedLinkError, LedSample, sample_offset_ns
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import BLOCKAGE_HELP, run_node
+from tskf_ros.nodes.common import BLOCKAGE_HELP, descriptor, run_node
 
 NODE_NAME = 'led_link_simulator'
 NS = 1_000_000_000
@@ -69,13 +68,6 @@ class LedSimulatorConfig:
     start_time: float
     wait_for_subscribers: int
     frame_id: str
-
-
-def _descriptor(text: str, rng: Optional[tuple], type_: int) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=text, type=type_, read_only=True)
-    if rng is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1])]
-    return d
 
 
 class LedLinkSimulator(Node):
@@ -127,26 +119,26 @@ class LedLinkSimulator(Node):
             value = getattr(defaults, f.name)
             type_ = {int: ParameterType.PARAMETER_INTEGER, str: ParameterType.PARAMETER_STRING,
                      float: ParameterType.PARAMETER_DOUBLE}[type(value)]
-            self.declare_parameter(f.name, value, _descriptor(text, rng, type_))
+            self.declare_parameter(f.name, value, descriptor(text, rng, type_))
         D = ParameterType.PARAMETER_DOUBLE
-        self.declare_parameter('time_factor', 1.0, _descriptor(
+        self.declare_parameter('time_factor', 1.0, descriptor(
             'play this many times faster than the stamps advance; 0: as fast as the loop '
             'goes (with lockstep)', (0.0, 1e6), D))
-        self.declare_parameter('lockstep', True, _descriptor(
+        self.declare_parameter('lockstep', True, descriptor(
             'hold each sample until the command answering the previous delivered one has '
             'arrived (deterministic closed loop)', None, ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('command_timeout', 1.0, _descriptor(
+        self.declare_parameter('command_timeout', 1.0, descriptor(
             's (node clock) to wait for that command before going on without it',
             (1e-3, 3600.0), D))
-        self.declare_parameter('duration', 0.0, _descriptor(
+        self.declare_parameter('duration', 0.0, descriptor(
             'seconds of stamped data to publish, then stop; 0: forever', (0.0, 1e9), D))
-        self.declare_parameter('start_time', 0.0, _descriptor(
+        self.declare_parameter('start_time', 0.0, descriptor(
             'stamp (s) of sample 0; 0: the node clock at the first sample', (0.0, 1e10), D))
         self.declare_parameter('wait_for_subscribers', 0, ParameterDescriptor(
             description='hold sample 0 until intensity has this many subscribers (and, in '
             'lockstep, the command topic a publisher)', type=ParameterType.PARAMETER_INTEGER,
             read_only=True, integer_range=[IntegerRange(from_value=0, to_value=1000)]))
-        self.declare_parameter('frame_id', 'photodiode', _descriptor(
+        self.declare_parameter('frame_id', 'photodiode', descriptor(
             'frame_id of intensity', None, ParameterType.PARAMETER_STRING))
 
     def _read(self) -> LedSimulatorConfig:

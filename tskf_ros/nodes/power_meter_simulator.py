@@ -10,14 +10,13 @@ published when the node's clock says (k / rate) / time_factor seconds have passe
 from dataclasses import dataclass, fields
 from typing import Optional
 
-from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
-                                SetParametersResult)
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Illuminance, JointState
 
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import BLOCKAGE_HELP, run_node
+from tskf_ros.nodes.common import BLOCKAGE_HELP, descriptor, run_node
 from tskf_ros.owc_link import LinkConfig, LinkError, OwcLink, Samples
 
 NODE_NAME = 'power_meter_simulator'
@@ -57,14 +56,6 @@ class SimulatorConfig:
     angle_name: str
 
 
-def _descriptor(name: str, text: str, rng: Optional[tuple], type_: int, *,
-                read_only: bool = True) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=text, type=type_, read_only=read_only)
-    if rng is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1])]
-    return d
-
-
 class PowerMeterSimulator(Node):
     """Publish simulated received power and the true angle at `rate` (times time_factor)."""
 
@@ -100,16 +91,16 @@ class PowerMeterSimulator(Node):
             value = getattr(defaults, f.name)
             type_ = {int: ParameterType.PARAMETER_INTEGER, str: ParameterType.PARAMETER_STRING,
                      float: ParameterType.PARAMETER_DOUBLE}[type(value)]
-            self.declare_parameter(f.name, value, _descriptor(f.name, text, rng, type_))
+            self.declare_parameter(f.name, value, descriptor(text, rng, type_))
         D = ParameterType.PARAMETER_DOUBLE
-        self.declare_parameter('time_factor', 1.0, _descriptor(
-            'time_factor', 'play the stream this many times faster than the stamps advance '
+        self.declare_parameter('time_factor', 1.0, descriptor(
+            'play the stream this many times faster than the stamps advance '
             '(a 300 s run at 1 Hz with 30: 10 s)', (1e-3, 1e4), D))
-        self.declare_parameter('duration', 0.0, _descriptor(
-            'duration', 'seconds of stamped data to publish, then stop; 0: forever',
+        self.declare_parameter('duration', 0.0, descriptor(
+            'seconds of stamped data to publish, then stop; 0: forever',
             (0.0, 1e9), D))
-        self.declare_parameter('start_time', 0.0, _descriptor(
-            'start_time', 'stamp (s) of sample 0; 0: the node clock at the first tick',
+        self.declare_parameter('start_time', 0.0, descriptor(
+            'stamp (s) of sample 0; 0: the node clock at the first tick',
             (0.0, 1e10), D))
         self.declare_parameter('wait_for_subscribers', 0, ParameterDescriptor(
             description='hold sample 0 until received_power has this many subscribers',
@@ -117,10 +108,10 @@ class PowerMeterSimulator(Node):
         self.declare_parameter('publish_invalid', False, ParameterDescriptor(
             description='publish readings <= 0 as they are (true) or leave a gap (false)',
             type=ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('frame_id', 'power_meter', _descriptor(
-            'frame_id', 'frame_id of received_power', None, ParameterType.PARAMETER_STRING))
-        self.declare_parameter('angle_name', 'theta', _descriptor(
-            'angle_name', 'joint name of the angle on true_angle', None,
+        self.declare_parameter('frame_id', 'power_meter', descriptor(
+            'frame_id of received_power', None, ParameterType.PARAMETER_STRING))
+        self.declare_parameter('angle_name', 'theta', descriptor(
+            'joint name of the angle on true_angle', None,
             ParameterType.PARAMETER_STRING))
 
     def _read(self) -> SimulatorConfig:
