@@ -167,15 +167,7 @@ def run_processes(args: argparse.Namespace) -> Summary:
         timeout = args.duration * args.duration_scale * 3 + 30
         record = collect(samples, timeout=timeout, on_ready=start_simulator)
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for p in procs:
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        _stop(procs)
     return summarise(record, period=1.0 / args.rate)
 
 
@@ -262,6 +254,7 @@ def format_alignment(s: AlignmentSummary, args: argparse.Namespace) -> str:
 
 
 def _stop(procs: list) -> None:
+    """Stop the node processes with SIGINT (a clean shutdown), killing any that hang."""
     for p in procs:
         if p.poll() is None:
             p.send_signal(signal.SIGINT)
