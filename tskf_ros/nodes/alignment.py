@@ -31,7 +31,7 @@ from std_msgs.msg import Float64MultiArray
 from tskf_ros import led
 from tskf_ros.alignment import AlignmentConfig, AlignmentSession, AlignOutcome
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import ReconfigurableNode, run_node
+from tskf_ros.nodes.common import ReconfigurableNode, run_node, sensor_input_qos
 
 NODE_NAME = 'alignment'
 INPUT_TOPIC = 'intensity'
@@ -163,8 +163,7 @@ class Alignment(ReconfigurableNode):
         self.config = self.start_watching_parameters()
         self.session = AlignmentSession(self.config.session)
 
-        qos_in = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.config.queue_depth,
-                            reliability=ReliabilityPolicy.BEST_EFFORT)
+        qos_in = sensor_input_qos(self.config.queue_depth)
         self.sub = self.create_subscription(Illuminance, INPUT_TOPIC, self._on_intensity,
                                             qos_in)
         self.pubs = {

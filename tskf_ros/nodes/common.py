@@ -10,6 +10,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 
 from tskf_ros.owc_link import BLOCKAGES
@@ -34,6 +35,17 @@ def descriptor(text: str, rng: Optional[tuple] = None,
     if rng is not None:
         d.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1])]
     return d
+
+
+def sensor_input_qos(depth: int) -> QoSProfile:
+    """
+    Return the QoS for a sensor input: best effort, keep last depth.
+
+    A best-effort subscription matches reliable and best-effort publishers alike, so the
+    node takes a real driver's sensor-data stream as well as a reliable bag player.
+    """
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
 def float_range(lo: float, hi: float) -> dict:

@@ -25,7 +25,8 @@ from tskf_ros.estimation import (ConfigError, EstimatorConfig, EstimatorSession,
                                  model_from_flat, Outcome)
 from tskf_ros.models import owc
 from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import float_range, ReconfigurableNode, run_node
+from tskf_ros.nodes.common import (float_range, ReconfigurableNode, run_node,
+                                   sensor_input_qos)
 from tskf_ros.tskf import FilterError, TRANSITIONS
 
 NODE_NAME = 'timescale_estimator'
@@ -158,9 +159,7 @@ class TimescaleEstimator(ReconfigurableNode):
         self.config = self.start_watching_parameters()
         self.session = EstimatorSession(self.config.estimator)
 
-        # received power: best effort matches reliable and best-effort publishers alike
-        qos_in = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.config.queue_depth,
-                            reliability=ReliabilityPolicy.BEST_EFFORT)
+        qos_in = sensor_input_qos(self.config.queue_depth)
         self.sub = self.create_subscription(Illuminance, 'received_power', self._on_power,
                                             qos_in)
         self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
