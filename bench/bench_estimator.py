@@ -32,10 +32,10 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data, QoSProfile  # noqa: E402
 from sensor_msgs.msg import Illuminance  # noqa: E402
 
-from tskf_ros.estimation import EstimatorConfig, EstimatorSession  # noqa: E402
-from tskf_ros.models import owc, spring_mass  # noqa: E402
-from tskf_ros.nodes import conversions  # noqa: E402
+from tskf_ros.core.linear_models import owc, spring_mass  # noqa: E402
+from tskf_ros.messages import conversions  # noqa: E402
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator  # noqa: E402
+from tskf_ros.owc.estimator_session import EstimatorConfig, EstimatorSession  # noqa: E402
 
 NS = 1_000_000_000
 

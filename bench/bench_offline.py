@@ -27,11 +27,11 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 101))
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from sensor_msgs.msg import Illuminance  # noqa: E402
 
-from tskf_ros.bag.offline import replay  # noqa: E402
+from tskf_ros.bag.offline_replay import replay  # noqa: E402
 from tskf_ros.bag.reader import BagReader  # noqa: E402
 from tskf_ros.bag.writer import BagWriter  # noqa: E402
-from tskf_ros.nodes import conversions  # noqa: E402
-from tskf_ros.owc_link import LinkConfig, OwcLink  # noqa: E402
+from tskf_ros.messages import conversions  # noqa: E402
+from tskf_ros.owc.vibrating_link import OwcLink, OwcLinkConfig  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'
@@ -57,7 +57,7 @@ def replay_rate(bag: Path, out: Path) -> tuple[int, float, int]:
 
 def million_bag(path: Path, n: int) -> Path:
     """Write n received-power samples at 1 kHz through a Gilbert-Elliott channel."""
-    link = OwcLink(LinkConfig(rate=1000.0, seed=7, blockage='gilbert_elliott'))
+    link = OwcLink(OwcLinkConfig(rate=1000.0, seed=7, blockage='gilbert_elliott'))
     with BagWriter(path, overwrite=True, compress=True) as w:
         w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
         written, t0 = 0, 1_700_000_000 * NS

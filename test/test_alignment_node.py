@@ -17,12 +17,15 @@ from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray
+
 from tskf_ros import led
-from tskf_ros.alignment import AlignmentConfig, AlignmentSession, NS
-from tskf_ros.led_link import closed_loop
-from tskf_ros.nodes import conversions
-from tskf_ros.nodes.alignment import Alignment, COMMAND_TOPIC
+from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession, NS
+from tskf_ros.led.led_link import closed_loop
+from tskf_ros.messages import conversions
+from tskf_ros.messages.alignment_interface import COMMAND_TOPIC
+from tskf_ros.nodes.alignment import Alignment
 from tskf_ros.nodes.led_link_simulator import LedLinkSimulator
+
 import yaml
 
 REPO = Path(__file__).resolve().parent.parent

@@ -11,10 +11,11 @@ from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import FluidPressure, Range, Temperature
 from std_msgs.msg import Float64, String
 
-from tskf_ros.bag.offline import EXIT_DAMAGED, main, replay
+from tskf_ros.bag.offline_replay import EXIT_DAMAGED, main, replay
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.writer import BagWriter
-from tskf_ros.nodes import conversions
+from tskf_ros.messages import conversions
+
 import yaml
 
 NS = 1_000_000_000
@@ -172,8 +173,8 @@ def test_output_is_never_half_written(tmp_path, monkeypatch):
 
     def explode(*args, **kwargs):
         raise KeyboardInterrupt
-    from tskf_ros.bag import offline
-    monkeypatch.setattr(offline.OfflineEstimator, 'process', explode)
+    from tskf_ros.bag import offline_replay
+    monkeypatch.setattr(offline_replay.OfflineEstimator, 'process', explode)
     with pytest.raises(KeyboardInterrupt):
         replay(bag, tmp_path / 'out')
     assert sorted(p.name for p in tmp_path.iterdir()) == ['bag']
@@ -231,7 +232,7 @@ def test_sqlite3_storage(capsys, tmp_path):
 
 
 def test_command_line_error_is_one_line_without_traceback(tmp_path):
-    proc = subprocess.run([sys.executable, '-m', 'tskf_ros.bag.offline', str(tmp_path / 'x')],
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run([sys.executable, '-m', 'tskf_ros.bag.offline_replay',
+                           str(tmp_path / 'x')], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 1
     one_line_error(proc.stderr, 'no such bag')

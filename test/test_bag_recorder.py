@@ -1,7 +1,6 @@
 """The recorder: raw MCAP bags that rosbags and mcap read, no losses, clean interruption."""
 
 import os
-from pathlib import Path
 import signal
 import subprocess
 import sys
@@ -12,8 +11,10 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import pytest
 import rclpy
+from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
+                       ReliabilityPolicy)
 from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader
@@ -22,7 +23,8 @@ from sensor_msgs.msg import Illuminance, JointState
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.recorder import Recorder
 from tskf_ros.bag.writer import BagExistsError
-from tskf_ros.nodes import conversions
+from tskf_ros.messages import conversions
+
 import yaml
 
 NS = 1_000_000_000
@@ -161,24 +163,29 @@ def test_recorder_refuses_to_overwrite(ros_context, tmp_path):
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_record_command_closes_the_bag_on_a_signal(tmp_path, sig):
+    # A reliable, transient-local publisher: the recorder takes its QoS from the graph, so
+    # every message reaches it whenever it matches, and wait_for_all_acked says when all
+    # 20 are in its reader; on the signal the recorder drains them before closing.
     bag = tmp_path / 'sig'
-    env = dict(os.environ)
-    proc = subprocess.Popen(
-        [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag),
-         '/sig_power:sensor_msgs/msg/Illuminance'], env=env,
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     context = rclpy.context.Context()
     rclpy.init(context=context)
     node = rclpy.create_node('sig_source', context=context)
-    pub = node.create_publisher(Illuminance, 'sig_power', QoSProfile(depth=100))
+    pub = node.create_publisher(Illuminance, 'sig_power', QoSProfile(
+        depth=100, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    for k in range(20):
+        pub.publish(conversions.power_to_msg(T0 + k * NS, 1.0, 0.0))
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag), '/sig_power'],
+        env=dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + TIMEOUT
         while pub.get_subscription_count() == 0:
-            assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read()
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.monotonic() < deadline, 'the recorder never subscribed to /sig_power'
             time.sleep(0.05)
-        for k in range(20):
-            pub.publish(conversions.power_to_msg(T0 + k * NS, 1.0, 0.0))
-        time.sleep(1.0)
+        assert pub.wait_for_all_acked(Duration(seconds=TIMEOUT)), \
+            'the recorder never acknowledged the 20 messages'
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=TIMEOUT)
     finally:
@@ -190,4 +197,3 @@ def test_record_command_closes_the_bag_on_a_signal(tmp_path, sig):
     assert 'wrote' in err
     with Reader(bag) as reader:
         assert reader.message_count == 20
-    assert not [p for p in Path(tmp_path).iterdir() if p.name.startswith('.')]

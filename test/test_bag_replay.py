@@ -15,14 +15,15 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance, TimeReference
 from std_msgs.msg import Float64MultiArray
 
-from tskf_ros.bag import alignment_io, estimator_io
-from tskf_ros.bag.offline import replay
+from tskf_ros.bag.message_types import message_class
+from tskf_ros.bag.offline_replay import replay
 from tskf_ros.bag.player import Player, PlayerError
 from tskf_ros.bag.reader import BagReader
-from tskf_ros.bag.types import message_class
-from tskf_ros.nodes import conversions
-from tskf_ros.nodes.alignment import Alignment, PARAMETERS as ALIGNMENT_PARAMETERS
-from tskf_ros.nodes.timescale_estimator import PARAMETERS, TimescaleEstimator
+from tskf_ros.messages import alignment_interface, estimator_interface
+from tskf_ros.messages import conversions
+from tskf_ros.nodes.alignment import Alignment
+from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
+
 import yaml
 
 REPO = Path(__file__).resolve().parent.parent
@@ -62,10 +63,10 @@ def offline_estimates(bag):
 def test_node_defaults_are_the_adapters(ros_context):
     node = TimescaleEstimator(context=ros_context)
     try:
-        live = {name: node.get_parameter(name).value for name in PARAMETERS}
+        live = {name: node.get_parameter(name).value for name in estimator_interface.PARAMETERS}
     finally:
         node.destroy_node()
-    mine = estimator_io.default_parameters()
+    mine = estimator_interface.default_parameters()
     assert set(live) == set(mine)
     for key, value in live.items():
         if isinstance(value, (list, tuple, np.ndarray)) or hasattr(value, 'tolist'):
@@ -122,10 +123,10 @@ def test_live_replay_equals_offline_replay(ros_context):
 def test_alignment_node_defaults_are_the_adapters(ros_context):
     node = Alignment(context=ros_context)
     try:
-        live = {name: node.get_parameter(name).value for name in ALIGNMENT_PARAMETERS}
+        live = {name: node.get_parameter(name).value for name in alignment_interface.PARAMETERS}
     finally:
         node.destroy_node()
-    mine = alignment_io.default_parameters()
+    mine = alignment_interface.default_parameters()
     assert set(live) == set(mine)
     for key, value in live.items():
         assert (list(value) if isinstance(value, (list, tuple)) else value) == mine[key], key
@@ -135,7 +136,7 @@ def test_live_alignment_replay_equals_offline_replay(ros_context):
     res = replay(LED_BAG, None, params_file=LED_PARAMS, diagnostics=False, filter='alignment')
     assert res.topic == '/photodiode' and res.samples == 381
     assert any('open loop' in line for line in res.assumptions)
-    topics = list(alignment_io.OUTPUT_TOPICS.values())
+    topics = list(alignment_interface.BAG_OUTPUT_TOPICS.values())
     offline = {t: [m for name, _, m in res.outputs if name == t] for t in topics}
     assert all(len(v) == 381 for v in offline.values())
     node = Alignment(context=ros_context, parameter_overrides=yaml_overrides(

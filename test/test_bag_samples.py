@@ -1,17 +1,20 @@
 """Sample bags: regenerated from their README command they are the same; plots; layout."""
 
+import array
+import copy
 import json
 from pathlib import Path
 import re
 
+import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
 
-from tskf_ros.bag import samples
-from tskf_ros.bag.offline import main as offline_main
-from tskf_ros.bag.plot import main as plot_main
+from tskf_ros.bag.message_types import message_class
+from tskf_ros.bag.offline_replay import main as offline_main
 from tskf_ros.bag.reader import BagReader
-from tskf_ros.bag.types import message_class
+from tskf_ros.tools import sample_bags
+from tskf_ros.tools.plot_bag import main as plot_main
 
 REPO = Path(__file__).resolve().parent.parent
 BAGS = REPO / 'bags'
@@ -39,22 +42,66 @@ def messages(path):
     return out
 
 
+def flatten(msg, prefix=''):
+    """Return {field path: value} of a message, recursing into nested messages and lists."""
+    if hasattr(msg, 'get_fields_and_field_types'):
+        out = {}
+        for name in msg.get_fields_and_field_types():
+            out.update(flatten(getattr(msg, name), f'{prefix}.{name}'))
+        return out
+    if isinstance(msg, (list, tuple, array.array, np.ndarray)):
+        out = {f'{prefix}.len': len(msg)}
+        for i, item in enumerate(msg):
+            out.update(flatten(item, f'{prefix}[{i}]'))
+        return out
+    return {prefix: float(msg) if isinstance(msg, (float, np.floating)) else msg}
+
+
+def assert_same_messages(got, want, rtol=1e-9):
+    """
+    Topics, types, log times, stamps, strings and counts exactly; floats to a relative rtol.
+
+    numpy's SIMD paths differ between CPUs in the last bits (1e-11 relative seen on an
+    AVX-512 machine for led_alignment), so floats are compared with a tolerance.
+    """
+    assert len(got) == len(want)
+    for k, (g, w) in enumerate(zip(got, want)):
+        assert g[:3] == w[:3], f'message {k}: {g[:3]} != {w[:3]}'
+        fg, fw = flatten(g[3]), flatten(w[3])
+        assert fg.keys() == fw.keys(), f'message {k}: fields differ'
+        for key, a in fg.items():
+            b = fw[key]
+            if isinstance(a, float):
+                assert a == pytest.approx(b, rel=rtol, abs=1e-300), f'message {k} {key}'
+            else:
+                assert a == b, f'message {k} {key}: {a!r} != {b!r}'
+
+
 @pytest.mark.parametrize('name', ['owc_cai_td_1hz', 'led_alignment', 'drogue'])
 def test_regenerating_a_sample_bag_gives_the_same_messages(tmp_path, name):
-    path = samples.make(name, tmp_path, readme_seed(name))
-    assert messages(path) == messages(BAGS / name)
+    path = sample_bags.make(name, tmp_path, readme_seed(name))
+    assert_same_messages(messages(path), messages(BAGS / name))
 
 
-@pytest.mark.parametrize('name', list(samples.SAMPLES))
+def test_the_message_comparison_catches_a_changed_value():
+    got = [m for m in messages(BAGS / 'drogue') if m[0] == '/drogue/truth'][:3]
+    want = [m[:3] + (copy.deepcopy(m[3]),) for m in got]
+    assert_same_messages(got, want)
+    want[2][3].position[1] *= 1 + 1e-6
+    with pytest.raises(AssertionError, match='message 2'):
+        assert_same_messages(got, want)
+
+
+@pytest.mark.parametrize('name', list(sample_bags.SAMPLES))
 def test_sample_bags_are_small_and_documented(name):
     size = sum(f.stat().st_size for f in (BAGS / name).iterdir())
     assert size < 5e6
-    assert readme_seed(name) == samples.DEFAULT_SEED
+    assert readme_seed(name) == sample_bags.DEFAULT_SEED
 
 
 def test_cai_td_sample_has_exactly_the_gaps_of_td():
     reader = BagReader(BAGS / 'owc_cai_td_1hz')
-    t = [(m.log_time_ns - samples.START_S * 10**9) / 1e9
+    t = [(m.log_time_ns - sample_bags.START_S * 10**9) / 1e9
          for m in reader.messages(['/received_power'])]
     gaps = [(b, b - a) for a, b in zip(t, t[1:]) if b - a > 1.5]
     assert gaps == [(32.0, 2.0), (128.0, 2.0), (135.0, 4.0), (212.0, 3.0), (224.0, 6.0)]

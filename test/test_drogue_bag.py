@@ -19,15 +19,15 @@ import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
 
-from tskf_ros import irregular
-from tskf_ros.bag.estimator_io import load_config
-from tskf_ros.bag.offline import InputError, replay
+from tskf_ros.bag.message_types import message_class
+from tskf_ros.bag.offline_replay import InputError, replay
 from tskf_ros.bag.reader import BagReader
-from tskf_ros.bag.samples import DROGUE_TRUTH, NS, START_S
-from tskf_ros.bag.types import message_class
+from tskf_ros.core import irregular_sampling as irregular
+from tskf_ros.core.timescale_kalman import exact_input_matrix, van_loan
 from tskf_ros.experiments import drogue
-from tskf_ros.nodes import conversions
-from tskf_ros.tskf import exact_input_matrix, van_loan
+from tskf_ros.messages import conversions
+from tskf_ros.messages.estimator_interface import load_config
+from tskf_ros.tools.sample_bags import DROGUE_TRUTH, NS, START_S
 
 REPO = Path(__file__).resolve().parent.parent
 BAG = REPO / 'bags' / 'drogue'
@@ -64,7 +64,7 @@ def _rms(e):
 
 def test_drogue_config_is_drogue_py_model():
     config = load_config(PARAMS)
-    est, cfg = config.estimator, drogue.DrogueConfig()
+    est, cfg = config.session, drogue.DrogueConfig()
     assert not est.nonpositive_is_gap
     longest_dive = cfg.dive_minutes[1] * 60.0
     assert est.max_jump > longest_dive and est.max_gap < est.max_jump
@@ -103,7 +103,7 @@ def test_offline_replay_of_the_drogue_bag_against_drogue_py():
     node_rms = _rms([node[k] - run.truth.x[k, 1] for k in ks])
 
     # the time-scale filter stepped every T with u and the fixes: the node's run exactly
-    config = load_config(PARAMS).estimator
+    config = load_config(PARAMS).session
     kf = config.model.make_filter(config.transition)
     assert sorted(estimates['predicted']) == list(range(len(u)))
     for k in range(len(u) - 1):

@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
-from tskf_ros import irregular
 
-from tskf_ros.estimation import (ConfigError, EstimatorConfig, EstimatorSession,
-                                 model_from_flat, NS)
-from tskf_ros.models import LinearModel, owc, OWC_SLOPE, run_filter, spring_mass
-from tskf_ros.timescale import discrete
+from tskf_ros.core import irregular_sampling as irregular
+from tskf_ros.core.linear_models import LinearModel, owc, OWC_SLOPE, run_filter, spring_mass
+from tskf_ros.core.time_scales import discrete
+from tskf_ros.owc.estimator_session import (ConfigError, EstimatorConfig, EstimatorSession,
+                                            model_from_flat, NS)
 
 # 1 Hz with gaps J = 3 (after 4) and J = 4 (after 12), and a dense stretch at 0.25 s
 STAMPS = np.array([1, 2, 3, 4, 7, 8, 9, 10, 11, 12, 16, 16.25, 16.5, 16.75, 17, 18, 19, 20])

@@ -13,11 +13,13 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance, TimeReference
-from tskf_ros.estimation import NS
-from tskf_ros.models import owc, run_filter, spring_mass
-from tskf_ros.nodes import conversions
+
+from tskf_ros.core.linear_models import owc, run_filter, spring_mass
+from tskf_ros.core.time_scales import discrete
+from tskf_ros.messages import conversions
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
-from tskf_ros.timescale import discrete
+from tskf_ros.owc.estimator_session import NS
+
 import yaml
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
@@ -303,7 +305,7 @@ def test_negative_rate_is_refused_by_its_range(make):
     h = make()
     result = h.node.set_parameters([Parameter('period', value=-1.0)])[0]
     assert not result.successful
-    assert h.node.config.estimator.period == 1.0
+    assert h.node.config.session.period == 1.0
 
 
 def test_good_parameter_change_is_used(make):
@@ -350,7 +352,7 @@ def test_inputs_are_held_and_outputs_equal_the_core(make):
         if t in fixes:
             h.send(t, fixes[t])
     # the core: the time-scale filter stepped at every input stamp from the first fix on
-    config = h.node.config.estimator
+    config = h.node.config.session
     kf = config.model.make_filter(config.transition)
     points = grid[1:]
     pred, corr = [], []

@@ -5,10 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tskf_ros import irregular as ir
-from tskf_ros import models
+from tskf_ros.core import irregular_sampling as ir
+from tskf_ros.core import linear_models as models
+from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 from tskf_ros.experiments import drogue, jump_covariance as jc_experiment
-from tskf_ros.tskf import TimeScaleKalmanFilter
 
 
 def rotation(angle: float, scale: float = 1.0) -> np.ndarray:

@@ -123,8 +123,8 @@ def test_hill_climbing_reverses_when_intensity_drops():
 
 def tracking_mean(name, noise, *, runs=200, beta=1.2, seed=0):
     aligner = led.make_aligner(name, runs=runs)
-    traj = led.simulate(aligner, led.LinkConfig(beta=beta, noise=noise),
-                        np.random.default_rng(seed))
+    traj = led.simulate_tracking(aligner, led.TrackingLinkConfig(beta=beta, noise=noise),
+                                 np.random.default_rng(seed))
     angular, measure = led.tracking(traj)
     return float(np.mean(angular)), float(np.mean(measure))
 

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from tskf_ros.models import OWC_LINEAR_RANGE
-from tskf_ros.owc_link import (fold, LinkConfig, LinkError, OwcLink, P_MAX, power_curve,
-                               simulate_link, THETA_ZERO)
+from tskf_ros.core.linear_models import OWC_LINEAR_RANGE
+from tskf_ros.owc.vibrating_link import (fold, OwcLink, OwcLinkConfig, OwcLinkError, P_MAX,
+                                         power_curve, simulate_link, THETA_ZERO)
 
 
 def test_power_curve_matches_eq2_on_the_linear_range():
@@ -29,7 +29,7 @@ def test_power_curve_shape_of_fig5():
 
 
 def test_same_seed_same_stream_in_any_chunking():
-    cfg = LinkConfig(seed=7, blockage='gilbert_elliott')
+    cfg = OwcLinkConfig(seed=7, blockage='gilbert_elliott')
     whole = simulate_link(cfg, 500)
     link = OwcLink(cfg)
     sizes = [1, 0, 3, 17, 100, 379]
@@ -37,12 +37,12 @@ def test_same_seed_same_stream_in_any_chunking():
     for name in ('theta', 'reading', 'blocked', 'bad_state', 't'):
         np.testing.assert_array_equal(np.concatenate([getattr(p, name) for p in parts]),
                                       getattr(whole, name))
-    other = simulate_link(LinkConfig(seed=8, blockage='gilbert_elliott'), 500)
+    other = simulate_link(OwcLinkConfig(seed=8, blockage='gilbert_elliott'), 500)
     assert not np.array_equal(other.reading, whole.reading)
 
 
 def test_invalid_readings_are_exactly_those_at_or_below_zero():
-    s = simulate_link(LinkConfig(seed=3, knob_max=1.5, knob_initial=1.0), 3000)
+    s = simulate_link(OwcLinkConfig(seed=3, knob_max=1.5, knob_initial=1.0), 3000)
     assert np.array_equal(s.valid, s.reading > 0)
     # there are interruptions, they happen far out on the curve, and no light reads 0
     assert 0 < np.count_nonzero(~s.valid) < s.reading.size
@@ -52,27 +52,27 @@ def test_invalid_readings_are_exactly_those_at_or_below_zero():
 
 
 def test_knob_stays_in_its_range_and_fold_reflects():
-    s = simulate_link(LinkConfig(seed=1, knob_rate=5.0, knob_step=1.0), 2000)
+    s = simulate_link(OwcLinkConfig(seed=1, knob_rate=5.0, knob_step=1.0), 2000)
     assert s.knob.min() >= 0.0 and s.knob.max() <= 1.2
     np.testing.assert_allclose(fold(np.array([-0.1, 0.5, 1.3, 2.5]), 0.0, 1.2),
                                [0.1, 0.5, 1.1, 0.1])
 
 
 def test_rate_1khz():
-    s = simulate_link(LinkConfig(rate=1000.0, seed=2), 2000)
+    s = simulate_link(OwcLinkConfig(rate=1000.0, seed=2), 2000)
     np.testing.assert_allclose(np.diff(s.t), 1e-3)
     assert np.all(np.isfinite(s.reading))
 
 
 def test_bernoulli_drop_rate_within_sampling_error():
     p, n = 0.1, 200_000
-    s = simulate_link(LinkConfig(seed=11, blockage='bernoulli', drop_probability=p), n)
+    s = simulate_link(OwcLinkConfig(seed=11, blockage='bernoulli', drop_probability=p), n)
     assert abs(s.blocked.mean() - p) < 4 * np.sqrt(p * (1 - p) / n)
 
 
 def test_gilbert_elliott_drop_rate_and_burst_length():
-    cfg = LinkConfig(seed=12, blockage='gilbert_elliott', ge_p_gb=0.02, ge_p_bg=0.25,
-                     ge_loss_good=0.01, ge_loss_bad=0.9)
+    cfg = OwcLinkConfig(seed=12, blockage='gilbert_elliott', ge_p_gb=0.02, ge_p_bg=0.25,
+                        ge_loss_good=0.01, ge_loss_bad=0.9)
     n = 300_000
     s = simulate_link(cfg, n)
     rate = cfg.expected_drop_rate()
@@ -96,5 +96,5 @@ def test_gilbert_elliott_drop_rate_and_burst_length():
     {'knob_initial': 5.0}, {'noise_std': float('nan')},
     {'blockage': 'gilbert_elliott', 'ge_p_gb': 0.0, 'ge_p_bg': 0.0}])
 def test_bad_link_parameters_are_refused(bad):
-    with pytest.raises(LinkError):
-        LinkConfig(**bad)
+    with pytest.raises(OwcLinkError):
+        OwcLinkConfig(**bad)

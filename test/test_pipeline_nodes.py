@@ -15,14 +15,14 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Illuminance, JointState
 
-from tskf_ros.estimation import NS
+from tskf_ros.core.linear_models import owc, run_filter
+from tskf_ros.core.time_scales import discrete
 from tskf_ros.experiments.demo import summarise
-from tskf_ros.models import owc, run_filter
-from tskf_ros.nodes import conversions
-from tskf_ros.nodes.demo_collector import arrays, Collector, run_in_process
+from tskf_ros.messages import conversions
 from tskf_ros.nodes.power_meter_simulator import PowerMeterSimulator
-from tskf_ros.owc_link import LinkConfig, simulate_link
-from tskf_ros.timescale import discrete
+from tskf_ros.owc.estimator_session import NS
+from tskf_ros.owc.vibrating_link import OwcLinkConfig, simulate_link
+from tskf_ros.tools.demo_collector import arrays, Collector, run_in_process
 
 REPO = Path(__file__).resolve().parent.parent
 TIMEOUT = 30.0      # s: a bound on waiting for DDS, never an assertion about timing
@@ -61,7 +61,8 @@ def test_simulator_publishes_the_seeded_stream_with_gaps(ros_context, publish_in
         executor.shutdown()
         sim.destroy_node()
         client.destroy_node()
-    cfg = LinkConfig(**{k: v for k, v in params.items() if k in LinkConfig.__dataclass_fields__})
+    cfg = OwcLinkConfig(**{k: v for k, v in params.items()
+                           if k in OwcLinkConfig.__dataclass_fields__})
     s = simulate_link(cfg, 120)
     stamps = NS + np.arange(120) * NS
     np.testing.assert_array_equal([conversions.msg_to_angle(m)[0] for m in truth], stamps)

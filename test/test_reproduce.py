@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 
-from tskf_ros import timescale
+from tskf_ros.core import time_scales as timescale
 from tskf_ros.experiments import reproduce
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tskf_ros import timescale as ts
+from tskf_ros.core import time_scales as ts
 
 
 def test_table_4_graininess():

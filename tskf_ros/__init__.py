@@ -1,1 +1,1 @@
-"""tskf_ros: two-stage Kalman filter (TSKF) core, ROS 2 nodes and experiments."""
+"""tskf_ros: Kalman filtering on time scales (TSKF) for intermittent optical links, in ROS 2."""

@@ -29,12 +29,11 @@ from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 
-from tskf_ros.bag.reader import BagError, BagReader, RawMessage
-from tskf_ros.bag.types import BagTypeError, message_class, qos_to_rclpy
+from tskf_ros.bag.message_types import BagTypeError, message_class, qos_to_rclpy
+from tskf_ros.bag.reader import BagError, BagReader, EXIT_DAMAGED, RawMessage
+from tskf_ros.core.units import NS
 
 NODE_NAME = 'player'
-NS = 1_000_000_000
-EXIT_DAMAGED = 3
 
 
 class PlayerError(BagError):

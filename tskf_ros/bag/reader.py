@@ -26,8 +26,8 @@ from mcap.exceptions import EndOfFile, McapError
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import read_magic
-from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
-                                QosReliability, QosTime)
+from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
+                                QosTime)
 from rosbags.rosbag2 import Reader as Sqlite3Reader
 from rosbags.rosbag2.errors import ReaderError
 import yaml
@@ -38,6 +38,8 @@ __all__ = ['BagEmptyError', 'BagError', 'BagFormatError', 'BagNotFoundError', 'B
 
 PathLike = Union[str, os.PathLike]
 MCAP_MAGIC = b'\x89MCAP0\r\n'
+# exit status of a command whose input bag was damaged (what it could read was used)
+EXIT_DAMAGED = 3
 # what the record parsers raise on bytes that are not a valid MCAP record sequence
 DAMAGE_ERRORS = (McapError, EOFError, struct.error, ValueError, UnicodeDecodeError,
                  zstandard.ZstdError, MemoryError, OverflowError)

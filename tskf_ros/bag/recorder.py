@@ -12,27 +12,33 @@ soon as a publisher appears, with a QoS compatible with every publisher's (relia
 offer reliable, else best effort; history KEEP_ALL so that a reliable publisher is never
 dropped), and the publishers' offered QoS goes to metadata.yaml.  The bag is written into
 a hidden .partial directory and renamed when it is closed: on Ctrl-C / SIGTERM the recorder
-closes the bag properly, and a bag that was not closed is never left under the final name.
+first takes every message already delivered to its subscriptions (up to DRAIN_LIMIT s),
+then closes the bag properly; a bag that was not closed is never left under the final name.
 """
 
 import argparse
 from pathlib import Path
+import signal
 import sys
+import time
 from typing import Optional, Sequence
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
+from tskf_ros.bag.message_types import BagTypeError, message_class, qos_from_rclpy
 from tskf_ros.bag.reader import BagError
-from tskf_ros.bag.types import BagTypeError, message_class, qos_from_rclpy
 from tskf_ros.bag.writer import BagWriter
 
 NODE_NAME = 'recorder'
 # not recorded by --all unless named
 INTERNAL_TOPICS = ('/rosout', '/parameter_events')
+# s: after a stop signal, keep taking delivered messages for at most this long
+DRAIN_LIMIT = 2.0
 
 
 class Recorder(Node):
@@ -142,6 +148,16 @@ def parse_topics(specs: Sequence[str]) -> tuple[list, dict]:
     return names, types
 
 
+def drain(executor: SingleThreadedExecutor, node: Recorder) -> None:
+    """Take the messages already delivered, until a pass adds none or DRAIN_LIMIT passes."""
+    deadline = time.monotonic() + DRAIN_LIMIT
+    while time.monotonic() < deadline:
+        before = sum(node.counts.values())
+        executor.spin_once(timeout_sec=0.05)
+        if sum(node.counts.values()) == before:
+            return
+
+
 def main(args: Optional[list] = None) -> int:
     """Record until Ctrl-C, SIGTERM or --max-duration; return the exit status."""
     argv = remove_ros_args(sys.argv if args is None else args)[1:]
@@ -159,7 +175,11 @@ def main(args: Optional[list] = None) -> int:
     if not opts.topics and not opts.all:
         parser.error('name topics to record, or --all')
     names, types = parse_topics(opts.topics)
-    rclpy.init(args=args)
+    # our own signal handlers: rclpy's would shut the context down before the drain
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, frame: stop.append(signum))
     node = None
     try:
         node = Recorder(opts.output, topics=None if opts.all else names, types=types,
@@ -167,8 +187,10 @@ def main(args: Optional[list] = None) -> int:
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         if opts.max_duration > 0:
-            node.create_timer(opts.max_duration, lambda: rclpy.try_shutdown())
-        executor.spin()
+            node.create_timer(opts.max_duration, lambda: stop.append('max-duration'))
+        while not stop:
+            executor.spin_once(timeout_sec=0.1)
+        drain(executor, node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (BagError, BagTypeError) as exc:

@@ -16,8 +16,8 @@ from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.rosbag2.errors import WriterError
 
+from tskf_ros.bag.message_types import BagTypeError, typestore
 from tskf_ros.bag.reader import BagError
-from tskf_ros.bag.types import BagTypeError, typestore
 
 __all__ = ['BagExistsError', 'BagWriter', 'BagWriteError']
 

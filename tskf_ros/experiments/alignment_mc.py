@@ -72,7 +72,7 @@ class HoldLast:
         return self.aligner.step(stamp, self.last)
 
 
-def build(name: str, runs: int, link: led.LinkConfig, response: led.IncidenceResponse,
+def build(name: str, runs: int, link: led.TrackingLinkConfig, response: led.IncidenceResponse,
           ekf: led.EKFConfig, clip: bool) -> led.Aligner:
     """Build the aligner for `name` (led.ALGORITHMS or 'ekf_hold')."""
     if name == 'ekf_hold':
@@ -81,11 +81,11 @@ def build(name: str, runs: int, link: led.LinkConfig, response: led.IncidenceRes
     return led.make_aligner(name, runs=runs, dt=link.dt, response=response, ekf=ekf, clip=clip)
 
 
-def evaluate(name: str, runs: int, link: led.LinkConfig, rng: np.random.Generator,
+def evaluate(name: str, runs: int, link: led.TrackingLinkConfig, rng: np.random.Generator,
              response: led.IncidenceResponse, ekf: led.EKFConfig, clip: bool
              ) -> tuple[np.ndarray, np.ndarray]:
     """Return the tracking % (angular, measure) per run of one algorithm on one link."""
-    traj = led.simulate(build(name, runs, link, response, ekf, clip), link, rng, response)
+    traj = led.simulate_tracking(build(name, runs, link, response, ekf, clip), link, rng, response)
     return led.tracking(traj, threshold=led.TRACKING_LEVEL * link.max_intensity)
 
 
@@ -100,7 +100,7 @@ def _record(results: dict, name: str, angular: np.ndarray, measure: np.ndarray) 
         results[name][metric]['std'].append(float(np.std(values)))
 
 
-def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.LinkConfig,
+def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.TrackingLinkConfig,
           seed: int, response: led.IncidenceResponse, ekf: led.EKFConfig,
           algorithms: Sequence[str] = led.ALGORITHMS, clip: bool = False,
           progress: Optional[Progress] = None) -> dict:
@@ -216,10 +216,10 @@ def plot_run(traj: led.Trajectory, *, title: str, threshold: float) -> Figure:
 def single_run(beta: float, args: argparse.Namespace, response: led.IncidenceResponse,
                ekf: led.EKFConfig) -> tuple[led.Trajectory, float, float]:
     """Run the EKF once (default noise: R_sys); return it and its tracking %."""
-    link = led.LinkConfig(beta=beta, dt=args.dt, steps=args.steps, noise=args.run_noise,
-                          x2_0=args.x2_0, dropout=args.dropout)
+    link = led.TrackingLinkConfig(beta=beta, dt=args.dt, steps=args.steps, noise=args.run_noise,
+                                  x2_0=args.x2_0, dropout=args.dropout)
     aligner = build('ekf', 1, link, response, ekf, False)
-    traj = led.simulate(aligner, link, np.random.default_rng(args.seed), response)
+    traj = led.simulate_tracking(aligner, link, np.random.default_rng(args.seed), response)
     angular, measure = led.tracking(traj)
     return traj, float(angular[0]), float(measure[0])
 
@@ -300,8 +300,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except led.AlignmentError as exc:
         print(f'alignment_mc: {exc}', file=sys.stderr)
         return 2
-    link = led.LinkConfig(beta=args.beta, dt=args.dt, steps=args.steps, x2_0=args.x2_0,
-                          dropout=args.dropout)
+    link = led.TrackingLinkConfig(beta=args.beta, dt=args.dt, steps=args.steps, x2_0=args.x2_0,
+                                  dropout=args.dropout)
     common = {'runs': args.runs, 'seed': args.seed, 'response': response, 'ekf': ekf,
               'clip': args.clip_three_point, 'progress': progress}
     progress(f'g at {response.units_per_degree:.4g} fit units per degree; beta {args.beta:g} '

@@ -12,7 +12,7 @@ Beside it, the LED active alignment loop of Solanki et al. runs live (led_link_s
 and alignment as two more processes, in the namespace /led) and the demo prints its
 tracking percentage: the share of samples with the angle of incidence within +-15 deg.
 
-This module stays ROS-free at import; the collecting client (tskf_ros.nodes.demo_collector)
+This module stays ROS-free at import; the collecting client (tskf_ros.tools.demo_collector)
 is imported when the demo runs.  `run_in_process` there runs the same pipeline in one
 process on one executor, for tests.
 """
@@ -28,11 +28,11 @@ from typing import Optional
 
 import numpy as np
 
+from tskf_ros.core.linear_models import OWC_LINEAR_RANGE
+from tskf_ros.core.time_scales import jumps
+from tskf_ros.core.units import NS
 from tskf_ros.led import PAPER_DT, TRACKING_ANGLE
-from tskf_ros.models import OWC_LINEAR_RANGE
-from tskf_ros.timescale import jumps
 
-NS = 1_000_000_000
 LED_NAMESPACE = '/led'
 LED_DT = PAPER_DT          # s: the LED link's sample period (config/led_link_simulator.yaml)
 
@@ -121,15 +121,17 @@ def bags_dir() -> Path:
 
 def replay_sample_bag(out: Path) -> int:
     """Replay the Cai T_d sample bag through the estimator offline and plot the result."""
-    from tskf_ros.bag import offline, plot
+    from tskf_ros.bag import offline_replay
+    from tskf_ros.tools import plot_bag
     bag = bags_dir() / 'owc_cai_td_1hz'
     params = config_dir() / 'owc_estimator.yaml'
     estimated = out / 'owc_cai_td_1hz_estimated'
     print(f'replaying the sample bag {bag.name} through the estimator (no DDS) -> {estimated}',
           flush=True)
-    rc = offline.main([str(bag), str(estimated), '--params-file', str(params), '--overwrite'])
+    rc = offline_replay.main([str(bag), str(estimated), '--params-file', str(params),
+                              '--overwrite'])
     if rc == 0:
-        rc = plot.main([str(estimated), '--out', str(out), '--params-file', str(params)])
+        rc = plot_bag.main([str(estimated), '--out', str(out), '--params-file', str(params)])
     return rc
 
 
@@ -144,7 +146,7 @@ def node_command(module: str, params_file: Path, **params: object) -> list:
 
 def run_processes(args: argparse.Namespace) -> Summary:
     """Start both nodes as processes, collect in this process, stop them; summarise."""
-    from tskf_ros.nodes.demo_collector import collect
+    from tskf_ros.tools.demo_collector import collect
 
     cfg = config_dir()
     time_factor = 1.0 / args.duration_scale
@@ -193,7 +195,7 @@ def start_alignment(args: argparse.Namespace) -> dict:
     """
     import threading
 
-    from tskf_ros.nodes.alignment_monitor import monitor
+    from tskf_ros.tools.alignment_monitor import monitor
 
     cfg = config_dir()
     ns = ['-r', f'__ns:={LED_NAMESPACE}']

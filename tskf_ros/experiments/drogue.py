@@ -30,7 +30,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from tskf_ros import irregular
+from tskf_ros.core import irregular_sampling as irregular
 from tskf_ros.experiments.output import save_figure, write_json
 
 
@@ -111,7 +111,7 @@ class Truth:
     gamma: np.ndarray       # position fix available
 
 
-def simulate(cfg: DrogueConfig, rng: np.random.Generator) -> Truth:
+def simulate_drogue(cfg: DrogueConfig, rng: np.random.Generator) -> Truth:
     """Integrate eq. (26) with RK4 (cfg.substeps per sample) along a drawn diving pattern."""
     dives, gamma = diving_pattern(cfg, rng)
     N = gamma.size
@@ -212,7 +212,7 @@ class DrogueRun:
 def run(cfg: DrogueConfig = DrogueConfig()) -> DrogueRun:
     """Simulate one drogue and run the switching filter on it (seeded by cfg.seed)."""
     rng = np.random.default_rng(cfg.seed)
-    truth = simulate(cfg, rng)
+    truth = simulate_drogue(cfg, rng)
     N = truth.t.size
     u = truth.accel + cfg.accel_sd * rng.standard_normal(N)
     y = np.full((N, 1), np.nan)

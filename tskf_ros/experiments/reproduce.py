@@ -25,7 +25,7 @@ from typing import Optional
 
 import numpy as np
 
-from tskf_ros import models, timescale
+from tskf_ros.core import linear_models as models, time_scales as timescale
 from tskf_ros.experiments.output import save_figure, write_json
 
 
@@ -127,7 +127,7 @@ def run_example_320(name: str, count: int, rng: np.random.Generator, *,
     """Simulate the spring-mass system on a time scale and run the filter."""
     model = models.spring_mass()
     ts = example_320_timescale(name, count, p12_step)
-    x, y = models.simulate(model, ts, rng, noise_scaling=noise_scaling)
+    x, y = models.simulate_truth(model, ts, rng, noise_scaling=noise_scaling)
     run = models.run_filter(model, ts, y)
     return Series(name, ts.points, ts.mu(), x[:, 0], y[:, 0], run.x_pred[:, 0],
                   run.x_corr[:, 0], np.sqrt(run.P_pred[:, 0, 0]), 'position (ft)')
@@ -162,7 +162,7 @@ def run_cai_td(system: str, td: timescale.TimeScale, rng: np.random.Generator, *
     vscale = 1.0 / np.sqrt(mu_meas) if noise_scaling == 'theory' else np.ones(mu.size)
     if system == 'reference':
         model = models.spring_mass()
-        x, y = models.simulate(model, td, rng, noise_scaling=noise_scaling)
+        x, y = models.simulate_truth(model, td, rng, noise_scaling=noise_scaling)
         truth, meas_state, unit = x[:, 0], y[:, 0], 'position (ft)'
     else:
         model = models.owc(a=1.0 if system == 'owc' else 0.0)

@@ -6,7 +6,7 @@ voltage in volts) and the evaluation truth `true_angle` (sensor_msgs/msg/JointSt
 incidence, base and transmitter angles in rad), and takes the base's position command on
 `base_position_controller/commands` (std_msgs/msg/Float64MultiArray, one entry in rad,
 system-default QoS), as a ros2_control forward_command_controller would.  The samples
-come from tskf_ros.led_link.LedLink; sample k is stamped start + k dt.
+come from tskf_ros.led.led_link.LedLink; sample k is stamped start + k dt.
 
 Pacing: sample k is due when the node's clock says k dt / time_factor seconds have passed
 (time_factor 0: no pacing).  With `lockstep` (the default) a delivered sample is also
@@ -15,24 +15,25 @@ passed), so that the same parameters and seed give the same stream however fast 
 loop runs.
 """
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray
 
-from tskf_ros.led_link import LedLink, LedLinkConfig, LedLinkError, LedSample, sample_offset_ns
-from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import BLOCKAGE_HELP, descriptor, run_node
+from tskf_ros.core.units import NS
+from tskf_ros.led.led_link import LedLink, LedLinkConfig, LedLinkError, LedSample, sample_offset_ns
+from tskf_ros.messages import conversions
+from tskf_ros.messages.alignment_interface import COMMAND_TOPIC, INPUT_TOPIC
+from tskf_ros.messages.parameters import BLOCKAGE_HELP, descriptor
+from tskf_ros.messages.qos import DEFAULT_DEPTH, SENSOR_OUTPUT_QOS, TRUTH_QOS
+from tskf_ros.nodes.node_base import (config_from_parameters, declare_config_fields,
+                                      MAX_BATCH, run_node)
 
 NODE_NAME = 'led_link_simulator'
-NS = 1_000_000_000
-MAX_BATCH = 10_000      # samples taken per callback at most (catching up)
-COMMAND_TOPIC = 'base_position_controller/commands'
 
 LINK_HELP = {
     'beta': ('deg/s: rate of the transmitter revolving around the receiver (Fig. 8: 1.2)',
@@ -81,14 +82,11 @@ class LedLinkSimulator(Node):
         self.config = self._read()
         self.link = LedLink(self.config.link)
         link = self.config.link
-        self.intensity_pub = self.create_publisher(Illuminance, 'intensity',
-                                                   qos_profile_sensor_data)
-        self.truth_pub = self.create_publisher(
-            JointState, 'true_angle',
-            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        self.intensity_pub = self.create_publisher(Illuminance, INPUT_TOPIC, SENSOR_OUTPUT_QOS)
+        self.truth_pub = self.create_publisher(JointState, 'true_angle', TRUTH_QOS)
         # forward_command_controller subscribes with the system-default QoS (reliable, 10)
         self.command_sub = self.create_subscription(Float64MultiArray, COMMAND_TOPIC,
-                                                    self._on_command, 10)
+                                                    self._on_command, DEFAULT_DEPTH)
         self.total = int(round(self.config.duration / link.dt)) or None
         self.commands = 0
         self.bad_commands = 0
@@ -113,13 +111,7 @@ class LedLinkSimulator(Node):
         return self.link.count
 
     def _declare(self) -> None:
-        defaults = LedLinkConfig()
-        for f in fields(LedLinkConfig):
-            text, rng = LINK_HELP[f.name]
-            value = getattr(defaults, f.name)
-            type_ = {int: ParameterType.PARAMETER_INTEGER, str: ParameterType.PARAMETER_STRING,
-                     float: ParameterType.PARAMETER_DOUBLE}[type(value)]
-            self.declare_parameter(f.name, value, descriptor(text, rng, type_))
+        declare_config_fields(self, LedLinkConfig, LINK_HELP)
         D = ParameterType.PARAMETER_DOUBLE
         self.declare_parameter('time_factor', 1.0, descriptor(
             'play this many times faster than the stamps advance; 0: as fast as the loop '
@@ -142,14 +134,10 @@ class LedLinkSimulator(Node):
             'frame_id of intensity', None, ParameterType.PARAMETER_STRING))
 
     def _read(self) -> LedSimulatorConfig:
-        p = {name: self.get_parameter(name).value for name in
-             [f.name for f in fields(LedLinkConfig)] + [
-                 'time_factor', 'lockstep', 'command_timeout', 'duration', 'start_time',
-                 'wait_for_subscribers', 'frame_id']}
-        try:
-            link = LedLinkConfig(**{f.name: p[f.name] for f in fields(LedLinkConfig)})
-        except LedLinkError as exc:
-            raise LedLinkError(f'bad simulator parameters: {exc}') from None
+        link = config_from_parameters(self, LedLinkConfig, LedLinkError)
+        p = {name: self.get_parameter(name).value for name in (
+            'time_factor', 'lockstep', 'command_timeout', 'duration', 'start_time',
+            'wait_for_subscribers', 'frame_id')}
         return LedSimulatorConfig(link, p['time_factor'], p['lockstep'], p['command_timeout'],
                                   p['duration'], p['start_time'], p['wait_for_subscribers'],
                                   p['frame_id'])

@@ -3,25 +3,27 @@ power_meter_simulator: the intermittent OWC link of Cai et al. IV-A/B as a senso
 
 Publishes `received_power` (sensor_msgs/msg/Illuminance, sensor-data QoS, as a power meter
 driver would) and the evaluation truth `true_angle` (sensor_msgs/msg/JointState).  The
-samples come from tskf_ros.owc_link.OwcLink; sample k is stamped start + k / rate, and is
+samples come from tskf_ros.owc.vibrating_link.OwcLink; sample k is stamped start + k / rate, and is
 published when the node's clock says (k / rate) / time_factor seconds have passed.
 """
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Optional
 
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Illuminance, JointState
 
-from tskf_ros.nodes import conversions
-from tskf_ros.nodes.common import BLOCKAGE_HELP, descriptor, run_node
-from tskf_ros.owc_link import LinkConfig, LinkError, OwcLink, Samples
+from tskf_ros.core.units import NS
+from tskf_ros.messages import conversions
+from tskf_ros.messages.estimator_interface import POWER_TOPIC
+from tskf_ros.messages.parameters import BLOCKAGE_HELP, descriptor
+from tskf_ros.messages.qos import SENSOR_OUTPUT_QOS, TRUTH_QOS
+from tskf_ros.nodes.node_base import (config_from_parameters, declare_config_fields,
+                                      MAX_BATCH, run_node)
+from tskf_ros.owc.vibrating_link import OwcLink, OwcLinkConfig, OwcLinkError, Samples
 
 NODE_NAME = 'power_meter_simulator'
-NS = 1_000_000_000
-MAX_BATCH = 10_000      # samples published per timer tick at most (catching up)
 
 LINK_HELP = {
     'rate': ('samples per second (Cai IV-C: 1 Hz; 1 kHz works)', (1e-3, 10_000.0)),
@@ -46,7 +48,7 @@ LINK_HELP = {
 class SimulatorConfig:
     """The node's settings, read once: the link and how it is played out."""
 
-    link: LinkConfig
+    link: OwcLinkConfig
     time_factor: float
     duration: float
     start_time: float
@@ -67,11 +69,8 @@ class PowerMeterSimulator(Node):
         self.config = self._read()
         self.link = OwcLink(self.config.link)
         self.add_on_set_parameters_callback(self._validate)
-        self.power_pub = self.create_publisher(Illuminance, 'received_power',
-                                               qos_profile_sensor_data)
-        self.angle_pub = self.create_publisher(
-            JointState, 'true_angle',
-            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        self.power_pub = self.create_publisher(Illuminance, POWER_TOPIC, SENSOR_OUTPUT_QOS)
+        self.angle_pub = self.create_publisher(JointState, 'true_angle', TRUTH_QOS)
         link = self.config.link
         self.total = int(round(self.config.duration * link.rate)) or None
         self.published = 0
@@ -85,13 +84,7 @@ class PowerMeterSimulator(Node):
             + (f', {self.total} samples' if self.total else ''))
 
     def _declare(self) -> None:
-        defaults = LinkConfig()
-        for f in fields(LinkConfig):
-            text, rng = LINK_HELP[f.name]
-            value = getattr(defaults, f.name)
-            type_ = {int: ParameterType.PARAMETER_INTEGER, str: ParameterType.PARAMETER_STRING,
-                     float: ParameterType.PARAMETER_DOUBLE}[type(value)]
-            self.declare_parameter(f.name, value, descriptor(text, rng, type_))
+        declare_config_fields(self, OwcLinkConfig, LINK_HELP)
         D = ParameterType.PARAMETER_DOUBLE
         self.declare_parameter('time_factor', 1.0, descriptor(
             'play the stream this many times faster than the stamps advance '
@@ -115,20 +108,13 @@ class PowerMeterSimulator(Node):
             ParameterType.PARAMETER_STRING))
 
     def _read(self) -> SimulatorConfig:
-        p = {name: value.value for name, value in self._parameters_by_name().items()}
-        try:
-            link = LinkConfig(**{f.name: p[f.name] for f in fields(LinkConfig)})
-        except LinkError as exc:
-            raise LinkError(f'bad simulator parameters: {exc}') from None
+        link = config_from_parameters(self, OwcLinkConfig, OwcLinkError)
+        p = {name: self.get_parameter(name).value for name in (
+            'time_factor', 'duration', 'start_time', 'publish_invalid', 'wait_for_subscribers',
+            'frame_id', 'angle_name')}
         return SimulatorConfig(link, p['time_factor'], p['duration'], p['start_time'],
                                p['publish_invalid'], p['wait_for_subscribers'], p['frame_id'],
                                p['angle_name'])
-
-    def _parameters_by_name(self) -> dict:
-        names = [f.name for f in fields(LinkConfig)] + [
-            'time_factor', 'duration', 'start_time', 'publish_invalid', 'wait_for_subscribers',
-            'frame_id', 'angle_name']
-        return {n: self.get_parameter(n) for n in names}
 
     def _validate(self, changes: list) -> SetParametersResult:
         """Only publish_invalid changes at run time; the seeded stream is fixed at start."""
@@ -183,7 +169,7 @@ DESCRIPTION = ('Simulated power meter of the vibration-induced '
 def main(args: Optional[list] = None) -> None:
     """Run the node until Ctrl-C or shutdown."""
     run_node(PowerMeterSimulator, name=NODE_NAME, description=DESCRIPTION,
-             startup_errors=(LinkError,), args=args)
+             startup_errors=(OwcLinkError,), args=args)
 
 
 if __name__ == '__main__':

@@ -20,8 +20,8 @@ from typing import Optional
 
 import numpy as np
 
-from tskf_ros.timescale import TimeScale
-from tskf_ros.tskf import as_matrix, TimeScaleKalmanFilter
+from tskf_ros.core.time_scales import TimeScale
+from tskf_ros.core.timescale_kalman import as_matrix, TimeScaleKalmanFilter
 
 NOISE_SCALINGS = ('theory', 'unit')
 
@@ -71,9 +71,9 @@ def owc(a: float = 1.0, theta0: float = 0.5435, p0: float = 0.01) -> LinearModel
                        P0=np.array([[p0]]), state_names=('theta',))
 
 
-def simulate(model: LinearModel, ts: TimeScale, rng: np.random.Generator, *,
-             noise_scaling: str = 'theory', x_true0: Optional[np.ndarray] = None
-             ) -> tuple[np.ndarray, np.ndarray]:
+def simulate_truth(model: LinearModel, ts: TimeScale, rng: np.random.Generator, *,
+                   noise_scaling: str = 'theory', x_true0: Optional[np.ndarray] = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """
     Simulate the model on ts: x(sigma) = (I + mu A) x + mu B u + noise; y = C x + D + v.
 

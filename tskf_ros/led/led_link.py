@@ -15,7 +15,7 @@ What is simulated (the model of tskf_ros.led, driven one sample at a time):
   from x1_0 = max_intensity / peak of g, and the photodiode reads eq. (5)/(8):
   z_k = x1_k g(phi_k) + v_k with v_k ~ N(0, noise^2) volts.
 - Optional dropouts: Bernoulli with probability `drop_probability`, or a Gilbert-Elliott
-  channel (tskf_ros.owc_link.gilbert_elliott_states) with the issue-3 parameters.
+  channel (tskf_ros.core.dropouts) with the issue-3 parameters.
 
 Every random stream is a spawned child of `np.random.default_rng(seed)` with one draw per
 sample, so the same parameters, seed and commands give the same samples.  `closed_loop`
@@ -29,7 +29,7 @@ from typing import Optional
 import numpy as np
 
 from tskf_ros import led
-from tskf_ros.owc_link import BLOCKAGES, gilbert_elliott_states
+from tskf_ros.core.dropouts import Dropouts, gilbert_elliott_states
 
 
 class LedLinkError(ValueError):
@@ -37,7 +37,7 @@ class LedLinkError(ValueError):
 
 
 @dataclass(frozen=True)
-class LedLinkConfig:
+class LedLinkConfig(Dropouts):
     """Parameters of the simulated LED link; angles in degrees, intensities in volts."""
 
     beta: float = 1.2                 # deg/s: the transmitter's revolution (Fig. 8)
@@ -50,12 +50,6 @@ class LedLinkConfig:
     max_speed: float = 0.0            # deg/s the base turns at most; 0: any turn in a step
     units_per_degree: float = 0.0     # fit units of g per degree; 0: the tracking-zone unit
     seed: int = 0
-    blockage: str = 'none'            # 'none', 'bernoulli' or 'gilbert_elliott'
-    drop_probability: float = 0.0     # Bernoulli p
-    ge_p_gb: float = 0.01             # Gilbert-Elliott P(good -> bad) per sample
-    ge_p_bg: float = 0.2              # P(bad -> good) per sample
-    ge_loss_good: float = 0.0         # loss probability in the good state
-    ge_loss_bad: float = 1.0          # loss probability in the bad state
 
     def __post_init__(self) -> None:
         """Check every parameter; raise LedLinkError with the reason."""
@@ -72,14 +66,7 @@ class LedLinkConfig:
                      'units_per_degree'):
             if getattr(self, name) < 0:
                 raise LedLinkError(f'{name} must be >= 0, got {getattr(self, name)}')
-        if self.blockage not in BLOCKAGES:
-            raise LedLinkError(f'blockage must be one of {BLOCKAGES}, got {self.blockage!r}')
-        for name in ('drop_probability', 'ge_p_gb', 'ge_p_bg', 'ge_loss_good', 'ge_loss_bad'):
-            value = getattr(self, name)
-            if not 0.0 <= value <= 1.0:
-                raise LedLinkError(f'{name} is a probability, got {value}')
-        if self.blockage == 'gilbert_elliott' and self.ge_p_gb + self.ge_p_bg <= 0:
-            raise LedLinkError('a Gilbert-Elliott channel needs ge_p_gb + ge_p_bg > 0')
+        self.check_dropouts(LedLinkError)
 
     def response(self) -> led.IncidenceResponse:
         """Return g of eq. (4) in this link's unit (0: the tracking-zone unit)."""

@@ -7,8 +7,9 @@ Definition 2.3).  mu(t_k) is known only when t_{k+1} arrives, so sample k+1 trig
 
     step(mu(t_k), y(t_k)):  corrected estimate x(t_k | t_k)  and  predictor xhat(t_{k+1})
 
-of the TimeScaleKalmanFilter (Bohner & Wintz Table 3, Cai Table I; see tskf_ros.tskf).
-Readings at or below zero are not points (Section IV-C: an interruption, a time jump J).
+of the TimeScaleKalmanFilter (Bohner & Wintz Table 3, Cai Table I; see
+tskf_ros.core.timescale_kalman).  Readings at or below zero are not points (Section IV-C:
+an interruption, a time jump J).
 
 Bad input never reaches the filter: non-finite values, zero stamps, duplicates and stamps
 too old for the history are rejected with a reason; a late sample within the history is
@@ -41,11 +42,11 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from tskf_ros import irregular
-from tskf_ros.models import LinearModel
-from tskf_ros.tskf import FilterError, is_psd, TRANSITIONS
+from tskf_ros.core import irregular_sampling as irregular
+from tskf_ros.core.linear_models import LinearModel
+from tskf_ros.core.timescale_kalman import FilterError, is_psd, TRANSITIONS
+from tskf_ros.core.units import NS
 
-NS = 1_000_000_000
 
 # reasons a sample is not used; each is a diagnostics counter
 REJECT_REASONS = ('zero_stamp', 'non_finite', 'bad_variance', 'invalid_power', 'future',

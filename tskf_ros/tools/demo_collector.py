@@ -14,7 +14,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Illuminance, JointState
 
-from tskf_ros.nodes import conversions
+from tskf_ros.messages import conversions
 
 
 @dataclass

@@ -31,8 +31,11 @@ import numpy as np
 from sensor_msgs.msg import Illuminance, JointState, TimeReference
 from std_msgs.msg import Float64MultiArray
 
-NS = 1_000_000_000
+from tskf_ros.core.units import NS
+
 SLOTS = 6
+# the type of every estimate: a stamped state vector with its covariance (see above)
+ESTIMATE_TYPE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
 LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
 
@@ -144,7 +147,7 @@ def msg_to_diagnostics(msg: DiagnosticArray) -> dict:
     return out
 
 
-# -- LED active alignment (Solanki et al.): tskf_ros.led_link and tskf_ros.alignment ------
+# -- LED active alignment (Solanki et al.): tskf_ros.led.led_link, .alignment_session ------
 #
 # Angles in messages are radians (REP 103); the core and the parameters use the paper's
 # degrees.  Types, all from common_interfaces:

@@ -34,14 +34,14 @@ from typing import Optional
 
 import numpy as np
 
-from tskf_ros.models import OWC_LINEAR_RANGE, OWC_OFFSET, OWC_SLOPE
+from tskf_ros.core.dropouts import Dropouts, gilbert_elliott_states
+from tskf_ros.core.linear_models import OWC_LINEAR_RANGE, OWC_OFFSET, OWC_SLOPE
 
 P_MAX = 270.0             # mW at theta = 0 (Section IV-B)
 THETA_ZERO = 1.51         # rad: Fig. 5 ends at 1.51 rad with the power at 0
-BLOCKAGES = ('none', 'bernoulli', 'gilbert_elliott')
 
 
-class LinkError(ValueError):
+class OwcLinkError(ValueError):
     """Parameters that do not describe a link that can be simulated."""
 
 
@@ -68,8 +68,8 @@ def power_curve(theta: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class LinkConfig:
-    """Parameters of the simulated link; units are s, Hz, rad and mW."""
+class OwcLinkConfig(Dropouts):
+    """Parameters of the simulated link; units are s, Hz, rad and mW (blockages first)."""
 
     rate: float = 1.0                   # samples per second (the power meter, 1 Hz in IV-C)
     seed: int = 0
@@ -82,47 +82,25 @@ class LinkConfig:
     knob_rate: float = 0.2              # knob turns per second (Poisson)
     knob_step: float = 0.3              # rad: standard deviation of one turn
     noise_std: float = 10.0             # mW: v ~ N(0, 100) of system (3)
-    blockage: str = 'none'              # 'none', 'bernoulli' or 'gilbert_elliott'
-    drop_probability: float = 0.0       # Bernoulli p
-    ge_p_gb: float = 0.01               # Gilbert-Elliott P(good -> bad) per sample
-    ge_p_bg: float = 0.2                # P(bad -> good) per sample
-    ge_loss_good: float = 0.0           # loss probability in the good state
-    ge_loss_bad: float = 1.0            # loss probability in the bad state
 
     def __post_init__(self) -> None:
-        """Check every parameter; raise LinkError with the reason."""
+        """Check every parameter; raise OwcLinkError with the reason."""
         for name in ('rate', 'vibration_frequency', 'phase_diffusion', 'rest_angle',
                      'knob_min', 'knob_max', 'knob_initial', 'knob_rate', 'knob_step',
                      'noise_std'):
             value = getattr(self, name)
             if not np.isfinite(value):
-                raise LinkError(f'{name} must be finite, got {value}')
+                raise OwcLinkError(f'{name} must be finite, got {value}')
         if not self.rate > 0:
-            raise LinkError(f'rate must be > 0 Hz, got {self.rate}')
+            raise OwcLinkError(f'rate must be > 0 Hz, got {self.rate}')
         for name in ('vibration_frequency', 'phase_diffusion', 'knob_min', 'knob_rate',
                      'knob_step', 'noise_std'):
             if getattr(self, name) < 0:
-                raise LinkError(f'{name} must be >= 0, got {getattr(self, name)}')
+                raise OwcLinkError(f'{name} must be >= 0, got {getattr(self, name)}')
         if not self.knob_min <= self.knob_initial <= self.knob_max:
-            raise LinkError(f'knob_initial {self.knob_initial} is outside '
-                            f'[knob_min, knob_max] = [{self.knob_min}, {self.knob_max}]')
-        if self.blockage not in BLOCKAGES:
-            raise LinkError(f'blockage must be one of {BLOCKAGES}, got {self.blockage!r}')
-        for name in ('drop_probability', 'ge_p_gb', 'ge_p_bg', 'ge_loss_good', 'ge_loss_bad'):
-            value = getattr(self, name)
-            if not 0.0 <= value <= 1.0:
-                raise LinkError(f'{name} is a probability, got {value}')
-        if self.blockage == 'gilbert_elliott' and self.ge_p_gb + self.ge_p_bg <= 0:
-            raise LinkError('a Gilbert-Elliott channel needs ge_p_gb + ge_p_bg > 0')
-
-    def expected_drop_rate(self) -> float:
-        """Long-run fraction of samples lost to blockages (stationary Gilbert-Elliott)."""
-        if self.blockage == 'bernoulli':
-            return self.drop_probability
-        if self.blockage == 'gilbert_elliott':
-            bad = self.ge_p_gb / (self.ge_p_gb + self.ge_p_bg)
-            return (1 - bad) * self.ge_loss_good + bad * self.ge_loss_bad
-        return 0.0
+            raise OwcLinkError(f'knob_initial {self.knob_initial} is outside '
+                               f'[knob_min, knob_max] = [{self.knob_min}, {self.knob_max}]')
+        self.check_dropouts(OwcLinkError)
 
 
 @dataclass(frozen=True)
@@ -160,7 +138,7 @@ def fold(w: np.ndarray, lo: float, hi: float) -> np.ndarray:
 class OwcLink:
     """A seeded, resumable stream of link samples; `generate(n)` returns the next n."""
 
-    def __init__(self, config: LinkConfig) -> None:
+    def __init__(self, config: OwcLinkConfig) -> None:
         self.config = config
         seq = np.random.SeedSequence(config.seed)
         (self._rng_phase0, self._rng_knob_count, self._rng_knob_step, self._rng_phase,
@@ -182,7 +160,7 @@ class OwcLink:
         c = self.config
         n = int(n)
         if n < 0:
-            raise LinkError(f'n must be >= 0, got {n}')
+            raise OwcLinkError(f'n must be >= 0, got {n}')
         dt = 1.0 / c.rate
         k = self._k + np.arange(n)
         t = k * dt
@@ -224,31 +202,7 @@ class OwcLink:
         return bad
 
 
-def gilbert_elliott_states(u: np.ndarray, p_gb: float, p_bg: float,
-                           bad: bool) -> tuple[np.ndarray, bool]:
-    """
-    Return the channel states (True: bad) of the next u.size samples, and the state after.
-
-    The channel is in state `bad` at the first sample; u[k] < p_gb (in the good state) or
-    u[k] < p_bg (in the bad state) switches it after sample k.
-    """
-    n = u.size
-    out = np.zeros(n, dtype=bool)
-    leave_good = np.flatnonzero(u < p_gb)
-    leave_bad = np.flatnonzero(u < p_bg)
-    pos, state = 0, bool(bad)
-    while pos < n:
-        switches = leave_bad if state else leave_good
-        i = int(np.searchsorted(switches, pos))
-        end = int(switches[i]) + 1 if i < switches.size else n
-        out[pos:end] = state
-        if i < switches.size:
-            state = not state
-        pos = end
-    return out, state
-
-
-def simulate_link(config: LinkConfig, n: int, *, start: Optional[int] = None) -> Samples:
+def simulate_link(config: OwcLinkConfig, n: int, *, start: Optional[int] = None) -> Samples:
     """Generate n samples of a fresh link (optionally skipping the first `start`)."""
     link = OwcLink(config)
     if start:

@@ -27,18 +27,18 @@ import matplotlib
 import numpy as np
 from rclpy.serialization import deserialize_message
 
-from tskf_ros.bag import alignment_io
-from tskf_ros.bag.estimator_io import load_config, ParamsError, TRUTH_TOPIC
-from tskf_ros.bag.offline import replay
+from tskf_ros.bag.message_types import BagTypeError, message_class
+from tskf_ros.bag.offline_replay import replay
 from tskf_ros.bag.reader import BagError, BagReader
-from tskf_ros.bag.types import BagTypeError, message_class
-from tskf_ros.nodes import conversions
+from tskf_ros.core.units import NS
+from tskf_ros.messages import alignment_interface as aligner
+from tskf_ros.messages import conversions
+from tskf_ros.messages.estimator_interface import BAG_TRUTH_TOPIC, load_config, ParamsError
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402, I100, I202
 
 PROG = 'plot_bag'
-NS = 1_000_000_000
 
 
 def _decode(reader: BagReader, topics: set) -> dict:
@@ -71,7 +71,7 @@ def estimator_figure(data: dict, measurement: list, C: float, D: float, title: s
     tm, mu = _series(data['/estimate/mu'], 'jump')
     ty = np.array([conversions.msg_to_power(m)[0] for _, m in measurement], float) / NS
     y = np.array([conversions.msg_to_power(m)[1] for _, m in measurement])
-    truth = data.get(TRUTH_TOPIC) or []
+    truth = data.get(BAG_TRUTH_TOPIC) or []
     t_true = np.array([conversions.stamp_to_ns(m.header.stamp) for _, m in truth]) / NS
     x_true = np.array([m.position[0] for _, m in truth]) if truth else np.zeros(0)
     t0 = min(tp.min(), ty.min()) if ty.size else tp.min()
@@ -143,7 +143,7 @@ def alignment_figure(data: dict, title: str, *, replayed: bool = False,
     """
     recorded = data.get('/alignment/estimate') or []
     if replayed:
-        t, x, sd = _alignment_series(data[alignment_io.OUTPUT_TOPICS['corrected']], True)
+        t, x, sd = _alignment_series(data[aligner.BAG_OUTPUT_TOPICS['corrected']], True)
         label = 'x(t|t) of the replay (open loop)'
     else:
         t, x, sd = _alignment_series(recorded, False)
@@ -189,14 +189,14 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
     reader = BagReader(bag)
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    if alignment_io.OUTPUT_TOPICS['command'] in reader.topics:
-        intensity = topic or next((t for t in (alignment_io.INPUT_TOPIC, '/photodiode')
-                                   if t in reader.topics), alignment_io.INPUT_TOPIC)
-        wanted = {alignment_io.OUTPUT_TOPICS['corrected'], intensity, '/alignment/truth',
+    if aligner.BAG_OUTPUT_TOPICS['command'] in reader.topics:
+        intensity = topic or next((t for t in (aligner.BAG_INPUT_TOPIC, '/photodiode')
+                                   if t in reader.topics), aligner.BAG_INPUT_TOPIC)
+        wanted = {aligner.BAG_OUTPUT_TOPICS['corrected'], intensity, '/alignment/truth',
                   '/alignment/estimate'}
         data = _decode(reader, wanted & set(reader.topics))
-        if not data.get(alignment_io.OUTPUT_TOPICS['corrected']):
-            raise BagError(f'{bag}: no EKF estimates on {alignment_io.OUTPUT_TOPICS["corrected"]}'
+        if not data.get(aligner.BAG_OUTPUT_TOPICS['corrected']):
+            raise BagError(f'{bag}: no EKF estimates on {aligner.BAG_OUTPUT_TOPICS["corrected"]}'
                            ' (algorithm is not ekf?): nothing to plot')
         fig = alignment_figure(data, f'{bag.name}: alignment node replayed offline (open '
                                'loop: the commands did not move the recorded receiver)',
@@ -210,12 +210,12 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
         written.append(_save(fig, out / 'alignment.png'))
         return written
     config = load_config(params_file)
-    model = config.estimator.model
+    model = config.session.model
     C, D = float(model.C[0, 0]), float(model.D[0]) if model.D is not None else 0.0
     if '/estimate/corrected' in reader.topics:
         meas_topic = topic or '/received_power'
         wanted = {'/estimate/predicted', '/estimate/corrected', '/estimate/mu', meas_topic}
-        data = _decode(reader, (wanted | {TRUTH_TOPIC}) & set(reader.topics))
+        data = _decode(reader, (wanted | {BAG_TRUTH_TOPIC}) & set(reader.topics))
         measurement = data.get(meas_topic, [])
     else:
         log(f'{bag}: no estimates in the bag: running the estimator offline first')
@@ -224,7 +224,7 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
         data = {}
         measurement = []
         for t, log_ns, msg in res.outputs:
-            if t == res.topic or t == TRUTH_TOPIC:
+            if t == res.topic or t == BAG_TRUTH_TOPIC:
                 msg = deserialize_message(msg.data, message_class(msg.msgtype))
             if t == res.topic:
                 measurement.append((log_ns, msg))

@@ -8,14 +8,14 @@ The bags hold what the drivers would publish (no estimates; `replay_offline` add
 
 - owc_cai_td_1hz: Cai et al.'s 300 s experiment at 1 Hz.  The power meter samples at
   every whole second; the received-power messages are exactly the whole seconds of Cai's
-  T_d (tskf_ros.timescale.CAI_TD_SEGMENTS realised at 1 s), i.e. t = 1..300 without the
+  T_d (tskf_ros.core.time_scales.CAI_TD_SEGMENTS realised at 1 s), i.e. t = 1..300 without the
   five interruptions 31, 127, 132-134, 210-211 and 219-223 (the jumps J = 2, 2, 4, 3, 6 of
   Fig. 6(b)).  The vibration amplitude is kept below 0.5 rad so that the power never
   drops to zero by itself: the only gaps are T_d's.  /true_angle has all 301 samples.
 - owc_ge_1khz: one minute at 1 kHz through a Gilbert-Elliott channel (good -> bad 0.002,
   bad -> good 0.05 per sample: bursts of 20 ms on average, 3.8 % of the time blocked) on
   top of the vibration's own dropouts (readings at or below zero are not published).
-- led_alignment: the scanning-EKF alignment of Solanki et al. (tskf_ros.led.simulate,
+- led_alignment: the scanning-EKF alignment of Solanki et al. (tskf_ros.led.simulate_tracking,
   Table I parameters, 400 steps of 50 ms, 5 % missing measurements).
 - drogue: Fang & de Callafon's drogue (tskf_ros.experiments.drogue.run with the seed, 4 h
   at T = 5 s): the position fixes at the surface on /received_power as the estimator's
@@ -38,15 +38,15 @@ from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 
 from tskf_ros import led
-from tskf_ros.bag.types import qos_from_rclpy
+from tskf_ros.bag.message_types import qos_from_rclpy
 from tskf_ros.bag.writer import BagError, BagWriter
+from tskf_ros.core.time_scales import cai_td
+from tskf_ros.core.units import NS
 from tskf_ros.experiments import drogue as drogue_sim
-from tskf_ros.nodes import conversions
-from tskf_ros.owc_link import LinkConfig, OwcLink
-from tskf_ros.timescale import cai_td
+from tskf_ros.messages import conversions
+from tskf_ros.owc.vibrating_link import OwcLink, OwcLinkConfig
 
 PROG = 'make_sample_bags'
-NS = 1_000_000_000
 START_S = 1_700_000_000
 DEFAULT_SEED = 2013
 ILLUMINANCE = 'sensor_msgs/msg/Illuminance'
@@ -67,7 +67,7 @@ def td_seconds() -> np.ndarray:
     return np.unique(np.round(points).astype(int))
 
 
-def _owc(writer: BagWriter, link: LinkConfig, n: int,
+def _owc(writer: BagWriter, link: OwcLinkConfig, n: int,
          keep: Callable[[np.ndarray], np.ndarray]) -> None:
     """Write n link samples: the truth always, the power where keep() and not blocked."""
     writer.add_topic('/received_power', ILLUMINANCE, qos=SENSOR_QOS)
@@ -86,14 +86,14 @@ def _owc(writer: BagWriter, link: LinkConfig, n: int,
 
 def owc_cai_td_1hz(writer: BagWriter, seed: int) -> None:
     """Cai's 300 s experiment at 1 Hz with the interruptions of T_d (see the module doc)."""
-    link = LinkConfig(rate=1.0, seed=seed, knob_max=0.5, knob_initial=0.3)
+    link = OwcLinkConfig(rate=1.0, seed=seed, knob_max=0.5, knob_initial=0.3)
     td = set(td_seconds().tolist())
     _owc(writer, link, 301, lambda k: np.isin(k, list(td)))
 
 
 def owc_ge_1khz(writer: BagWriter, seed: int) -> None:
     """One minute at 1 kHz through a Gilbert-Elliott channel."""
-    link = LinkConfig(rate=1000.0, seed=seed, blockage='gilbert_elliott', **GE)
+    link = OwcLinkConfig(rate=1000.0, seed=seed, blockage='gilbert_elliott', **GE)
     _owc(writer, link, 60_000, lambda k: np.ones(k.shape, dtype=bool))
 
 
@@ -113,8 +113,8 @@ class _RecordingEKF(led.ScanningEKF):
 def led_alignment(writer: BagWriter, seed: int) -> None:
     """Simulate one scanning-EKF alignment run of Solanki et al. Section V."""
     aligner = _RecordingEKF(led.EKFConfig(), runs=1)
-    link = led.LinkConfig(dropout=LED_DROPOUT)
-    traj = led.simulate(aligner, link, np.random.default_rng(seed))
+    link = led.TrackingLinkConfig(dropout=LED_DROPOUT)
+    traj = led.simulate_tracking(aligner, link, np.random.default_rng(seed))
     writer.add_topic('/photodiode', ILLUMINANCE, qos=SENSOR_QOS)
     writer.add_topic('/alignment/truth', JOINT_STATE, qos=RELIABLE_QOS)
     writer.add_topic('/alignment/estimate', ESTIMATE, qos=RELIABLE_QOS)

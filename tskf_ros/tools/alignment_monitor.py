@@ -12,9 +12,9 @@ from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray
 
-from tskf_ros.nodes import conversions
-from tskf_ros.nodes.alignment import COMMAND_TOPIC
-from tskf_ros.nodes.demo_collector import spin_until
+from tskf_ros.messages import conversions
+from tskf_ros.messages.alignment_interface import COMMAND_TOPIC
+from tskf_ros.tools.demo_collector import spin_until
 
 
 @dataclass

@@ -15,8 +15,8 @@ message types and header stamps.  An output message's log time is the log time o
 input message that produced it (the live node publishes on receipt); /diagnostics is
 emitted every diagnostics_period seconds of log time, as the node's timer would.
 
---filter alignment runs the alignment node's AlignmentSession instead (tskf_ros.bag.
-alignment_io) on the intensity topic (default /intensity, else the only stamped scalar
+--filter alignment runs the alignment node's AlignmentSession instead (tskf_ros.messages.
+alignment_interface) on the intensity topic (default /intensity, else the only stamped scalar
 topic, e.g. /photodiode of bags/led_alignment) and writes what that node publishes:
 base_position_controller/commands, estimate/predicted and estimate/corrected (EKF) and
 /diagnostics.  This is open loop: the commands do not move the recorded receiver, so the
@@ -42,27 +42,28 @@ from typing import Callable, Optional
 
 from rclpy.serialization import deserialize_message, serialize_message
 
-from tskf_ros.alignment import AlignmentSession
-from tskf_ros.bag import alignment_io
-from tskf_ros.bag.estimator_io import (DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, ESTIMATE_TYPE,
-                                       extractor, INPUT_TYPES, JUMP_TYPE, load_config,
-                                       outcome_messages, output_qos, OUTPUT_TOPICS,
-                                       ParamsError, POWER_TOPIC, U_TOPIC, U_TYPE)
-from tskf_ros.bag.reader import BagError, BagReader, Damage
-from tskf_ros.bag.types import BagTypeError, message_class, qos_from_rclpy, typestore
+from tskf_ros.bag.message_types import BagTypeError, message_class, qos_from_rclpy, typestore
+from tskf_ros.bag.reader import BagError, BagReader, Damage, EXIT_DAMAGED
 from tskf_ros.bag.writer import BagWriter
-from tskf_ros.estimation import EstimatorSession, NS
-from tskf_ros.nodes import conversions
-from tskf_ros.nodes.timescale_estimator import input_from_msg, NodeConfig
+from tskf_ros.core.units import NS
+from tskf_ros.led.alignment_session import AlignmentSession
+from tskf_ros.messages import alignment_interface as aligner
+from tskf_ros.messages import estimator_interface as estimator
+from tskf_ros.messages.estimator_interface import (BAG_INPUT_TOPIC, bag_outcome_messages,
+                                                   BAG_OUTPUT_TOPICS, BAG_POWER_TOPIC,
+                                                   DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE,
+                                                   ESTIMATE_TYPE, extractor, input_from_msg,
+                                                   INPUT_TYPE, INPUT_TYPES, JUMP_TYPE, load_config,
+                                                   NodeConfig, output_qos, ParamsError)
+from tskf_ros.owc.estimator_session import EstimatorSession
 
 PROG = 'replay_offline'
-EXIT_DAMAGED = 3
 # exceptions rclpy's deserializer raises on bytes that are not the type
 DESERIALIZE_ERRORS = (RuntimeError, ValueError, TypeError)
 FILTERS = ('estimator', 'alignment')
 # filter -> (default input topic, suffix of the default output)
-FILTER_INPUT = {'estimator': (POWER_TOPIC, '_estimated'),
-                'alignment': (alignment_io.INPUT_TOPIC, '_aligned')}
+FILTER_INPUT = {'estimator': (BAG_POWER_TOPIC, '_estimated'),
+                'alignment': (aligner.BAG_INPUT_TOPIC, '_aligned')}
 
 
 class InputError(BagError):
@@ -89,7 +90,7 @@ class ReplayResult:
 
 
 def choose_topic(reader: BagReader, topic: Optional[str],
-                 default: str = POWER_TOPIC) -> tuple[str, str, list]:
+                 default: str = BAG_POWER_TOPIC) -> tuple[str, str, list]:
     """
     Pick the measurement topic and its type; return (topic, type, assumptions).
 
@@ -138,26 +139,29 @@ def choose_input_topic(reader: BagReader, topic: Optional[str]) -> tuple[str, li
     Without --input-topic: /input if the bag has it, else none.
     """
     if topic is None:
-        if U_TOPIC not in reader.topics:
+        if BAG_INPUT_TOPIC not in reader.topics:
             return '', []
-        topic = U_TOPIC
+        topic = BAG_INPUT_TOPIC
     info = reader.topics.get(topic)
     if info is None:
         raise InputError(f'{reader.path}: no input topic {topic} (topics: '
                          f'{", ".join(sorted(reader.topics)) or "none"})')
-    if info.msgtype != U_TYPE:
+    if info.msgtype != INPUT_TYPE:
         raise InputError(f'{reader.path}: input topic {topic} has type '
-                         f'{info.msgtype or "unknown"}, not {U_TYPE}')
-    return topic, [f'{topic} ({U_TYPE}, slot i = u[i]) is the input u of the model, held '
+                         f'{info.msgtype or "unknown"}, not {INPUT_TYPE}')
+    return topic, [f'{topic} ({INPUT_TYPE}, slot i = u[i]) is the input u of the model, held '
                    'from each stamp to the next (zero-order hold)']
 
 
 class OfflineEstimator:
     """The live node's work on one message at a time, without DDS or a clock."""
 
+    interface = estimator   # the node's module in tskf_ros.messages
+    session_class: type = EstimatorSession
+
     def __init__(self, config: NodeConfig, msgtype: str) -> None:
         self.config = config
-        self.session = EstimatorSession(config.estimator)
+        self.session = self.session_class(config.session)
         self.cls = message_class(msgtype)
         self.extract = extractor(msgtype)
         self.period_ns = int(round(config.diagnostics_period * NS))
@@ -167,7 +171,7 @@ class OfflineEstimator:
         """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
         qos = output_qos(self.config)
         return [(name, JUMP_TYPE if kind == 'mu' else ESTIMATE_TYPE, qos)
-                for (kind, _), name in OUTPUT_TOPICS.items()]
+                for (kind, _), name in BAG_OUTPUT_TOPICS.items()]
 
     def diagnostics_due(self, log_ns: int) -> list:
         """Return the /diagnostics messages the node's timer would have sent up to log_ns."""
@@ -175,10 +179,8 @@ class OfflineEstimator:
         if self.next_diag is None:
             self.next_diag = log_ns + self.period_ns
         while log_ns >= self.next_diag:
-            level, message, values = self.session.diagnostics()
-            out.append((self.next_diag, conversions.diagnostics_to_msg(
-                self.next_diag, 'timescale_estimator: time-scale filter', level, message,
-                values, hardware_id=self.config.estimator.model.name)))
+            out.append((self.next_diag, self.interface.diagnostics_message(
+                self.session, self.config, self.next_diag)))
             self.next_diag += self.period_ns
         return out
 
@@ -187,48 +189,32 @@ class OfflineEstimator:
         msg = deserialize_message(data, self.cls)
         stamp_ns, value, variance = self.extract(msg, log_ns)
         out = self.session.add(stamp_ns, value, variance, now_ns=log_ns)
-        return out.status, outcome_messages(out, self.config)
+        return out.status, bag_outcome_messages(out, self.config)
 
     def process_input(self, data: bytes, log_ns: int) -> tuple[str, list]:
         """Deserialize one input u and run it; return (status, [(topic, msg)])."""
-        msg = deserialize_message(data, message_class(U_TYPE))
+        msg = deserialize_message(data, message_class(INPUT_TYPE))
         out = self.session.add_input(*input_from_msg(msg, self.session))
-        return out.status, outcome_messages(out, self.config)
+        return out.status, bag_outcome_messages(out, self.config)
 
 
 class OfflineAligner(OfflineEstimator):
     """The live alignment node's work on one message at a time, without DDS or a clock."""
 
-    def __init__(self, config: alignment_io.NodeConfig, msgtype: str) -> None:
-        self.config = config
-        self.session = AlignmentSession(config.session)
-        self.cls = message_class(msgtype)
-        self.extract = extractor(msgtype)
-        self.period_ns = int(round(config.diagnostics_period * NS))
-        self.next_diag = None
+    interface = aligner
+    session_class = AlignmentSession
 
     def output_topics(self) -> list:
         """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
-        return [(name, alignment_io.OUTPUT_TYPES[key], alignment_io.output_qos(self.config, key))
-                for key, name in alignment_io.OUTPUT_TOPICS.items()]
-
-    def diagnostics_due(self, log_ns: int) -> list:
-        """Return the /diagnostics messages the node's timer would have sent up to log_ns."""
-        out = []
-        if self.next_diag is None:
-            self.next_diag = log_ns + self.period_ns
-        while log_ns >= self.next_diag:
-            out.append((self.next_diag, alignment_io.diagnostics_message(
-                self.session, self.config, self.next_diag)))
-            self.next_diag += self.period_ns
-        return out
+        return [(name, aligner.OUTPUT_TYPES[key], aligner.output_qos(self.config, key))
+                for key, name in aligner.BAG_OUTPUT_TOPICS.items()]
 
     def process(self, data: bytes, log_ns: int) -> tuple[str, list]:
         """Deserialize one intensity sample and run it; return (status, [(topic, msg)])."""
         msg = deserialize_message(data, self.cls)
         stamp_ns, volts, _ = self.extract(msg, log_ns)
         out = self.session.add(stamp_ns, volts)
-        return out.status, alignment_io.outcome_messages(out, self.config)
+        return out.status, aligner.bag_outcome_messages(out, self.config)
 
 
 def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
@@ -252,12 +238,12 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
         raise ValueError(f'filter must be one of {FILTERS}, got {filter!r}')
     reader = BagReader(bag)
     aligning = filter == 'alignment'
-    config = (alignment_io.load_config if aligning else load_config)(params_file)
+    config = (aligner.load_config if aligning else load_config)(params_file)
     result = ReplayResult()
     result.topic, result.msgtype, result.assumptions = choose_topic(
         reader, topic, FILTER_INPUT[filter][0])
     if aligning:
-        result.assumptions.append(alignment_io.OPEN_LOOP_NOTE)
+        result.assumptions.append(aligner.OPEN_LOOP_NOTE)
     else:
         result.input_topic, notes = choose_input_topic(reader, input_topic)
         result.assumptions += notes
@@ -283,7 +269,7 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
                 writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, qos=[qos_from_rclpy(
                     est.output_topics()[0][2])])
             if aligning:
-                writer._writer.set_custom_data('tskf_ros.open_loop', alignment_io.OPEN_LOOP_NOTE)
+                writer._writer.set_custom_data('tskf_ros.open_loop', aligner.OPEN_LOOP_NOTE)
         damage = _run(reader, est, writer, result, diagnostics)
         if damage is not None:
             result.damage = damage
@@ -317,7 +303,7 @@ def _run(reader: BagReader, est: OfflineEstimator, writer: Optional[BagWriter],
                 status, msgs = est.process_input(raw.data, log_ns)
             except DESERIALIZE_ERRORS as exc:
                 return Damage(str(reader.path), -1, f'message {result.read} on '
-                              f'{raw.topic} does not deserialize as {U_TYPE} ({exc})',
+                              f'{raw.topic} does not deserialize as {INPUT_TYPE} ({exc})',
                               result.read - 1)
             result.inputs += 1
             result.input_statuses[status] += 1
@@ -379,11 +365,11 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--params-file', type=Path,
                         help='parameters of that node, e.g. config/owc_estimator.yaml or '
                         "config/alignment.yaml; default: the node's defaults")
-    parser.add_argument('--topic', help=f'measurement topic (default {POWER_TOPIC}, with '
-                        f'--filter alignment {alignment_io.INPUT_TOPIC}); types: '
+    parser.add_argument('--topic', help=f'measurement topic (default {BAG_POWER_TOPIC}, with '
+                        f'--filter alignment {aligner.BAG_INPUT_TOPIC}); types: '
                         + ', '.join(INPUT_TYPES))
-    parser.add_argument('--input-topic', help=f"the estimator's input u ({U_TYPE}); "
-                        f'default {U_TOPIC} if the bag has it')
+    parser.add_argument('--input-topic', help=f"the estimator's input u ({INPUT_TYPE}); "
+                        f'default {BAG_INPUT_TOPIC} if the bag has it')
     parser.add_argument('--overwrite', action='store_true', help='replace an existing output')
     parser.add_argument('--compress', action='store_true', help='zstd-compress the chunks')
     parser.add_argument('--no-diagnostics', action='store_true',

@@ -31,8 +31,8 @@ from typing import Optional, Sequence
 import numpy as np
 
 from tskf_ros import led
+from tskf_ros.core.units import NS
 
-NS = 1_000_000_000
 GAP_FACTOR = 1.5        # an interval longer than this many dt is a gap (samples missing)
 MISSING_REASONS = ('non_finite', 'negative')
 REJECT_REASONS = ('zero_stamp', 'duplicate', 'stale', 'filter_error')

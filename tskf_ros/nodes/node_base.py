@@ -1,56 +1,25 @@
 """What the nodes share: `--help` without ROS, the Jazzy main loop, validated parameters."""
 
 import argparse
+from dataclasses import fields
 import sys
 from typing import Callable, Optional, Sequence
 
-from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
-                                SetParametersResult)
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import ParameterType, SetParametersResult
 import rclpy
+from rclpy.clock import ClockChange, JumpThreshold, TimeJump
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 
-from tskf_ros.owc_link import BLOCKAGES
+from tskf_ros.messages.parameters import descriptor
+from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC
 
-
-# descriptions and ranges of the dropout parameters both link simulators share
-BLOCKAGE_HELP = {
-    'blockage': ('link blockages: ' + ', '.join(BLOCKAGES), None),
-    'drop_probability': ('Bernoulli drop probability per sample', (0.0, 1.0)),
-    'ge_p_gb': ('Gilbert-Elliott P(good -> bad) per sample', (0.0, 1.0)),
-    'ge_p_bg': ('Gilbert-Elliott P(bad -> good) per sample', (0.0, 1.0)),
-    'ge_loss_good': ('Gilbert-Elliott loss probability in the good state', (0.0, 1.0)),
-    'ge_loss_bad': ('Gilbert-Elliott loss probability in the bad state', (0.0, 1.0)),
-}
-
-
-def descriptor(text: str, rng: Optional[tuple] = None,
-               type_: int = ParameterType.PARAMETER_DOUBLE, *,
-               read_only: bool = True) -> ParameterDescriptor:
-    """Describe a parameter: its text, type, optional float range (lo, hi) and read-only flag."""
-    d = ParameterDescriptor(description=text, type=type_, read_only=read_only)
-    if rng is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1])]
-    return d
-
-
-def sensor_input_qos(depth: int) -> QoSProfile:
-    """
-    Return the QoS for a sensor input: best effort, keep last depth.
-
-    A best-effort subscription matches reliable and best-effort publishers alike, so the
-    node takes a real driver's sensor-data stream as well as a reliable bag player.
-    """
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=ReliabilityPolicy.BEST_EFFORT)
-
-
-def float_range(lo: float, hi: float) -> dict:
-    """Return ParameterDescriptor keyword arguments for a closed floating-point range."""
-    return {'floating_point_range': [FloatingPointRange(from_value=lo, to_value=hi)]}
+# a simulator takes at most this many samples per callback when catching up
+MAX_BATCH = 10_000
 
 
 def parse_args(prog: str, description: str,
@@ -88,13 +57,16 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
 
 class ReconfigurableNode(Node):
     """
-    A node whose parameters make one config object, validated whole and then applied.
+    A filtering node: one config object validated whole, diagnostics, and clock-jump resets.
 
     A subclass declares its parameters, names them in PARAMETERS, builds its config with
     `make_config(values)` (raising one of CONFIG_ERRORS with the reason) and hands a new
     config to its session in `reconfigure(config)`, which returns what happened.  A change
     that does not make a working config is refused with the reason, and the node keeps
-    running on the old values.  `config.diagnostics_period` retimes `self.diag_timer`.
+    running on the old values.  `start_diagnostics()` publishes `diagnostics_message(now)`
+    on /diagnostics every `config.diagnostics_period`, retimed when that changes.
+    `watch_clock_jumps()` calls `restart(why)` when the clock jumps back or changes source
+    (use_sim_time with a looped bag).
     """
 
     PARAMETERS: tuple = ()
@@ -122,6 +94,42 @@ class ReconfigurableNode(Node):
         """Hand a validated config to the session; return what it did (subclasses)."""
         raise NotImplementedError
 
+    def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
+        """Return the /diagnostics message of the session at stamp_ns (subclasses)."""
+        raise NotImplementedError
+
+    def restart(self, why: str) -> None:
+        """Restart the session after a clock jump, saying why (subclasses)."""
+        raise NotImplementedError
+
+    def start_diagnostics(self) -> None:
+        """Publish the session's diagnostics every config.diagnostics_period seconds."""
+        self.diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC,
+                                              DEFAULT_DEPTH)
+        self.diag_timer = self.create_timer(self.config.diagnostics_period,
+                                            self.publish_diagnostics)
+
+    def publish_diagnostics(self) -> DiagnosticArray:
+        """Publish (and return) the session's counters on /diagnostics."""
+        msg = self.diagnostics_message(self.get_clock().now().nanoseconds)
+        self.diag_pub.publish(msg)
+        return msg
+
+    def watch_clock_jumps(self) -> None:
+        """Restart the session when the clock jumps back by 1 ms or more or changes source."""
+        self._jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1_000_000),
+                          on_clock_change=True),
+            post_callback=self._on_clock_jump)
+
+    def _on_clock_jump(self, jump: TimeJump) -> None:
+        if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED,
+                                 ClockChange.ROS_TIME_DEACTIVATED):
+            why = f'clock source changed ({jump.clock_change.name})'
+        else:
+            why = f'clock jumped {jump.delta.nanoseconds / 1e9:.3f} s'
+        self.restart(why)
+
     def _validate(self, changes: list) -> SetParametersResult:
         try:
             config = self.make_config(self.parameter_values(changes))
@@ -142,3 +150,23 @@ class ReconfigurableNode(Node):
         message = self.reconfigure(config)
         self.get_logger().info(f'parameters changed ({", ".join(p.name for p in changes)}): '
                                f'{message}')
+
+
+def declare_config_fields(node: Node, config_cls: type, help_: dict) -> None:
+    """Declare one read-only parameter per field of a link config dataclass, typed by default."""
+    defaults = config_cls()
+    for f in fields(config_cls):
+        text, rng = help_[f.name]
+        value = getattr(defaults, f.name)
+        type_ = {int: ParameterType.PARAMETER_INTEGER, str: ParameterType.PARAMETER_STRING,
+                 float: ParameterType.PARAMETER_DOUBLE}[type(value)]
+        node.declare_parameter(f.name, value, descriptor(text, rng, type_))
+
+
+def config_from_parameters(node: Node, config_cls: type, error: type) -> object:
+    """Build a link config dataclass from the node's parameters; raise `error` if bad."""
+    try:
+        return config_cls(**{f.name: node.get_parameter(f.name).value
+                             for f in fields(config_cls)})
+    except error as exc:
+        raise error(f'bad simulator parameters: {exc}') from None

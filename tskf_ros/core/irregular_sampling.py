@@ -16,8 +16,8 @@ Contents:
   eq. (18)), degenerate intervals (Definition 3, eqs. (19)-(20)), the test of
   Theorem 1, Corollaries 1 and 2, and `interval_warnings` for a node;
 - Theorem 2 for scalar systems: the fixed points of X = f^k(g(X)), eqs. (22)-(25);
-- not in the paper: the covariance of the time-scale filter (tskf_ros.tskf) after one
-  jump of length J in an otherwise steady stream (`jump_covariance`).
+- not in the paper: the covariance of the time-scale filter (tskf_ros.core.timescale_kalman)
+  after one jump of length J in an otherwise steady stream (`jump_covariance`).
 
 Errata in the paper, and what this module does instead:
 - eq. (3): Omega is printed [A^{k-1} B ... A I]; it is [A^{k-1} ... A I] (no B).
@@ -38,8 +38,9 @@ from typing import Iterable, Optional, Sequence
 import numpy as np
 import scipy.linalg
 
-from tskf_ros.models import LinearModel
-from tskf_ros.tskf import ArrayLike, as_matrix, check_covariance, TimeScaleKalmanFilter, van_loan
+from tskf_ros.core.linear_models import LinearModel
+from tskf_ros.core.timescale_kalman import (ArrayLike, as_matrix, check_covariance,
+                                            TimeScaleKalmanFilter, van_loan)
 
 # Default tolerances of the eigen-structure checks (all relative; see the functions).
 CLUSTER_TOL = 1e-6      # eigenvalues closer than this * max(1, ||A||_2) are one eigenvalue

@@ -1,0 +1,9 @@
+"""
+The papers' mathematics: the time-scale Kalman filter, time scales, irregular sampling, models.
+
+No I/O and no ROS: every module here imports only numpy, scipy and this folder.
+"""
+
+from tskf_ros.core.timescale_kalman import FilterError, TimeScaleKalmanFilter
+
+__all__ = ['FilterError', 'TimeScaleKalmanFilter']

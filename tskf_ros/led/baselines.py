@@ -1,0 +1,122 @@
+"""
+The baselines of Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018), Section V.
+
+Hill-climbing with step gamma = 2 degrees, and three-point averaging (26)
+gamma_p = gamma (V1 - V2) / (V1 + V2 + V3); `make_aligner` builds any of ALGORITHMS.
+"""
+
+import math
+from typing import Optional
+
+import numpy as np
+
+from tskf_ros.led.intensity_model import AlignmentError, IncidenceResponse
+from tskf_ros.led.scanning_ekf import (Aligner, as_measurement, EKFConfig, Measurement, PAPER_DT,
+                                       ScanningEKF, StampClock)
+
+HILL_STEP = 2.0                 # degrees, gamma of Section V
+
+
+class HillClimbing:
+    """
+    Hill-climbing (Section V): keep turning by gamma while the intensity rises.
+
+    A missing measurement makes it wait one step in place (command 0) and measure again.
+    """
+
+    def __init__(self, gamma: float = HILL_STEP, *, runs: int = 1, dt: float = PAPER_DT) -> None:
+        if not (math.isfinite(gamma) and gamma > 0.0):
+            raise AlignmentError(f'gamma must be positive, got {gamma}')
+        self.gamma = float(gamma)
+        self.runs = int(runs)
+        self.clock = StampClock(dt)
+        self.direction = np.ones(self.runs)
+        self.reference = np.full(self.runs, np.nan)
+
+    @property
+    def scan_offset(self) -> float:
+        """Return 0: hill-climbing has no scan."""
+        return 0.0
+
+    def step(self, stamp: float, z: Measurement) -> np.ndarray:
+        """Compare z with the last measurement, reverse if it did not rise, return the turn."""
+        z = as_measurement(z, self.runs)
+        self.clock.tick(stamp)
+        have = np.isfinite(z)
+        worse = have & np.isfinite(self.reference) & ~(z > self.reference)
+        self.direction = np.where(worse, -self.direction, self.direction)
+        self.reference = np.where(have, z, self.reference)
+        return np.where(have, self.direction * self.gamma, 0.0)
+
+
+class ThreePointAveraging:
+    """
+    Three-point averaging (Section V, eq. (26)), vectorised over runs.
+
+    A cycle measures V3 at the current orientation, V1 after turning by +gamma and V2
+    at -gamma, then turns to the new orientation by gamma_p = gamma (V1 - V2) /
+    (V1 + V2 + V3) (26), as printed: with noise the denominator can come close to zero
+    and gamma_p be huge.  clip=True (not in the paper) makes gamma_p 0 when the
+    denominator is not positive and clips it to [-gamma, gamma], its noise-free range.
+    A missing measurement repeats that phase of the cycle in place.
+    """
+
+    def __init__(self, gamma: float = HILL_STEP, *, runs: int = 1, dt: float = PAPER_DT,
+                 clip: bool = False) -> None:
+        if not (math.isfinite(gamma) and gamma > 0.0):
+            raise AlignmentError(f'gamma must be positive, got {gamma}')
+        self.gamma = float(gamma)
+        self.clip = bool(clip)
+        self.runs = int(runs)
+        self.clock = StampClock(dt)
+        self.phase = np.zeros(self.runs, dtype=int)   # 0: at origin, 1: at +gamma, 2: at -gamma
+        self.v = np.zeros((self.runs, 3))             # V1, V2, V3 of the current cycle
+        self.offset = np.zeros(self.runs)
+
+    @property
+    def scan_offset(self) -> float:
+        """Return 0: the turns around the cycle's origin are not a scan."""
+        return 0.0
+
+    def step(self, stamp: float, z: Measurement) -> np.ndarray:
+        """Record V for this phase, return the turn to the next phase's orientation."""
+        z = as_measurement(z, self.runs)
+        self.clock.tick(stamp)
+        have = np.isfinite(z)
+        g = self.gamma
+        cmd = np.zeros(self.runs)
+        at0, at1, at2 = (have & (self.phase == phase) for phase in range(3))
+        self.v[at0, 2] = z[at0]
+        self.v[at1, 0] = z[at1]
+        self.v[at2, 1] = z[at2]
+        cmd[at0] = g                     # origin -> +gamma
+        cmd[at1] = -2.0 * g              # +gamma -> -gamma
+        v1, v2, v3 = self.v[:, 0], self.v[:, 1], self.v[:, 2]
+        total = v1 + v2 + v3
+        with np.errstate(divide='ignore', invalid='ignore'):
+            # (26): gamma_p = (gamma V1 - gamma V2) / (V1 + V2 + V3)
+            gamma_p = g * (v1 - v2) / total
+        if self.clip:
+            gamma_p = np.clip(np.where(total > 0.0, gamma_p, 0.0), -g, g)
+        gamma_p = np.where(np.isfinite(gamma_p), gamma_p, 0.0)   # 0/0: no turn
+        cmd[at2] = g + gamma_p[at2]      # -gamma -> origin + gamma_p
+        self.phase = np.where(have, (self.phase + 1) % 3, self.phase)
+        return cmd
+
+
+ALGORITHMS = ('ekf', 'hill_climbing', 'three_point')
+
+
+def make_aligner(name: str, *, runs: int = 1, dt: float = PAPER_DT,
+                 response: Optional[IncidenceResponse] = None,
+                 ekf: Optional[EKFConfig] = None, gamma: float = HILL_STEP,
+                 clip: bool = False) -> Aligner:
+    """Build the aligner called `name` (one of ALGORITHMS); clip is for three_point."""
+    if name == 'ekf':
+        config = ekf if ekf is not None else EKFConfig(dt=dt)
+        return ScanningEKF(config, response, runs=runs)
+    if name == 'hill_climbing':
+        return HillClimbing(gamma, runs=runs, dt=dt)
+    if name == 'three_point':
+        return ThreePointAveraging(gamma, runs=runs, dt=dt, clip=clip)
+    raise AlignmentError(f'unknown algorithm {name!r}; expected one of {ALGORITHMS}')

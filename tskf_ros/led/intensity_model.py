@@ -1,0 +1,131 @@
+"""
+The light-intensity model of Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018), eq. (1)-(5).
+
+    A = e^{-cd}                                            (1)
+    E_theta(d) = I_theta e^{-cd} / d^2                     (2)
+    P_in = E_theta(d) A_0 g(phi)                           (3)
+    g(phi) = a1 e^{-((phi - b1)/c1)^2} + a2 e^{-((phi - b2)/c2)^2}     (4)
+    V_d = C_p I_theta e^{-cd} g(phi) / d^2                 (5)
+
+with the printed fit a1 = 0.6682, b1 = 7.752, c1 = 148.8, a2 = 0.3340, b2 = -13.57,
+c2 = 325.8.  Read with phi in degrees, that g is above 98% of its peak over +-15 degrees
+and still 40% of it at +-180, whereas Section V says +-15 degrees is about 20% of the
+peak (the tracking zone).  So the fit's argument is phi times `units_per_degree`; the
+default is the unit for which g(+-15 deg) averages 20% of the peak (17.70 units per
+degree, close to a 1.8 degree stepper at 1/32 microstep, 17.78 microsteps per degree),
+and `LITERAL_UNITS_PER_DEGREE` (1.0) keeps the printed reading selectable.
+"""
+
+from dataclasses import dataclass, field
+import functools
+import math
+from typing import Optional, Sequence
+
+import numpy as np
+import scipy.optimize
+
+# Eq. (4), the printed Gaussian fit of the photodiode's angular response (Fig. 5).
+PAPER_G_COEFFICIENTS = (0.6682, 7.752, 148.8, 0.3340, -13.57, 325.8)
+LITERAL_UNITS_PER_DEGREE = 1.0
+TRACKING_ANGLE = 15.0           # degrees, Section V
+TRACKING_LEVEL = 0.2            # fraction of the peak intensity, Section V
+MAX_INTENSITY = 3.0             # volts, Section V
+
+
+class AlignmentError(ValueError):
+    """Bad configuration or bad call given to an aligner."""
+
+
+def wrap_degrees(angle: np.ndarray) -> np.ndarray:
+    """Wrap angles in degrees to [-180, 180)."""
+    return (np.asarray(angle, dtype=float) + 180.0) % 360.0 - 180.0
+
+
+def attenuation(c: float, d: float) -> float:
+    """Beer's law, eq. (1): A = e^{-cd}."""
+    return math.exp(-c * d)
+
+
+def irradiance(intensity: float, c: float, d: float) -> float:
+    """Irradiance at the receiver, eq. (2): E_theta(d) = I_theta e^{-cd} / d^2."""
+    return intensity * attenuation(c, d) / d ** 2
+
+
+def _fit(u: np.ndarray, coefficients: Sequence[float]) -> np.ndarray:
+    """Eq. (4) in fit units: a1 e^{-((u - b1)/c1)^2} + a2 e^{-((u - b2)/c2)^2}."""
+    a1, b1, c1, a2, b2, c2 = coefficients
+    return a1 * np.exp(-((u - b1) / c1) ** 2) + a2 * np.exp(-((u - b2) / c2) ** 2)
+
+
+def _fit_peak(coefficients: Sequence[float]) -> tuple[float, float]:
+    """Return (u, g(u)) at the maximum of eq. (4), in fit units."""
+    b1, b2 = coefficients[1], coefficients[4]
+    lo, hi = min(b1, b2), max(b1, b2)
+    res = scipy.optimize.minimize_scalar(lambda u: -float(_fit(u, coefficients)),
+                                         bounds=(lo, hi), method='bounded',
+                                         options={'xatol': 1e-10})
+    return float(res.x), float(-res.fun)
+
+
+@functools.lru_cache(maxsize=None)
+def zone_units_per_degree(coefficients: tuple = PAPER_G_COEFFICIENTS, *,
+                          angle: float = TRACKING_ANGLE, level: float = TRACKING_LEVEL) -> float:
+    """
+    Fit units per degree for which g(+-angle) averages `level` of g's peak.
+
+    Solved with Brent's method; for the paper's fit, 15 degrees and 20% give 17.697.
+    """
+    _, peak = _fit_peak(coefficients)
+
+    def excess(scale: float) -> float:
+        mean = 0.5 * (_fit(angle * scale, coefficients) + _fit(-angle * scale, coefficients))
+        return float(mean) / peak - level
+
+    return float(scipy.optimize.brentq(excess, 1e-3, 1e3, xtol=1e-12))
+
+
+@dataclass(frozen=True)
+class IncidenceResponse:
+    """
+    g(phi) of eq. (4) with phi in degrees, evaluated at phi * units_per_degree.
+
+    units_per_degree=None picks `zone_units_per_degree` (about 17.70, the default);
+    pass LITERAL_UNITS_PER_DEGREE for the printed reading (phi in degrees).
+    """
+
+    coefficients: tuple = PAPER_G_COEFFICIENTS
+    units_per_degree: Optional[float] = None
+    peak_angle: float = field(init=False)
+    peak: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        if len(self.coefficients) != 6:
+            raise AlignmentError('g needs six coefficients (a1, b1, c1, a2, b2, c2), '
+                                 f'got {len(self.coefficients)}')
+        scale = self.units_per_degree
+        if scale is None:
+            scale = zone_units_per_degree(tuple(self.coefficients))
+        if not (math.isfinite(scale) and scale > 0.0):
+            raise AlignmentError(f'units_per_degree must be positive, got {scale}')
+        object.__setattr__(self, 'units_per_degree', float(scale))
+        u_peak, peak = _fit_peak(self.coefficients)
+        object.__setattr__(self, 'peak_angle', u_peak / scale)
+        object.__setattr__(self, 'peak', peak)
+
+    def g(self, phi: np.ndarray) -> np.ndarray:
+        """Eq. (4) at phi degrees."""
+        return _fit(np.asarray(phi, dtype=float) * self.units_per_degree, self.coefficients)
+
+    def dg(self, phi: np.ndarray) -> np.ndarray:
+        """g'(phi), the derivative of eq. (4) with respect to phi in degrees."""
+        a1, b1, c1, a2, b2, c2 = self.coefficients
+        s = self.units_per_degree
+        u = np.asarray(phi, dtype=float) * s
+        # d/du a e^{-((u - b)/c)^2} = -2 a (u - b) / c^2 e^{-((u - b)/c)^2}; du/dphi = s
+        return s * (-2.0 * a1 * (u - b1) / c1 ** 2 * np.exp(-((u - b1) / c1) ** 2)
+                    - 2.0 * a2 * (u - b2) / c2 ** 2 * np.exp(-((u - b2) / c2) ** 2))
+
+    def voltage(self, phi: np.ndarray, *, c_p: float, intensity: float, c: float,
+                d: float) -> np.ndarray:
+        """Eq. (5): V_d = C_p I_theta e^{-cd} g(phi) / d^2."""
+        return c_p * irradiance(intensity, c, d) * self.g(phi)

@@ -1,0 +1,106 @@
+"""
+The closed-loop tracking simulation of Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018).
+
+Eq. (25): x1_k = x1_{k-1} + w1, x2_k = x2_{k-1} + beta + u_{k-1} + w2, with Table I's
+parameters, and the tracking percentages of Section V (Table I, Fig. 8-10).
+"""
+
+from dataclasses import dataclass
+import math
+from typing import Optional
+
+import numpy as np
+
+from tskf_ros.led.intensity_model import (AlignmentError, IncidenceResponse, MAX_INTENSITY,
+                                          TRACKING_ANGLE, TRACKING_LEVEL, wrap_degrees)
+from tskf_ros.led.scanning_ekf import Aligner, PAPER_DT, PAPER_Q_SYS, ScanningEKF
+
+
+@dataclass(frozen=True)
+class TrackingLinkConfig:
+    """
+    The simulated link of Section V: eq. (25) with Table I's system noise.
+
+    beta is the transmitter's angular rate in degrees per second, added as beta * dt per
+    step; Q_sys is per step.  noise is the standard deviation of v in volts (R_sys = 0.04
+    is noise 0.2).  x1 starts where the peak intensity is `max_intensity`, and x2 (the
+    scan mean, or the orientation for the baselines) at x2_0 degrees.  dropout is the
+    probability that a measurement is missing (Bernoulli, independent per step and run).
+    """
+
+    beta: float = 1.2
+    dt: float = PAPER_DT
+    steps: int = 400
+    noise: float = 0.2
+    q_sys: tuple = (PAPER_Q_SYS[0][0], PAPER_Q_SYS[1][1])
+    max_intensity: float = MAX_INTENSITY
+    x2_0: float = 5.0
+    dropout: float = 0.0
+
+
+@dataclass
+class Trajectory:
+    """One simulation: time (steps,) and per-step, per-run arrays (steps, runs)."""
+
+    t: np.ndarray
+    phi: np.ndarray        # true angle of incidence, unwrapped (degrees)
+    x2: np.ndarray         # true scan mean phi - psi_k (the baselines: phi)
+    x1: np.ndarray         # true intensity factor
+    clean: np.ndarray      # x1 g(phi), the clean measurement (V)
+    z: np.ndarray          # the measurement given to the aligner, NaN when missing
+    command: np.ndarray    # motor command returned by the aligner
+    estimate: Optional[np.ndarray] = None   # (steps, runs, 2) posterior, EKF only
+
+
+def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random.Generator,
+                      response: Optional[IncidenceResponse] = None) -> Trajectory:
+    """
+    Run the aligner in closed loop with eq. (25) for link.steps steps.
+
+    Step k: the receiver at phi_k measures z_k = x1_k g(phi_k) + v_k (eq. (8)), the aligner
+    returns the command c_k, and phi_{k+1} = phi_k + beta dt + c_k + w2, x1_{k+1} =
+    |x1_k + w1| (kept positive, as Section IV assumes).  The noise is drawn up front in a
+    fixed order, so aligners run with the same seed see the same w, v and dropouts.
+    """
+    response = response if response is not None else IncidenceResponse()
+    n, steps = aligner.runs, int(link.steps)
+    if steps < 1:
+        raise AlignmentError(f'steps must be at least 1, got {steps}')
+    if not 0.0 <= link.dropout < 1.0:
+        raise AlignmentError(f'dropout must be in [0, 1), got {link.dropout}')
+    w1 = rng.standard_normal((steps, n)) * math.sqrt(link.q_sys[0])
+    w2 = rng.standard_normal((steps, n)) * math.sqrt(link.q_sys[1])
+    v = rng.standard_normal((steps, n)) * link.noise
+    missing = rng.random((steps, n)) < link.dropout
+    t = np.arange(steps) * link.dt
+    shape = (steps, n)
+    out = Trajectory(t=t, phi=np.empty(shape), x2=np.empty(shape), x1=np.empty(shape),
+                     clean=np.empty(shape), z=np.empty(shape), command=np.empty(shape))
+    record_estimate = isinstance(aligner, ScanningEKF)
+    if record_estimate:
+        out.estimate = np.empty((steps, n, 2))
+    x1 = np.full(n, link.max_intensity / response.peak)
+    phi = np.full(n, link.x2_0 + aligner.scan_offset)
+    drift = link.beta * link.dt
+    for k in range(steps):
+        clean = x1 * response.g(wrap_degrees(phi))
+        # (8): V_d,k = x1 g(phi) + v_k
+        z = np.where(missing[k], np.nan, clean + v[k])
+        out.phi[k], out.x2[k], out.x1[k] = phi, phi - aligner.scan_offset, x1
+        out.clean[k], out.z[k] = clean, z
+        cmd = aligner.step(t[k], z)
+        out.command[k] = cmd
+        if record_estimate:
+            out.estimate[k] = aligner.x
+        # (25): x2_k = x2_{k-1} + beta + u_{k-1} + w2 (here on phi = x2 + psi, with the scan)
+        phi = phi + drift + cmd + w2[k]
+        x1 = np.abs(x1 + w1[k])
+    return out
+
+
+def tracking(traj: Trajectory, *, angle: float = TRACKING_ANGLE,
+             threshold: float = TRACKING_LEVEL * MAX_INTENSITY) -> tuple[np.ndarray, np.ndarray]:
+    """Tracking percentage per run (Section V): by angle |phi| <= 15 deg, by clean >= 0.6 V."""
+    angular = 100.0 * np.mean(np.abs(wrap_degrees(traj.phi)) <= angle, axis=0)
+    measure = 100.0 * np.mean(traj.clean >= threshold, axis=0)
+    return angular, measure

@@ -1,0 +1,1 @@
+"""Where ROS messages meet arrays: conversions, QoS, parameters and each node's interface."""

@@ -1,0 +1,212 @@
+"""
+The timescale_estimator's interface: parameters, topics, QoS and outcome-to-message mapping.
+
+The live node (tskf_ros.nodes.timescale_estimator) and the offline replay
+(tskf_ros.bag.offline_replay) both turn a received-power message into
+`EstimatorSession.add(...)` and the resulting Outcome into messages through this module,
+so live and offline cannot drift apart; test_bag_replay checks one against the other.
+Topic names here are relative, as the node creates them; the BAG_ names are the same
+topics resolved in '/', as the offline replay writes them.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Optional, Union
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import AccelStamped
+import numpy as np
+from rclpy.qos import QoSProfile
+
+from tskf_ros.core.linear_models import owc
+from tskf_ros.messages import conversions
+from tskf_ros.messages.conversions import ESTIMATE_TYPE
+from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
+from tskf_ros.messages.qos import DIAGNOSTICS_TOPIC, reliable_qos
+from tskf_ros.owc.estimator_session import (ConfigError, EstimatorConfig, EstimatorSession,
+                                            model_from_flat, Outcome)
+
+NODE_NAME = 'timescale_estimator'
+MATRICES = ('A', 'B', 'C', 'D', 'G', 'Q', 'R', 'x0', 'P0')
+MATRIX_HELP = {
+    'A': 'x^Delta = A x + B u + G w: A, n x n row-major (model (3): [1.0])',
+    'B': 'input matrix, n x m row-major (u on the input topic, m <= 6); empty for none',
+    'C': 'y = C x + D + v: C, p x n row-major (model (3): [-637.35])',
+    'D': 'output offset, p entries; empty for 0 (model (3): [511.97])',
+    'G': 'process noise input, n x r row-major; empty for identity',
+    'Q': 'process noise intensity, r x r, symmetric positive semi-definite',
+    'R': 'measurement noise intensity, p x p, symmetric positive definite',
+    'x0': 'initial estimate, n entries',
+    'P0': 'initial covariance, n x n, symmetric positive semi-definite',
+}
+# name -> (default, description, (lo, hi))
+SCALARS = {
+    'period': (1.0, 'nominal sample period (s): sorts intervals into dense, discrete and '
+               'jumps (Cai IV-C)', (1e-6, 3600.0)),
+    'dense_fraction': (0.5, 'an interval shorter than dense_fraction * period is dense',
+                       (0.0, 1.0)),
+    'jump_factor': (1.5, 'an interval longer than jump_factor * period is a gap (a jump J)',
+                    (1.0, 1000.0)),
+    'max_gap': (5.0, 'a gap longer than this (s) sets the diagnostics level to WARN',
+                (0.0, 1e6)),
+    'history_window': (10.0, 'a late sample at most this much (s) older than the newest is '
+                       'inserted and the filter re-run', (0.0, 3600.0)),
+    'max_jump': (60.0, 'a stamp further ahead (s) of the last point re-initialises the '
+                 'filter', (1e-6, 1e6)),
+    'max_backward': (30.0, 'a stamp further behind (s) the last point re-initialises the '
+                     'filter (clock reset, looped bag); >= history_window', (0.0, 1e6)),
+    'max_future': (0.0, "a stamp further ahead (s) of this node's clock is rejected; 0: "
+                   'off (replayed or time-compressed streams)', (0.0, 1e6)),
+    'diagnostics_period': (1.0, 'seconds between /diagnostics messages', (0.01, 3600.0)),
+}
+PARAMETERS = MATRICES + tuple(SCALARS) + (
+    'model_name', 'state_names', 'transition', 'history_size', 'queue_depth', 'frame_id',
+    'nonpositive_is_gap')
+
+# topics, relative: resolved in the node's namespace
+POWER_TOPIC = 'received_power'
+INPUT_TOPIC = 'input'
+# (estimate kind, revised) -> output topic
+OUTPUT_TOPICS = {
+    ('predicted', False): 'estimate/predicted',
+    ('corrected', False): 'estimate/corrected',
+    ('mu', False): 'estimate/mu',
+    ('predicted', True): 'estimate/revised/predicted',
+    ('corrected', True): 'estimate/revised/corrected',
+    ('mu', True): 'estimate/revised/mu',
+}
+
+# the same topics in a bag, resolved in '/', with their types
+BAG_POWER_TOPIC = '/' + POWER_TOPIC
+BAG_INPUT_TOPIC = '/' + INPUT_TOPIC
+BAG_OUTPUT_TOPICS = {key: '/' + topic for key, topic in OUTPUT_TOPICS.items()}
+BAG_TRUTH_TOPIC = '/true_angle'
+JUMP_TYPE = 'sensor_msgs/msg/TimeReference'
+INPUT_TYPE = 'geometry_msgs/msg/AccelStamped'
+DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+
+__all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'BAG_POWER_TOPIC', 'BAG_TRUTH_TOPIC',
+           'bag_outcome_messages', 'ConfigError', 'default_parameters', 'DIAGNOSTICS_TOPIC',
+           'DIAGNOSTICS_TYPE', 'diagnostics_message', 'ESTIMATE_TYPE', 'extractor',
+           'INPUT_TOPIC', 'INPUT_TYPE', 'INPUT_TYPES', 'input_from_msg', 'InputType',
+           'JUMP_TYPE', 'load_config', 'MATRICES', 'MATRIX_HELP', 'NODE_NAME', 'NodeConfig',
+           'outcome_messages', 'OUTPUT_TOPICS', 'output_qos', 'PARAMETERS',
+           'parameters_to_config', 'ParamsError', 'POWER_TOPIC', 'SCALARS']
+
+
+def parameters_to_config(values: dict) -> NodeConfig:
+    """Build the config from parameter values; raise ConfigError with the reason if bad."""
+    flat = {}
+    for key in MATRICES:
+        v = values[key]
+        if isinstance(v, (str, bytes)) or any(isinstance(e, (bool, str)) for e in v):
+            raise ConfigError(f'{key} must be a list of numbers, got {v!r}')
+        flat[key] = [float(e) for e in v]
+    model = model_from_flat(name=values['model_name'],
+                            state_names=tuple(values['state_names']), **flat)
+    estimator = EstimatorConfig(
+        model, transition=values['transition'], period=values['period'],
+        dense_fraction=values['dense_fraction'], jump_factor=values['jump_factor'],
+        max_gap=values['max_gap'], history_window=values['history_window'],
+        history_size=values['history_size'], max_jump=values['max_jump'],
+        max_backward=values['max_backward'], max_future=values['max_future'],
+        nonpositive_is_gap=values['nonpositive_is_gap'])
+    return NodeConfig(estimator, values['frame_id'], values['diagnostics_period'],
+                      values['queue_depth'])
+
+
+def default_parameters() -> dict:
+    """Return the declared default of every parameter (the OWC model (3) of Cai et al.)."""
+    d = owc()
+    matrices = {'A': d.A, 'B': (), 'C': d.C, 'D': d.D, 'G': d.G, 'Q': d.Q, 'R': d.R,
+                'x0': d.x0, 'P0': d.P0}
+    values: dict = {key: [float(v) for v in np.ravel(matrices[key])] for key in MATRICES}
+    values.update({name: spec[0] for name, spec in SCALARS.items()})
+    values.update({'model_name': d.name, 'state_names': list(d.state_names),
+                   'transition': 'euler', 'history_size': 1000, 'queue_depth': 100,
+                   'nonpositive_is_gap': True, 'frame_id': ''})
+    return values
+
+
+def load_config(params_file: Optional[Union[str, Path]] = None,
+                overrides: Optional[dict] = None) -> NodeConfig:
+    """
+    Build the node's config from a ROS parameter YAML file, as `--params-file` would.
+
+    The file's `timescale_estimator` (or `/**`) ros__parameters override the defaults.
+    Raises ParamsError naming the file and the problem.
+    """
+    values = parameter_values(params_file, NODE_NAME, default_parameters(), overrides)
+    try:
+        return parameters_to_config(values)
+    except (ValueError, TypeError, KeyError) as exc:
+        raise ParamsError(f'{params_file or "defaults"}: {exc}') from None
+
+
+def output_qos(config: NodeConfig) -> QoSProfile:
+    """Return the QoS of the estimate publishers: reliable, keep last queue_depth."""
+    return reliable_qos(config.queue_depth)
+
+
+def outcome_messages(out: Outcome, config: NodeConfig) -> list:
+    """Return the ((kind, revised), message) pairs to publish for an Outcome, in order."""
+    frame = config.frame_id or config.session.model.name
+    msgs = [((e.kind, e.revised),
+             conversions.estimate_to_msg(e.stamp_ns, e.x, e.P, frame_id=frame))
+            for e in out.estimates]
+    msgs += [(('mu', j.revised), conversions.jump_to_msg(j.stamp_ns, j.sigma_ns))
+             for j in out.jumps]
+    return msgs
+
+
+def bag_outcome_messages(out: Outcome, config: NodeConfig) -> list[tuple[str, Any]]:
+    """Return the (bag topic, message) pairs the live node publishes for an Outcome."""
+    return [(BAG_OUTPUT_TOPICS[key], msg) for key, msg in outcome_messages(out, config)]
+
+
+def diagnostics_message(session: EstimatorSession, config: NodeConfig, stamp_ns: int, *,
+                        node_name: str = NODE_NAME) -> DiagnosticArray:
+    """Return the /diagnostics message of the session's counters at stamp_ns."""
+    level, message, values = session.diagnostics()
+    return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: time-scale filter', level,
+                                          message, values,
+                                          hardware_id=config.session.model.name)
+
+
+def input_from_msg(msg: AccelStamped, session: EstimatorSession) -> tuple:
+    """Return (stamp ns, u) of an input message for the session's model (B's columns)."""
+    return conversions.msg_to_input(msg, session.u.size)
+
+
+@dataclass(frozen=True)
+class InputType:
+    """How a stamped scalar type carries a measurement: value field, variance field."""
+
+    value: str
+    variance: Optional[str]
+    stamped: bool = True
+
+
+# Stamped scalars of common_interfaces the offline replay takes as the measurement y.
+INPUT_TYPES = {
+    'sensor_msgs/msg/Illuminance': InputType('illuminance', 'variance'),
+    'sensor_msgs/msg/Temperature': InputType('temperature', 'variance'),
+    'sensor_msgs/msg/FluidPressure': InputType('fluid_pressure', 'variance'),
+    'sensor_msgs/msg/RelativeHumidity': InputType('relative_humidity', 'variance'),
+    'sensor_msgs/msg/Range': InputType('range', None),
+    'std_msgs/msg/Float64': InputType('data', None, stamped=False),
+    'std_msgs/msg/Float32': InputType('data', None, stamped=False),
+}
+
+
+def extractor(msgtype: str) -> Callable[[Any, int], tuple[int, float, float]]:
+    """Return f(msg, log_time_ns) -> (stamp ns, value, variance) for a type of INPUT_TYPES."""
+    kind = INPUT_TYPES[msgtype]
+    value, variance = kind.value, kind.variance
+    if not kind.stamped:
+        return lambda msg, log_ns: (int(log_ns), float(getattr(msg, value)), 0.0)
+    if variance is None:
+        return lambda msg, log_ns: (conversions.stamp_to_ns(msg.header.stamp),
+                                    float(getattr(msg, value)), 0.0)
+    return lambda msg, log_ns: (conversions.stamp_to_ns(msg.header.stamp),
+                                float(getattr(msg, value)), float(getattr(msg, variance)))

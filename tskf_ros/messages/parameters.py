@@ -1,0 +1,90 @@
+"""
+Parameters: descriptors, the config every node reads once, and the params-file reader.
+
+`parameter_values` reads a node's parameters from a ROS 2 parameter YAML file as
+`--params-file` would, for the offline adapters that run a node's session without ROS.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Optional, Union
+
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
+
+from tskf_ros.core.dropouts import BLOCKAGES
+
+import yaml
+
+__all__ = ['BLOCKAGE_HELP', 'descriptor', 'float_range', 'IGNORED', 'NodeConfig',
+           'ParamsError', 'parameter_values']
+
+# descriptions and ranges of the dropout parameters both link simulators share
+BLOCKAGE_HELP = {
+    'blockage': ('link blockages: ' + ', '.join(BLOCKAGES), None),
+    'drop_probability': ('Bernoulli drop probability per sample', (0.0, 1.0)),
+    'ge_p_gb': ('Gilbert-Elliott P(good -> bad) per sample', (0.0, 1.0)),
+    'ge_p_bg': ('Gilbert-Elliott P(bad -> good) per sample', (0.0, 1.0)),
+    'ge_loss_good': ('Gilbert-Elliott loss probability in the good state', (0.0, 1.0)),
+    'ge_loss_bad': ('Gilbert-Elliott loss probability in the bad state', (0.0, 1.0)),
+}
+
+
+def float_range(lo: float, hi: float) -> dict:
+    """Return ParameterDescriptor keyword arguments for a closed floating-point range."""
+    return {'floating_point_range': [FloatingPointRange(from_value=lo, to_value=hi)]}
+
+
+def descriptor(text: str, rng: Optional[tuple] = None,
+               type_: int = ParameterType.PARAMETER_DOUBLE, *,
+               read_only: bool = True) -> ParameterDescriptor:
+    """Describe a parameter: its text, type, optional float range (lo, hi) and read-only flag."""
+    return ParameterDescriptor(description=text, type=type_, read_only=read_only,
+                               **(float_range(*rng) if rng is not None else {}))
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """A filtering node's settings, read once: its session's config and its own."""
+
+    session: Any                 # EstimatorConfig or AlignmentConfig
+    frame_id: str
+    diagnostics_period: float
+    queue_depth: int
+
+
+# parameters every node has that the offline adapters do not use
+IGNORED = frozenset({'use_sim_time'})
+
+
+class ParamsError(ValueError):
+    """A parameter file that cannot configure the filter."""
+
+
+def parameter_values(params_file: Optional[Union[str, Path]], node_name: str,
+                     defaults: dict, overrides: Optional[dict] = None) -> dict:
+    """
+    Return the defaults overridden by the file's section for node_name, then by overrides.
+
+    The section is the first of `node_name`, `/node_name`, `/**/node_name` and `/**` that
+    has `ros__parameters`.  Raises ParamsError naming the file and the problem: unreadable,
+    no section, or a parameter the node does not have.
+    """
+    values = dict(defaults)
+    if params_file:
+        try:
+            doc = yaml.safe_load(Path(params_file).read_text()) or {}
+        except (OSError, yaml.YAMLError) as exc:
+            raise ParamsError(f'{params_file}: cannot read parameters ({exc})') from None
+        section = None
+        for key in (node_name, '/' + node_name, '/**/' + node_name, '/**'):
+            if isinstance(doc.get(key), dict) and 'ros__parameters' in doc[key]:
+                section = doc[key]['ros__parameters']
+                break
+        if section is None:
+            raise ParamsError(f'{params_file}: no {node_name}: ros__parameters section')
+        unknown = sorted(set(section) - set(values) - IGNORED)
+        if unknown:
+            raise ParamsError(f'{params_file}: unknown parameter(s) {", ".join(unknown)}')
+        values.update({k: v for k, v in section.items() if k not in IGNORED})
+    values.update(overrides or {})
+    return values

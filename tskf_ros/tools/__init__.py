@@ -1,0 +1,1 @@
+"""Command-line tools: bag plots, the sample bags and the demo's clients."""
