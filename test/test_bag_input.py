@@ -11,8 +11,8 @@ from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import FluidPressure, Range, Temperature
 from std_msgs.msg import Float64, String
 
-from tskf_ros.bag.offline_replay import EXIT_DAMAGED, main, replay
-from tskf_ros.bag.reader import BagReader
+from tskf_ros.bag.offline_replay import main, replay
+from tskf_ros.bag.reader import BagReader, EXIT_DAMAGED
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.messages import conversions
 

@@ -43,7 +43,7 @@ from typing import Callable, Optional
 from rclpy.serialization import deserialize_message, serialize_message
 
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_from_rclpy, typestore
-from tskf_ros.bag.reader import BagError, BagReader, Damage, EXIT_DAMAGED
+from tskf_ros.bag.reader import BagError, BagReader, Damage, exit_status
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_session import AlignmentSession
@@ -298,33 +298,27 @@ def _run(reader: BagReader, est: OfflineEstimator, writer: Optional[BagWriter],
                 _emit(writer, result, DIAGNOSTICS_TOPIC, t, msg, collect)
         if writer is not None and writer.has_topic(raw.topic):
             writer.write(raw.topic, log_ns, raw.data)
+        process, msgs = None, []
         if raw.topic == result.input_topic:
+            process, msgtype = est.process_input, INPUT_TYPE
+        elif raw.topic == topic:
+            process, msgtype = est.process, result.msgtype
+        if process is not None:
             try:
-                status, msgs = est.process_input(raw.data, log_ns)
+                status, msgs = process(raw.data, log_ns)
             except DESERIALIZE_ERRORS as exc:
-                return Damage(str(reader.path), -1, f'message {result.read} on '
-                              f'{raw.topic} does not deserialize as {INPUT_TYPE} ({exc})',
-                              result.read - 1)
-            result.inputs += 1
-            result.input_statuses[status] += 1
-            if collect:
-                result.outputs.append((raw.topic, log_ns, raw))
-            for name, msg in msgs:
-                _emit(writer, result, name, log_ns, msg, collect)
-            continue
-        if raw.topic != topic:
-            if collect:
-                result.outputs.append((raw.topic, log_ns, raw))
-            continue
-        try:
-            status, msgs = est.process(raw.data, log_ns)
-        except DESERIALIZE_ERRORS as exc:
-            return Damage(str(reader.path), -1, f'message {result.read} on {topic} does '
-                          f'not deserialize as {result.msgtype} ({exc})', result.read - 1)
-        result.samples += 1
-        result.statuses[status] += 1
+                return Damage(str(reader.path), -1, f'message {result.read} on {raw.topic} '
+                              f'does not deserialize as {msgtype} ({exc})', result.read - 1)
         if collect:
             result.outputs.append((raw.topic, log_ns, raw))
+        if process is None:
+            continue
+        if process == est.process:
+            result.samples += 1
+            result.statuses[status] += 1
+        else:
+            result.inputs += 1
+            result.input_statuses[status] += 1
         for name, msg in msgs:
             _emit(writer, result, name, log_ns, msg, collect)
     if result.samples == 0 and reader.damage is None:
@@ -402,11 +396,7 @@ def main(argv: Optional[list] = None) -> int:
         f'{sum(res.written.values())} output messages; {res.seconds:.2f} s '
         f'({rate:,.0f} msgs/s)')
     log(f'wrote {output}')
-    if res.damage is not None:
-        print(f'{PROG}: input damaged: {res.damage}; the output holds what came before',
-              file=sys.stderr)
-        return EXIT_DAMAGED
-    return 0
+    return exit_status(PROG, res.damage, 'input damaged; the output holds what came before')
 
 
 def console_main() -> None:

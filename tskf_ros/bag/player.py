@@ -30,7 +30,7 @@ from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_to_rclpy
-from tskf_ros.bag.reader import BagError, BagReader, EXIT_DAMAGED, RawMessage
+from tskf_ros.bag.reader import BagError, BagReader, exit_status, RawMessage
 from tskf_ros.core.units import NS
 
 NODE_NAME = 'player'
@@ -191,10 +191,7 @@ def main(args: Optional[list] = None) -> int:
                 f'{t} {n}' for t, n in sorted(node.published.items())), file=sys.stderr)
             node.destroy_node()
         rclpy.try_shutdown()
-    if node is not None and node.damage is not None:
-        print(f'play: bag damaged: {node.damage}', file=sys.stderr)
-        return EXIT_DAMAGED
-    return 0
+    return exit_status('play', node.damage if node is not None else None, 'bag damaged')
 
 
 def console_main() -> None:

@@ -17,6 +17,7 @@ from io import BytesIO
 import os
 from pathlib import Path
 import struct
+import sys
 from typing import Iterable, Iterator, NamedTuple, Optional, Union
 import zlib
 
@@ -43,6 +44,14 @@ EXIT_DAMAGED = 3
 # what the record parsers raise on bytes that are not a valid MCAP record sequence
 DAMAGE_ERRORS = (McapError, EOFError, struct.error, ValueError, UnicodeDecodeError,
                  zstandard.ZstdError, MemoryError, OverflowError)
+
+
+def exit_status(prog: str, damage: Optional['Damage'], what: str) -> int:
+    """Return 0, or print the damage in one line (prefixed by prog and what) and EXIT_DAMAGED."""
+    if damage is None:
+        return 0
+    print(f'{prog}: {what}: {damage}', file=sys.stderr)
+    return EXIT_DAMAGED
 
 
 class BagError(Exception):

@@ -31,7 +31,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from tskf_ros.core import irregular_sampling as irregular
-from tskf_ros.experiments.output import save_figure, write_json
+from tskf_ros.experiments.output import save_results
 
 
 @dataclass(frozen=True)
@@ -318,9 +318,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
           f'flow {rms0["flow_velocity"]:.5f} m/s')
     print(f'Theorem 1: pathological {data["pathological_intervals"]}, degenerate '
           f'{data["degenerate_intervals"]}, stable: {data["theorem1_stable"]}')
-    save_figure(plot(r), args.out / 'drogue.png')
-    write_json(args.out / 'drogue.json', data)
-    print(f'wrote {args.out / "drogue.png"} and {args.out / "drogue.json"}')
+    save_results(args.out, 'drogue', plot(r), data)
     return 0
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from tskf_ros.core import linear_models as models
 from tskf_ros.core.irregular_sampling import jump_covariance, JumpCovariance, steady_covariance
 from tskf_ros.core.timescale_kalman import TRANSITIONS
-from tskf_ros.experiments.output import save_figure, write_json
+from tskf_ros.experiments.output import save_results
 
 PERIOD = 1.0                            # s, the discrete parts of Cai's T_d
 J_GRID = np.linspace(1.0, 6.0, 26)      # s
@@ -118,9 +118,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 flag = '' if r['regressive'] else '  (I + J A singular)'
                 print(f'  J = {r["J"]:.0f}: peak {_fmt(r["peak_variances"])}, corrected '
                       f'{_fmt(r["after_variances"])}, recovery {r["recovery_steps"]} steps{flag}')
-    save_figure(plot(model_list), args.out / 'jump_covariance.png')
-    write_json(args.out / 'jump_covariance.json', data)
-    print(f'wrote {args.out / "jump_covariance.png"} and {args.out / "jump_covariance.json"}')
+    save_results(args.out, 'jump_covariance', plot(model_list), data)
     return 0
 
 

@@ -52,3 +52,10 @@ def save_figure(fig, path: Path, dpi: int = 110) -> Path:
         return _replace_from_temp(path, lambda f: fig.savefig(f, format='png', dpi=dpi))
     finally:
         plt.close(fig)
+
+
+def save_results(out: Path, name: str, fig, data: Any) -> None:
+    """Write <name>.png and <name>.json into out and say so."""
+    save_figure(fig, Path(out) / f'{name}.png')
+    write_json(Path(out) / f'{name}.json', data)
+    print(f'wrote {Path(out) / (name + ".png")} and {Path(out) / (name + ".json")}')

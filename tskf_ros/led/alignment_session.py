@@ -146,6 +146,7 @@ class AlignOutcome:
 class AlignStats:
     """Counters for diagnostics."""
 
+    # alike in shape to the estimator session's Stats, but other counters
     received: int = 0
     used: int = 0
     commands: int = 0

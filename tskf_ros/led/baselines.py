@@ -17,7 +17,23 @@ from tskf_ros.led.scanning_ekf import (Aligner, as_measurement, EKFConfig, Measu
 HILL_STEP = 2.0                 # degrees, gamma of Section V
 
 
-class HillClimbing:
+class _SteppingAligner:
+    """What both baselines share: a turn step gamma, runs, a stamp clock and no scan."""
+
+    def __init__(self, gamma: float, *, runs: int, dt: float) -> None:
+        if not (math.isfinite(gamma) and gamma > 0.0):
+            raise AlignmentError(f'gamma must be positive, got {gamma}')
+        self.gamma = float(gamma)
+        self.runs = int(runs)
+        self.clock = StampClock(dt)
+
+    @property
+    def scan_offset(self) -> float:
+        """Return 0: the baselines' turns are commands, not a scan."""
+        return 0.0
+
+
+class HillClimbing(_SteppingAligner):
     """
     Hill-climbing (Section V): keep turning by gamma while the intensity rises.
 
@@ -25,18 +41,9 @@ class HillClimbing:
     """
 
     def __init__(self, gamma: float = HILL_STEP, *, runs: int = 1, dt: float = PAPER_DT) -> None:
-        if not (math.isfinite(gamma) and gamma > 0.0):
-            raise AlignmentError(f'gamma must be positive, got {gamma}')
-        self.gamma = float(gamma)
-        self.runs = int(runs)
-        self.clock = StampClock(dt)
+        super().__init__(gamma, runs=runs, dt=dt)
         self.direction = np.ones(self.runs)
         self.reference = np.full(self.runs, np.nan)
-
-    @property
-    def scan_offset(self) -> float:
-        """Return 0: hill-climbing has no scan."""
-        return 0.0
 
     def step(self, stamp: float, z: Measurement) -> np.ndarray:
         """Compare z with the last measurement, reverse if it did not rise, return the turn."""
@@ -49,7 +56,7 @@ class HillClimbing:
         return np.where(have, self.direction * self.gamma, 0.0)
 
 
-class ThreePointAveraging:
+class ThreePointAveraging(_SteppingAligner):
     """
     Three-point averaging (Section V, eq. (26)), vectorised over runs.
 
@@ -63,20 +70,11 @@ class ThreePointAveraging:
 
     def __init__(self, gamma: float = HILL_STEP, *, runs: int = 1, dt: float = PAPER_DT,
                  clip: bool = False) -> None:
-        if not (math.isfinite(gamma) and gamma > 0.0):
-            raise AlignmentError(f'gamma must be positive, got {gamma}')
-        self.gamma = float(gamma)
+        super().__init__(gamma, runs=runs, dt=dt)
         self.clip = bool(clip)
-        self.runs = int(runs)
-        self.clock = StampClock(dt)
         self.phase = np.zeros(self.runs, dtype=int)   # 0: at origin, 1: at +gamma, 2: at -gamma
         self.v = np.zeros((self.runs, 3))             # V1, V2, V3 of the current cycle
         self.offset = np.zeros(self.runs)
-
-    @property
-    def scan_offset(self) -> float:
-        """Return 0: the turns around the cycle's origin are not a scan."""
-        return 0.0
 
     def step(self, stamp: float, z: Measurement) -> np.ndarray:
         """Record V for this phase, return the turn to the next phase's orientation."""

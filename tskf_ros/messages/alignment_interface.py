@@ -164,6 +164,7 @@ def bag_outcome_messages(out: AlignOutcome, config: NodeConfig) -> list[tuple[st
 def diagnostics_message(session: AlignmentSession, config: NodeConfig, stamp_ns: int, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""
+    # like the estimator's, but named after the aligner and its receiver frame
     level, message, values = session.diagnostics()
     return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: LED alignment', level,
                                           message, values, hardware_id=config.frame_id)

@@ -37,16 +37,13 @@ class Alignment(ReconfigurableNode):
     """Node wrapping AlignmentSession: intensity in, base commands, estimates, diagnostics out."""
 
     PARAMETERS = PARAMETERS
+    SESSION = AlignmentSession
     CONFIG_ERRORS = (led.AlignmentError, KeyError, TypeError, ValueError)
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
                  node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
-        self._declare()
-        self.config = self.start_watching_parameters()
-        self.session = AlignmentSession(self.config.session)
-
         qos_in = sensor_input_qos(self.config.queue_depth)
         self.sub = self.create_subscription(Illuminance, INPUT_TOPIC, self._on_intensity,
                                             qos_in)

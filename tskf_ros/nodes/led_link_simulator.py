@@ -20,8 +20,6 @@ from typing import Optional
 
 import numpy as np
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
-from rclpy.node import Node
-from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.core.units import NS
@@ -29,9 +27,9 @@ from tskf_ros.led.led_link import LedLink, LedLinkConfig, LedLinkError, LedSampl
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import COMMAND_TOPIC, INPUT_TOPIC
 from tskf_ros.messages.parameters import BLOCKAGE_HELP, descriptor
-from tskf_ros.messages.qos import DEFAULT_DEPTH, SENSOR_OUTPUT_QOS, TRUTH_QOS
+from tskf_ros.messages.qos import DEFAULT_DEPTH
 from tskf_ros.nodes.node_base import (config_from_parameters, declare_config_fields,
-                                      MAX_BATCH, run_node)
+                                      LinkSimulatorNode, MAX_BATCH, run_node)
 
 NODE_NAME = 'led_link_simulator'
 
@@ -71,19 +69,17 @@ class LedSimulatorConfig:
     frame_id: str
 
 
-class LedLinkSimulator(Node):
+class LedLinkSimulator(LinkSimulatorNode):
     """Publish simulated intensity and truth; turn the base as commanded."""
+
+    SENSOR_TOPIC = INPUT_TOPIC
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
                  node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
-        self._declare()
-        self.config = self._read()
         self.link = LedLink(self.config.link)
         link = self.config.link
-        self.intensity_pub = self.create_publisher(Illuminance, INPUT_TOPIC, SENSOR_OUTPUT_QOS)
-        self.truth_pub = self.create_publisher(JointState, 'true_angle', TRUTH_QOS)
         # forward_command_controller subscribes with the system-default QoS (reliable, 10)
         self.command_sub = self.create_subscription(Float64MultiArray, COMMAND_TOPIC,
                                                     self._on_command, DEFAULT_DEPTH)
@@ -91,8 +87,6 @@ class LedLinkSimulator(Node):
         self.commands = 0
         self.bad_commands = 0
         self.timeouts = 0
-        self.start_ns: Optional[int] = None
-        self.stamp0_ns = int(round(self.config.start_time * NS))
         self._waiting_since: Optional[int] = None    # lockstep: a delivered sample's time
         self._answered = True
         self._finished = False
@@ -160,17 +154,15 @@ class LedLinkSimulator(Node):
 
     def _tick(self) -> None:
         now = self.get_clock().now().nanoseconds
-        if self.start_ns is None:
-            cfg = self.config
-            if self.intensity_pub.get_subscription_count() < cfg.wait_for_subscribers:
-                return
-            if (cfg.lockstep and cfg.wait_for_subscribers
-                    and self.count_publishers(self.command_sub.topic_name) < 1):
-                return
-            self.start_ns = now
-            if not self.stamp0_ns:
-                self.stamp0_ns = now
-        self._advance(now)
+        if self.started(now):
+            self._advance(now)
+
+    def ready(self) -> bool:
+        """Sample 0 waits for the subscribers and, in lockstep, a command publisher."""
+        cfg = self.config
+        return super().ready() and not (
+            cfg.lockstep and cfg.wait_for_subscribers
+            and self.count_publishers(self.command_sub.topic_name) < 1)
 
     def _advance(self, now: int) -> None:
         """Take every sample that is due and, in lockstep, answered; stop at the end."""
@@ -208,7 +200,7 @@ class LedLinkSimulator(Node):
         if cfg.lockstep:
             self._answered = False
             self._waiting_since = now
-        self.intensity_pub.publish(conversions.intensity_to_msg(
+        self.sensor_pub.publish(conversions.intensity_to_msg(
             stamp, s.reading, cfg.link.noise ** 2, frame_id=cfg.frame_id))
 
 

@@ -14,12 +14,16 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import Illuminance, JointState
 
+from tskf_ros.core.units import NS
 from tskf_ros.messages.parameters import descriptor
-from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC
+from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
 
 # a simulator takes at most this many samples per callback when catching up
 MAX_BATCH = 10_000
+# the evaluation truth of both simulators (sensor_msgs/msg/JointState)
+TRUTH_TOPIC = 'true_angle'
 
 
 def parse_args(prog: str, description: str,
@@ -71,6 +75,19 @@ class ReconfigurableNode(Node):
 
     PARAMETERS: tuple = ()
     CONFIG_ERRORS: tuple = (KeyError, TypeError, ValueError)
+    SESSION: type = object       # the session class of the core, built from config.session
+
+    def __init__(self, node_name: str, *, context=None, namespace: Optional[str] = None,
+                 parameter_overrides: Optional[list] = None) -> None:
+        super().__init__(node_name, context=context, namespace=namespace,
+                         parameter_overrides=parameter_overrides)
+        self._declare()
+        self.config = self.start_watching_parameters()
+        self.session = self.SESSION(self.config.session)
+
+    def _declare(self) -> None:
+        """Declare the node's parameters (subclasses)."""
+        raise NotImplementedError
 
     def start_watching_parameters(self) -> object:
         """Build the config from the declared parameters and validate every later change."""
@@ -170,3 +187,47 @@ def config_from_parameters(node: Node, config_cls: type, error: type) -> object:
                              for f in fields(config_cls)})
     except error as exc:
         raise error(f'bad simulator parameters: {exc}') from None
+
+
+class LinkSimulatorNode(Node):
+    """
+    A simulated link: a sensor topic, a truth topic, and a clock that starts on subscribers.
+
+    A subclass declares its parameters in `_declare()`, reads them in `_read()` into a
+    config with `.link`, `.start_time` (s; 0: the clock at the start) and
+    `.wait_for_subscribers`, and names its sensor topic in SENSOR_TOPIC.
+    """
+
+    SENSOR_TOPIC = ''
+
+    def __init__(self, node_name: str, *, context=None, namespace: Optional[str] = None,
+                 parameter_overrides: Optional[list] = None) -> None:
+        super().__init__(node_name, context=context, namespace=namespace,
+                         parameter_overrides=parameter_overrides)
+        self._declare()
+        self.config = self._read()
+        self.sensor_pub = self.create_publisher(Illuminance, self.SENSOR_TOPIC,
+                                                SENSOR_OUTPUT_QOS)
+        self.truth_pub = self.create_publisher(JointState, TRUTH_TOPIC, TRUTH_QOS)
+        self.start_ns: Optional[int] = None
+        self.stamp0_ns = int(round(self.config.start_time * NS))
+
+    def _declare(self) -> None:
+        raise NotImplementedError
+
+    def _read(self) -> object:
+        raise NotImplementedError
+
+    def ready(self) -> bool:
+        """Return whether sample 0 may go (subclasses may add conditions)."""
+        return self.sensor_pub.get_subscription_count() >= self.config.wait_for_subscribers
+
+    def started(self, now: int) -> bool:
+        """Start the stream at now once `ready()`; return whether it has started."""
+        if self.start_ns is None:
+            if not self.ready():
+                return False
+            self.start_ns = now
+            if not self.stamp0_ns:
+                self.stamp0_ns = now
+        return True

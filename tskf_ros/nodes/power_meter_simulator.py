@@ -11,16 +11,13 @@ from dataclasses import dataclass
 from typing import Optional
 
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
-from rclpy.node import Node
-from sensor_msgs.msg import Illuminance, JointState
 
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import POWER_TOPIC
 from tskf_ros.messages.parameters import BLOCKAGE_HELP, descriptor
-from tskf_ros.messages.qos import SENSOR_OUTPUT_QOS, TRUTH_QOS
 from tskf_ros.nodes.node_base import (config_from_parameters, declare_config_fields,
-                                      MAX_BATCH, run_node)
+                                      LinkSimulatorNode, MAX_BATCH, run_node)
 from tskf_ros.owc.vibrating_link import OwcLink, OwcLinkConfig, OwcLinkError, Samples
 
 NODE_NAME = 'power_meter_simulator'
@@ -58,24 +55,20 @@ class SimulatorConfig:
     angle_name: str
 
 
-class PowerMeterSimulator(Node):
+class PowerMeterSimulator(LinkSimulatorNode):
     """Publish simulated received power and the true angle at `rate` (times time_factor)."""
+
+    SENSOR_TOPIC = POWER_TOPIC
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
                  node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
-        self._declare()
-        self.config = self._read()
         self.link = OwcLink(self.config.link)
         self.add_on_set_parameters_callback(self._validate)
-        self.power_pub = self.create_publisher(Illuminance, POWER_TOPIC, SENSOR_OUTPUT_QOS)
-        self.angle_pub = self.create_publisher(JointState, 'true_angle', TRUTH_QOS)
         link = self.config.link
         self.total = int(round(self.config.duration * link.rate)) or None
         self.published = 0
-        self.start_ns: Optional[int] = None
-        self.stamp0_ns = int(round(self.config.start_time * NS))
         period = max(1.0 / (link.rate * self.config.time_factor), 1e-3)
         self.timer = self.create_timer(period, self._tick)
         self.get_logger().info(
@@ -129,12 +122,8 @@ class PowerMeterSimulator(Node):
 
     def _tick(self) -> None:
         now = self.get_clock().now().nanoseconds
-        if self.start_ns is None:
-            if self.power_pub.get_subscription_count() < self.config.wait_for_subscribers:
-                return
-            self.start_ns = now
-            if not self.stamp0_ns:
-                self.stamp0_ns = now
+        if not self.started(now):
+            return
         link, factor = self.config.link, self.config.time_factor
         due = int((now - self.start_ns) / NS * factor * link.rate) + 1
         if self.total is not None:
@@ -152,12 +141,12 @@ class PowerMeterSimulator(Node):
         var = cfg.link.noise_std ** 2
         for i in range(len(s)):
             stamp = self.stamp0_ns + int(round(int(s.index[i]) * NS / cfg.link.rate))
-            self.angle_pub.publish(conversions.angle_to_msg(stamp, [s.theta[i]],
+            self.truth_pub.publish(conversions.angle_to_msg(stamp, [s.theta[i]],
                                                             [cfg.angle_name]))
             if s.blocked[i] or not (s.reading[i] > 0 or cfg.publish_invalid):
                 continue
-            self.power_pub.publish(conversions.power_to_msg(stamp, s.reading[i], var,
-                                                            frame_id=cfg.frame_id))
+            self.sensor_pub.publish(conversions.power_to_msg(stamp, s.reading[i], var,
+                                                             frame_id=cfg.frame_id))
         self.published += len(s)
 
 

@@ -36,16 +36,13 @@ class TimescaleEstimator(ReconfigurableNode):
     """Node wrapping EstimatorSession: received power in, estimates and diagnostics out."""
 
     PARAMETERS = PARAMETERS
+    SESSION = EstimatorSession
     CONFIG_ERRORS = (ConfigError, FilterError, KeyError, TypeError, ValueError)
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
                  node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
-        self._declare()
-        self.config = self.start_watching_parameters()
-        self.session = EstimatorSession(self.config.session)
-
         qos_in = sensor_input_qos(self.config.queue_depth)
         self.sub = self.create_subscription(Illuminance, POWER_TOPIC, self._on_power,
                                             qos_in)
