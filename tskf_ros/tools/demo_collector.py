@@ -2,7 +2,7 @@
 
 from dataclasses import dataclass, field
 import time
-from typing import Callable, Optional
+from typing import Callable, Optional, Union
 
 from geometry_msgs.msg import TwistWithCovarianceStamped
 import numpy as np
@@ -83,6 +83,20 @@ def spin_until(executor: SingleThreadedExecutor, condition: Callable[[], bool],
             return False
         executor.spin_once(timeout_sec=0.02)
     return True
+
+
+def wait_for(executor: SingleThreadedExecutor, condition: Callable[[], bool],
+             what: Union[str, Callable[[], str]], timeout: float = 60.0) -> None:
+    """
+    Spin until condition() holds; raise TimeoutError saying what never happened.
+
+    The timeout bounds a wait on DDS (discovery, matching, delivery); it is never an
+    assertion about timing, so it is generous: it costs nothing when things work.  `what`
+    may be a callable, called only on failure (to report the state reached).
+    """
+    if not spin_until(executor, condition, timeout):
+        raise TimeoutError(f'timed out after {timeout:g} s waiting for '
+                           f'{what() if callable(what) else what}')
 
 
 def run_in_process(*, duration: float = 300.0, time_factor: float = 30.0, seed: int = 0,
