@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from tskf_ros.core import irregular_sampling as irregular
 from tskf_ros.core.linear_models import LinearModel, owc, OWC_SLOPE, run_filter, spring_mass
 from tskf_ros.core.time_scales import discrete
 from tskf_ros.owc.estimator_session import (ConfigError, EstimatorConfig, EstimatorSession,
@@ -183,21 +182,49 @@ def test_reconfigure_keeps_the_estimate():
     assert out.status == 'reset' and session.pending() is None
 
 
-def test_sampling_intervals_are_checked_against_fang_section_iii():
+def fang_scalar_fixed_point(a, c, q, r, kappa, iterations=20_000):
+    """
+    Theorem 2's fixed point of X = f^kappa(g(X)) by plain iteration from X = q.
+
+    Written here independently of irregular_sampling (which solves a quadratic):
+    g(X) = (1/X + c^2/r)^-1 (information form of eq. (23)), f(Y) = a^2 Y + q (eq. (22)).
+    """
+    X = q
+    for _ in range(iterations):
+        Y = 1.0 / (1.0 / X + c * c / r)
+        for _ in range(kappa):
+            Y = a * a * Y + q
+        if abs(Y - X) <= 1e-15 * X:
+            break
+        X = Y
+    return Y
+
+
+@pytest.mark.parametrize('period', [1.0, 0.5, 2.0])
+def test_sampling_intervals_are_checked_against_fang_section_iii(period):
     # a scalar unstable model: no pathological interval; Theorem 2 bounds for 1..4 periods
-    cfg = EstimatorConfig(model=owc(), max_gap=100.0)
+    cfg = EstimatorConfig(model=owc(), max_gap=100.0, period=period)
     s = EstimatorSession(cfg)
     t = 10 * NS
     for dt in (1, 1, 3, 1, 4, 2):
-        t += dt * NS
+        t += int(round(dt * period * NS))
         s.add(t, 200.0)
     level, _, values = s.diagnostics()
     assert values['intervals_seen_periods'] == '1 2 3 4'
     assert values['interval_warnings'] == ''
-    F, Qd, _ = s.kf.transition_matrices(1.0)
-    lo, hi = irregular.scalar_peak_bounds(F[0, 0], OWC_SLOPE, Qd[0, 0], 100.0, 1, 4)
-    assert values['theorem2_peak_bound_low'] == pytest.approx(lo)
-    assert values['theorem2_peak_bound_high'] == pytest.approx(hi)
+    # Fang's discrete system of one nominal period h (Euler: a = 1 + h, q = h G Q G^T = h)
+    # measured with R / h at every sample (Table 3's R_d at mu = h): Theorem 2 for 1 and 4
+    a, q, r = 1.0 + period, period, 100.0 / period
+    lo = fang_scalar_fixed_point(a, OWC_SLOPE, q, r, 1)
+    hi = fang_scalar_fixed_point(a, OWC_SLOPE, q, r, 4)
+    assert values['theorem2_peak_bound_low'] == pytest.approx(lo, rel=1e-9)
+    assert values['theorem2_peak_bound_high'] == pytest.approx(hi, rel=1e-9)
+    if period == 1.0:
+        # a = 2, q = 1, r = 100, kappa = 1: X = 4 r X / (c^2 X + r) + 1, that is
+        # c^2 X^2 - (3 r + c^2) X - r = 0
+        c2 = OWC_SLOPE ** 2
+        b = 300 + c2
+        assert lo == pytest.approx((b + np.sqrt(b * b + 400 * c2)) / (2 * c2), rel=1e-12)
     # eigenvalues +-2 of the one-period transition: every even interval is pathological
     # (I + h A = diag(2, -2) with h = 1), and C = [1, 1] cannot tell the modes apart
     model = LinearModel('pm2', A=np.diag([1.0, -3.0]), C=np.array([[1.0, 1.0]]),
@@ -255,7 +282,8 @@ def assert_same(got, want):
 @pytest.mark.parametrize('transition', ['exact', 'euler'])
 def test_inputs_are_held_over_a_gap_like_input_only_points(transition):
     model = double_integrator()
-    session = EstimatorSession(EstimatorConfig(model, transition=transition,
+    # y is random, unrelated to the model's prediction: no innovation gate (gate=0)
+    session = EstimatorSession(EstimatorConfig(model, transition=transition, gate=0.0,
                                                nonpositive_is_gap=False, max_gap=100.0))
     rng = np.random.default_rng(3)
     # (stamp, 'y' or 'u'), in arrival order: an input before the first measurement is held;

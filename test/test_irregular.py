@@ -1,9 +1,11 @@
 """Fang & de Callafon (2011): switching and lifted filters, interval checks, Theorem 2, drogue."""
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 from tskf_ros.core import irregular_sampling as ir
 from tskf_ros.core import linear_models as models
@@ -60,6 +62,23 @@ def test_theorem1_and_interval_warnings_for_the_rotation():
     assert ir.interval_warnings(ROT3, C, [1, 2, 4]) == []
     # an undetectable pair is flagged at every interval
     assert ir.interval_warnings(np.diag([2.0, 0.5]), [[0.0, 1.0]], [1])[0][0] == 1
+
+
+def test_theorem1_is_not_stable_without_detectability():
+    # (A1) fails: the unstable mode 2 is invisible to C = [0, 1]; with a single unstable
+    # eigenvalue no interval is pathological, so T n D = {} and only (A1) says 'unstable'
+    A, C = np.diag([2.0, 0.5]), [[0.0, 1.0]]
+    assert not pbh_detectable(A, np.array(C))
+    check = ir.theorem1(A, C, [1, 2, 3])
+    assert check.degenerate == () and check.pathological == ()
+    assert not check.detectable and not check.stable
+    # the switching filter confirms it: the peak covariance of the hidden mode grows as 4^k
+    y = np.zeros((12, 1))
+    sw = ir.run_switching(A, C, Q=np.eye(2), R=[[1.0]], x0=[0.0, 0.0], P0=np.eye(2), y=y)
+    p = sw.P_prior[:, 0, 0]
+    np.testing.assert_allclose(p[1:], 4 * p[:-1] + 1, rtol=1e-12)
+    # and with C seeing it, the same intervals are fine
+    assert ir.theorem1(A, [[1.0, 1.0]], [1, 2, 3]).stable
 
 
 def test_unit_circle_pairs_count_by_default():
@@ -183,11 +202,23 @@ def test_lifted_hand_numbers():
 # Theorem 2
 # ---------------------------------------------------------------------------------------
 
+def peak_map(a, c, q, r, kappa, X):
+    """f^kappa(g(X)) written here: g in information form (1/X + c^2/r)^-1, f(Y) = a^2 Y + q."""
+    Y = 1.0 / (1.0 / X + c * c / r)
+    for _ in range(kappa):
+        Y = a * a * Y + q
+    return Y
+
+
 def test_scalar_fixed_points_hand_numbers():
     # a = 1.2, c = q = r = 1, k = 1: X^2 - 1.44 X - 1 = 0
     lo, hi = ir.scalar_peak_bounds(1.2, 1.0, 1.0, 1.0, 1, 4)
     assert lo == pytest.approx((1.44 + np.sqrt(1.44 ** 2 + 4)) / 2, rel=1e-12)
-    assert hi == pytest.approx(ir.scalar_peak_map(1.2, 1.0, 1.0, 1.0, 4, hi), rel=1e-12)
+    assert hi == pytest.approx(peak_map(1.2, 1.0, 1.0, 1.0, 4, hi), rel=1e-12)
+    # the module's map (eq. (22)-(23) as printed) agrees with the information form
+    for X in (0.1, 1.0, 17.0):
+        assert ir.scalar_peak_map(1.2, 1.0, 1.0, 1.0, 3, X) == pytest.approx(
+            peak_map(1.2, 1.0, 1.0, 1.0, 3, X), rel=1e-12)
     assert hi == pytest.approx(11.454149197572, rel=1e-10)
     # a = 1: q_k = k q; X^2 - 2 X - 2 = 0 for k = 2
     assert ir.scalar_fixed_point(1.0, 1.0, 1.0, 1.0, 2) == pytest.approx(1 + np.sqrt(3))
@@ -195,16 +226,22 @@ def test_scalar_fixed_points_hand_numbers():
         ir.scalar_fixed_point(1.5, 0.0, 1.0, 1.0, 2)
 
 
-@pytest.mark.parametrize('a, c, q, r, tau, eta', [
-    (1.3, 1.0, 1.0, 2.0, 1, 5),
-    (1.0, 0.7, 0.5, 1.0, 2, 6),
-    (-1.1, 2.0, 0.3, 0.5, 1, 3),
-    (0.8, 1.0, 1.0, 1.0, 1, 4),       # stable: holds on [0, q / (1 - a^2)]
+# README's table (bounds and the peaks seen on 5 sequences of 30 intervals, seed 7), to the
+# printed digits: (a, c, q, r, tau, eta), (bounds), (peaks seen), half a printed unit
+@pytest.mark.parametrize('a, c, q, r, tau, eta, bounds, seen, tol', [
+    (1.3, 1.0, 1.0, 2.0, 1, 5, (3.038, 44.927), (3.103, 44.925), 5e-4),
+    (1.0, 0.7, 0.5, 1.0, 2, 6, (2.014, 4.394), (2.035, 4.392), 5e-4),
+    (-1.1, 2.0, 0.3, 0.5, 1, 3, (0.4163, 1.3043), (0.4163, 1.3043), 5e-5),
+    (0.8, 1.0, 1.0, 1.0, 1, 4, (1.370, 2.431), (1.371, 2.431), 5e-4),   # stable a
 ])
-def test_peak_covariances_stay_within_theorem2_bounds(a, c, q, r, tau, eta):
+def test_peak_covariances_stay_within_theorem2_bounds(a, c, q, r, tau, eta, bounds, seen, tol):
     rng = np.random.default_rng(7)
     lo, hi = ir.scalar_peak_bounds(a, c, q, r, tau, eta)
-    assert lo <= hi
+    # fixed points of the map written in this file
+    assert peak_map(a, c, q, r, tau, lo) == pytest.approx(lo, rel=1e-11)
+    assert peak_map(a, c, q, r, eta, hi) == pytest.approx(hi, rel=1e-11)
+    assert (lo, hi) == pytest.approx(bounds, abs=tol * 1.01)
+    all_peaks = []
     for _ in range(5):
         gaps = rng.integers(tau, eta + 1, size=30)
         times = np.concatenate([[0], np.cumsum(gaps)])
@@ -213,13 +250,15 @@ def test_peak_covariances_stay_within_theorem2_bounds(a, c, q, r, tau, eta):
         P0 = rng.uniform(lo, hi)
         sw = ir.run_switching([[a]], [[c]], Q=[[q]], R=[[r]], x0=[0.0], P0=[[P0]], y=y)
         peaks = sw.P_prior[times, 0, 0]
+        all_peaks.extend(peaks)
         assert np.all(peaks >= lo * (1 - 1e-12)) and np.all(peaks <= hi * (1 + 1e-12))
         # eq. (24): sandwiched by the single-rate sequences from ordered starts
         p_tau, p_eta = 0.5 * P0, 2 * P0
         for k, peak in zip(gaps, peaks[1:]):
-            p_tau = ir.scalar_peak_map(a, c, q, r, tau, p_tau)
-            p_eta = ir.scalar_peak_map(a, c, q, r, eta, p_eta)
+            p_tau = peak_map(a, c, q, r, tau, p_tau)
+            p_eta = peak_map(a, c, q, r, eta, p_eta)
             assert p_tau <= peak * (1 + 1e-12) and peak <= p_eta * (1 + 1e-12)
+    assert (min(all_peaks), max(all_peaks)) == pytest.approx(seen, abs=tol * 1.01)
 
 
 # ---------------------------------------------------------------------------------------
@@ -265,6 +304,56 @@ def test_jump_covariance_owc_numbers():
     assert periodic.P_peak[0, 0] >= once.P_peak[0, 0] * (1 - 1e-12)
 
 
+def scalar_dare(F, Qd, c2, Rd):
+    """Predicted steady variance of a scalar KF: P = F^2 P Rd / (c^2 P + Rd) + Qd (closed form)."""
+    # c^2 P^2 + (Rd (1 - F^2) - Qd c^2) P - Qd Rd = 0, positive root
+    b = Rd * (1 - F * F) - Qd * c2
+    return (-b + np.sqrt(b * b + 4 * c2 * Qd * Rd)) / (2 * c2)
+
+
+def test_jump_covariance_readme_numbers_owc():
+    # README: peak variance of theta 1.001 ... 6.002 rad^2 (I + mu A) and 3.2, 26.8, 201,
+    # 1490, 11014, 81384 (exact) for J = 1..6; corrected 2.46e-4 whatever J
+    m = models.owc()
+    c2, R = models.OWC_SLOPE ** 2, 100.0
+    euler = [1.001, 2.001, 3.001, 4.002, 5.002, 6.002]
+    exact = [(3.2, 0.05), (26.8, 0.05), (201, 0.5), (1490, 0.5), (11014, 0.5), (81384, 0.5)]
+    # exact sampled plant x' = x + w: F = e^h, Q_d = (e^{2h} - 1) / 2 (closed form)
+    P_ss_exact = scalar_dare(np.e, (np.e ** 2 - 1) / 2, c2, R)
+    for J, want_euler, (want_exact, tol) in zip(range(1, 7), euler, exact):
+        r_eu = ir.jump_covariance(m, float(J))
+        r_ex = ir.jump_covariance(m, float(J), transition='exact')
+        assert r_eu.P_peak[0, 0] == pytest.approx(want_euler, abs=5e-4)
+        assert r_ex.P_peak[0, 0] == pytest.approx(want_exact, abs=tol)
+        P_c = P_ss_exact * (R / J) / (c2 * P_ss_exact + R / J)
+        assert r_ex.P_peak[0, 0] == pytest.approx(
+            np.exp(2 * J) * P_c + (np.exp(2 * J) - 1) / 2, rel=1e-9)
+        for r in (r_eu, r_ex):
+            assert r.P_after[0, 0] == pytest.approx(2.46e-4, abs=5e-7)
+            # one measurement with R / h = 100 on the peak: P_peak R / (c^2 P_peak + R)
+            assert r.P_after[0, 0] == pytest.approx(
+                r.P_peak[0, 0] * R / (c2 * r.P_peak[0, 0] + R), rel=1e-9)
+
+
+def test_jump_covariance_readme_numbers_spring_mass():
+    # README: position variance 4.5, 10.6, 19, 29.6, 42.3 for J = 2..6 with I + mu A; with
+    # the exact transition it stays near 0.25.  Reference: scipy's DARE at h = 1, then the
+    # correction with R / J and the prediction over J written here.
+    m = models.spring_mass()
+    A, C, GQG, R = m.A, m.C, m.G @ m.Q @ m.G.T, m.R
+    P_ss = scipy.linalg.solve_discrete_are((np.eye(2) + A).T, C.T, GQG, R)
+    for J, want in zip(range(2, 7), [4.5, 10.6, 19.0, 29.6, 42.3]):
+        r = ir.jump_covariance(m, float(J))
+        assert r.P_peak[0, 0] == pytest.approx(want, abs=0.05)
+        Rd = R / J
+        L = P_ss @ C.T @ np.linalg.inv(C @ P_ss @ C.T + Rd)
+        P_c = P_ss - L @ C @ P_ss
+        F = np.eye(2) + J * A
+        np.testing.assert_allclose(r.P_peak, F @ P_c @ F.T + J * GQG, rtol=1e-8, atol=1e-10)
+        ex = ir.jump_covariance(m, float(J), transition='exact')
+        assert 0.24 <= ex.P_peak[0, 0] <= 0.25
+
+
 def test_jump_covariance_flags_the_nonregressive_spring_mass_step():
     m = models.spring_mass()
     assert not ir.jump_covariance(m, 1.0).regressive    # I + A is singular (Cai's mu = 1)
@@ -280,8 +369,12 @@ def test_jump_covariance_flags_the_nonregressive_spring_mass_step():
 def test_drogue_rms_velocity_error():
     r = drogue.run(drogue.DrogueConfig(seed=6))
     rms = r.rms()
-    # 20 seeds (1..20) gave 0.0047..0.0115 m/s after the first dive, filter sd ~0.0085
-    assert rms['drogue_velocity'] == pytest.approx(0.00936, abs=2e-4)
+    # README, seed 6: drogue velocity 0.0094 m/s (filter sigma 0.0088), flow 0.0095 m/s,
+    # 0.0121 m/s without the inverse of eq. (27); to the printed digit
+    assert rms['drogue_velocity'] == pytest.approx(0.0094, abs=5e-5)
+    assert rms['filter_velocity_sd'] == pytest.approx(0.0088, abs=5e-5)
+    assert rms['flow_velocity'] == pytest.approx(0.0095, abs=5e-5)
+    assert rms['flow_velocity_without_inverse_27'] == pytest.approx(0.0121, abs=5e-5)
     assert rms['drogue_velocity'] < 0.015
     assert 0.4 < rms['drogue_velocity'] / rms['filter_velocity_sd'] < 1.6
     # the inverse of eq. (27) adds the slip the drogue velocity alone misses
@@ -293,11 +386,27 @@ def test_drogue_rms_velocity_error():
     assert ir.theorem1(m['A'], m['C'], T).stable
 
 
+def test_drogue_rms_over_seeds_1_to_20():
+    # README: over seeds 1-20 the RMS error after the first dive ranges over 0.0047-0.0115
+    v = [drogue.run(drogue.DrogueConfig(seed=seed)).rms()['drogue_velocity']
+         for seed in range(1, 21)]
+    assert min(v) == pytest.approx(0.0047, abs=5e-5)
+    assert max(v) == pytest.approx(0.0115, abs=5e-5)
+
+
 def test_drogue_main_writes_figure_and_summary(tmp_path, capsys):
     assert drogue.main(['--out', str(tmp_path), '--hours', '1.5']) == 0
     assert (tmp_path / 'drogue.png').stat().st_size > 10_000
-    assert (tmp_path / 'drogue.json').is_file()
-    assert 'RMS velocity error' in capsys.readouterr().out
+    data = json.loads((tmp_path / 'drogue.json').read_text())
+    # 1.5 h, seed 6: the numbers of the run itself, and Theorem 1 on its intervals
+    rms = data['rms']
+    assert rms['drogue_velocity'] == pytest.approx(0.007914, abs=5e-6)
+    assert rms['flow_velocity'] == pytest.approx(0.008061, abs=5e-6)
+    assert rms['flow_velocity_without_inverse_27'] == pytest.approx(0.011924, abs=5e-6)
+    assert data['pathological_intervals'] == [] and data['degenerate_intervals'] == []
+    assert data['theorem1_stable'] is True
+    out = capsys.readouterr().out
+    assert f"drogue {rms['drogue_velocity']:.5f} m/s" in out and 'stable: True' in out
 
 
 def test_drogue_estimator_yaml_is_the_drogue_model():
