@@ -33,6 +33,7 @@ Errata in the paper, and what this module does instead:
 """
 
 from dataclasses import dataclass
+import math
 from typing import Iterable, Optional, Sequence
 
 import numpy as np
@@ -49,6 +50,8 @@ NULL_TOL = 1e-7         # singular values of A - mu I below this * max(1, ||A||_
 RANK_TOL = 1e-8         # C U is rank deficient if sigma_min(C U) <= this * ||C||_2
 
 CRITERIA = ('paper', 'detectability')
+# log of the largest float: a power whose log is beyond this overflows
+LOG_OVERFLOW = math.log(np.finfo(float).max)
 
 
 class IrregularError(ValueError):
@@ -479,6 +482,71 @@ def is_detectable(A: ArrayLike, C: ArrayLike, *, rank_tol: float = RANK_TOL,
                if _is_unstable(e, True, rtol))
 
 
+class IntervalChecker:
+    """
+    Definitions 2-3 and (A1) for one (A, C), asked one interval at a time.
+
+    The eigen-analysis is done once; `pathological(k)` and `degenerate(k)` then cost
+    O(n^2) resonance tests (plus a rank test per merged group) whatever k is, so a stream
+    that keeps showing new intervals pays a bounded price per new interval instead of
+    re-enumerating 2..max(T) (`pathological_intervals` does that to list the whole set).
+    Same tolerances and criteria as `pathological_intervals` / `degenerate_intervals`.
+    """
+
+    def __init__(self, A: ArrayLike, C: ArrayLike, *, criterion: str = 'paper',
+                 marginal: bool = True, rtol: float = MODULUS_RTOL,
+                 rank_tol: float = RANK_TOL, cluster_tol: float = CLUSTER_TOL,
+                 null_tol: float = NULL_TOL) -> None:
+        if criterion not in CRITERIA:
+            raise IrregularError(f'criterion must be one of {CRITERIA}, got {criterion!r}')
+        self.A = as_matrix(A, 'A')
+        self.C = as_matrix(C, 'C')
+        if self.C.shape[1] != self.A.shape[0]:
+            raise IrregularError(f'C must have {self.A.shape[0]} columns, got shape '
+                                 f'{self.C.shape}')
+        self.criterion, self.rtol, self.rank_tol = criterion, rtol, rank_tol
+        self.eig = [e for e in distinct_eigenvalues(self.A, cluster_tol=cluster_tol)
+                    if _is_unstable(e, marginal, rtol)]
+        self.spaces = [eigenspace(self.A, e, chains=criterion == 'paper', null_tol=null_tol)
+                       for e in self.eig]
+        self.detectable = is_detectable(self.A, self.C, rank_tol=rank_tol, rtol=rtol,
+                                        cluster_tol=cluster_tol, null_tol=null_tol)
+
+    def merged(self, kappa: int) -> list[tuple[int, int]]:
+        """Pairs (i, j), i < j, of unstable eigenvalues that coincide after kappa steps."""
+        kappa = _interval(kappa)
+        if kappa < 2:
+            return []
+        return [(i, j) for i in range(len(self.eig)) for j in range(i + 1, len(self.eig))
+                if resonate(self.eig[i].value, self.eig[j].value, kappa, self.rtol)]
+
+    def pathological(self, kappa: int) -> bool:
+        """Tell whether kappa is in P (Definition 2, eq. (18))."""
+        return bool(self.merged(kappa))
+
+    def degenerate(self, kappa: int) -> bool:
+        """Tell whether kappa is in D (Definition 3, eq. (20))."""
+        if not self.pathological(kappa):
+            return False
+        return any(not sees_fully(self.C, [self.spaces[i] for i in group], self.rank_tol)
+                   for group in _groups(self.eig, kappa, self.criterion, self.rtol))
+
+    def warning(self, kappa: int) -> Optional[str]:
+        """Return why kappa is pathological or degenerate, or None (see interval_warnings)."""
+        pairs = self.merged(kappa)
+        if not pairs:
+            return None
+        what = ', '.join(sorted({_fmt(self.eig[i].value) for pair in pairs for i in pair}))
+        if self.degenerate(kappa):
+            return (f'degenerate (Definition 3): eigenvalues {what} coincide after {kappa} '
+                    f'steps and C cannot tell them apart; (A^{kappa}, C) is not detectable')
+        return (f'pathological (Definition 2): eigenvalues {what} coincide after {kappa} '
+                'steps, but C sees them apart (not degenerate)')
+
+
+UNDETECTABLE = '(A, C) is not detectable: assumption (A1) fails at every interval'
+
+
 @dataclass(frozen=True)
 class Theorem1Check:
     """Theorem 1 for an observed set of sampling intervals T."""
@@ -505,12 +573,9 @@ def theorem1(A: ArrayLike, C: ArrayLike, intervals: Iterable[int], *,
     T = sorted({_interval(k) for k in intervals})
     if not T:
         raise IrregularError('theorem1 needs at least one sampling interval')
-    kmax = T[-1]
-    P = set(pathological_intervals(A, kmax, **_pick(tolerances, 'rtol', 'cluster_tol')))
-    D = set(degenerate_intervals(A, C, kmax, criterion=criterion, **tolerances))
-    return Theorem1Check(tuple(T), tuple(k for k in T if k in P), tuple(k for k in T if k in D),
-                         is_detectable(A, C, **_pick(tolerances, 'rtol', 'cluster_tol',
-                                                     'rank_tol', 'null_tol')))
+    check = IntervalChecker(A, C, criterion=criterion, **tolerances)
+    return Theorem1Check(tuple(T), tuple(k for k in T if check.pathological(k)),
+                         tuple(k for k in T if check.degenerate(k)), check.detectable)
 
 
 def _pick(d: dict, *keys: str) -> dict:
@@ -566,32 +631,12 @@ def interval_warnings(A: ArrayLike, C: ArrayLike, intervals: Iterable[int], *,
     by interval; empty when all is well.  An undetectable (A, C) is reported as interval
     1 (it fails assumption (A1) at every interval).
     """
-    A = as_matrix(A, 'A')
-    T = sorted({_interval(k) for k in intervals})
-    out: list[tuple[int, str]] = []
-    if not is_detectable(A, C):
-        out.append((1, '(A, C) is not detectable: assumption (A1) fails at every interval'))
-    if not T:
-        return out
-    P = set(pathological_intervals(A, T[-1]))
-    D = set(degenerate_intervals(A, C, T[-1], criterion=criterion))
-    eig = [e for e in distinct_eigenvalues(A) if _is_unstable(e, True, MODULUS_RTOL)]
-    for k in T:
-        if k not in P:
-            continue
-        merged: set[str] = set()
-        for i, e in enumerate(eig):
-            for f in eig[i + 1:]:
-                if resonate(e.value, f.value, k):
-                    merged.update((_fmt(e.value), _fmt(f.value)))
-        what = ', '.join(sorted(merged))
-        if k in D:
-            out.append((k, f'degenerate (Definition 3): eigenvalues {what} coincide after '
-                           f'{k} steps and C cannot tell them apart; (A^{k}, C) is not '
-                           'detectable'))
-        else:
-            out.append((k, f'pathological (Definition 2): eigenvalues {what} coincide '
-                           f'after {k} steps, but C sees them apart (not degenerate)'))
+    check = IntervalChecker(A, C, criterion=criterion)
+    out: list[tuple[int, str]] = [] if check.detectable else [(1, UNDETECTABLE)]
+    for k in sorted({_interval(k) for k in intervals}):
+        why = check.warning(k)
+        if why is not None:
+            out.append((k, why))
     return out
 
 
@@ -627,11 +672,15 @@ def scalar_fixed_point(a: float, c: float, q: float, r: float, kappa: int) -> fl
     a, c, q, r = float(a), float(c), float(q), float(r)
     if not r > 0 or q < 0:
         raise IrregularError(f'need r > 0 and q >= 0, got r = {r}, q = {q}')
+    if c == 0 and abs(a) >= 1:
+        raise IrregularError('c = 0 with |a| >= 1: (a, c) is not detectable (A1)')
+    if abs(a) > 1 and 2 * kappa * math.log(abs(a)) > LOG_OVERFLOW:
+        # a^{2 kappa} overflows: the peak covariance after such an interval is beyond any
+        # float (X ~ a^{2 kappa} (r / c^2 + q / (a^2 - 1))), so the bound is +inf
+        return math.inf
     a2k = a ** (2 * kappa)
     qk = q * kappa if a * a == 1 else q * (a2k - 1) / (a * a - 1)
     if c == 0:
-        if abs(a) >= 1:
-            raise IrregularError('c = 0 with |a| >= 1: (a, c) is not detectable (A1)')
         return qk / (1 - a2k)
     c2 = c * c
     b = r * (1 - a2k) - qk * c2

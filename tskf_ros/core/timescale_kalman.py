@@ -54,6 +54,10 @@ class FilterError(ValueError):
     """Bad model, bad step, or bad measurement given to the time-scale filter."""
 
 
+class NonRegressiveError(FilterError):
+    """A step whose I + mu A is singular (Definition 2.12): refused, the state is sound."""
+
+
 def as_matrix(value: ArrayLike, name: str, shape: Optional[tuple] = None, *,
               column: bool = False) -> np.ndarray:
     """
@@ -142,16 +146,28 @@ def van_loan(A: np.ndarray, GQGt: np.ndarray, mu: float) -> tuple[np.ndarray, np
     """
     Exact (F, Q_d) of x' = A x + G w over mu: F = e^{A mu}, Q_d = int_0^mu F(s) GQG^T F(s)^T.
 
-    Van Loan (1978): expm([[-A, GQG^T], [0, A^T]] mu) = [[., F^-1 Q_d], [0, F^T]].
+    Van Loan (1978): expm([[-A, GQG^T], [0, A^T]] h) = [[., F(h)^-1 Q_d(h)], [0, F(h)^T]],
+    taken over h = mu / 2^k with ||A||_1 h <= 1 and doubled k times,
+    F(2h) = F(h)^2, Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T: the one-shot block exponential
+    holds e^{-A mu}, which for a stable A and a long mu (60 s of a spring-mass system) is
+    so large that F and Q_d lose every digit (F came out 1e10, Q_d indefinite).
     """
     n = A.shape[0]
+    reach = float(np.linalg.norm(A, 1)) * mu
+    k = int(np.ceil(np.log2(reach))) if reach > 1 else 0
+    h = mu / 2.0 ** k
     M = np.zeros((2 * n, 2 * n))
     M[:n, :n] = -A
     M[:n, n:] = GQGt
     M[n:, n:] = A.T
-    E = scipy.linalg.expm(M * mu)
+    E = scipy.linalg.expm(M * h)
     F = E[n:, n:].T
     Qd = F @ E[:n, n:]
+    with np.errstate(over='ignore', invalid='ignore'):
+        for _ in range(k):
+            # Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T, F(2h) = F(h)^2
+            Qd = Qd + F @ Qd @ F.T
+            F = F @ F
     return F, (Qd + Qd.T) / 2
 
 
@@ -300,7 +316,7 @@ class TimeScaleKalmanFilter:
         if self.transition == 'euler':
             I_muA = eye + mu * A
             if not self.allow_nonregressive and not is_invertible(I_muA):
-                raise FilterError(
+                raise NonRegressiveError(
                     f'I + mu A is singular at mu = {mu}: A is not regressive on this time '
                     'scale (Bohner & Wintz Definition 2.12); the step is refused')
         F, Qd, Bd = self.transition_matrices(mu)

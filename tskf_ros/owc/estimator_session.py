@@ -11,12 +11,28 @@ of the TimeScaleKalmanFilter (Bohner & Wintz Table 3, Cai Table I; see
 tskf_ros.core.timescale_kalman).  Readings at or below zero are not points (Section IV-C:
 an interruption, a time jump J).
 
-Bad input never reaches the filter: non-finite values, zero stamps, duplicates and stamps
-too old for the history are rejected with a reason; a late sample within the history is
-inserted into the time scale, which changes mu of its left neighbour, and the filter is
-re-run from there (the revised estimates are returned separately); a clock jump forward
-or backward beyond a bound re-initialises the filter.  Nothing non-finite is returned and
-P stays symmetric positive semi-definite.  The module never imports rclpy.
+Bad input never reaches the filter: non-finite values, zero stamps, stamps a ROS message
+cannot hold, duplicates, stamps too old for the history, readings outside the optional
+physical `measurement_range`, and readings whose innovation fails the gate are rejected
+with a reason.  The gate (as robot_localization's per-sensor rejection threshold) is the
+Mahalanobis distance of the innovation y - C xhat(t) - D against S = C P(t) C^T + R / period
+at the predictor of the sample's own stamp; a rejected sample is not a point, so the next
+one sees the whole gap and a wider gate: a filter cannot lock itself out.  The first sample
+after a (re)start is not gated (there is no prediction yet).  A late sample within the
+history is inserted into the time scale, which changes mu of its left neighbour, and the
+filter is re-run from there (the revised estimates are returned separately); a clock
+jump forward or backward beyond a bound re-initialises the filter.  A step whose state
+or covariance is non-finite or beyond `state_limit` (|x_i| or sqrt(trace P)) re-initialises
+the filter from that sample ('state_health'), says so, and the next diagnostics report
+is an ERROR.  Nothing non-finite is returned and P stays symmetric positive
+semi-definite.  A config is validated by what it does: x0, P0 within state_limit, and a
+trial step of mu = period from x0, P0 that stays finite and within state_limit.  The
+module never imports rclpy.
+
+Revisions: a sample inserted late re-runs the filter from its left neighbour, and the
+revised estimates of every later point are returned again (revised=True).  A second late
+sample can revise the same stamps once more; the revised outputs of one insertion come
+together and in stamp order, and a later revision of a stamp supersedes an earlier one.
 
 An input u (`add_input`) is held piecewise constant from its stamp to the next input
 (zero-order hold: u(t) is in force on [t, sigma(t)) of every point t until the next
@@ -43,16 +59,22 @@ from typing import Optional, Sequence
 import numpy as np
 
 from tskf_ros.core import irregular_sampling as irregular
+from tskf_ros.core.input_rate import InputRate
 from tskf_ros.core.linear_models import LinearModel
-from tskf_ros.core.timescale_kalman import FilterError, is_psd, TRANSITIONS
-from tskf_ros.core.units import NS
+from tskf_ros.core.timescale_kalman import (FilterError, is_psd, NonRegressiveError,
+                                            TRANSITIONS)
+from tskf_ros.core.units import MAX_STAMP_NS, NS
 
 
 # reasons a sample is not used; each is a diagnostics counter
-REJECT_REASONS = ('zero_stamp', 'non_finite', 'bad_variance', 'invalid_power', 'future',
-                  'duplicate', 'too_old', 'filter_error', 'input_non_finite', 'input_size',
-                  'input_late', 'input_duplicate', 'input_zero_stamp', 'no_input_matrix')
-RESET_REASONS = ('forward_jump', 'backward_jump', 'clock_jump', 'reconfigured')
+REJECT_REASONS = ('zero_stamp', 'stamp_range', 'non_finite', 'bad_variance', 'invalid_power',
+                  'out_of_range', 'gated', 'future', 'duplicate', 'too_old', 'filter_error',
+                  'input_non_finite', 'input_size', 'input_late', 'input_duplicate',
+                  'input_zero_stamp', 'no_input_matrix')
+RESET_REASONS = ('forward_jump', 'backward_jump', 'clock_jump', 'reconfigured',
+                 'state_health')
+# diagnostics list at most this many of the sampling intervals seen
+INTERVALS_SHOWN = 20
 
 
 class ConfigError(ValueError):
@@ -127,6 +149,12 @@ class EstimatorConfig:
     max_backward: float = 30.0      # a backward jump beyond this re-initialises
     max_future: float = 0.0         # stamp ahead of the receiver clock by more: rejected (0 off)
     nonpositive_is_gap: bool = True  # a reading <= 0 is an interruption (a power, Cai IV-C)
+    gate: float = 10.0              # Mahalanobis distance of a rejected innovation (0: off)
+    measurement_range: tuple = ()   # (lo, hi) of a physical reading; (): any finite value
+    state_limit: float = 1e9        # |x_i| or sqrt(trace P) beyond this: re-initialise
+    stale_timeout: float = 10.0     # s without input: diagnostics ERROR (0: off)
+    min_rate_fraction: float = 0.0  # input rate below this * 1 / period: WARN (0: off)
+    rate_window: float = 10.0       # s over which the input rate is measured
 
     def __post_init__(self) -> None:
         """Check the bounds and that the model makes a filter; raise ConfigError if not."""
@@ -134,7 +162,8 @@ class EstimatorConfig:
             raise ConfigError(f'transition must be one of {TRANSITIONS}, '
                               f'got {self.transition!r}')
         for name in ('period', 'dense_fraction', 'jump_factor', 'max_gap', 'history_window',
-                     'max_jump', 'max_backward', 'max_future'):
+                     'max_jump', 'max_backward', 'max_future', 'gate', 'state_limit',
+                     'stale_timeout', 'min_rate_fraction', 'rate_window'):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ConfigError(f'{name} must be finite and >= 0, got {value}')
@@ -147,10 +176,44 @@ class EstimatorConfig:
         if self.max_backward < self.history_window:
             raise ConfigError(f'max_backward ({self.max_backward} s) must be at least '
                               f'history_window ({self.history_window} s)')
+        if not self.state_limit > 0:
+            raise ConfigError(f'state_limit must be > 0, got {self.state_limit}')
+        if self.measurement_range:
+            r = tuple(self.measurement_range)
+            if len(r) != 2 or not all(np.isfinite(r)) or not r[0] < r[1]:
+                raise ConfigError('measurement_range must be empty or [lo, hi] with finite '
+                                  f'lo < hi, got {list(r)}')
         try:
             self.model.make_filter(self.transition)
         except FilterError as exc:
             raise ConfigError(str(exc)) from None
+        # a model that is not regressive at mu = period is refused step by step, not here
+        self._trial(self.model.make_filter(self.transition, allow_nonregressive=True))
+
+    def _trial(self, kf: 'object') -> None:
+        """
+        Refuse a model that is absurd at x0, P0 or after one nominal step from there.
+
+        Longer jumps are not tried: an unstable model may legitimately blow up over
+        max_jump (e^60 for Cai's A = 1 with the exact transition); at run time such a
+        step re-initialises the filter instead ('state_health').
+        """
+        x0, P0 = kf.state()
+        why = _unhealthy(x0, P0, self.state_limit)
+        if why:
+            raise ConfigError(f'the initial state is absurd: {why}')
+        y = kf.C @ x0 + kf.D
+        u = np.zeros(kf.B.shape[1])
+        for mu in (self.period,):
+            kf.set_state(x0, P0)
+            try:
+                with np.errstate(all='ignore'):
+                    res = kf.step(mu, y, u)
+            except (FilterError, ArithmeticError, np.linalg.LinAlgError) as exc:
+                raise ConfigError(f'a step of mu = {mu:g} s from x0, P0 fails: {exc}') from None
+            why = _unhealthy(res.x_predicted, res.P_predicted, self.state_limit)
+            if why:
+                raise ConfigError(f'a step of mu = period = {mu:g} s from x0, P0 gives {why}')
 
 
 @dataclass(frozen=True)
@@ -232,6 +295,20 @@ def _finite(*arrays: np.ndarray) -> bool:
     return all(np.isfinite(a.sum()) for a in arrays)
 
 
+def _unhealthy(x: np.ndarray, P: np.ndarray, limit: float) -> str:
+    """Return why (x, P) is absurd (non-finite, or beyond limit), or '' if it is not."""
+    with np.errstate(all='ignore'):
+        if not _finite(x, P):
+            return 'a non-finite state or covariance'
+        big = float(np.max(np.abs(x))) if x.size else 0.0
+        if big > limit:
+            return f'|x| = {big:.3g} > state_limit = {limit:g}'
+        trace = float(np.trace(P))
+        if not trace <= limit * limit:
+            return f'sqrt(trace P) = {np.sqrt(max(trace, 0.0)):.3g} > state_limit = {limit:g}'
+    return ''
+
+
 class EstimatorSession:
     """The filter fed from a stream of stamped samples; see the module docstring."""
 
@@ -244,6 +321,15 @@ class EstimatorSession:
         self.points: deque = deque()
         self.u = np.zeros(self.kf.B.shape[1])     # the input in force (zero-order hold)
         self.u_stamp_ns = 0                         # its stamp (0: none yet)
+        self._checker: Optional[irregular.IntervalChecker] = None
+        self.health_error = ''                      # why the filter re-initialised itself
+        self.input_rate = self._input_rate(config)
+
+    @staticmethod
+    def _input_rate(config: EstimatorConfig) -> InputRate:
+        return InputRate(1.0 / config.period, window=config.rate_window,
+                         min_fraction=config.min_rate_fraction,
+                         stale_after=config.stale_timeout)
 
     # -- public API -----------------------------------------------------------------------
 
@@ -252,11 +338,16 @@ class EstimatorSession:
         """Take one sample (stamp in ns, measurement, its variance); say what it did."""
         st = self.stats
         st.received += 1
+        if now_ns is not None:
+            self.input_rate.note(now_ns)
         stamp_ns = int(stamp_ns)
         cfg = self.config
         y = np.atleast_1d(np.asarray(power, dtype=float)).reshape(-1)
         if stamp_ns <= 0:
             return self._reject('zero_stamp', 'the header stamp is unset (0)')
+        if stamp_ns > MAX_STAMP_NS:
+            return self._reject('stamp_range', f'stamp {stamp_ns} ns is beyond what a ROS '
+                                'message can hold (sec is an int32)')
         if not _finite(y):
             return self._reject('non_finite', f'measurement {y} is not finite')
         if not (np.isfinite(variance) and variance >= 0):
@@ -269,6 +360,10 @@ class EstimatorSession:
             # Cai et al. IV-C: a reading at or below zero is an interruption, not a point
             st.rejected['invalid_power'] += 1
             return Outcome('gap', 'invalid_power', f'reading {y} <= 0: an interruption')
+        if cfg.measurement_range and not np.all(
+                (y >= cfg.measurement_range[0]) & (y <= cfg.measurement_range[1])):
+            return self._reject('out_of_range', f'reading {y} outside measurement_range '
+                                f'{list(cfg.measurement_range)}')
         if (now_ns is not None and cfg.max_future > 0
                 and stamp_ns - int(now_ns) > cfg.max_future * NS):
             return self._reject('future', f'stamp {stamp_ns / NS:.9f} s is '
@@ -312,6 +407,9 @@ class EstimatorSession:
             return self._reject('no_input_matrix', 'the model has no B: input ignored')
         if stamp_ns <= 0:
             return self._reject('input_zero_stamp', 'the input header stamp is unset (0)')
+        if stamp_ns > MAX_STAMP_NS:
+            return self._reject('stamp_range', f'input stamp {stamp_ns} ns is beyond what a '
+                                'ROS message can hold (sec is an int32)')
         if u.size != self.u.size:
             return self._reject('input_size', f'input has {u.size} entries, B has '
                                 f'{self.u.size} columns')
@@ -363,6 +461,7 @@ class EstimatorSession:
         old_n = self.kf.n
         kf = config.model.make_filter(config.transition)
         self.config = config
+        self._checker = None
         if kf.B.shape[1] != self.u.size:
             self.u, self.u_stamp_ns = np.zeros(kf.B.shape[1]), 0
             self.kf = kf
@@ -371,6 +470,8 @@ class EstimatorSession:
             return self.reset('reconfigured', f'state dimension changed {old_n} -> {kf.n}')
         kf.set_state(self.kf.x, self.kf.P)
         self.kf = kf
+        self.input_rate = self._input_rate(config)
+        self._checker = None
         self._check_intervals()          # the same intervals may mean something else now
         return Outcome('accepted', 'reconfigured', 'new parameters in use')
 
@@ -378,26 +479,42 @@ class EstimatorSession:
         """Stamp of the last point, whose corrected estimate waits for the next point."""
         return self.points[-1].stamp_ns if self.points else None
 
-    def diagnostics(self, *, consume: bool = True) -> tuple[str, str, dict]:
+    def diagnostics(self, *, consume: bool = True,
+                    now_ns: Optional[int] = None) -> tuple[str, str, dict]:
         """
-        Return (level 'OK' or 'WARN', message, values) for a diagnostics status.
+        Return (level 'OK', 'WARN' or 'ERROR', message, values) for a diagnostics status.
 
-        consume=True resets the since-last-report counters (gaps over the bound, rejects).
+        consume=True resets the since-last-report counters (gaps over the bound, rejects,
+        a self re-initialisation).  With now_ns (the receiver clock) the input rate and
+        staleness are judged too (InputRate).
         """
         st, cfg = self.stats, self.config
         level, msgs = 'OK', []
+        values: dict = {}
+        if now_ns is not None:
+            rate_level, why, values = self.input_rate.level(now_ns)
+            if why:
+                level = rate_level
+                msgs.append(why)
+        if self.health_error:
+            level = 'ERROR'
+            msgs.append(f'filter re-initialised itself: {self.health_error}')
         if st.gaps_over_bound:
-            level = 'WARN'
+            level = 'WARN' if level == 'OK' else level
             msgs.append(f'{st.gaps_over_bound} gap(s) longer than max_gap = {cfg.max_gap} s')
         if st.rejected_since:
             msgs.append(f'{st.rejected_since} sample(s) rejected')
         if st.interval_warnings:
-            level = 'WARN'
+            level = 'WARN' if level == 'OK' else level
             msgs.append('sampling interval(s) ' + ', '.join(
                 str(k) for k, _ in st.interval_warnings) + ' break observability (Fang & '
                 'de Callafon Section III)')
         lengths = list(st.gaps.values())
-        values = {
+        seen = sorted(st.intervals)
+        shown = seen if len(seen) <= INTERVALS_SHOWN else (
+            seen[:INTERVALS_SHOWN // 2] + ['...'] + seen[-INTERVALS_SHOWN // 2:])
+        warnings = st.interval_warnings[:INTERVALS_SHOWN]
+        values.update({
             'received': st.received, 'accepted': st.accepted, 'inserted_late': st.inserted,
             'inputs_received': st.inputs_received, 'inputs_accepted': st.inputs_accepted,
             'input_in_force': ' '.join(f'{v:g}' for v in self.u),
@@ -409,9 +526,10 @@ class EstimatorSession:
             'covariance_trace': st.covariance_trace,
             'last_stamp_s': st.last_stamp_ns / NS,
             'transition': cfg.transition,
-            'intervals_seen_periods': ' '.join(str(k) for k in sorted(st.intervals)),
-            'interval_warnings': ' | '.join(f'{k}: {why}' for k, why in st.interval_warnings),
-        }
+            'intervals_seen_periods': ' '.join(str(k) for k in shown),
+            'intervals_seen_count': len(seen),
+            'interval_warnings': ' | '.join(f'{k}: {why}' for k, why in warnings),
+        })
         if st.peak_bounds is not None:
             # Theorem 2 next to the covariance the filter runs (scalar models only)
             values['theorem2_peak_bound_low'] = st.peak_bounds[0]
@@ -424,6 +542,7 @@ class EstimatorSession:
         if consume:
             st.gaps_over_bound = 0
             st.rejected_since = 0
+            self.health_error = ''
         return level, '; '.join(msgs) or 'ok', values
 
     # -- internals ------------------------------------------------------------------------
@@ -494,35 +613,59 @@ class EstimatorSession:
 
     def _record_interval(self, dt: float) -> None:
         """
-        Keep the set of sampling intervals in nominal periods and re-check it when it grows.
+        Keep the set of sampling intervals in nominal periods and check each new one.
 
         Fang & de Callafon view the stream as the discrete system of one nominal period,
         A_h = the filter's transition over `period`, measured after kappa periods.  A new
-        kappa triggers the Section III checks (pathological, Definition 2; degenerate,
-        Definition 3) and, for a scalar model, the Theorem 2 bounds for kappa in
-        [min, max] seen.  Those bounds are for Fang's filter: a measurement variance of
-        R / period at every sample, where Table 3 uses R / mu.
+        kappa gets the Section III checks (pathological, Definition 2; degenerate,
+        Definition 3) for itself only, at a cost independent of kappa
+        (irregular.IntervalChecker), and for a scalar model the Theorem 2 bounds for kappa
+        in [min, max] seen (closed form).  Those bounds are for Fang's filter: a
+        measurement variance of R / period at every sample, where Table 3 uses R / mu.
         """
         st, cfg = self.stats, self.config
         kappa = int(round(dt / cfg.period))
         if kappa < 1 or kappa in st.intervals:
             return
         st.intervals.add(kappa)
-        self._check_intervals()
+        if len(st.intervals) == 1:          # the first: (A1) is reported with it
+            self._check_intervals()
+            return
+        why = self._interval_checker().warning(kappa)
+        if why is not None:
+            st.interval_warnings = sorted(st.interval_warnings + [(kappa, why)])
+        self._peak_bounds()
+
+    def _interval_checker(self) -> irregular.IntervalChecker:
+        """Return the Section III checks of this config's one-period transition (built once)."""
+        if self._checker is None:
+            kf = self.kf
+            A_h, _, _ = kf.transition_matrices(self.config.period)
+            self._checker = irregular.IntervalChecker(A_h, kf.C)
+        return self._checker
 
     def _check_intervals(self) -> None:
-        """Run the interval checks and the scalar bounds for the intervals seen so far."""
-        st, cfg, kf = self.stats, self.config, self.kf
+        """Re-run the interval checks and the scalar bounds for all intervals seen so far."""
+        st = self.stats
         st.interval_warnings, st.peak_bounds = [], None
         if not st.intervals:
             return
-        A_h, Q_h, _ = kf.transition_matrices(cfg.period)
-        st.interval_warnings = irregular.interval_warnings(A_h, kf.C, st.intervals)
-        if kf.n == 1 and kf.p == 1:
-            lo, hi = min(st.intervals), max(st.intervals)
+        check = self._interval_checker()
+        st.interval_warnings = [] if check.detectable else [(1, irregular.UNDETECTABLE)]
+        for k in sorted(st.intervals):
+            why = check.warning(k)
+            if why is not None:
+                st.interval_warnings.append((k, why))
+        self._peak_bounds()
+
+    def _peak_bounds(self) -> None:
+        """Theorem 2 for kappa in [min, max] seen (scalar models only)."""
+        st, cfg, kf = self.stats, self.config, self.kf
+        if kf.n == 1 and kf.p == 1 and st.intervals:
+            A_h, Q_h, _ = kf.transition_matrices(cfg.period)
             st.peak_bounds = irregular.scalar_peak_bounds(
                 float(A_h[0, 0]), float(kf.C[0, 0]), float(Q_h[0, 0]),
-                float(kf.R[0, 0]) / cfg.period, lo, hi)
+                float(kf.R[0, 0]) / cfg.period, min(st.intervals), max(st.intervals))
 
     def _step(self, point: _Point, sigma_ns: int, revised: bool
               ) -> tuple[list, Jump, np.ndarray, np.ndarray]:
@@ -550,7 +693,21 @@ class EstimatorSession:
             est, jump, x, P = self._step(last, stamp_ns, False)
         except FilterError as exc:
             self.kf.set_state(*saved)       # the step may have moved it before the check
-            return self._reject('filter_error', f'step refused: {exc}')
+            if y is None or isinstance(exc, NonRegressiveError):
+                # this mu only: the state is sound and the next sample's mu will differ
+                return self._reject('filter_error', f'step refused: {exc}')
+            return self._unhealthy_restart(stamp_ns, y, f'step refused: {exc}')
+        why = _unhealthy(x, P, self.config.state_limit)
+        if why:
+            self.kf.set_state(*saved)
+            if y is None:
+                return self._reject('filter_error', f'step refused: {why}')
+            return self._unhealthy_restart(stamp_ns, y, f'the step gave {why}')
+        if y is not None:
+            gated = self._gate(y, x, P)
+            if gated:
+                self.kf.set_state(*saved)
+                return self._reject('gated', gated)
         if u is None:
             self.points.append(_Point(stamp_ns, y, x, P, self.u))
         else:
@@ -592,13 +749,21 @@ class EstimatorSession:
                 points[k + 1] = replace(points[k + 1], x=x, P=P)
                 estimates += est
                 jumps.append(jump)
+            why = _unhealthy(self.kf.x, self.kf.P, self.config.state_limit)
+            if why:
+                raise FilterError(why)
         except FilterError as exc:
             self.points = deque(old_points)
             self.kf.set_state(*saved)
             return self._reject('filter_error', f're-run after a late sample refused: {exc}')
+        new = j if merged else j + 1
+        gated = self._gate(y, points[new].x, points[new].P) if new > 0 else ''
+        if gated:
+            self.points = deque(old_points)
+            self.kf.set_state(*saved)
+            return self._reject('gated', gated)
         self.points = deque(points)
         # the interval between the measurement points around it is now two intervals
-        new = j if merged else j + 1
         before = [p.stamp_ns for p in points[:new] if p.y is not None]
         after = [p.stamp_ns for p in points[new + 1:] if p.y is not None]
         if after:
@@ -614,6 +779,29 @@ class EstimatorSession:
         self._trim()
         return Outcome('inserted', 'late', f'late sample {stamp_ns / NS:.9f} s inserted; '
                        f'{len(estimates)} estimates revised', estimates, jumps)
+
+    def _gate(self, y: np.ndarray, x: np.ndarray, P: np.ndarray) -> str:
+        """Return why y fails the innovation gate at the predictor (x, P), or ''."""
+        gate = self.config.gate
+        if not gate > 0 or x.size == 0:
+            return ''
+        kf = self.kf
+        e = y - kf.C @ x - kf.D
+        S = kf.C @ P @ kf.C.T + kf.R / self.config.period
+        with np.errstate(all='ignore'):
+            try:
+                d2 = float(e @ np.linalg.solve(S, e))
+            except np.linalg.LinAlgError:
+                return ''
+        if d2 > gate * gate or not np.isfinite(d2):
+            return (f'innovation {e} is {np.sqrt(d2):.3g} standard deviations from the '
+                    f'prediction (gate {gate:g})')
+        return ''
+
+    def _unhealthy_restart(self, stamp_ns: int, y: np.ndarray, why: str) -> Outcome:
+        """Re-initialise after an absurd or failed step and start again from this sample."""
+        self.health_error = why
+        return self._restart('state_health', stamp_ns, y, why)
 
     def _trim(self) -> None:
         cfg = self.config

@@ -1,0 +1,62 @@
+"""
+Input rate and staleness of a sample stream, as diagnostic_updater's FrequencyStatus does.
+
+Not from the papers: a monitor for the diagnostics of the two sessions.  Receipts are
+counted on the receiver's clock (the node clock live, the log time offline) over a
+sliding window; `level(now)` is ERROR when nothing has arrived for `stale_after` seconds
+(counted from the first report if nothing ever arrived), WARN when the rate over the
+window is below `min_fraction` of the nominal rate, else OK.  The memory is bounded:
+at most MAX_RECEIPTS receipt times are kept (beyond that the oldest are dropped, which
+can only under-count a rate that is then far above any nominal one anyway).
+"""
+
+from collections import deque
+from typing import Optional
+
+from tskf_ros.core.units import NS
+
+MAX_RECEIPTS = 100_000
+
+
+class InputRate:
+    """Receipt times of a stream and the OK / WARN / ERROR verdict on them."""
+
+    def __init__(self, nominal_rate: float, *, window: float, min_fraction: float,
+                 stale_after: float) -> None:
+        self.nominal_rate = float(nominal_rate)      # samples per second expected
+        self.window_ns = int(window * NS)
+        self.min_fraction = float(min_fraction)      # 0: no rate check
+        self.stale_ns = int(stale_after * NS)        # 0: no staleness check
+        self.receipts: deque = deque(maxlen=MAX_RECEIPTS)
+        self.first_report_ns: Optional[int] = None
+
+    def note(self, now_ns: int) -> None:
+        """Count one receipt at now_ns (receiver clock)."""
+        self.receipts.append(int(now_ns))
+
+    def rate(self, now_ns: int) -> float:
+        """Return the receipts per second over the window ending at now_ns."""
+        lo = now_ns - self.window_ns
+        while self.receipts and self.receipts[0] <= lo:
+            self.receipts.popleft()
+        return len(self.receipts) / (self.window_ns / NS) if self.window_ns > 0 else 0.0
+
+    def level(self, now_ns: int) -> tuple[str, str, dict]:
+        """Return (level, message or '', values) of the stream at now_ns."""
+        now_ns = int(now_ns)
+        if self.first_report_ns is None:
+            self.first_report_ns = now_ns
+        last = self.receipts[-1] if self.receipts else None
+        silent = (now_ns - (last if last is not None else self.first_report_ns)) / NS
+        rate = self.rate(now_ns)
+        values = {'input_rate_hz': rate, 'input_silent_s': silent}
+        if self.stale_ns and silent * NS >= self.stale_ns:
+            what = 'no input yet' if last is None else 'no input'
+            return 'ERROR', f'{what} for {silent:.3g} s (stale_timeout)', values
+        # the rate is judged only once a whole window has passed since the first report
+        whole = now_ns - self.first_report_ns >= self.window_ns
+        if (self.min_fraction > 0 and whole
+                and rate < self.min_fraction * self.nominal_rate):
+            return 'WARN', (f'input rate {rate:.3g} Hz is below {self.min_fraction:g} of '
+                            f'the nominal {self.nominal_rate:.3g} Hz'), values
+        return 'OK', '', values
