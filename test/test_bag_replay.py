@@ -1,7 +1,6 @@
 """Live replay (player + estimator or alignment node) against offline replay; the player."""
 
 from pathlib import Path
-import time
 
 from geometry_msgs.msg import TwistWithCovarianceStamped
 import numpy as np
@@ -13,7 +12,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance, TimeReference
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from tskf_ros.bag.message_types import message_class
 from tskf_ros.bag.offline_replay import replay
@@ -23,6 +22,7 @@ from tskf_ros.messages import alignment_interface, estimator_interface
 from tskf_ros.messages import conversions
 from tskf_ros.nodes.alignment import Alignment
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
+from tskf_ros.tools.demo_collector import wait_for
 
 import yaml
 
@@ -31,15 +31,65 @@ BAG = REPO / 'bags' / 'owc_cai_td_1hz'
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'
 LED_BAG = REPO / 'bags' / 'led_alignment'
 LED_PARAMS = REPO / 'config' / 'alignment.yaml'
-TIMEOUT = 30.0
+# s: a bound on waiting for DDS, never an assertion about timing (generous: a loaded machine)
+TIMEOUT = 60.0
+# the live nodes' queues: deeper than a whole bag, so that in one process (delivery within
+# the publish call) nothing is dropped however late the executor takes the messages
+DEEP = 1000
+SENTINEL = 'flush'
 
 
 def spin_until(executor, condition, what):
-    """Spin until condition(); fail after TIMEOUT (a bound on DDS, not a timing assertion)."""
-    deadline = time.monotonic() + TIMEOUT
-    while not condition():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        executor.spin_once(timeout_sec=0.005)
+    """Spin until condition(); fail, saying what never happened, after TIMEOUT."""
+    wait_for(executor, condition, what, TIMEOUT)
+
+
+def sentinel(cls):
+    """Return a message of cls marked as the end of a flush (never a node's output)."""
+    msg = cls()
+    if cls is TimeReference:
+        msg.source = SENTINEL
+    elif cls is Float64MultiArray:
+        msg.layout.dim = [MultiArrayDimension(label=SENTINEL)]
+    else:
+        msg.header.frame_id = SENTINEL
+    return msg
+
+
+def is_sentinel(msg):
+    """Tell a flush sentinel from a node's output."""
+    if isinstance(msg, TimeReference):
+        return msg.source == SENTINEL
+    if isinstance(msg, Float64MultiArray):
+        return any(d.label == SENTINEL for d in msg.layout.dim)
+    return msg.header.frame_id == SENTINEL
+
+
+class Flusher:
+    """
+    Make sure a client took every message a node in the same process has published.
+
+    Per topic a publisher with the node's QoS, in the same process: once the node has
+    published everything, a sentinel published after it lands in the client's queue behind
+    the node's messages, so when the client has taken the sentinel it has taken them all.
+    """
+
+    def __init__(self, node, topics):
+        self.pubs = {t: node.create_publisher(cls, t, QoSProfile(depth=10))
+                     for t, cls in topics.items()}
+
+    def matched(self):
+        """Tell whether every sentinel publisher reaches the client."""
+        return all(p.get_subscription_count() > 0 for p in self.pubs.values())
+
+    def flush(self, executor, live):
+        """Publish the sentinels; spin until the client has taken them; drop them."""
+        for topic, pub in self.pubs.items():
+            pub.publish(sentinel(pub.msg_type))
+        spin_until(executor, lambda: all(any(is_sentinel(m) for m in live[t])
+                                         for t in self.pubs), 'the flush sentinels')
+        for topic in self.pubs:
+            live[topic][:] = [m for m in live[topic] if not is_sentinel(m)]
 
 
 def yaml_overrides(path, key='timescale_estimator'):
@@ -79,25 +129,33 @@ def test_live_replay_equals_offline_replay(ros_context):
     res, offline = offline_estimates(BAG)
     assert res.samples == 288 and res.statuses == {'accepted': 288}
     est = TimescaleEstimator(context=ros_context, parameter_overrides=yaml_overrides(PARAMS)
-                             + [Parameter('use_sim_time', value=True)])
+                             + [Parameter('use_sim_time', value=True),
+                                Parameter('queue_depth', value=DEEP)])
     player = Player(BAG, rate=100.0, clock_hz=200.0, topics=['/received_power'],
                     context=ros_context)
     client = rclpy.create_node('replay_client', context=ros_context)
+    kinds = {t: TimeReference if t.endswith('mu') else TwistWithCovarianceStamped
+             for t in offline}
     live = {t: [] for t in offline}
-    for topic in live:
-        cls = TimeReference if topic.endswith('mu') else TwistWithCovarianceStamped
-        client.create_subscription(cls, topic, live[topic].append, QoSProfile(depth=1000))
+    for topic, cls in kinds.items():
+        client.create_subscription(cls, topic, live[topic].append, QoSProfile(depth=DEEP))
+    flusher = Flusher(client, kinds)
     executor = SingleThreadedExecutor(context=ros_context)
     for node in (est, client):
         executor.add_node(node)
     try:
-        spin_until(executor, lambda: all(
-            est.count_publishers(t) and client.count_publishers(t) for t in live)
-            and player.pubs['/received_power'].get_subscription_count(), 'matching')
+        # two publishers per output topic: the node's and the flusher's
+        spin_until(executor, lambda: all(client.count_publishers(t) >= 2 for t in live)
+                   and player.pubs['/received_power'].get_subscription_count()
+                   and flusher.matched(), 'matching')
         executor.add_node(player)
-        spin_until(executor, lambda: player.done.done() and all(
-            len(live[t]) >= len(offline[t]) for t in live), 'the live estimates')
-        spin_until(executor, lambda: True, 'flush')
+        # all played and all taken by the estimator: it has published all it ever will
+        spin_until(executor, lambda: player.done.done()
+                   and est.session.stats.received == res.samples,
+                   lambda: f'the estimator to take the {res.samples} samples (player done: '
+                   f'{player.done.done()}, published {player.published}, estimator took '
+                   f'{est.session.stats.received})')
+        flusher.flush(executor, live)
         sim_now = est.get_clock().now().nanoseconds
     finally:
         executor.shutdown()
@@ -140,24 +198,31 @@ def test_live_alignment_replay_equals_offline_replay(ros_context):
     offline = {t: [m for name, _, m in res.outputs if name == t] for t in topics}
     assert all(len(v) == 381 for v in offline.values())
     node = Alignment(context=ros_context, parameter_overrides=yaml_overrides(
-        LED_PARAMS, '/**/alignment') + [Parameter('use_sim_time', value=True)])
+        LED_PARAMS, '/**/alignment') + [Parameter('use_sim_time', value=True),
+                                        Parameter('queue_depth', value=DEEP)])
     player = Player(LED_BAG, rate=10.0, clock_hz=200.0, topics=['/photodiode'],
                     remap={'/photodiode': '/intensity'}, context=ros_context)
     client = rclpy.create_node('alignment_client', context=ros_context)
+    kinds = {t: Float64MultiArray if t.endswith('commands') else TwistWithCovarianceStamped
+             for t in topics}
     live = {t: [] for t in topics}
-    for topic in topics:
-        cls = Float64MultiArray if topic.endswith('commands') else TwistWithCovarianceStamped
-        client.create_subscription(cls, topic, live[topic].append, QoSProfile(depth=1000))
+    for topic, cls in kinds.items():
+        client.create_subscription(cls, topic, live[topic].append, QoSProfile(depth=DEEP))
+    flusher = Flusher(client, kinds)
     executor = SingleThreadedExecutor(context=ros_context)
     for n in (node, client):
         executor.add_node(n)
     try:
-        spin_until(executor, lambda: all(client.count_publishers(t) for t in topics)
-                   and player.pubs['/photodiode'].get_subscription_count(), 'matching')
+        spin_until(executor, lambda: all(client.count_publishers(t) >= 2 for t in topics)
+                   and player.pubs['/photodiode'].get_subscription_count()
+                   and flusher.matched(), 'matching')
         executor.add_node(player)
-        spin_until(executor, lambda: player.done.done() and all(
-            len(live[t]) >= len(offline[t]) for t in topics), 'the live outputs')
-        spin_until(executor, lambda: True, 'flush')
+        spin_until(executor, lambda: player.done.done()
+                   and node.session.stats.received == res.samples,
+                   lambda: f'the aligner to take the {res.samples} samples (player done: '
+                   f'{player.done.done()}, published {player.published}, aligner took '
+                   f'{node.session.stats.received})')
+        flusher.flush(executor, live)
         sim_now = node.get_clock().now().nanoseconds
     finally:
         executor.shutdown()
@@ -219,7 +284,14 @@ def test_player_selects_remaps_offsets_and_loops(ros_context):
         spin_until(executor, lambda: player.pubs['/received_power'].get_subscription_count()
                    and player.clock_pub.get_subscription_count(), 'matching')
         executor.add_node(player)
-        spin_until(executor, lambda: player.loops >= 2, 'two loops')
+        # in process, into a queue deeper than two passes: nothing of the best-effort
+        # stream is lost; wait until the client has the first pass and the start of the
+        # second, and has seen /clock go back (a late tick may publish a whole pass at once
+        # and skip the clock's jump: the player keeps looping until one shows it)
+        spin_until(executor, lambda: player.loops >= 2 and len(received) > 51 and any(
+            b.clock.sec < a.clock.sec for a, b in zip(clocks, clocks[1:])),
+            lambda: f'two loops and /clock going back (loops {player.loops}, '
+            f'{len(received)} messages, {len(clocks)} clocks)')
     finally:
         executor.shutdown()
         player.destroy_node()
