@@ -1,6 +1,9 @@
 """Message types and QoS profiles as rclpy, rosbags and the rosbag2 metadata see them."""
 
 import importlib
+import importlib.util
+from pathlib import Path
+import re
 from typing import Any
 
 from rclpy.duration import Duration
@@ -11,9 +14,12 @@ from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, Q
 from rosbags.typesys import get_typestore, Stores
 from rosbags.typesys.store import Typestore
 
-__all__ = ['BagTypeError', 'message_class', 'qos_from_rclpy', 'qos_to_rclpy', 'typestore']
+__all__ = ['BagTypeError', 'interface_package', 'message_class', 'qos_from_rclpy',
+           'qos_to_rclpy', 'typestore']
 
 _STORE = None
+# package/msg/Name: the ROS 2 interface name grammar (rosidl_adapter, REP 144)
+TYPE_NAME = re.compile(r'[a-z][a-z0-9_]*/msg/[A-Z][A-Za-z0-9]*')
 
 
 class BagTypeError(LookupError):
@@ -28,20 +34,50 @@ def typestore() -> Typestore:
     return _STORE
 
 
+def interface_package(pkg: str) -> bool:
+    """
+    Say whether `pkg` is an installed rosidl-generated interface package, without importing it.
+
+    Such a package is a directory with a `msg` subpackage and the generated type support
+    libraries (<pkg>_s__rosidl_typesupport_c...); nothing else (`os`, `this`, any module
+    that runs code when imported) is ever imported by message_class.
+    """
+    try:
+        spec = importlib.util.find_spec(pkg)
+    except (ImportError, ValueError):
+        return False
+    if spec is None or not spec.submodule_search_locations:
+        return False
+    for where in spec.submodule_search_locations:
+        top = Path(where)
+        if ((top / 'msg' / '__init__.py').is_file()
+                and any(top.glob(f'{pkg}_s__rosidl_typesupport_c*'))):
+            return True
+    return False
+
+
 def message_class(msgtype: str) -> Any:
     """
     Return the rclpy message class of a type name such as 'sensor_msgs/msg/Illuminance'.
 
-    Raises BagTypeError if the name is malformed or its package is not installed.
+    The name must follow the ROS interface name grammar (package/msg/Name) and name an
+    installed interface package (interface_package); raises BagTypeError otherwise,
+    without importing anything.
     """
-    parts = msgtype.split('/')
-    if len(parts) != 3 or not all(parts):
-        raise BagTypeError(f'{msgtype!r} is not a message type name (pkg/msg/Name)')
+    if not isinstance(msgtype, str) or not TYPE_NAME.fullmatch(msgtype):
+        raise BagTypeError(f'{msgtype!r} is not a message type name (package/msg/Name)')
+    pkg, sub, name = msgtype.split('/')
+    if not interface_package(pkg):
+        raise BagTypeError(f'message type {msgtype} is not installed here '
+                           f'(no interface package {pkg})')
     try:
-        module = importlib.import_module(f'{parts[0]}.{parts[1]}')
-        return getattr(module, parts[2])
+        module = importlib.import_module(f'{pkg}.{sub}')
+        cls = getattr(module, name)
     except (ImportError, AttributeError):
         raise BagTypeError(f'message type {msgtype} is not installed here') from None
+    if not hasattr(cls, '_TYPE_SUPPORT') and not hasattr(type(cls), '_TYPE_SUPPORT'):
+        raise BagTypeError(f'{msgtype} is not a ROS message class')
+    return cls
 
 
 def _time(duration: Duration) -> QosTime:

@@ -13,7 +13,11 @@ input topics and every topic the live node would publish (estimate/predicted,
 estimate/corrected, estimate/mu, their revised/ versions and /diagnostics), with the same
 message types and header stamps.  An output message's log time is the log time of the
 input message that produced it (the live node publishes on receipt); /diagnostics is
-emitted every diagnostics_period seconds of log time, as the node's timer would.
+emitted every diagnostics_period seconds of log time, as the node's timer would, but at
+most once per input message: when several periods elapsed between two messages (a gap in
+the log times, a clock that jumps from boot time to the present), one /diagnostics
+message is written at the latest due time, not one per period (the output stays bounded by
+the input, however long the span of its clock).
 
 --filter alignment runs the alignment node's AlignmentSession instead (tskf_ros.messages.
 alignment_interface) on the intensity topic (default /intensity, else the only stamped scalar
@@ -44,7 +48,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_from_rclpy, typestore
 from tskf_ros.bag.reader import BagError, BagReader, Damage, exit_status
-from tskf_ros.bag.writer import BagWriter
+from tskf_ros.bag.writer import BagExistsError, BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_session import AlignmentSession
 from tskf_ros.messages import alignment_interface as aligner
@@ -174,15 +178,21 @@ class OfflineEstimator:
                 for (kind, _), name in BAG_OUTPUT_TOPICS.items()]
 
     def diagnostics_due(self, log_ns: int) -> list:
-        """Return the /diagnostics messages the node's timer would have sent up to log_ns."""
-        out = []
+        """
+        Return the /diagnostics message due at log_ns, if any: at most one.
+
+        When several periods have elapsed since the last one, the message is stamped at the
+        latest due time (the others would repeat the same state).
+        """
+        if self.period_ns <= 0:
+            return []
         if self.next_diag is None:
             self.next_diag = log_ns + self.period_ns
-        while log_ns >= self.next_diag:
-            out.append((self.next_diag, self.interface.diagnostics_message(
-                self.session, self.config, self.next_diag)))
-            self.next_diag += self.period_ns
-        return out
+        if log_ns < self.next_diag:
+            return []
+        due = self.next_diag + (log_ns - self.next_diag) // self.period_ns * self.period_ns
+        self.next_diag = due + self.period_ns
+        return [(due, self.interface.diagnostics_message(self.session, self.config, due))]
 
     def process(self, data: bytes, log_ns: int) -> tuple[str, list]:
         """Deserialize one measurement and run it; return (status, [(topic, msg)])."""
@@ -236,6 +246,8 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
     t0 = time.perf_counter()
     if filter not in FILTERS:
         raise ValueError(f'filter must be one of {FILTERS}, got {filter!r}')
+    if output is not None:
+        _check_output(Path(bag), Path(output), overwrite)
     reader = BagReader(bag)
     aligning = filter == 'alignment'
     config = (aligner.load_config if aligning else load_config)(params_file)
@@ -269,12 +281,12 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
                 writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, qos=[qos_from_rclpy(
                     est.output_topics()[0][2])])
             if aligning:
-                writer._writer.set_custom_data('tskf_ros.open_loop', aligner.OPEN_LOOP_NOTE)
+                writer.set_custom_data('tskf_ros.open_loop', aligner.OPEN_LOOP_NOTE)
         damage = _run(reader, est, writer, result, diagnostics)
         if damage is not None:
             result.damage = damage
             if writer is not None:
-                writer._writer.set_custom_data('tskf_ros.input_damage', str(damage))
+                writer.set_custom_data('tskf_ros.input_damage', str(damage))
         if writer is not None:
             writer.close()
     except BaseException:
@@ -283,6 +295,15 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
         raise
     result.seconds = time.perf_counter() - t0
     return result
+
+
+def _check_output(bag: Path, output: Path, overwrite: bool) -> None:
+    """Raise a BagError if `output` cannot be written (before anything is read or made)."""
+    out, src = output.resolve(), bag.resolve()
+    if out == src or src.is_relative_to(out) or out.is_relative_to(src):
+        raise BagExistsError(f'{output}: is (or holds, or is inside) the input bag {bag}; '
+                             'give another output')
+    BagWriter(output, overwrite=overwrite).check_target()
 
 
 def _run(reader: BagReader, est: OfflineEstimator, writer: Optional[BagWriter],

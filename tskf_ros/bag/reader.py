@@ -42,8 +42,10 @@ MCAP_MAGIC = b'\x89MCAP0\r\n'
 # exit status of a command whose input bag was damaged (what it could read was used)
 EXIT_DAMAGED = 3
 # what the record parsers raise on bytes that are not a valid MCAP record sequence
+# (lz4 raises RuntimeError on a bad frame)
 DAMAGE_ERRORS = (McapError, EOFError, struct.error, ValueError, UnicodeDecodeError,
-                 zstandard.ZstdError, MemoryError, OverflowError)
+                 zstandard.ZstdError, MemoryError, OverflowError, RuntimeError, KeyError,
+                 TypeError, IndexError)
 
 
 def exit_status(prog: str, damage: Optional['Damage'], what: str) -> int:
@@ -52,6 +54,10 @@ def exit_status(prog: str, damage: Optional['Damage'], what: str) -> int:
         return 0
     print(f'{prog}: {what}: {damage}', file=sys.stderr)
     return EXIT_DAMAGED
+
+
+def _int_or_none(value: object) -> Optional[int]:
+    return None if value is None else int(value)
 
 
 class BagError(Exception):
@@ -156,6 +162,7 @@ class BagReader:
     def __init__(self, path: PathLike) -> None:
         self.path = Path(path)
         self.topics: dict[str, TopicInfo] = {}
+        self.type_hashes: dict[str, str] = {}
         self.damage: Optional[Damage] = None
         self.metadata: dict = {}
         self.message_count: Optional[int] = None
@@ -196,27 +203,39 @@ class BagReader:
             info = doc['rosbag2_bagfile_information']
             self.storage = str(info['storage_identifier'])
             names = [str(p) for p in info['relative_file_paths']]
-        except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+            self.metadata = info
+            self.message_count = _int_or_none(info.get('message_count'))
+            self.start_ns = _int_or_none(
+                (info.get('starting_time') or {}).get('nanoseconds_since_epoch'))
+            self.duration_ns = _int_or_none((info.get('duration') or {}).get('nanoseconds'))
+            for entry in info.get('topics_with_message_count') or []:
+                md = entry.get('topic_metadata', {})
+                name = md.get('name')
+                if name:
+                    name = str(name)
+                    self.topics[name] = TopicInfo(
+                        name, str(md.get('type', '')),
+                        _int_or_none(entry.get('message_count')),
+                        parse_qos(md.get('offered_qos_profiles', [])),
+                        serialization_format=str(md.get('serialization_format', 'cdr')))
+                    if md.get('type_description_hash'):
+                        self.type_hashes[name] = str(md['type_description_hash'])
+        except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError, ValueError,
+                UnicodeDecodeError) as exc:
             raise MetadataError(f'{meta}: unreadable metadata ({type(exc).__name__}: '
                                 f'{str(exc).splitlines()[0] if str(exc) else exc!r})') from None
-        self.metadata = info
-        self.message_count = info.get('message_count')
-        self.start_ns = (info.get('starting_time') or {}).get('nanoseconds_since_epoch')
-        self.duration_ns = (info.get('duration') or {}).get('nanoseconds')
-        for entry in info.get('topics_with_message_count') or []:
-            md = entry.get('topic_metadata', {})
-            name = md.get('name')
-            if name:
-                self.topics[name] = TopicInfo(
-                    name, md.get('type', ''), entry.get('message_count'),
-                    parse_qos(md.get('offered_qos_profiles', [])),
-                    serialization_format=md.get('serialization_format', 'cdr'))
         if self.storage not in ('mcap', 'sqlite3'):
             raise BagFormatError(f'{meta}: storage {self.storage!r} is not supported '
                                  '(mcap or sqlite3)')
         self.files = [self.path / n for n in names]
         if not self.files:
             raise BagEmptyError(f'{meta}: lists no storage files')
+        top = self.path.resolve()
+        for name, f in zip(names, self.files):
+            # confined: a name such as ../../x or /etc/x would read outside the bag
+            if not f.resolve().is_relative_to(top) or f.resolve() == top:
+                raise MetadataError(f'{meta}: storage file {name!r} is outside the bag '
+                                    'directory; not reading it')
         for f in self.files:
             if not f.is_file():
                 raise BagNotFoundError(f'{f}: listed in metadata.yaml but missing')
@@ -282,11 +301,12 @@ class BagReader:
         where = 'a record'
         size = path.stat().st_size
         with path.open('rb') as f:
-            stream = ReadDataStream(f)
+            stream = ReadDataStream(f, calculate_crc=True)
             try:
                 read_magic(stream)
                 while True:
                     offset = stream.count
+                    crc = stream.checksum()
                     where = 'a record'
                     opcode = stream.read1()
                     length = stream.read8()
@@ -313,7 +333,14 @@ class BagReader:
                         if msg is not None:
                             count += 1
                             yield msg
-                    elif opcode in (Opcode.DATA_END, Opcode.FOOTER):
+                    elif opcode == Opcode.DATA_END:
+                        expected = stream.read4() if length >= 4 else 0
+                        if expected and expected != crc:
+                            where = 'the data section'
+                            raise ValueError('data section CRC mismatch: the file was '
+                                             'changed after it was written')
+                        return
+                    elif opcode == Opcode.FOOTER:
                         return
                     else:
                         stream.read(length)
@@ -334,6 +361,9 @@ class BagReader:
         schema = schemas.get(c.schema_id)
         msgtype = schema.name if schema is not None else ''
         info = self.topics.get(c.topic)
+        digest = c.metadata.get('topic_type_hash')
+        if digest:
+            self.type_hashes.setdefault(c.topic, digest)
         if info is None:
             qos = parse_qos(c.metadata.get('offered_qos_profiles', ''))
             info = self.topics[c.topic] = TopicInfo(c.topic, msgtype, None, qos,

@@ -14,10 +14,19 @@ dropped), and the publishers' offered QoS goes to metadata.yaml.  The bag is wri
 a hidden .partial directory and renamed when it is closed: on Ctrl-C / SIGTERM the recorder
 first takes every message already delivered to its subscriptions (up to DRAIN_LIMIT s),
 then closes the bag properly; a bag that was not closed is never left under the final name.
+
+Faults: every --flush-interval seconds (default 1) the chunk in progress is written and
+fsynced, so a SIGKILL or a power loss loses at most that much; the hidden .partial
+directory left behind is turned into a bag by `reindex`.  When the disk fills (ENOSPC)
+the recorder stops, keeps what reached the disk, closes it as a valid bag under the final
+name and exits 1 with a one-line error.  A bad output path or option is refused before
+anything is subscribed or created.
 """
 
 import argparse
+import math
 from pathlib import Path
+import re
 import signal
 import sys
 import time
@@ -32,13 +41,17 @@ from rclpy.utilities import remove_ros_args
 
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_from_rclpy
 from tskf_ros.bag.reader import BagError
-from tskf_ros.bag.writer import BagWriter
+from tskf_ros.bag.writer import BagWriteError, BagWriter
 
 NODE_NAME = 'recorder'
 # not recorded by --all unless named
 INTERNAL_TOPICS = ('/rosout', '/parameter_events')
+# a fully qualified topic name (rcl's grammar, without substitutions)
+TOPIC_NAME = re.compile(r'/|(/[A-Za-z_][A-Za-z0-9_]*)+')
 # s: after a stop signal, keep taking delivered messages for at most this long
 DRAIN_LIMIT = 2.0
+# s: default interval between flushes (what a SIGKILL or a power loss may lose at most)
+FLUSH_INTERVAL = 1.0
 
 
 class Recorder(Node):
@@ -52,11 +65,18 @@ class Recorder(Node):
     def __init__(self, output: Path, *, topics: Optional[Sequence[str]] = None,
                  types: Optional[dict] = None, overwrite: bool = False,
                  compress: bool = False, discovery_period: float = 0.2,
+                 flush_interval: float = FLUSH_INTERVAL,
                  context=None, node_name: str = NODE_NAME,
                  parameter_overrides: Optional[list] = None) -> None:
         super().__init__(node_name, context=context, parameter_overrides=parameter_overrides)
+        if not (math.isfinite(flush_interval) and flush_interval >= 0):
+            raise BagWriteError(f'flush interval must be a finite number >= 0, got '
+                                f'{flush_interval}')
         self.writer = BagWriter(output, overwrite=overwrite, compress=compress)
         self.writer.open()
+        self.failed: Optional[BagWriteError] = None     # a write failed: stop recording
+        self.flusher = (self.create_timer(flush_interval, self.flush) if flush_interval > 0
+                        else None)
         self.wanted = None if topics is None else set(topics) | set(types or {})
         self.counts: dict[str, int] = {}
         self.subs: dict = {}
@@ -91,6 +111,8 @@ class Recorder(Node):
             self.get_logger().error(f'{topic}: {exc}; not recorded')
             self.subs[topic] = None
             return
+        if self.writer is None or self.failed is not None:
+            return
         infos = self.get_publishers_info_by_topic(topic)
         offered = [i.qos_profile for i in infos]
         reliable = bool(offered) and all(
@@ -103,20 +125,52 @@ class Recorder(Node):
             else ReliabilityPolicy.BEST_EFFORT,
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
             else DurabilityPolicy.VOLATILE)
-        self.writer.add_topic(topic, msgtype, qos=[qos_from_rclpy(p) for p in offered])
+        try:
+            self.writer.add_topic(topic, msgtype, qos=[qos_from_rclpy(p) for p in offered])
+        except BagTypeError as exc:
+            self.get_logger().error(f'{topic}: {exc}; not recorded')
+            self.subs[topic] = None
+            return
+        except BagWriteError as exc:
+            self._fail(exc)
+            return
         self.counts[topic] = 0
         clock = self.get_clock()
         write = self.writer.write
 
         def on_message(data: bytes) -> None:
-            write(topic, clock.now().nanoseconds, data)
+            if self.failed is not None:
+                return
+            try:
+                write(topic, clock.now().nanoseconds, data)
+            except BagWriteError as exc:
+                self._fail(exc)
+                return
             self.counts[topic] += 1
         self.subs[topic] = self.create_subscription(cls, topic, on_message, qos, raw=True)
         self.get_logger().info(f'subscribed to {topic} ({msgtype}, '
                                f'{"reliable" if reliable else "best effort"})')
 
+    def _fail(self, exc: BagWriteError) -> None:
+        if self.failed is None:
+            self.failed = exc
+            self.get_logger().error(f'{exc}; stopping')
+
+    def flush(self) -> None:
+        """Write the chunk in progress and fsync (the timer's callback)."""
+        if self.writer is None or self.failed is not None:
+            return
+        try:
+            self.writer.flush()
+        except BagWriteError as exc:
+            self._fail(exc)
+
     def close(self) -> Optional[Path]:
-        """Stop recording and finish the bag; return its path (None if already closed)."""
+        """
+        Stop recording and finish the bag; return its path (None if already closed).
+
+        After a failed write (`failed`), the bag holds what reached the disk (BagWriter).
+        """
         if self.writer is None:
             return None
         for sub in self.subs.values():
@@ -124,8 +178,12 @@ class Recorder(Node):
                 self.destroy_subscription(sub)
         self.subs.clear()
         self.discovery.cancel()
-        path = self.writer.close()
-        self.writer = None
+        if self.flusher is not None:
+            self.flusher.cancel()
+        writer, self.writer = self.writer, None
+        path = writer.close()
+        if writer.error is not None:
+            self.counts = dict(writer.counts)
         return path
 
     def destroy_node(self) -> None:
@@ -171,10 +229,26 @@ def main(args: Optional[list] = None) -> int:
     parser.add_argument('--compress', action='store_true', help='zstd chunk compression')
     parser.add_argument('--max-duration', type=float, default=0.0,
                         help='stop after this many seconds (0: until interrupted)')
+    parser.add_argument('--flush-interval', type=float, default=FLUSH_INTERVAL, metavar='S',
+                        help='write and fsync the chunk in progress every S seconds: what a '
+                        f'crash may lose at most (default {FLUSH_INTERVAL:g}; 0: only when '
+                        'chunks fill)')
     opts = parser.parse_args(argv)
     if not opts.topics and not opts.all:
         parser.error('name topics to record, or --all')
+    for flag, value in (('--max-duration', opts.max_duration),
+                        ('--flush-interval', opts.flush_interval)):
+        if not (math.isfinite(value) and value >= 0):
+            parser.error(f'{flag} must be a finite number >= 0, got {value}')
     names, types = parse_topics(opts.topics)
+    bad = [n for n in list(names) + list(types) if not TOPIC_NAME.fullmatch(n)]
+    if bad:
+        parser.error(f'not a topic name: {bad[0]}')
+    try:
+        BagWriter(opts.output, overwrite=opts.overwrite).check_target()
+    except BagError as exc:
+        print(f'record: error: {exc}', file=sys.stderr)
+        return 1
     # our own signal handlers: rclpy's would shut the context down before the drain
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = []
@@ -183,28 +257,42 @@ def main(args: Optional[list] = None) -> int:
     node = None
     try:
         node = Recorder(opts.output, topics=None if opts.all else names, types=types,
-                        overwrite=opts.overwrite, compress=opts.compress)
+                        overwrite=opts.overwrite, compress=opts.compress,
+                        flush_interval=opts.flush_interval)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         if opts.max_duration > 0:
             node.create_timer(opts.max_duration, lambda: stop.append('max-duration'))
-        while not stop:
+        while not stop and node.failed is None:
             executor.spin_once(timeout_sec=0.1)
-        drain(executor, node)
+        if node.failed is None:
+            drain(executor, node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (BagError, BagTypeError) as exc:
         print(f'record: error: {exc}', file=sys.stderr)
         return 1
     finally:
+        status = 0
         if node is not None:
-            counts = dict(node.counts)
-            path = node.close()
-            print(f'record: wrote {path}: ' + ', '.join(
-                f'{t} {n}' for t, n in sorted(counts.items())), file=sys.stderr)
+            failed = node.failed
+            try:
+                path = node.close()
+            except BagError as exc:
+                print(f'record: error: {exc}', file=sys.stderr)
+                status = 1
+            else:
+                counts = ', '.join(f'{t} {n}' for t, n in sorted(node.counts.items()))
+                if failed is not None:
+                    print(f'record: error: {failed}; kept the {sum(node.counts.values())} '
+                          f'messages written before, closed in {path} ({counts})',
+                          file=sys.stderr)
+                    status = 1
+                else:
+                    print(f'record: wrote {path}: {counts}', file=sys.stderr)
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return status
 
 
 def console_main() -> None:
