@@ -15,6 +15,7 @@ reset).  Publishers offer the QoS recorded in the bag (reliable when unknown).
 """
 
 import argparse
+import math
 from pathlib import Path
 import sys
 import time
@@ -40,6 +41,14 @@ class PlayerError(BagError):
     """Bad options for a bag: an unknown topic, a bad remap, an offset past the end."""
 
 
+class PlayerDamageError(PlayerError):
+    """The bag is damaged before its first message to play: `damage` says where."""
+
+    def __init__(self, damage) -> None:
+        super().__init__(str(damage))
+        self.damage = damage
+
+
 class Player(Node):
     """
     Publish a bag at its recorded pace; `done` completes when it has played (not with loop).
@@ -54,10 +63,13 @@ class Player(Node):
                  node_name: str = NODE_NAME,
                  parameter_overrides: Optional[list] = None) -> None:
         super().__init__(node_name, context=context, parameter_overrides=parameter_overrides)
-        if not rate > 0:
-            raise PlayerError(f'--rate must be > 0, got {rate}')
-        if start_offset < 0:
-            raise PlayerError(f'--start-offset must be >= 0, got {start_offset}')
+        if not (math.isfinite(rate) and rate > 0):
+            raise PlayerError(f'--rate must be a finite number > 0, got {rate}')
+        if not (math.isfinite(start_offset) and start_offset >= 0):
+            raise PlayerError(f'--start-offset must be a finite number >= 0, got '
+                              f'{start_offset}')
+        if not (math.isfinite(clock_hz) and clock_hz >= 0):
+            raise PlayerError(f'--clock must be a finite number >= 0, got {clock_hz}')
         self.reader = BagReader(bag)
         self.rate, self.loop = float(rate), loop
         remap = dict(remap or {})
@@ -103,6 +115,8 @@ class Player(Node):
         self._it = self._messages()
         self._next = next(self._it, None)
         if self._next is None:
+            if self.reader.damage is not None:
+                raise PlayerDamageError(self.reader.damage)
             raise PlayerError(f'{self.reader.path}: no messages to play')
         # the bag's start (all topics, as ros2 bag play), else the first selected message
         first = self.reader.start_ns if self.reader.start_ns is not None else \
@@ -171,6 +185,14 @@ def main(args: Optional[list] = None) -> int:
     parser.add_argument('--clock', type=float, default=100.0, metavar='HZ',
                         help='publish /clock at HZ (0: off; default 100)')
     opts = parser.parse_args(argv)
+    for flag, value, low in (('--rate', opts.rate, None), ('--start-offset', opts.start_offset, 0),
+                             ('--delay', opts.delay, 0), ('--clock', opts.clock, 0)):
+        if not math.isfinite(value) or (value <= 0 if low is None else value < low):
+            parser.error(f'{flag} must be a finite number {"> 0" if low is None else ">= 0"}, '
+                         f'got {value}')
+    if not opts.bag.exists():
+        print(f'play: error: {opts.bag}: no such bag (file or directory)', file=sys.stderr)
+        return 1
     rclpy.init(args=args)
     node = None
     try:
@@ -182,6 +204,8 @@ def main(args: Optional[list] = None) -> int:
         executor.spin_until_future_complete(node.done)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except PlayerDamageError as exc:
+        return exit_status('play', exc.damage, 'bag damaged, nothing could be played')
     except BagError as exc:
         print(f'play: error: {exc}', file=sys.stderr)
         return 1

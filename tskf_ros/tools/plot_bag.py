@@ -16,9 +16,14 @@ x2hat and the true scan mean, the true angle of incidence, and the measured inte
 An offline alignment replay (base_position_controller/commands present) is drawn the
 same way from the node's estimate/corrected (x2 converted back to degrees), with the
 recorded run's /alignment/estimate, if any, dashed for comparison (open loop).
+
+Exit status: 0 plotted; 1 the bag or an option cannot be used (one-line error, nothing
+written); 2 usage; 3 the bag is damaged: what came before the damage is plotted (if
+anything could be read) and the damage is reported in one line.
 """
 
 import argparse
+import os
 from pathlib import Path
 import sys
 from typing import Optional
@@ -29,7 +34,7 @@ from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.message_types import BagTypeError, message_class
 from tskf_ros.bag.offline_replay import replay
-from tskf_ros.bag.reader import BagError, BagReader
+from tskf_ros.bag.reader import BagError, BagReader, exit_status
 from tskf_ros.core.units import NS
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages import conversions
@@ -39,6 +44,22 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402, I100, I202
 
 PROG = 'plot_bag'
+# exceptions rclpy's deserializer raises on bytes that are not the type
+DECODE_ERRORS = (RuntimeError, ValueError, TypeError)
+
+
+class PlotDamageError(BagError):
+    """The bag is damaged and nothing before the damage can be plotted."""
+
+    def __init__(self, damage) -> None:
+        super().__init__(str(damage))
+        self.damage = damage
+
+
+class Plotted(list):
+    """The PNGs written (a list of paths) and the damage met while reading, if any."""
+
+    damage = None
 
 
 def _decode(reader: BagReader, topics: set) -> dict:
@@ -48,8 +69,23 @@ def _decode(reader: BagReader, topics: set) -> dict:
     for raw in reader.messages(topics):
         cls = classes.get(raw.msgtype) or classes.setdefault(raw.msgtype,
                                                              message_class(raw.msgtype))
-        out[raw.topic].append((raw.log_time_ns, deserialize_message(raw.data, cls)))
+        try:
+            msg = deserialize_message(raw.data, cls)
+        except DECODE_ERRORS as exc:
+            raise BagError(f'{reader.path}: a message on {raw.topic} does not deserialize as '
+                           f'{raw.msgtype} ({str(exc).splitlines()[0] if str(exc) else exc!r})'
+                           ) from None
+        out[raw.topic].append((raw.log_time_ns, msg))
     return out
+
+
+def _require(reader: BagReader, data: dict, topics) -> None:
+    """Raise PlotDamageError or BagError unless every topic of `topics` has messages."""
+    empty = [t for t in topics if not data.get(t)]
+    if empty:
+        if reader.damage is not None:
+            raise PlotDamageError(reader.damage)
+        raise BagError(f'{reader.path}: no messages on {", ".join(empty)}: nothing to plot')
 
 
 def _series(msgs: list, kind: str) -> tuple:
@@ -185,10 +221,14 @@ def alignment_figure(data: dict, title: str, *, replayed: bool = False,
 
 def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
          topic: Optional[str] = None, log=print) -> list:
-    """Write the PNGs of a bag into `out`; return their paths."""
+    """
+    Write the PNGs of a bag into `out`; return their paths (a Plotted list).
+
+    The result's `damage` is set if the bag was damaged (what came before is plotted);
+    PlotDamageError if nothing before the damage can be plotted.
+    """
     reader = BagReader(bag)
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
+    written = Plotted()
     if aligner.BAG_OUTPUT_TOPICS['command'] in reader.topics:
         intensity = topic or next((t for t in (aligner.BAG_INPUT_TOPIC, '/photodiode')
                                    if t in reader.topics), aligner.BAG_INPUT_TOPIC)
@@ -196,8 +236,12 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
                   '/alignment/estimate'}
         data = _decode(reader, wanted & set(reader.topics))
         if not data.get(aligner.BAG_OUTPUT_TOPICS['corrected']):
+            if reader.damage is not None:
+                raise PlotDamageError(reader.damage)
             raise BagError(f'{bag}: no EKF estimates on {aligner.BAG_OUTPUT_TOPICS["corrected"]}'
                            ' (algorithm is not ekf?): nothing to plot')
+        written.damage = reader.damage
+        out.mkdir(parents=True, exist_ok=True)
         fig = alignment_figure(data, f'{bag.name}: alignment node replayed offline (open '
                                'loop: the commands did not move the recorded receiver)',
                                replayed=True, intensity_topic=intensity)
@@ -206,6 +250,9 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
     if '/alignment/estimate' in reader.topics:
         data = _decode(reader, {t for t in reader.topics if t.startswith('/alignment/')}
                        | ({'/photodiode'} & set(reader.topics)))
+        _require(reader, data, ['/alignment/estimate'])
+        written.damage = reader.damage
+        out.mkdir(parents=True, exist_ok=True)
         fig = alignment_figure(data, f'{bag.name}: scanning-EKF alignment (Fig. 8 style)')
         written.append(_save(fig, out / 'alignment.png'))
         return written
@@ -217,6 +264,8 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
         wanted = {'/estimate/predicted', '/estimate/corrected', '/estimate/mu', meas_topic}
         data = _decode(reader, (wanted | {BAG_TRUTH_TOPIC}) & set(reader.topics))
         measurement = data.get(meas_topic, [])
+        _require(reader, data, ['/estimate/predicted', '/estimate/corrected', '/estimate/mu'])
+        written.damage = reader.damage
     else:
         log(f'{bag}: no estimates in the bag: running the estimator offline first')
         res = replay(bag, None, params_file=params_file, topic=topic, diagnostics=False,
@@ -232,6 +281,14 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
                 data.setdefault(t, []).append((log_ns, msg))
         if res.msgtype != 'sensor_msgs/msg/Illuminance':
             measurement = []
+        written.damage = res.damage
+        if not data.get('/estimate/corrected') or not data.get('/estimate/predicted') \
+                or not data.get('/estimate/mu'):
+            if res.damage is not None:
+                raise PlotDamageError(res.damage)
+            raise BagError(f'{bag}: too few samples on {res.topic} for an estimate: '
+                           'nothing to plot')
+    out.mkdir(parents=True, exist_ok=True)
     fig = estimator_figure(data, measurement, C, D,
                            f'{bag.name}: time-scale filter, {model.name} model')
     written.append(_save(fig, out / 'estimator.png'))
@@ -255,15 +312,43 @@ def main(argv: Optional[list] = None) -> int:
                         'and, on a raw bag, the estimator)')
     parser.add_argument('--topic', help='measurement topic (default /received_power)')
     args = parser.parse_args(argv)
+    problem = _check_paths(args.bag, args.out, args.params_file)
+    if problem:
+        print(f'{PROG}: error: {problem}', file=sys.stderr)
+        return 1
     try:
         paths = plot(args.bag, args.out, params_file=args.params_file, topic=args.topic,
                      log=lambda s: print(f'{PROG}: {s}'))
+    except PlotDamageError as exc:
+        return exit_status(PROG, exc.damage, 'bag damaged, nothing before the damage to plot')
     except (BagError, ParamsError, BagTypeError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return 1
+    except OSError as exc:
+        print(f'{PROG}: error: {exc.filename or args.out}: {exc.strerror or exc}',
+              file=sys.stderr)
+        return 1
     for p in paths:
         print(f'{PROG}: wrote {p}')
-    return 0
+    return exit_status(PROG, paths.damage, 'bag damaged; plotted what came before')
+
+
+def _check_paths(bag: Path, out: Path, params: Optional[Path]) -> str:
+    """Return a one-line problem with the paths, or ''."""
+    if not bag.exists():
+        return f'{bag}: no such bag (file or directory)'
+    if params is not None and not params.is_file():
+        return f'{params}: no such parameters file'
+    if out.exists() and not out.is_dir():
+        return f'{out}: exists and is not a directory'
+    parent = out
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        return f'{out}: {parent} is not a directory'
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f'{out}: cannot write in {parent} (permission denied)'
+    return ''
 
 
 def console_main() -> None:

@@ -175,11 +175,24 @@ def main(argv: Optional[list] = None) -> int:
                         help='generate only this bag (repeatable)')
     parser.add_argument('--overwrite', action='store_true', help='replace existing bags')
     args = parser.parse_args(argv)
-    for name in args.only or SAMPLES:
+    if not 0 <= args.seed < 2 ** 32:
+        parser.error(f'--seed must be in [0, 2**32), got {args.seed}')
+    names = list(dict.fromkeys(args.only or SAMPLES))
+    try:     # every target is checked before any bag is made
+        for name in names:
+            BagWriter(args.out / name, overwrite=args.overwrite).check_target()
+    except BagError as exc:
+        print(f'{PROG}: error: {exc}', file=sys.stderr)
+        return 1
+    for name in names:
         try:
             path = make(name, args.out, args.seed, overwrite=args.overwrite)
         except BagError as exc:
             print(f'{PROG}: error: {exc}', file=sys.stderr)
+            return 1
+        except OSError as exc:
+            print(f'{PROG}: error: {exc.filename or args.out}: {exc.strerror or exc}',
+                  file=sys.stderr)
             return 1
         size = sum(f.stat().st_size for f in path.iterdir())
         print(f'{PROG}: wrote {path} ({size / 1e6:.2f} MB, seed {args.seed})')
