@@ -223,7 +223,7 @@ class OfflineAligner(OfflineEstimator):
         """Deserialize one intensity sample and run it; return (status, [(topic, msg)])."""
         msg = deserialize_message(data, self.cls)
         stamp_ns, volts, _ = self.extract(msg, log_ns)
-        out = self.session.add(stamp_ns, volts)
+        out = self.session.add(stamp_ns, volts, now_ns=log_ns)
         return out.status, aligner.bag_outcome_messages(out, self.config)
 
 

@@ -18,9 +18,20 @@ Bad input never reaches the aligner as a number it would misuse, and never stops
 - a stamp more than `max_backward` seconds older than the last (a clock reset, a looped
   bag) restarts the aligner from its initial state, as does a clock jump (`reset`);
 - a step that would give a non-finite command or estimate restarts the aligner and
-  returns no command.
+  returns no command;
+- an intensity outside the optional physical `intensity_range`, or one whose innovation
+  is more than `gate` standard deviations from the EKF's prediction (row 1 of (12)
+  against the prior of its stamp; robot_localization's per-sensor rejection threshold),
+  is a missing measurement too ('out_of_range', 'gated'): a rejected sample widens the
+  next prior, so the aligner cannot lock itself out;
+- an EKF state or covariance beyond `state_limit` (|x_i| or sqrt(trace P)) restarts the
+  aligner ('state_health') and the next diagnostics report is an ERROR;
+- a command is clamped to `max_step` degrees from the base and to the joint limits
+  `base_limits`; the EKF is told the turn the base really made (its u_k), the baselines
+  keep no angle and need not be told.
 
-Every case is counted for diagnostics.  The module never imports rclpy.
+Every case is counted for diagnostics, with the input rate and staleness (InputRate)
+when the receiver clock is given.  The module never imports rclpy.
 """
 
 from collections import Counter
@@ -31,15 +42,18 @@ from typing import Optional, Sequence
 import numpy as np
 
 from tskf_ros import led
-from tskf_ros.core.units import NS
+from tskf_ros.core.input_rate import InputRate
+from tskf_ros.core.units import MAX_STAMP_NS, NS
 
 GAP_FACTOR = 1.5        # an interval longer than this many dt is a gap (samples missing)
-MISSING_REASONS = ('non_finite', 'negative')
-REJECT_REASONS = ('zero_stamp', 'duplicate', 'stale', 'filter_error')
-RESET_REASONS = ('backward_jump', 'clock_jump', 'reconfigured', 'filter_error')
+MISSING_REASONS = ('non_finite', 'negative', 'out_of_range', 'gated')
+REJECT_REASONS = ('zero_stamp', 'stamp_range', 'duplicate', 'stale', 'filter_error')
+RESET_REASONS = ('backward_jump', 'clock_jump', 'reconfigured', 'filter_error',
+                 'state_health')
 # parameters that change in place; any other change restarts the aligner
 TUNABLE = ('gain', 'Q', 'R', 'x1_floor', 'gamma', 'clip', 'negative_is_missing', 'max_gap',
-           'max_backward')
+           'max_backward', 'gate', 'intensity_range', 'state_limit', 'max_step',
+           'base_limits', 'stale_timeout', 'min_rate_fraction', 'rate_window')
 
 
 def _matrix(values: Sequence[float], name: str, *, definite: bool) -> np.ndarray:
@@ -79,6 +93,14 @@ class AlignmentConfig:
     negative_is_missing: bool = True             # a negative intensity is a missing sample
     max_gap: float = 1.0                         # s: a longer gap sets diagnostics to WARN
     max_backward: float = 5.0                    # s: a stamp further back restarts
+    gate: float = 10.0                           # innovation gate (std devs); 0: off
+    intensity_range: tuple = ()                  # (lo, hi) V of a physical reading; (): any
+    state_limit: float = 1e6                     # |x_i| or sqrt(trace P) beyond: restart
+    max_step: float = 45.0                       # deg a command may turn the base; 0: any
+    base_limits: tuple = (-360.0, 360.0)         # deg: the joint limits of the base
+    stale_timeout: float = 5.0                   # s without input: diagnostics ERROR; 0 off
+    min_rate_fraction: float = 0.5               # rate below this * 1 / dt: WARN; 0 off
+    rate_window: float = 5.0                     # s over which the input rate is measured
 
     def __post_init__(self) -> None:
         """Check that the settings make a working aligner; raise AlignmentError if not."""
@@ -86,21 +108,44 @@ class AlignmentConfig:
             raise led.AlignmentError(f'algorithm must be one of {led.ALGORITHMS}, '
                                      f'got {self.algorithm!r}')
         for name in ('dt', 'gain', 'x1_floor', 'gamma', 'units_per_degree', 'base_initial',
-                     'max_gap', 'max_backward'):
+                     'max_gap', 'max_backward', 'gate', 'state_limit', 'max_step',
+                     'stale_timeout', 'min_rate_fraction', 'rate_window'):
             value = getattr(self, name)
             if not math.isfinite(value):
                 raise led.AlignmentError(f'{name} must be finite, got {value}')
         for name in ('dt', 'gamma'):
             if not getattr(self, name) > 0:
                 raise led.AlignmentError(f'{name} must be > 0, got {getattr(self, name)}')
-        for name in ('x1_floor', 'units_per_degree', 'max_gap', 'max_backward'):
+        for name in ('x1_floor', 'units_per_degree', 'max_gap', 'max_backward', 'gate',
+                     'max_step', 'stale_timeout', 'min_rate_fraction', 'rate_window'):
             if getattr(self, name) < 0:
                 raise led.AlignmentError(f'{name} must be >= 0, got {getattr(self, name)}')
+        if not self.state_limit > 0 or not self.rate_window > 0:
+            raise led.AlignmentError('state_limit and rate_window must be > 0')
+        for name in ('intensity_range', 'base_limits'):
+            r = tuple(getattr(self, name))
+            if r and (len(r) != 2 or not all(math.isfinite(v) for v in r) or not r[0] < r[1]):
+                raise led.AlignmentError(f'{name} must be [lo, hi] with finite lo < hi'
+                                         f'{" (or empty)" if name == "intensity_range" else ""}'
+                                         f', got {list(r)}')
+        if len(tuple(self.base_limits)) != 2:
+            raise led.AlignmentError(f'base_limits must be [lo, hi], got {list(self.base_limits)}')
+        lo, hi = self.base_limits
+        if not lo <= self.base_initial <= hi:
+            raise led.AlignmentError(f'base_initial {self.base_initial} deg is outside '
+                                     f'base_limits {list(self.base_limits)}')
         x0 = np.asarray(list(self.x0), dtype=float)
         if x0.size != 2 or not np.all(np.isfinite(x0)):
             raise led.AlignmentError(f'x0 must be 2 finite numbers [x1, x2], got {list(x0)}')
-        _matrix(self.P0, 'P0', definite=False)
-        _matrix(self.Q, 'Q', definite=False)
+        if float(np.max(np.abs(x0))) > self.state_limit:
+            raise led.AlignmentError(f'x0 {list(x0)} is beyond state_limit {self.state_limit:g}')
+        P0 = _matrix(self.P0, 'P0', definite=False)
+        Q = _matrix(self.Q, 'Q', definite=False)
+        # by what they do: one nominal step from P0 must stay within state_limit
+        if not float(np.trace(P0 + Q)) <= self.state_limit ** 2:
+            raise led.AlignmentError(f'P0 + Q (one step) has sqrt(trace) '
+                                     f'{math.sqrt(float(np.trace(P0 + Q))):.3g} beyond '
+                                     f'state_limit {self.state_limit:g}')
         _matrix(self.R, 'R', definite=True)
         scan = np.asarray(list(self.scan), dtype=float)
         if not np.all(np.isfinite(scan)):
@@ -158,6 +203,7 @@ class AlignStats:
     mu_current: float = 0.0
     mu_max: float = 0.0
     singular: int = 0
+    clamped: int = 0
     last_stamp_ns: int = 0
     # since the last diagnostics report
     gaps_over_bound: int = 0
@@ -171,7 +217,15 @@ class AlignmentSession:
         self.config = config
         self.stats = AlignStats()
         self.base = float(config.base_initial)
+        self.health_error = ''          # why the aligner restarted itself
+        self.input_rate = self._input_rate(config)
         self._restart()
+
+    @staticmethod
+    def _input_rate(config: AlignmentConfig) -> InputRate:
+        return InputRate(1.0 / config.dt, window=config.rate_window,
+                         min_fraction=config.min_rate_fraction,
+                         stale_after=config.stale_timeout)
 
     def _restart(self) -> None:
         self.aligner = self.config.make_aligner()
@@ -185,13 +239,18 @@ class AlignmentSession:
 
     # -- public API -----------------------------------------------------------------------
 
-    def add(self, stamp_ns: int, z: float) -> AlignOutcome:
-        """Take one sample (stamp in ns, intensity in V); say what it did."""
+    def add(self, stamp_ns: int, z: float, *, now_ns: Optional[int] = None) -> AlignOutcome:
+        """Take one sample (stamp in ns, intensity in V; receiver clock now); say what it did."""
         st, cfg = self.stats, self.config
         st.received += 1
+        if now_ns is not None:
+            self.input_rate.note(now_ns)
         stamp_ns = int(stamp_ns)
         if stamp_ns <= 0:
             return self._reject('zero_stamp', stamp_ns, 'the header stamp is unset (0)')
+        if stamp_ns > MAX_STAMP_NS:
+            return self._reject('stamp_range', stamp_ns, f'stamp {stamp_ns} ns is beyond what '
+                                'a ROS message can hold (sec is an int32)')
         status, reason, message = 'used', '', ''
         last = self.last_ns
         if last is not None and stamp_ns == last:
@@ -211,6 +270,17 @@ class AlignmentSession:
             status, reason, message = 'missing', 'non_finite', f'intensity {z} is not finite'
         elif z < 0 and cfg.negative_is_missing:
             status, reason, message = 'missing', 'negative', f'intensity {z:g} V < 0'
+        elif cfg.intensity_range and not (
+                cfg.intensity_range[0] <= z <= cfg.intensity_range[1]):
+            status, reason = 'missing', 'out_of_range'
+            message = f'intensity {z:g} V outside intensity_range {list(cfg.intensity_range)}'
+        elif cfg.gate > 0 and self.is_ekf and last is not None:
+            d = float(self.aligner.innovation_distance(
+                (stamp_ns - self.origin_ns) / NS, z)[0])
+            if not d <= cfg.gate:
+                status, reason = 'missing', 'gated'
+                message = (f'intensity {z:g} V is {d:.3g} standard deviations from the '
+                           f'prediction (gate {cfg.gate:g})')
         if status == 'missing':
             st.missing[reason] += 1
             st.bad_since += 1
@@ -232,15 +302,35 @@ class AlignmentSession:
             posterior = (ekf.x[0].copy(), _sym(ekf.P[0]))
             if not all(np.all(np.isfinite(a)) for a in (*prior, *posterior)):
                 return self._fail(stamp_ns, 'the EKF estimate is not finite')
+            big = max(float(np.max(np.abs(posterior[0]))),
+                      math.sqrt(max(float(np.trace(posterior[1])), 0.0)))
+            if big > cfg.state_limit:
+                self.health_error = (f'EKF state or covariance {big:.3g} beyond state_limit '
+                                     f'{cfg.state_limit:g}')
+                self.reset('state_health')
+                return self._reject('filter_error', stamp_ns,
+                                    f'{self.health_error}; aligner restarted')
             st.singular += int(ekf.singular[0])
         if not math.isfinite(turn) or not math.isfinite(self.base + turn):
             return self._fail(stamp_ns, f'the command {turn} is not finite')
-        self.base += turn
+        applied = self._clamp(turn)
+        if applied != turn:
+            st.clamped += 1
+            self.aligner.correct_last_turn(np.array([applied - turn]))
+        self.base += applied
         if status != 'missing':
             st.used += 1
         st.commands += 1
-        return AlignOutcome(status, reason, message, stamp_ns, self.base, turn, prior,
+        return AlignOutcome(status, reason, message, stamp_ns, self.base, applied, prior,
                             posterior)
+
+    def _clamp(self, turn: float) -> float:
+        """Return the turn limited to max_step and to the joint limits base_limits."""
+        cfg = self.config
+        if cfg.max_step > 0:
+            turn = min(max(turn, -cfg.max_step), cfg.max_step)
+        lo, hi = cfg.base_limits
+        return min(max(self.base + turn, lo), hi) - self.base
 
     def reset(self, reason: str) -> None:
         """Restart the aligner from its initial state; the base stays where it is."""
@@ -250,6 +340,7 @@ class AlignmentSession:
     def reconfigure(self, config: AlignmentConfig) -> str:
         """Switch to a new (validated) config; in place if only TUNABLE fields changed."""
         old, self.config = self.config, config
+        self.input_rate = self._input_rate(config)
         changed = {f.name for f in fields(config)
                    if getattr(config, f.name) != getattr(old, f.name)}
         if changed - set(TUNABLE):
@@ -266,27 +357,38 @@ class AlignmentSession:
                 a.clip = bool(config.clip)
         return 'new parameters in use'
 
-    def diagnostics(self, *, consume: bool = True) -> tuple[str, str, dict]:
+    def diagnostics(self, *, consume: bool = True,
+                    now_ns: Optional[int] = None) -> tuple[str, str, dict]:
         """
-        Return (level 'OK' or 'WARN', message, values) for a diagnostics status.
+        Return (level 'OK', 'WARN' or 'ERROR', message, values) for a diagnostics status.
 
-        consume=True resets the since-last-report counters (long gaps, bad samples).
+        consume=True resets the since-last-report counters (long gaps, bad samples, a
+        self restart).  With now_ns (receiver clock) the input rate and staleness count.
         """
         st, cfg = self.stats, self.config
         level, msgs = 'OK', []
+        values: dict = {}
+        if now_ns is not None:
+            rate_level, why, values = self.input_rate.level(now_ns)
+            if why:
+                level = rate_level
+                msgs.append(why)
+        if self.health_error:
+            level = 'ERROR'
+            msgs.append(f'aligner restarted itself: {self.health_error}')
         if st.gaps_over_bound:
-            level = 'WARN'
+            level = 'WARN' if level == 'OK' else level
             msgs.append(f'{st.gaps_over_bound} gap(s) longer than max_gap = {cfg.max_gap} s')
         if st.bad_since:
             msgs.append(f'{st.bad_since} sample(s) missing or rejected')
-        values = {
+        values.update({
             'algorithm': cfg.algorithm, 'received': st.received,
-            'used': st.used, 'commands': st.commands,
+            'used': st.used, 'commands': st.commands, 'commands_clamped': st.clamped,
             'base_command_deg': self.base,
             'gaps': st.gaps, 'gap_max_s': st.gap_max,
             'mu_current': st.mu_current, 'mu_max': st.mu_max,
             'last_stamp_s': st.last_stamp_ns / NS,
-        }
+        })
         for reason in MISSING_REASONS:
             values[f'missing_{reason}'] = st.missing[reason]
         for reason in REJECT_REASONS:
@@ -299,11 +401,12 @@ class AlignmentSession:
                            'covariance_trace': float(np.trace(P)),
                            'singular_updates': st.singular})
             if st.used and not x[0] > 0:
-                level = 'WARN'
+                level = 'WARN' if level == 'OK' else level
                 msgs.append(f'x1hat = {x[0]:.3g} <= 0: the EKF has lost the transmitter')
         if consume:
             st.gaps_over_bound = 0
             st.bad_since = 0
+            self.health_error = ''
         return level, '; '.join(msgs) or 'ok', values
 
     # -- internals ------------------------------------------------------------------------

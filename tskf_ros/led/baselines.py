@@ -32,6 +32,9 @@ class _SteppingAligner:
         """Return 0: the baselines' turns are commands, not a scan."""
         return 0.0
 
+    def correct_last_turn(self, delta: np.ndarray) -> None:
+        """Ignore a clamped turn: the baselines compare intensities, they keep no angle."""
+
 
 class HillClimbing(_SteppingAligner):
     """

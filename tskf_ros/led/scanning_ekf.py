@@ -276,6 +276,32 @@ class ScanningEKF:
         self.psi_prev = np.where(have, psi, self.psi_prev)
         self.since = np.where(have, 0.0, self.since)
 
+    def innovation_distance(self, stamp: float, z: Measurement) -> np.ndarray:
+        """
+        Return |z - yhat| / sqrt(S) of row 1 of (12) at the prior of `stamp`, per run.
+
+        Not in the paper: the Mahalanobis distance of the new measurement alone against
+        the prediction (13)-(14) over the time since the last call, with
+        S = C_1 P^f C_1^T + R_11 and C_1 the first row of (17); nothing is changed.  For
+        an innovation gate in front of `step`; NaN where z is missing.
+        """
+        z = as_measurement(z, self.runs)
+        last = self.clock.stamp
+        mu = 0.0 if last is None else max(float(stamp) - last, 0.0) / self.clock.dt
+        x2 = self.x[:, 1] + (self.u if last is not None else 0.0)
+        P = self.P + mu * self.Q
+        a1 = x2 + self.scan_offset
+        g, dg = self.response.g(a1), self.response.dg(a1)
+        C1 = np.stack([g, self.x[:, 0] * dg], axis=-1)
+        S = np.einsum('ri,rij,rj->r', C1, P, C1) + self.R[0, 0]
+        with np.errstate(all='ignore'):
+            return np.abs(z - self.x[:, 0] * g) / np.sqrt(S)
+
+    def correct_last_turn(self, delta: np.ndarray) -> None:
+        """Account for a base that turned delta more than commanded (clamped): u_k += delta."""
+        self.u = self.u + delta
+        self.since = self.since + delta
+
     def step(self, stamp: float, z: Measurement) -> np.ndarray:
         """Run one iteration at `stamp` with z_k (NaN/None: missing); return the commands."""
         z = as_measurement(z, self.runs)

@@ -82,6 +82,22 @@ SESSION_PARAMETERS = {
                 (0.0, 1e6), False),
     'max_backward': (D, 's: a stamp further behind the last restarts the aligner (clock '
                      'reset, looped bag); closer: dropped as stale', (0.0, 1e6), False),
+    'gate': (D, 'EKF innovation gate: an intensity further than this many standard '
+             'deviations from the prediction is treated as missing; 0: off', (0.0, 1e6),
+             False),
+    'intensity_range': (DA, 'V: [lo, hi] of a physical reading, others are treated as '
+                        'missing; empty: any finite value', None, False),
+    'state_limit': (D, '|x_i| or sqrt(trace P) of the EKF beyond this restarts the aligner '
+                    '(diagnostics ERROR)', (1e-6, 1e300), False),
+    'max_step': (D, 'deg: a command turns the base at most this much; 0: no limit',
+                 (0.0, 1e6), False),
+    'base_limits': (DA, 'deg: [lo, hi] joint limits of the base; commands are clamped',
+                    None, False),
+    'stale_timeout': (D, 's without any intensity (node clock): diagnostics ERROR; 0: off',
+                      (0.0, 1e6), False),
+    'min_rate_fraction': (D, 'intensity rate below this fraction of 1 / dt over '
+                          'rate_window: diagnostics WARN; 0: off', (0.0, 1.0), False),
+    'rate_window': (D, 's over which the intensity rate is measured', (0.01, 3600.0), False),
 }
 PARAMETERS = tuple(SESSION_PARAMETERS) + ('frame_id', 'diagnostics_period', 'queue_depth')
 
@@ -165,6 +181,6 @@ def diagnostics_message(session: AlignmentSession, config: NodeConfig, stamp_ns:
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""
     # like the estimator's, but named after the aligner and its receiver frame
-    level, message, values = session.diagnostics()
+    level, message, values = session.diagnostics(now_ns=stamp_ns)
     return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: LED alignment', level,
                                           message, values, hardware_id=config.frame_id)

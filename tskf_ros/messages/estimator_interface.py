@@ -58,10 +58,22 @@ SCALARS = {
     'max_future': (0.0, "a stamp further ahead (s) of this node's clock is rejected; 0: "
                    'off (replayed or time-compressed streams)', (0.0, 1e6)),
     'diagnostics_period': (1.0, 'seconds between /diagnostics messages', (0.01, 3600.0)),
+    'gate': (10.0, 'innovation gate: a measurement further than this many standard '
+             'deviations (Mahalanobis distance) from the prediction is rejected; 0: off',
+             (0.0, 1e6)),
+    'state_limit': (1e9, '|x_i| or sqrt(trace P) beyond this re-initialises the filter '
+                    '(diagnostics ERROR)', (1e-6, 1e300)),
+    'stale_timeout': (10.0, 's without any input (node clock): diagnostics ERROR; 0: off',
+                      (0.0, 1e6)),
+    'min_rate_fraction': (0.5, 'input rate below this fraction of 1 / period over '
+                          'rate_window: diagnostics WARN; 0: off', (0.0, 1.0)),
+    'rate_window': (10.0, 's over which the input rate is measured', (0.01, 3600.0)),
 }
+MEASUREMENT_RANGE_HELP = ('[lo, hi]: a physical reading outside is rejected (out_of_range); '
+                          'empty: any finite value')
 PARAMETERS = MATRICES + tuple(SCALARS) + (
     'model_name', 'state_names', 'transition', 'history_size', 'queue_depth', 'frame_id',
-    'nonpositive_is_gap')
+    'nonpositive_is_gap', 'measurement_range')
 
 # topics, relative: resolved in the node's namespace
 POWER_TOPIC = 'received_power'
@@ -89,7 +101,8 @@ __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'BAG_POWER_TOPIC', 'BAG_TRUTH
            'bag_outcome_messages', 'ConfigError', 'default_parameters', 'DIAGNOSTICS_TOPIC',
            'DIAGNOSTICS_TYPE', 'diagnostics_message', 'ESTIMATE_TYPE', 'extractor',
            'INPUT_TOPIC', 'INPUT_TYPE', 'INPUT_TYPES', 'input_from_msg', 'InputType',
-           'JUMP_TYPE', 'load_config', 'MATRICES', 'MATRIX_HELP', 'NODE_NAME', 'NodeConfig',
+           'JUMP_TYPE', 'load_config', 'MATRICES', 'MATRIX_HELP', 'MEASUREMENT_RANGE_HELP',
+           'NODE_NAME', 'NodeConfig',
            'outcome_messages', 'OUTPUT_TOPICS', 'output_qos', 'PARAMETERS',
            'parameters_to_config', 'ParamsError', 'POWER_TOPIC', 'SCALARS']
 
@@ -97,11 +110,12 @@ __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'BAG_POWER_TOPIC', 'BAG_TRUTH
 def parameters_to_config(values: dict) -> NodeConfig:
     """Build the config from parameter values; raise ConfigError with the reason if bad."""
     flat = {}
-    for key in MATRICES:
+    for key in MATRICES + ('measurement_range',):
         v = values[key]
         if isinstance(v, (str, bytes)) or any(isinstance(e, (bool, str)) for e in v):
             raise ConfigError(f'{key} must be a list of numbers, got {v!r}')
         flat[key] = [float(e) for e in v]
+    measurement_range = tuple(flat.pop('measurement_range'))
     model = model_from_flat(name=values['model_name'],
                             state_names=tuple(values['state_names']), **flat)
     estimator = EstimatorConfig(
@@ -110,7 +124,10 @@ def parameters_to_config(values: dict) -> NodeConfig:
         max_gap=values['max_gap'], history_window=values['history_window'],
         history_size=values['history_size'], max_jump=values['max_jump'],
         max_backward=values['max_backward'], max_future=values['max_future'],
-        nonpositive_is_gap=values['nonpositive_is_gap'])
+        nonpositive_is_gap=values['nonpositive_is_gap'], gate=values['gate'],
+        measurement_range=measurement_range, state_limit=values['state_limit'],
+        stale_timeout=values['stale_timeout'],
+        min_rate_fraction=values['min_rate_fraction'], rate_window=values['rate_window'])
     return NodeConfig(estimator, values['frame_id'], values['diagnostics_period'],
                       values['queue_depth'])
 
@@ -124,7 +141,7 @@ def default_parameters() -> dict:
     values.update({name: spec[0] for name, spec in SCALARS.items()})
     values.update({'model_name': d.name, 'state_names': list(d.state_names),
                    'transition': 'euler', 'history_size': 1000, 'queue_depth': 100,
-                   'nonpositive_is_gap': True, 'frame_id': ''})
+                   'nonpositive_is_gap': True, 'frame_id': '', 'measurement_range': []})
     return values
 
 
@@ -167,7 +184,7 @@ def bag_outcome_messages(out: Outcome, config: NodeConfig) -> list[tuple[str, An
 def diagnostics_message(session: EstimatorSession, config: NodeConfig, stamp_ns: int, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""
-    level, message, values = session.diagnostics()
+    level, message, values = session.diagnostics(now_ns=stamp_ns)
     return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: time-scale filter', level,
                                           message, values,
                                           hardware_id=config.session.model.name)

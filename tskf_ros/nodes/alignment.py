@@ -69,6 +69,8 @@ class Alignment(ReconfigurableNode):
             value = defaults[name]
             d = ParameterDescriptor(description=text, type=type_, read_only=read_only,
                                     **(float_range(*rng) if rng is not None else {}))
+            if value == []:     # an empty list would be typed as bytes: let it take numbers
+                d.type, d.dynamic_typing = ParameterType.PARAMETER_NOT_SET, True
             if name == 'algorithm':
                 d.additional_constraints = 'one of ' + ', '.join(led.ALGORITHMS)
             self.declare_parameter(name, value, d)
@@ -96,7 +98,7 @@ class Alignment(ReconfigurableNode):
 
     def _on_intensity(self, msg: Illuminance) -> None:
         stamp_ns, volts, _ = conversions.msg_to_intensity(msg)
-        out = self.session.add(stamp_ns, volts)
+        out = self.session.add(stamp_ns, volts, now_ns=self.get_clock().now().nanoseconds)
         self._report(out)
         self._publish(out)
 

@@ -22,10 +22,11 @@ from tskf_ros.core.timescale_kalman import FilterError, TRANSITIONS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import (ConfigError, default_parameters,
                                                    diagnostics_message, input_from_msg,
-                                                   INPUT_TOPIC, MATRICES, MATRIX_HELP, NODE_NAME,
-                                                   NodeConfig, outcome_messages, output_qos,
-                                                   OUTPUT_TOPICS, PARAMETERS, parameters_to_config,
-                                                   POWER_TOPIC, SCALARS)
+                                                   INPUT_TOPIC, MATRICES, MATRIX_HELP,
+                                                   MEASUREMENT_RANGE_HELP, NODE_NAME, NodeConfig,
+                                                   outcome_messages, output_qos, OUTPUT_TOPICS,
+                                                   PARAMETERS, parameters_to_config, POWER_TOPIC,
+                                                   SCALARS)
 from tskf_ros.messages.parameters import float_range
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
@@ -94,6 +95,9 @@ class TimescaleEstimator(ReconfigurableNode):
         self.declare_parameter('nonpositive_is_gap', defaults['nonpositive_is_gap'],
                                ParameterDescriptor(description=gap_help,
                                                    type=ParameterType.PARAMETER_BOOL))
+        self.declare_parameter('measurement_range', defaults['measurement_range'],
+                               ParameterDescriptor(description=MEASUREMENT_RANGE_HELP,
+                                                   dynamic_typing=True))
         self.declare_parameter('frame_id', defaults['frame_id'], ParameterDescriptor(
             description='frame_id of the estimates (empty: model_name)',
             type=ParameterType.PARAMETER_STRING))
