@@ -51,7 +51,7 @@ def one_line(err, prefix, *words):
 
 
 def usage_error(err, prog, text):
-    """argparse's usage error: usage lines, then exactly `prog: error: text`."""
+    """Check an argparse usage error: usage lines, then exactly `prog: error: text`."""
     lines = error_lines(err)
     assert lines[0].startswith(f'usage: {prog}'), err
     assert lines[-1] == f'{prog}: error: {text}', err
@@ -62,7 +62,7 @@ def usage_error(err, prog, text):
 def test_a_log_time_gap_gives_one_diagnostics_message_not_one_per_period(tmp_path):
     # 20 messages, 1e5 s apart in the middle: the live node's 1 s timer would fire 1e5
     # times; the offline replay writes one /diagnostics message at the latest due time
-    times = [k for k in range(10)] + [1e5 + k for k in range(10)]
+    times = list(range(10)) + [1e5 + k for k in range(10)]
     bag = make_bag(tmp_path / 'gap', times)
     res = offline_replay.replay(bag, tmp_path / 'out')
     assert res.read == 20
