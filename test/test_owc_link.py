@@ -16,6 +16,8 @@ def test_power_curve_matches_eq2_on_the_linear_range():
 def test_power_curve_shape_of_fig5():
     theta = np.linspace(-2.0, 2.0, 40001)
     p = power_curve(theta)
+    # README: 'at most 270 mW, zero beyond 1.51 rad; continuous'
+    assert P_MAX == 270.0 and THETA_ZERO == 1.51
     assert p.max() == pytest.approx(P_MAX)
     assert np.all(p <= P_MAX) and np.all(p >= 0)
     assert np.all(p[np.abs(theta) >= THETA_ZERO] == 0)

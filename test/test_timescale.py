@@ -83,3 +83,22 @@ def test_bad_time_scales_are_refused():
         ts.classify([0.0, 1.0], period=0.0)
     with pytest.raises(ts.TimeScaleError, match='finite'):
         ts.discrete([0.0, float('nan')])
+
+
+def test_readme_numbers_of_t3_and_t_d():
+    # README: 'after 8 come the harmonic numbers above 8 (H_1674 = 8.0005, ...), with
+    # mu ~ 6e-4'; a measurement there has variance R / mu, 'about 1700 R'
+    t3 = ts.cai_t3(12)
+    H = np.cumsum(1.0 / np.arange(1, 1676))
+    assert H[1672] <= 8.0 < H[1673]                   # H_1673 <= 8 < H_1674
+    assert t3.points[5] == pytest.approx(H[1673], rel=1e-12)
+    assert t3.points[5] == pytest.approx(8.0005, abs=5e-5)
+    mu = t3.mu()[5]
+    assert mu == pytest.approx(1 / 1675, rel=1e-9) and mu == pytest.approx(6e-4, abs=5e-5)
+    assert 1 / mu == pytest.approx(1700, abs=50)
+    # 'a measurement on a dense stretch realised at 0.1 s has variance 10 R'
+    td = ts.cai_td(0.1)
+    np.testing.assert_allclose(1 / td.mu()[:-1][td.dense], 10.0, rtol=1e-9)
+    # 'over T_d's 300 s a truth simulated from (3) reaches e^250': prod (1 + mu) = e^250.96
+    growth = np.sum(np.log1p(td.mu()[:-1]))
+    assert 250.0 <= growth < 251.0

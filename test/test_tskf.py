@@ -106,11 +106,26 @@ def test_dare_fixed_point_and_limit_to_care_as_mu_goes_to_zero():
         kf.step(mu, 0.0)
         # the steady covariance of the discrete equivalent is a fixed point of Table 3
         np.testing.assert_allclose(kf.P, P_dare, rtol=1e-8, atol=1e-12)
-        errors.append(np.max(np.abs(P_dare - P_care)))
+        errors.append(np.max(np.abs(kf.P - P_care)))
     # first-order convergence: the error falls about tenfold per decade of mu
     assert errors[0] > errors[1] > errors[2]
     assert errors[2] < 2e-3 * np.max(np.abs(P_care))
     assert 5 < errors[1] / errors[2] < 20
+    # README: 'error max abs 0.041, 0.0037, 0.00037 for mu = 0.1, 0.01, 0.001'
+    for got, want in zip(errors, [0.041, 0.0037, 0.00037]):
+        assert got == pytest.approx(want, abs=want / 82)      # half a unit of the 2nd digit
+
+
+def test_steady_state_of_the_filter_itself_tends_to_care():
+    # the same limit reached by stepping the filter from P0 (no DARE solver): mu = 0.1
+    A = np.array([[0.0, 1.0], [-1.0, -2.0]])
+    C = np.array([[1.0, 0.0]])
+    G = np.array([[0.0], [1.0]])
+    P_care = scipy.linalg.solve_continuous_are(A.T, C.T, G @ G.T, np.array([[2.0]]))
+    kf = TimeScaleKalmanFilter(A, C, Q=1.0, R=2.0, G=G, x0=[0, 0], P0=np.diag([2.0, 3.0]))
+    for _ in range(400):
+        kf.step(0.1, 0.0)
+    assert np.max(np.abs(kf.P - P_care)) == pytest.approx(0.041, abs=5e-4)
 
 
 def scalar_riccati_closed_form(t, a, c, g2q, r, p0):
