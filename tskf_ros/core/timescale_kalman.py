@@ -92,12 +92,13 @@ def check_covariance(m: np.ndarray, name: str, *, definite: bool = False,
     if not np.allclose(m, m.T, rtol=0.0, atol=tol * scale):
         raise FilterError(f'{name} is not symmetric: max |{name} - {name}^T| = '
                           f'{np.max(np.abs(m - m.T)):.3g}')
-    eig = np.linalg.eigvalsh((m + m.T) / 2)
+    sym = m / 2 + m.T / 2           # halves first: m + m^T overflows near 1e308
+    eig = np.linalg.eigvalsh(sym)
     if definite and eig[0] <= 0:
         raise FilterError(f'{name} must be positive definite, smallest eigenvalue {eig[0]:.3g}')
     if eig[0] < -tol * scale:
         raise FilterError(f'{name} is indefinite: smallest eigenvalue {eig[0]:.3g}')
-    return (m + m.T) / 2
+    return sym
 
 
 def is_invertible(M: np.ndarray, rtol: float = 1e-12) -> bool:

@@ -73,7 +73,7 @@ MEASUREMENT_RANGE_HELP = ('[lo, hi]: a physical reading outside is rejected (out
                           'empty: any finite value')
 PARAMETERS = MATRICES + tuple(SCALARS) + (
     'model_name', 'state_names', 'transition', 'history_size', 'queue_depth', 'frame_id',
-    'nonpositive_is_gap', 'measurement_range')
+    'nonpositive_is_gap', 'measurement_range', 'gate_patience')
 
 # topics, relative: resolved in the node's namespace
 POWER_TOPIC = 'received_power'
@@ -125,6 +125,7 @@ def parameters_to_config(values: dict) -> NodeConfig:
         history_size=values['history_size'], max_jump=values['max_jump'],
         max_backward=values['max_backward'], max_future=values['max_future'],
         nonpositive_is_gap=values['nonpositive_is_gap'], gate=values['gate'],
+        gate_patience=values['gate_patience'],
         measurement_range=measurement_range, state_limit=values['state_limit'],
         stale_timeout=values['stale_timeout'],
         min_rate_fraction=values['min_rate_fraction'], rate_window=values['rate_window'])
@@ -141,7 +142,8 @@ def default_parameters() -> dict:
     values.update({name: spec[0] for name, spec in SCALARS.items()})
     values.update({'model_name': d.name, 'state_names': list(d.state_names),
                    'transition': 'euler', 'history_size': 1000, 'queue_depth': 100,
-                   'nonpositive_is_gap': True, 'frame_id': '', 'measurement_range': []})
+                   'nonpositive_is_gap': True, 'frame_id': '', 'measurement_range': [],
+                   'gate_patience': 5})
     return values
 
 

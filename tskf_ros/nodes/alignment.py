@@ -116,11 +116,11 @@ class Alignment(ReconfigurableNode):
         for key, msg in outcome_messages(out, self.config):
             self.pubs[key].publish(msg)
 
-    def restart(self, why: str) -> None:
-        """Restart the aligner after a clock jump (nothing to do before a sample)."""
+    def restart(self, why: str, reason: str = 'clock_jump') -> None:
+        """Restart the aligner, saying why (nothing to do before a sample)."""
         if self.session.last_ns is None:
             return
-        self.session.reset('clock_jump')
+        self.session.reset(reason)
         self.get_logger().warning(f'aligner restarted: {why}')
 
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:

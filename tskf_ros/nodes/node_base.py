@@ -115,8 +115,8 @@ class ReconfigurableNode(Node):
         """Return the /diagnostics message of the session at stamp_ns (subclasses)."""
         raise NotImplementedError
 
-    def restart(self, why: str) -> None:
-        """Restart the session after a clock jump, saying why (subclasses)."""
+    def restart(self, why: str, reason: str = 'clock_jump') -> None:
+        """Restart the session (after a clock jump, by default), saying why (subclasses)."""
         raise NotImplementedError
 
     def start_diagnostics(self) -> None:
@@ -145,7 +145,7 @@ class ReconfigurableNode(Node):
             why = f'clock source changed ({jump.clock_change.name})'
         else:
             why = f'clock jumped {jump.delta.nanoseconds / 1e9:.3f} s'
-        self.restart(why)
+        self.restart(why, 'clock_jump')
 
     def _validate(self, changes: list) -> SetParametersResult:
         try:
@@ -164,9 +164,15 @@ class ReconfigurableNode(Node):
             self.diag_timer.timer_period_ns = int(config.diagnostics_period * 1e9)
             self.diag_timer.reset()
         self.config = config
-        message = self.reconfigure(config)
-        self.get_logger().info(f'parameters changed ({", ".join(p.name for p in changes)}): '
-                               f'{message}')
+        names = ', '.join(p.name for p in changes)
+        try:
+            message = self.reconfigure(config)
+        except Exception as exc:  # noqa: B902 - a post-set callback must never kill the node
+            self.restart(f'applying the change of {names} failed: {exc!r}', 'reconfigured')
+            self.get_logger().error(f'parameters changed ({names}) but applying them failed '
+                                    f'({exc!r}); the session was restarted')
+            return
+        self.get_logger().info(f'parameters changed ({names}): {message}')
 
 
 def declare_config_fields(node: Node, config_cls: type, help_: dict) -> None:

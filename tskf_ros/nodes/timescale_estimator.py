@@ -95,6 +95,11 @@ class TimescaleEstimator(ReconfigurableNode):
         self.declare_parameter('nonpositive_is_gap', defaults['nonpositive_is_gap'],
                                ParameterDescriptor(description=gap_help,
                                                    type=ParameterType.PARAMETER_BOOL))
+        self.declare_parameter('gate_patience', defaults['gate_patience'], ParameterDescriptor(
+            description='consecutive gated samples after which the next one that fails the '
+            'gate re-initialises the filter (an unstable model need not widen its gate)',
+            type=ParameterType.PARAMETER_INTEGER,
+            integer_range=[IntegerRange(from_value=0, to_value=1_000_000)]))
         self.declare_parameter('measurement_range', defaults['measurement_range'],
                                ParameterDescriptor(description=MEASUREMENT_RANGE_HELP,
                                                    dynamic_typing=True))
@@ -139,11 +144,11 @@ class TimescaleEstimator(ReconfigurableNode):
         for key, msg in outcome_messages(out, self.config):
             self.pubs[key].publish(msg)
 
-    def restart(self, why: str) -> None:
-        """Re-initialise the filter after a clock jump (nothing to do before a sample)."""
+    def restart(self, why: str, reason: str = 'clock_jump') -> None:
+        """Re-initialise the filter, saying why (nothing to do before a sample)."""
         if self.session.pending() is None:
             return
-        out = self.session.reset('clock_jump', why)
+        out = self.session.reset(reason, why)
         self.get_logger().warning(f'filter re-initialised: {out.message}')
 
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:

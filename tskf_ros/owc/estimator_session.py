@@ -16,9 +16,13 @@ cannot hold, duplicates, stamps too old for the history, readings outside the op
 physical `measurement_range`, and readings whose innovation fails the gate are rejected
 with a reason.  The gate (as robot_localization's per-sensor rejection threshold) is the
 Mahalanobis distance of the innovation y - C xhat(t) - D against S = C P(t) C^T + R / period
-at the predictor of the sample's own stamp; a rejected sample is not a point, so the next
-one sees the whole gap and a wider gate: a filter cannot lock itself out.  The first sample
-after a (re)start is not gated (there is no prediction yet).  A late sample within the
+at the predictor of the sample's own stamp.  A rejected sample is not a point, so the next
+one sees the whole gap and, for a stable or integrating model, a wider gate; but for an
+unstable model (Cai's A = 1 is one: the prediction's mean grows as fast as its deviation
+over a gap) the gate need not widen, so after `gate_patience` consecutive gated samples
+the next one that fails the gate re-initialises the filter from itself ('gate_lockout'):
+a filter cannot lock itself out.  The first sample after a (re)start is not gated (there
+is no prediction yet).  A late sample within the
 history is inserted into the time scale, which changes mu of its left neighbour, and the
 filter is re-run from there (the revised estimates are returned separately); a clock
 jump forward or backward beyond a bound re-initialises the filter.  A step whose state
@@ -72,7 +76,7 @@ REJECT_REASONS = ('zero_stamp', 'stamp_range', 'non_finite', 'bad_variance', 'in
                   'input_non_finite', 'input_size', 'input_late', 'input_duplicate',
                   'input_zero_stamp', 'no_input_matrix')
 RESET_REASONS = ('forward_jump', 'backward_jump', 'clock_jump', 'reconfigured',
-                 'state_health')
+                 'state_health', 'gate_lockout')
 # diagnostics list at most this many of the sampling intervals seen
 INTERVALS_SHOWN = 20
 
@@ -150,6 +154,7 @@ class EstimatorConfig:
     max_future: float = 0.0         # stamp ahead of the receiver clock by more: rejected (0 off)
     nonpositive_is_gap: bool = True  # a reading <= 0 is an interruption (a power, Cai IV-C)
     gate: float = 10.0              # Mahalanobis distance of a rejected innovation (0: off)
+    gate_patience: int = 5          # consecutive gated samples before a re-initialisation
     measurement_range: tuple = ()   # (lo, hi) of a physical reading; (): any finite value
     state_limit: float = 1e9        # |x_i| or sqrt(trace P) beyond this: re-initialise
     stale_timeout: float = 10.0     # s without input: diagnostics ERROR (0: off)
@@ -169,6 +174,8 @@ class EstimatorConfig:
                 raise ConfigError(f'{name} must be finite and >= 0, got {value}')
         if not self.period > 0:
             raise ConfigError(f'period must be > 0, got {self.period}')
+        if self.gate_patience < 0:
+            raise ConfigError(f'gate_patience must be >= 0, got {self.gate_patience}')
         if self.history_size < 2:
             raise ConfigError(f'history_size must be >= 2, got {self.history_size}')
         if not self.max_jump > 0:
@@ -323,6 +330,7 @@ class EstimatorSession:
         self.u_stamp_ns = 0                         # its stamp (0: none yet)
         self._checker: Optional[irregular.IntervalChecker] = None
         self.health_error = ''                      # why the filter re-initialised itself
+        self.gated_in_a_row = 0
         self.input_rate = self._input_rate(config)
 
     @staticmethod
@@ -707,7 +715,13 @@ class EstimatorSession:
             gated = self._gate(y, x, P)
             if gated:
                 self.kf.set_state(*saved)
+                if self.gated_in_a_row >= self.config.gate_patience:
+                    self.gated_in_a_row = 0
+                    return self._restart('gate_lockout', stamp_ns, y, gated + (
+                        f'; {self.config.gate_patience + 1} samples in a row failed the gate'))
+                self.gated_in_a_row += 1
                 return self._reject('gated', gated)
+            self.gated_in_a_row = 0
         if u is None:
             self.points.append(_Point(stamp_ns, y, x, P, self.u))
         else:
