@@ -312,6 +312,27 @@ def test_good_parameter_change_is_used(make):
     h = make()
     assert h.node.set_parameters([Parameter('transition', value='exact')])[0].successful
     assert h.node.session.kf.transition == 'exact'
+    stamps, power = (1.0, 2.0, 4.0), (200.0, 210.0, 190.0)
+    for t, p in zip(stamps, power):
+        h.send(t, p)
+    h.expect(predicted=3)
+    t, x, P = h.estimates('predicted', 1)
+    # model (3) sampled exactly, written out: F = e^mu, Q_d = (e^{2 mu} - 1) / 2, R_d = R / mu
+    c, d, R = -637.35, 511.97, 100.0
+    xs, Ps, want_x, want_P = 0.5435, 0.01, [0.5435], [0.01]
+    for k, mu in enumerate(np.diff(stamps)):
+        L = Ps * c / (c * c * Ps + R / mu)
+        xs, Ps = xs + L * (power[k] - c * xs - d), Ps - L * c * Ps
+        xs, Ps = np.exp(mu) * xs, np.exp(2 * mu) * Ps + (np.exp(2 * mu) - 1) / 2
+        want_x.append(xs)
+        want_P.append(Ps)
+    np.testing.assert_array_equal(t, stamps)
+    np.testing.assert_allclose(x[:, 0], want_x, rtol=1e-9)
+    np.testing.assert_allclose(P[:, 0, 0], want_P, rtol=1e-9)
+    # the Euler step (F = 1 + mu, Q_d = mu) would predict far from that: the change was used
+    L = want_P[1] * c / (c * c * want_P[1] + R / 2)
+    euler = 3 * (want_x[1] + L * (power[1] - c * want_x[1] - d))
+    assert abs(x[2, 0] - euler) > 0.1
 
 
 def test_diagnostics_warn_on_long_gap(make):
