@@ -93,8 +93,8 @@ class ThreePointAveraging(_SteppingAligner):
         cmd[at0] = g                     # origin -> +gamma
         cmd[at1] = -2.0 * g              # +gamma -> -gamma
         v1, v2, v3 = self.v[:, 0], self.v[:, 1], self.v[:, 2]
-        total = v1 + v2 + v3
-        with np.errstate(divide='ignore', invalid='ignore'):
+        with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+            total = v1 + v2 + v3
             # (26): gamma_p = (gamma V1 - gamma V2) / (V1 + V2 + V3)
             gamma_p = g * (v1 - v2) / total
         if self.clip:
