@@ -87,7 +87,7 @@ def test_the_gate_is_the_mahalanobis_distance_of_the_innovation():
 
 
 def slow_owc(**extra):
-    """A random-walk angle (A = 0, Q = 1e-3 rad^2/s) seen through Cai's eq. (2)."""
+    """Return a session of Cai's eq. (2) over a random-walk angle (A = 0, Q = 1e-3 rad^2/s)."""
     model = model_from_flat(A=[0.0], C=[-637.35], D=[511.97], Q=[1e-3], R=[100.0],
                             x0=[THETA], P0=[0.01], name='owc')
     return EstimatorSession(EstimatorConfig(model, **extra))
@@ -357,3 +357,18 @@ def test_load_config_has_the_new_defaults():
     cfg = load_config()
     assert cfg.session.gate == 10.0 and cfg.session.state_limit == 1e9
     assert cfg.session.measurement_range == ()
+
+
+def test_node_diagnostics_say_error_when_the_input_went_silent(estimator):
+    # before: a node whose input had gone silent still reported OK
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from tskf_ros.messages import conversions
+    estimator.session.add(T0, power(THETA), now_ns=T0)
+    first = conversions.msg_to_diagnostics(estimator.diagnostics_message(T0 + NS))
+    later = conversions.msg_to_diagnostics(estimator.diagnostics_message(T0 + 11 * NS))
+    (status_first,) = first.values()
+    (status_later,) = later.values()
+    assert status_first['level'] == DiagnosticStatus.OK[0]
+    assert status_later['level'] == DiagnosticStatus.ERROR[0]
+    assert 'no input for 11 s' in status_later['message']
