@@ -238,4 +238,4 @@ def test_record_command_closes_the_bag_on_a_signal(tmp_path, sig):
     assert proc.returncode == 0, err
     assert 'wrote' in err
     with Reader(bag) as reader:
-        assert reader.message_count == 20
+        assert reader.message_count == 20, err
