@@ -107,3 +107,13 @@ def test_eight_degrees_per_second_still_tracks():
     eight, sixteen = got['ekf']['angular']['mean']
     assert 97.0 <= eight < 98.0
     assert sixteen == pytest.approx(12.3, abs=HALF)
+
+
+def test_about_two_percent_of_ekf_runs_never_recover_at_noise_one():
+    # README: 'in about 2% of runs the first updates from P0 = diag(100, 1000) throw x2hat
+    # by tens of degrees and the run never recovers' (noise 1.0, 1000 runs, seed 0)
+    angular, _ = alignment_mc.evaluate('ekf', RUNS, led.TrackingLinkConfig(beta=1.2, noise=1.0),
+                                       np.random.default_rng(0), led.IncidenceResponse(),
+                                       led.EKFConfig(), False)
+    lost = np.mean(angular < 50.0)
+    assert lost == pytest.approx(0.02, abs=0.005)

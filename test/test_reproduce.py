@@ -207,3 +207,29 @@ def test_simulate_truth_noise_scales_with_mu():
         dx, v = np.diff(x[:, 0]), y[:, 0] - x[:, 0]
         assert np.var(dx) == pytest.approx(var_w, rel=4 * np.sqrt(2 / n))
         assert np.var(v) == pytest.approx(var_v, rel=4 * np.sqrt(2 / n))
+
+
+def test_cai_td_owc_mu_one_points_carry_the_angle_as_error(td_runs):
+    # README: 'Under a = 1 every mu = 1 point also has a 0.5 rad error (mu x)': the
+    # predictor multiplies theta (~0.54 rad) by 1 + mu = 2
+    s = td_runs['owc'][0]['euler']
+    before = timescale.backward_graininess(s.t)
+    one = np.isclose(before, 1.0)
+    err = np.abs(s.pred - s.truth)[one]
+    assert one.sum() == 96
+    assert np.median(err) == pytest.approx(0.5, abs=0.06)
+    assert np.median(err) == pytest.approx(np.median(s.truth[one]), abs=0.02)
+    # on the dense parts (mu = 0.1) the same error is ten times smaller
+    assert np.median(np.abs(s.pred - s.truth)[np.isclose(before, 0.1)]) < 0.1
+
+
+def test_ou_angle_statistics():
+    # README: the true angle is an Ornstein-Uhlenbeck process, mean 0.5435 rad, sd 0.04 rad,
+    # 2 s time constant, clipped to the linear range [0.4141, 0.6729] of eq. (2)
+    t = np.arange(0.0, 40000.0, 1.0)
+    th = models.ou_angle(t, np.random.default_rng(1))
+    n_eff = t.size * (1 - np.exp(-0.5)) / (1 + np.exp(-0.5))    # AR(1) with rho = e^-1/2
+    assert th.mean() == pytest.approx(0.5435, abs=4 * 0.04 / np.sqrt(n_eff))
+    assert th.std() == pytest.approx(0.04, rel=0.03)
+    assert np.corrcoef(th[:-1], th[1:])[0, 1] == pytest.approx(np.exp(-0.5), abs=0.02)
+    assert th.min() >= 0.4141 and th.max() <= 0.6729
