@@ -33,7 +33,8 @@ TIMEOUT = 20.0      # s: only a bound on waiting for DDS; no assertion depends o
 
 def yaml_parameters(name, **extra):
     """Parameter overrides from a config/ YAML file, plus extra ones."""
-    data = yaml.safe_load((CONFIG / name).read_text())['timescale_estimator']['ros__parameters']
+    data = yaml.safe_load((CONFIG / name).read_text())['/**/timescale_estimator'][
+        'ros__parameters']
     data.update(extra)
     return [Parameter(k, value=v) for k, v in data.items()]
 

@@ -412,7 +412,7 @@ def test_drogue_main_writes_figure_and_summary(tmp_path, capsys):
 def test_drogue_estimator_yaml_is_the_drogue_model():
     yaml = pytest.importorskip('yaml')
     path = Path(__file__).resolve().parent.parent / 'config' / 'drogue_estimator.yaml'
-    p = yaml.safe_load(path.read_text())['timescale_estimator']['ros__parameters']
+    p = yaml.safe_load(path.read_text())['/**/timescale_estimator']['ros__parameters']
     kf = TimeScaleKalmanFilter(np.reshape(p['A'], (2, 2)), [p['C']], Q=[p['Q']], R=[p['R']],
                                G=p['G'], B=p['B'], x0=p['x0'], P0=np.reshape(p['P0'], (2, 2)),
                                transition=p['transition'])

@@ -56,8 +56,8 @@ from tskf_ros.messages import estimator_interface as estimator
 from tskf_ros.messages.estimator_interface import (BAG_INPUT_TOPIC, bag_outcome_messages,
                                                    BAG_OUTPUT_TOPICS, BAG_POWER_TOPIC,
                                                    DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE,
-                                                   ESTIMATE_TYPE, extractor, input_from_msg,
-                                                   INPUT_TYPE, INPUT_TYPES, JUMP_TYPE, load_config,
+                                                   extractor, input_from_msg, INPUT_TYPE,
+                                                   INPUT_TYPES, load_config,
                                                    NodeConfig, output_qos, ParamsError)
 from tskf_ros.owc.estimator_session import EstimatorSession
 
@@ -174,8 +174,8 @@ class OfflineEstimator:
     def output_topics(self) -> list:
         """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
         qos = output_qos(self.config)
-        return [(name, JUMP_TYPE if kind == 'mu' else ESTIMATE_TYPE, qos)
-                for (kind, _), name in BAG_OUTPUT_TOPICS.items()]
+        return [(name, estimator.output_type(key), qos)
+                for key, name in BAG_OUTPUT_TOPICS.items()]
 
     def diagnostics_due(self, log_ns: int) -> list:
         """

@@ -24,7 +24,7 @@ from rclpy.qos import QoSProfile
 from tskf_ros import led
 from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession, AlignOutcome
 from tskf_ros.messages import conversions
-from tskf_ros.messages.conversions import ESTIMATE_TYPE
+from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
 from tskf_ros.messages.qos import DEFAULT_DEPTH, reliable_qos
 
@@ -36,10 +36,13 @@ COMMAND_TOPIC = 'base_position_controller/commands'
 OUTPUT_TOPICS = {
     'predicted': 'estimate/predicted',
     'corrected': 'estimate/corrected',
+    'predicted_states': 'estimate/predicted_states',
+    'corrected_states': 'estimate/corrected_states',
     'command': COMMAND_TOPIC,
 }
 COMMAND_TYPE = 'std_msgs/msg/Float64MultiArray'
 OUTPUT_TYPES = {'predicted': ESTIMATE_TYPE, 'corrected': ESTIMATE_TYPE,
+                'predicted_states': STATES_TYPE, 'corrected_states': STATES_TYPE,
                 'command': COMMAND_TYPE}
 # the same topics in a bag, resolved in '/'
 BAG_INPUT_TOPIC = '/' + INPUT_TOPIC
@@ -164,10 +167,11 @@ def outcome_messages(out: AlignOutcome, config: NodeConfig) -> list:
         return []
     msgs = []
     if out.prior is not None:
-        msgs.append(('predicted', conversions.alignment_estimate_to_msg(
-            out.stamp_ns, *out.prior, frame_id=config.frame_id)))
-        msgs.append(('corrected', conversions.alignment_estimate_to_msg(
-            out.stamp_ns, *out.posterior, frame_id=config.frame_id)))
+        for kind, (x, P) in (('predicted', out.prior), ('corrected', out.posterior)):
+            msgs.append((kind, conversions.alignment_estimate_to_msg(
+                out.stamp_ns, x, P, frame_id=config.frame_id)))
+            msgs.append((kind + '_states', conversions.alignment_estimate_to_joint_state(
+                out.stamp_ns, x, P, frame_id=config.frame_id)))
     msgs.append(('command', conversions.base_command_to_msg(out.command)))
     return msgs
 
@@ -183,4 +187,5 @@ def diagnostics_message(session: AlignmentSession, config: NodeConfig, stamp_ns:
     # like the estimator's, but named after the aligner and its receiver frame
     level, message, values = session.diagnostics(now_ns=stamp_ns)
     return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: LED alignment', level,
-                                          message, values, hardware_id=config.frame_id)
+                                          message, values,
+                                          hardware_id=config.frame_id or node_name)

@@ -16,6 +16,10 @@ Types (all from common_interfaces, no custom messages):
   its variance in covariance[0]); unused slots and their covariance are 0.  Pose types
   would force the state through a unit quaternion; JointState has no covariance;
   std_msgs arrays have no stamp.
+- the same estimates by name, for plotting tools (Foxglove, PlotJuggler):
+  sensor_msgs/msg/JointState with name = the state names, position = x and velocity =
+  the standard deviations sqrt(diag P) (not velocities: JointState has no covariance
+  field, and the slot's name says what it holds in the README).
 - graininess: sensor_msgs/msg/TimeReference with header.stamp = t and time_ref =
   sigma(t), source = 'sigma': mu(t) = time_ref - stamp exactly, in integer nanoseconds.
 - diagnostics: diagnostic_msgs/msg/DiagnosticArray (the ROS convention).
@@ -36,6 +40,8 @@ from tskf_ros.core.units import NS
 SLOTS = 6
 # the type of every estimate: a stamped state vector with its covariance (see above)
 ESTIMATE_TYPE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
+# the type of its mirror by name
+STATES_TYPE = 'sensor_msgs/msg/JointState'
 LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
 
@@ -97,6 +103,17 @@ def estimate_to_msg(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
     t.linear.x, t.linear.y, t.linear.z = float(v[0]), float(v[1]), float(v[2])
     t.angular.x, t.angular.y, t.angular.z = float(v[3]), float(v[4]), float(v[5])
     msg.twist.covariance = cov.reshape(-1)
+    return msg
+
+
+def estimate_to_joint_state(stamp_ns: int, x: np.ndarray, P: np.ndarray,
+                            names: Sequence[str], *, frame_id: str = '') -> JointState:
+    """Convert x and P -> JointState: name = names, position = x, velocity = sqrt(diag P)."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    sd = np.sqrt(np.maximum(np.diag(np.asarray(P, dtype=float).reshape(x.size, x.size)), 0.0))
+    msg = JointState(name=list(names), position=x.tolist(), velocity=sd.tolist())
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = frame_id
     return msg
 
 
@@ -209,6 +226,18 @@ def alignment_estimate_to_msg(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
     return estimate_to_msg(stamp_ns, D @ np.asarray(x, dtype=float).reshape(2),
                            D @ np.asarray(P, dtype=float).reshape(2, 2) @ D,
                            frame_id=frame_id)
+
+
+ALIGNMENT_STATE_NAMES = ('x1_intensity_V', 'x2_scan_mean_rad')
+
+
+def alignment_estimate_to_joint_state(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
+                                      frame_id: str = '') -> JointState:
+    """Convert EKF state [x1 V, x2 deg] and covariance -> JointState (x2 in rad)."""
+    D = _degree_scaling()
+    return estimate_to_joint_state(stamp_ns, D @ np.asarray(x, dtype=float).reshape(2),
+                                   D @ np.asarray(P, dtype=float).reshape(2, 2) @ D,
+                                   ALIGNMENT_STATE_NAMES, frame_id=frame_id)
 
 
 def msg_to_alignment_estimate(msg: TwistWithCovarianceStamped

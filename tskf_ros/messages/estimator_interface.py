@@ -20,7 +20,7 @@ from rclpy.qos import QoSProfile
 
 from tskf_ros.core.linear_models import owc
 from tskf_ros.messages import conversions
-from tskf_ros.messages.conversions import ESTIMATE_TYPE
+from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
 from tskf_ros.messages.qos import DIAGNOSTICS_TOPIC, reliable_qos
 from tskf_ros.owc.estimator_session import (ConfigError, EstimatorConfig, EstimatorSession,
@@ -73,19 +73,23 @@ MEASUREMENT_RANGE_HELP = ('[lo, hi]: a physical reading outside is rejected (out
                           'empty: any finite value')
 PARAMETERS = MATRICES + tuple(SCALARS) + (
     'model_name', 'state_names', 'transition', 'history_size', 'queue_depth', 'frame_id',
-    'nonpositive_is_gap', 'measurement_range', 'gate_patience')
+    'nonpositive_is_gap', 'measurement_range', 'gate_patience', 'use_message_variance')
 
 # topics, relative: resolved in the node's namespace
 POWER_TOPIC = 'received_power'
 INPUT_TOPIC = 'input'
-# (estimate kind, revised) -> output topic
+# (estimate kind, revised) -> output topic; '<kind>_states' is the JointState mirror
 OUTPUT_TOPICS = {
     ('predicted', False): 'estimate/predicted',
     ('corrected', False): 'estimate/corrected',
     ('mu', False): 'estimate/mu',
+    ('predicted_states', False): 'estimate/predicted_states',
+    ('corrected_states', False): 'estimate/corrected_states',
     ('predicted', True): 'estimate/revised/predicted',
     ('corrected', True): 'estimate/revised/corrected',
     ('mu', True): 'estimate/revised/mu',
+    ('predicted_states', True): 'estimate/revised/predicted_states',
+    ('corrected_states', True): 'estimate/revised/corrected_states',
 }
 
 # the same topics in a bag, resolved in '/', with their types
@@ -94,6 +98,15 @@ BAG_INPUT_TOPIC = '/' + INPUT_TOPIC
 BAG_OUTPUT_TOPICS = {key: '/' + topic for key, topic in OUTPUT_TOPICS.items()}
 BAG_TRUTH_TOPIC = '/true_angle'
 JUMP_TYPE = 'sensor_msgs/msg/TimeReference'
+
+
+def output_type(key: tuple) -> str:
+    """Return the message type of the output (kind, revised)."""
+    kind = key[0]
+    return JUMP_TYPE if kind == 'mu' else STATES_TYPE if kind.endswith('_states') \
+        else ESTIMATE_TYPE
+
+
 INPUT_TYPE = 'geometry_msgs/msg/AccelStamped'
 DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 
@@ -101,6 +114,7 @@ __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'BAG_POWER_TOPIC', 'BAG_TRUTH
            'bag_outcome_messages', 'ConfigError', 'default_parameters', 'DIAGNOSTICS_TOPIC',
            'DIAGNOSTICS_TYPE', 'diagnostics_message', 'ESTIMATE_TYPE', 'extractor',
            'INPUT_TOPIC', 'INPUT_TYPE', 'INPUT_TYPES', 'input_from_msg', 'InputType',
+           'output_type',
            'JUMP_TYPE', 'load_config', 'MATRICES', 'MATRIX_HELP', 'MEASUREMENT_RANGE_HELP',
            'NODE_NAME', 'NodeConfig',
            'outcome_messages', 'OUTPUT_TOPICS', 'output_qos', 'PARAMETERS',
@@ -126,6 +140,7 @@ def parameters_to_config(values: dict) -> NodeConfig:
         max_backward=values['max_backward'], max_future=values['max_future'],
         nonpositive_is_gap=values['nonpositive_is_gap'], gate=values['gate'],
         gate_patience=values['gate_patience'],
+        use_message_variance=values['use_message_variance'],
         measurement_range=measurement_range, state_limit=values['state_limit'],
         stale_timeout=values['stale_timeout'],
         min_rate_fraction=values['min_rate_fraction'], rate_window=values['rate_window'])
@@ -143,7 +158,7 @@ def default_parameters() -> dict:
     values.update({'model_name': d.name, 'state_names': list(d.state_names),
                    'transition': 'euler', 'history_size': 1000, 'queue_depth': 100,
                    'nonpositive_is_gap': True, 'frame_id': '', 'measurement_range': [],
-                   'gate_patience': 5})
+                   'gate_patience': 5, 'use_message_variance': False})
     return values
 
 
@@ -169,10 +184,13 @@ def output_qos(config: NodeConfig) -> QoSProfile:
 
 def outcome_messages(out: Outcome, config: NodeConfig) -> list:
     """Return the ((kind, revised), message) pairs to publish for an Outcome, in order."""
-    frame = config.frame_id or config.session.model.name
-    msgs = [((e.kind, e.revised),
-             conversions.estimate_to_msg(e.stamp_ns, e.x, e.P, frame_id=frame))
-            for e in out.estimates]
+    frame, names = config.frame_id, config.session.model.state_names
+    msgs = []
+    for e in out.estimates:
+        msgs.append(((e.kind, e.revised),
+                     conversions.estimate_to_msg(e.stamp_ns, e.x, e.P, frame_id=frame)))
+        msgs.append(((e.kind + '_states', e.revised), conversions.estimate_to_joint_state(
+            e.stamp_ns, e.x, e.P, names, frame_id=frame)))
     msgs += [(('mu', j.revised), conversions.jump_to_msg(j.stamp_ns, j.sigma_ns))
              for j in out.jumps]
     return msgs
@@ -189,7 +207,7 @@ def diagnostics_message(session: EstimatorSession, config: NodeConfig, stamp_ns:
     level, message, values = session.diagnostics(now_ns=stamp_ns)
     return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: time-scale filter', level,
                                           message, values,
-                                          hardware_id=config.session.model.name)
+                                          hardware_id=config.frame_id or node_name)
 
 
 def input_from_msg(msg: AccelStamped, session: EstimatorSession) -> tuple:

@@ -17,17 +17,19 @@ from typing import Optional
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
-from sensor_msgs.msg import Illuminance
+from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool
 
 from tskf_ros import led
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.messages import conversions
-from tskf_ros.messages.alignment_interface import (default_parameters, diagnostics_message,
-                                                   INPUT_TOPIC, NODE_NAME, NodeConfig,
-                                                   outcome_messages, output_qos, OUTPUT_TOPICS,
-                                                   PARAMETERS, parameters_to_config,
-                                                   SESSION_PARAMETERS)
+from tskf_ros.messages.alignment_interface import (COMMAND_TYPE, default_parameters,
+                                                   diagnostics_message, INPUT_TOPIC, NODE_NAME,
+                                                   NodeConfig, outcome_messages, output_qos,
+                                                   OUTPUT_TOPICS, OUTPUT_TYPES, PARAMETERS,
+                                                   parameters_to_config, SESSION_PARAMETERS)
+from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.parameters import float_range
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
@@ -47,13 +49,19 @@ class Alignment(ReconfigurableNode):
         qos_in = sensor_input_qos(self.config.queue_depth)
         self.sub = self.create_subscription(Illuminance, INPUT_TOPIC, self._on_intensity,
                                             qos_in)
+        types = {COMMAND_TYPE: Float64MultiArray, ESTIMATE_TYPE: TwistWithCovarianceStamped,
+                 STATES_TYPE: JointState}
         self.pubs = {
-            key: self.create_publisher(
-                Float64MultiArray if key == 'command' else TwistWithCovarianceStamped, topic,
-                output_qos(self.config, key))
+            key: self.create_publisher(types[OUTPUT_TYPES[key]], topic,
+                                       output_qos(self.config, key))
             for key, topic in OUTPUT_TOPICS.items()}
         self.start_diagnostics()
         self.watch_clock_jumps()
+        self.start_services()
+        # ~/enable (std_srvs/srv/SetBool): false pauses the loop (no step, no command)
+        self.enabled = True
+        self.paused = 0
+        self.enable_service = self.create_service(SetBool, '~/enable', self._on_enable)
         cfg = self.config.session
         self.get_logger().info(
             f'aligning with {cfg.algorithm}'
@@ -97,6 +105,9 @@ class Alignment(ReconfigurableNode):
     # -- data -----------------------------------------------------------------------------
 
     def _on_intensity(self, msg: Illuminance) -> None:
+        if not self.enabled:
+            self.paused += 1
+            return
         stamp_ns, volts, _ = conversions.msg_to_intensity(msg)
         out = self.session.add(stamp_ns, volts, now_ns=self.get_clock().now().nanoseconds)
         self._report(out)
@@ -122,6 +133,18 @@ class Alignment(ReconfigurableNode):
             return
         self.session.reset(reason)
         self.get_logger().warning(f'aligner restarted: {why}')
+
+    def _on_enable(self, request: SetBool.Request,
+                   response: SetBool.Response) -> SetBool.Response:
+        was, self.enabled = self.enabled, bool(request.data)
+        if self.enabled and not was:
+            # the EKF predicts over the pause (mu = elapsed / dt): nothing to reset
+            self.get_logger().info(f'alignment resumed after {self.paused} paused samples')
+        elif was and not self.enabled:
+            self.get_logger().info('alignment paused: no steps, no commands')
+        response.success = True
+        response.message = 'enabled' if self.enabled else 'paused'
+        return response
 
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""

@@ -15,6 +15,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import Illuminance, JointState
+from std_srvs.srv import Trigger
 
 from tskf_ros.core.units import NS
 from tskf_ros.messages.parameters import descriptor
@@ -118,6 +119,16 @@ class ReconfigurableNode(Node):
     def restart(self, why: str, reason: str = 'clock_jump') -> None:
         """Restart the session (after a clock jump, by default), saying why (subclasses)."""
         raise NotImplementedError
+
+    def start_services(self) -> None:
+        """Offer ~/reset (std_srvs/srv/Trigger): restart the session from its initial state."""
+        self.reset_service = self.create_service(Trigger, '~/reset', self._on_reset)
+
+    def _on_reset(self, request: Trigger.Request,
+                  response: Trigger.Response) -> Trigger.Response:
+        self.restart('reset by the ~/reset service', 'service')
+        response.success, response.message = True, 'session restarted from its initial state'
+        return response
 
     def start_diagnostics(self) -> None:
         """Publish the session's diagnostics every config.diagnostics_period seconds."""

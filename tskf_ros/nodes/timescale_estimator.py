@@ -16,17 +16,19 @@ from typing import Optional
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
-from sensor_msgs.msg import Illuminance, TimeReference
+from sensor_msgs.msg import Illuminance, JointState, TimeReference
 
 from tskf_ros.core.timescale_kalman import FilterError, TRANSITIONS
 from tskf_ros.messages import conversions
+from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.estimator_interface import (ConfigError, default_parameters,
                                                    diagnostics_message, input_from_msg,
-                                                   INPUT_TOPIC, MATRICES, MATRIX_HELP,
-                                                   MEASUREMENT_RANGE_HELP, NODE_NAME, NodeConfig,
-                                                   outcome_messages, output_qos, OUTPUT_TOPICS,
-                                                   PARAMETERS, parameters_to_config, POWER_TOPIC,
-                                                   SCALARS)
+                                                   INPUT_TOPIC, JUMP_TYPE, MATRICES,
+                                                   MATRIX_HELP, MEASUREMENT_RANGE_HELP,
+                                                   NODE_NAME, NodeConfig, outcome_messages,
+                                                   output_qos, OUTPUT_TOPICS, output_type,
+                                                   PARAMETERS, parameters_to_config,
+                                                   POWER_TOPIC, SCALARS)
 from tskf_ros.messages.parameters import float_range
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
@@ -50,16 +52,22 @@ class TimescaleEstimator(ReconfigurableNode):
         self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
                                                   qos_in)
         qos_out = output_qos(self.config)
-        self.pubs = {
-            key: self.create_publisher(
-                TimeReference if key[0] == 'mu' else TwistWithCovarianceStamped, topic, qos_out)
-            for key, topic in OUTPUT_TOPICS.items()}
+        types = {JUMP_TYPE: TimeReference, STATES_TYPE: JointState,
+                 ESTIMATE_TYPE: TwistWithCovarianceStamped}
+        self.pubs = {key: self.create_publisher(types[output_type(key)], topic, qos_out)
+                     for key, topic in OUTPUT_TOPICS.items()}
         self.start_diagnostics()
         self.watch_clock_jumps()
+        self.start_services()
         m = self.config.session.model
+        given = sorted(k for k in MATRICES if k in self._parameter_overrides)
+        source = (f'parameters ({", ".join(given)} given)' if given else
+                  "the built-in default, Cai et al.'s model (3): no A, C, ... given; pass "
+                  '--params-file config/<model>_estimator.yaml to choose a model')
         self.get_logger().info(
             f'estimating {m.name} (n = {m.A.shape[0]}, states {", ".join(m.state_names)}) '
-            f'with the {self.config.session.transition} transition')
+            f'with the {self.config.session.transition} transition; the model comes from '
+            f'{source}')
 
     # -- parameters -----------------------------------------------------------------------
 
@@ -100,11 +108,17 @@ class TimescaleEstimator(ReconfigurableNode):
             'gate re-initialises the filter (an unstable model need not widen its gate)',
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=0, to_value=1_000_000)]))
+        self.declare_parameter('use_message_variance', defaults['use_message_variance'],
+                               ParameterDescriptor(
+                                   description="a sample's own variance (> 0) is its "
+                                   'measurement noise R_d, as robot_localization uses the '
+                                   "message covariance; 0 or false: the model's R / mu",
+                                   type=ParameterType.PARAMETER_BOOL))
         self.declare_parameter('measurement_range', defaults['measurement_range'],
                                ParameterDescriptor(description=MEASUREMENT_RANGE_HELP,
                                                    dynamic_typing=True))
         self.declare_parameter('frame_id', defaults['frame_id'], ParameterDescriptor(
-            description='frame_id of the estimates (empty: model_name)',
+            description='frame_id of the estimates: a TF frame, or empty',
             type=ParameterType.PARAMETER_STRING))
 
     def make_config(self, values: dict) -> NodeConfig:

@@ -71,12 +71,13 @@ from tskf_ros.core.units import MAX_STAMP_NS, NS
 
 
 # reasons a sample is not used; each is a diagnostics counter
-REJECT_REASONS = ('zero_stamp', 'stamp_range', 'non_finite', 'bad_variance', 'invalid_power',
+REJECT_REASONS = ('zero_stamp', 'stamp_range', 'non_finite', 'bad_size', 'bad_variance',
+                  'invalid_power',
                   'out_of_range', 'gated', 'future', 'duplicate', 'too_old', 'filter_error',
                   'input_non_finite', 'input_size', 'input_late', 'input_duplicate',
                   'input_zero_stamp', 'no_input_matrix')
 RESET_REASONS = ('forward_jump', 'backward_jump', 'clock_jump', 'reconfigured',
-                 'state_health', 'gate_lockout')
+                 'state_health', 'gate_lockout', 'set_state', 'service')
 # diagnostics list at most this many of the sampling intervals seen
 INTERVALS_SHOWN = 20
 
@@ -155,6 +156,7 @@ class EstimatorConfig:
     nonpositive_is_gap: bool = True  # a reading <= 0 is an interruption (a power, Cai IV-C)
     gate: float = 10.0              # Mahalanobis distance of a rejected innovation (0: off)
     gate_patience: int = 5          # consecutive gated samples before a re-initialisation
+    use_message_variance: bool = False  # R_d = the sample's own variance when it is > 0
     measurement_range: tuple = ()   # (lo, hi) of a physical reading; (): any finite value
     state_limit: float = 1e9        # |x_i| or sqrt(trace P) beyond this: re-initialise
     stale_timeout: float = 10.0     # s without input: diagnostics ERROR (0: off)
@@ -295,6 +297,7 @@ class _Point:
     P: np.ndarray
     u: np.ndarray              # the input in force on [t, sigma(t))
     has_input: bool = False    # an input sample has this stamp
+    variance: float = 0.0      # the sample's own variance (use_message_variance)
 
 
 def _finite(*arrays: np.ndarray) -> bool:
@@ -331,6 +334,7 @@ class EstimatorSession:
         self._checker: Optional[irregular.IntervalChecker] = None
         self.health_error = ''                      # why the filter re-initialised itself
         self.gated_in_a_row = 0
+        self._variance = 0.0                        # of the sample being added
         self.input_rate = self._input_rate(config)
 
     @staticmethod
@@ -361,8 +365,9 @@ class EstimatorSession:
         if not (np.isfinite(variance) and variance >= 0):
             return self._reject('bad_variance', f'variance {variance} is not a finite value '
                                 '>= 0')
+        self._variance = float(variance) if cfg.use_message_variance else 0.0
         if y.size != self.kf.p:
-            return self._reject('non_finite', f'measurement has {y.size} entries, the model '
+            return self._reject('bad_size', f'measurement has {y.size} entries, the model '
                                 f'{self.kf.p}')
         if cfg.nonpositive_is_gap and np.any(y <= 0):
             # Cai et al. IV-C: a reading at or below zero is an interruption, not a point
@@ -466,7 +471,7 @@ class EstimatorSession:
 
     def reconfigure(self, config: EstimatorConfig) -> Outcome:
         """Switch to a new (already validated) config, keeping the estimate if n is unchanged."""
-        old_n = self.kf.n
+        old_n, old_model = self.kf.n, self.config.model
         kf = config.model.make_filter(config.transition)
         self.config = config
         self._checker = None
@@ -476,6 +481,11 @@ class EstimatorSession:
             return self.reset('reconfigured', f'input dimension changed -> {kf.B.shape[1]}')
         if kf.n != old_n:
             return self.reset('reconfigured', f'state dimension changed {old_n} -> {kf.n}')
+        if not (np.array_equal(config.model.x0, old_model.x0)
+                and np.array_equal(config.model.P0, old_model.P0)):
+            self.kf = kf
+            return self.reset('set_state', 'x0 / P0 changed: the estimate starts again from '
+                              'them at the next sample')
         kf.set_state(self.kf.x, self.kf.P)
         self.kf = kf
         self.input_rate = self._input_rate(config)
@@ -563,7 +573,8 @@ class EstimatorSession:
     def _start(self, stamp_ns: int, y: np.ndarray) -> Outcome:
         x, P = self.kf.state()
         self.points.append(_Point(stamp_ns, y, x, P, self.u,
-                                  has_input=self.u_stamp_ns == stamp_ns))
+                                  has_input=self.u_stamp_ns == stamp_ns,
+                                  variance=self._variance))
         self.stats.last_measurement_ns = stamp_ns
         self._accepted(stamp_ns, P)
         return Outcome('accepted', estimates=[Estimate('predicted', stamp_ns, x, P)])
@@ -578,7 +589,7 @@ class EstimatorSession:
     def _merge_measurement(self, stamp_ns: int, y: np.ndarray) -> Outcome:
         """Give the newest point, an input-only one, its measurement (not stepped yet)."""
         last = self.points[-1]
-        last.y = y
+        last.y, last.variance = y, self._variance
         self._measured(stamp_ns)
         self._accepted(stamp_ns, last.P)
         return Outcome('accepted', 'merged', 'measurement merged into an input point')
@@ -679,7 +690,16 @@ class EstimatorSession:
               ) -> tuple[list, Jump, np.ndarray, np.ndarray]:
         """step(mu, y) from point to sigma; raises FilterError on a bad step."""
         mu = (sigma_ns - point.stamp_ns) / NS
-        res = self.kf.step(mu, point.y, point.u)
+        kf = self.kf
+        if point.variance > 0 and point.y is not None:
+            # the sample's own variance is its R_d = R / mu (Table 3's noise on the point)
+            R_model, kf.R = kf.R, np.eye(kf.p) * point.variance * mu
+            try:
+                res = kf.step(mu, point.y, point.u)
+            finally:
+                kf.R = R_model
+        else:
+            res = kf.step(mu, point.y, point.u)
         P_c = (res.P_corrected + res.P_corrected.T) / 2
         P_p = res.P_predicted
         if not _finite(res.x_corrected, P_c, res.x_predicted, P_p):
@@ -723,7 +743,7 @@ class EstimatorSession:
                 return self._reject('gated', gated)
             self.gated_in_a_row = 0
         if u is None:
-            self.points.append(_Point(stamp_ns, y, x, P, self.u))
+            self.points.append(_Point(stamp_ns, y, x, P, self.u, variance=self._variance))
         else:
             self.points.append(_Point(stamp_ns, None, x, P, u, has_input=True))
         self.stats.mu_current = jump.mu
@@ -750,10 +770,11 @@ class EstimatorSession:
         merged = i < len(points) and points[i].stamp_ns == stamp_ns
         if merged:
             j = i
-            points[j] = replace(points[j], y=y)
+            points[j] = replace(points[j], y=y, variance=self._variance)
         else:
             j = i - 1
-            points.insert(i, _Point(stamp_ns, y, np.zeros(0), np.zeros((0, 0)), points[j].u))
+            points.insert(i, _Point(stamp_ns, y, np.zeros(0), np.zeros((0, 0)), points[j].u,
+                                    variance=self._variance))
         saved = self.kf.state()
         estimates, jumps = [], []
         try:
@@ -801,7 +822,8 @@ class EstimatorSession:
             return ''
         kf = self.kf
         e = y - kf.C @ x - kf.D
-        S = kf.C @ P @ kf.C.T + kf.R / self.config.period
+        Rd = np.eye(kf.p) * self._variance if self._variance > 0 else kf.R / self.config.period
+        S = kf.C @ P @ kf.C.T + Rd
         with np.errstate(all='ignore'):
             try:
                 d2 = float(e @ np.linalg.solve(S, e))

@@ -1,0 +1,45 @@
+"""
+The LED alignment loop: the LED link simulator and the alignment node, in a namespace.
+
+    ros2 launch tskf_ros led_loop.launch.py
+    ros2 launch tskf_ros led_loop.launch.py namespace:=rig2 params_file:=/path/to/alignment.yaml
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    """Return the link simulator and the aligner, talking on the namespace's topics."""
+    config = os.path.join(get_package_share_directory('tskf_ros'), 'config')
+    namespace = LaunchConfiguration('namespace')
+    use_sim_time = LaunchConfiguration('use_sim_time')
+    log_level = LaunchConfiguration('log_level')
+    return LaunchDescription([
+        DeclareLaunchArgument('namespace', default_value='led',
+                              description='namespace of both nodes'),
+        DeclareLaunchArgument('params_file',
+                              default_value=os.path.join(config, 'alignment.yaml'),
+                              description='parameters of the alignment node'),
+        DeclareLaunchArgument('simulator_params_file',
+                              default_value=os.path.join(config, 'led_link_simulator.yaml'),
+                              description='parameters of the LED link simulator'),
+        DeclareLaunchArgument('use_sim_time', default_value='false',
+                              description='follow /clock'),
+        DeclareLaunchArgument('log_level', default_value='info',
+                              description='debug, info, warn or error'),
+        Node(package='tskf_ros', executable='led_link_simulator', name='led_link_simulator',
+             namespace=namespace, output='screen',
+             parameters=[LaunchConfiguration('simulator_params_file'),
+                         {'use_sim_time': use_sim_time}],
+             arguments=['--ros-args', '--log-level', log_level]),
+        Node(package='tskf_ros', executable='alignment', name='alignment',
+             namespace=namespace, output='screen',
+             parameters=[LaunchConfiguration('params_file'), {'use_sim_time': use_sim_time}],
+             arguments=['--ros-args', '--log-level', log_level]),
+    ])

@@ -1,0 +1,51 @@
+"""
+The OWC pipeline: the power-meter simulator and the time-scale estimator.
+
+    ros2 launch tskf_ros owc_pipeline.launch.py
+    ros2 launch tskf_ros owc_pipeline.launch.py namespace:=bench1 log_level:=debug \
+        params_file:=/path/to/my_estimator.yaml
+
+The simulator publishes `received_power`; the estimator reads its `measurement` topic,
+remapped here to `received_power` (the launch restores the OWC name).
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    """Return the simulator and the estimator, in one namespace."""
+    config = os.path.join(get_package_share_directory('tskf_ros'), 'config')
+    namespace = LaunchConfiguration('namespace')
+    use_sim_time = LaunchConfiguration('use_sim_time')
+    log_level = LaunchConfiguration('log_level')
+    return LaunchDescription([
+        DeclareLaunchArgument('namespace', default_value='',
+                              description='namespace of both nodes'),
+        DeclareLaunchArgument('params_file',
+                              default_value=os.path.join(config, 'owc_estimator.yaml'),
+                              description='parameters of the estimator'),
+        DeclareLaunchArgument('simulator_params_file',
+                              default_value=os.path.join(config,
+                                                         'power_meter_simulator.yaml'),
+                              description='parameters of the simulator'),
+        DeclareLaunchArgument('use_sim_time', default_value='false',
+                              description='follow /clock (a bag played with --clock)'),
+        DeclareLaunchArgument('log_level', default_value='info',
+                              description='debug, info, warn or error'),
+        Node(package='tskf_ros', executable='power_meter_simulator',
+             name='power_meter_simulator', namespace=namespace, output='screen',
+             parameters=[LaunchConfiguration('simulator_params_file'),
+                         {'use_sim_time': use_sim_time}],
+             arguments=['--ros-args', '--log-level', log_level]),
+        Node(package='tskf_ros', executable='timescale_estimator',
+             name='timescale_estimator', namespace=namespace, output='screen',
+             parameters=[LaunchConfiguration('params_file'), {'use_sim_time': use_sim_time}],
+             remappings=[('measurement', 'received_power')],
+             arguments=['--ros-args', '--log-level', log_level]),
+    ])
