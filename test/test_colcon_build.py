@@ -120,3 +120,17 @@ def test_executable_runs_like_ros2_run(install, executable):
 def test_every_executable_has_its_help_expectations():
     missing = sorted(set(console_scripts()) - set(HELP_MUST_NAME))
     assert not missing, f'add what --help must name for {missing} to HELP_MUST_NAME'
+
+
+def test_launch_files_are_installed_and_name_installed_executables(install):
+    share = install / PACKAGE / 'share' / PACKAGE
+    lib = install / PACKAGE / 'lib' / PACKAGE
+    for path in sorted((REPO_ROOT / 'launch').glob('*.launch.py')):
+        assert (share / 'launch' / path.name).is_file(), path.name
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.keyword) and node.arg == 'executable':
+                assert (lib / ast.literal_eval(node.value)).is_file(), (path.name, node.value)
+            if (isinstance(node, ast.Constant) and isinstance(node.value, str)
+                    and node.value.endswith('.yaml')):
+                assert (share / 'config' / node.value).is_file(), (path.name, node.value)

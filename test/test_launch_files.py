@@ -1,0 +1,80 @@
+"""
+The launch files name only executables and parameter files the package installs.
+
+`launch` and `launch_ros` are not available as wheels, so the files are read (ast), not
+run: every `Node(package='tskf_ros', executable=...)` must be a console script of
+setup.py (what colcon installs to lib/tskf_ros; test_colcon_build checks the installed
+tree too), every '*.yaml' a file of config/, every launch argument must be declared
+before use, and the usual arguments (namespace, params_file, use_sim_time, log_level)
+must exist.  Where launch_ros imports, the files are also loaded for real.
+"""
+
+import ast
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+from test_colcon_build import console_scripts
+
+REPO = Path(__file__).resolve().parent.parent
+LAUNCH = sorted((REPO / 'launch').glob('*.launch.py'))
+USUAL = {'namespace', 'params_file', 'use_sim_time', 'log_level'}
+
+
+def calls(tree, name):
+    """Every call of `name(...)` in the tree, as {keyword: node} plus positional args."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and getattr(node.func, 'id', None) == name:
+            yield node
+
+
+def keyword(call, name):
+    for kw in call.keywords:
+        if kw.arg == name:
+            return kw.value
+    return None
+
+
+def test_there_are_three_launch_files():
+    assert [p.name for p in LAUNCH] == ['led_loop.launch.py', 'owc_pipeline.launch.py',
+                                        'replay_estimator.launch.py']
+
+
+@pytest.mark.parametrize('path', LAUNCH, ids=lambda p: p.name)
+def test_launch_file_names_only_what_the_package_installs(path):
+    tree = ast.parse(path.read_text())
+    executables = set(console_scripts())
+    nodes = list(calls(tree, 'Node'))
+    assert nodes, 'no Node in the launch file'
+    for node in nodes:
+        assert ast.literal_eval(keyword(node, 'package')) == 'tskf_ros'
+        assert ast.literal_eval(keyword(node, 'executable')) in executables
+    yamls = {n.value for n in ast.walk(tree)
+             if isinstance(n, ast.Constant) and isinstance(n.value, str)
+             and n.value.endswith('.yaml')}
+    for name in yamls:
+        assert (REPO / 'config' / name).is_file(), name
+    declared = {ast.literal_eval(c.args[0]) for c in calls(tree, 'DeclareLaunchArgument')}
+    used = {ast.literal_eval(c.args[0]) for c in calls(tree, 'LaunchConfiguration')}
+    assert used <= declared, used - declared
+    assert USUAL <= declared
+
+
+def test_the_check_catches_an_unknown_executable(tmp_path):
+    bad = tmp_path / 'bad.launch.py'
+    bad.write_text("Node(package='tskf_ros', executable='no_such_node')\n")
+    tree = ast.parse(bad.read_text())
+    (node,) = calls(tree, 'Node')
+    assert ast.literal_eval(keyword(node, 'executable')) not in set(console_scripts())
+
+
+@pytest.mark.skipif(importlib.util.find_spec('launch_ros') is None,
+                    reason='launch_ros is not installed (no wheel); the files are checked '
+                    'statically above')
+@pytest.mark.parametrize('path', LAUNCH, ids=lambda p: p.name)
+def test_launch_file_loads(path):
+    spec = importlib.util.spec_from_file_location(path.stem.replace('.', '_'), path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.generate_launch_description().entities
