@@ -61,13 +61,14 @@ class TimescaleEstimator(ReconfigurableNode):
         self.start_services()
         m = self.config.session.model
         given = sorted(k for k in MATRICES if k in self._parameter_overrides)
-        source = (f'parameters ({", ".join(given)} given)' if given else
-                  "the built-in default, Cai et al.'s model (3): no A, C, ... given; pass "
-                  '--params-file config/<model>_estimator.yaml to choose a model')
+        self.model_source = (
+            f'parameters ({", ".join(given)} given)' if given else
+            "the built-in default, Cai et al.'s model (3): no A, C, ... given; pass "
+            '--params-file config/<model>_estimator.yaml to choose a model')
         self.get_logger().info(
             f'estimating {m.name} (n = {m.A.shape[0]}, states {", ".join(m.state_names)}) '
             f'with the {self.config.session.transition} transition; the model comes from '
-            f'{source}')
+            f'{self.model_source}')
 
     # -- parameters -----------------------------------------------------------------------
 
