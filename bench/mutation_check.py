@@ -198,6 +198,14 @@ def run_pytest(copy: Path, env: dict, args: list, timeout: float) -> tuple:
     return passed, time.perf_counter() - start, out
 
 
+def first_failure(output: str) -> str:
+    """Return the first FAILED/ERROR test id in pytest -q output ('' if none)."""
+    for line in output.splitlines():
+        if line.startswith(('FAILED ', 'ERROR ')):
+            return line.split(' - ')[0]
+    return ''
+
+
 def main(argv=None) -> int:
     """Run the mutations; print the table and the score."""
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
@@ -245,9 +253,10 @@ def main(argv=None) -> int:
                 path.write_text(original)
             caught = not passed
             ok &= caught
-            rows.append((m, caught, seconds))
+            failure = first_failure(out)
+            rows.append((m, caught, seconds, failure))
             print(f'{m.name:4s} {"caught" if caught else "SURVIVED":8s} {seconds:6.1f} s  '
-                  f'{m.what}', flush=True)
+                  f'{m.what}\n     {failure}', flush=True)
             if not caught:
                 print('  tests run: ' + ' '.join(m.pytest_args()))
     finally:
@@ -255,11 +264,11 @@ def main(argv=None) -> int:
             print(f'kept the copy in {copy}')
         else:
             shutil.rmtree(copy, ignore_errors=True)
-    caught = sum(1 for _, c, _ in rows if c)
-    print('\n| mutation | file | what | caught | seconds |\n| --- | --- | --- | --- | --- |')
-    for m, c, seconds in rows:
-        print(f'| {m.name} | `{m.path}` | {m.what} | {"caught" if c else "**survived**"} '
-              f'| {seconds:.1f} |')
+    caught = sum(1 for row in rows if row[1])
+    print('\n| mutation | file | what | caught by | seconds |\n| --- | --- | --- | --- | --- |')
+    for m, c, seconds, failure in rows:
+        by = failure.split('::', 1)[-1] if c else '**survived**'
+        print(f'| {m.name} | `{m.path}` | {m.what} | {by} | {seconds:.1f} |')
     print(f'\nscore: {caught}/{len(rows)} caught')
     return 0 if ok else 1
 
