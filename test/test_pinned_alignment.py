@@ -1,4 +1,5 @@
-"""The README's LED alignment numbers (Fig. 10, dropouts, literal unit), each to its printed digit.
+"""
+The README's LED alignment numbers (Fig. 10, dropouts, literal unit), each to its printed digit.
 
 These are regression pins on fixed seeds: a change that moves a number the README states
 fails here.  Every sweep is the README's own command, 1000 runs of 400 steps, seed 0.

@@ -1,4 +1,5 @@
-"""The README's demo numbers (seed 0), reproduced without ROS from the same configurations.
+"""
+The README's demo numbers (seed 0), reproduced without ROS from the same configurations.
 
 The demo runs the simulators and the nodes as processes over DDS; what they compute is the
 seeded simulator stream through the ROS-free sessions, which is what is pinned here.  The

@@ -1,4 +1,5 @@
-"""The README's drogue-through-the-estimator numbers, without the bag or ROS (seed 2013).
+"""
+The README's drogue-through-the-estimator numbers, without the bag or ROS (seed 2013).
 
 README: `replay_offline bags/drogue ... --params-file config/drogue_estimator.yaml` gives a
 velocity RMS error at the fixes after the first dive of 0.00342 m/s, equal to the
