@@ -12,6 +12,8 @@ NOT_LINTED = {'build', 'install', 'log', 'results'}
 # Set at import time, before any test starts a subprocess or imports rclpy, so that every
 # process of this run talks only on this machine and only in this run's own domain.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+# one BLAS thread for this run's subprocesses too (./run sets it before Python starts)
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 if not os.environ.get('ROS_DOMAIN_ID'):
     os.environ['ROS_DOMAIN_ID'] = str(os.getpid() % 100 + 1)
 
