@@ -11,11 +11,14 @@ must exist.  Where launch_ros imports, the files are also loaded for real.
 
 import ast
 import importlib.util
+import json
 from pathlib import Path
 
 import pytest
-
 from test_colcon_build import console_scripts
+
+from tskf_ros.messages import alignment_interface as aligner
+from tskf_ros.messages import estimator_interface as estimator
 
 REPO = Path(__file__).resolve().parent.parent
 LAUNCH = sorted((REPO / 'launch').glob('*.launch.py'))
@@ -78,3 +81,27 @@ def test_launch_file_loads(path):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert module.generate_launch_description().entities
+
+
+LIVE_LAYOUTS = {
+    # layout -> (namespace, the topics the launch file's nodes publish, relative)
+    'foxglove_owc_live.json': ('/', {
+        'received_power', 'true_angle', *estimator.OUTPUT_TOPICS.values()}),
+    'foxglove_led_live.json': ('/led/', {
+        'intensity', 'true_angle', *aligner.OUTPUT_TOPICS.values()}),
+}
+
+
+@pytest.mark.parametrize('name', sorted(LIVE_LAYOUTS))
+def test_live_foxglove_layouts_plot_only_topics_the_launch_files_publish(name):
+    namespace, published = LIVE_LAYOUTS[name]
+    layout = json.loads((REPO / 'config' / name).read_text())
+    paths = [p['value'] for panel in layout['configById'].values()
+             for p in panel.get('paths', [])]
+    paths += [panel['topicPath'] for panel in layout['configById'].values()
+              if 'topicPath' in panel]
+    assert paths
+    for path in paths:
+        topic = path.split('.')[0]
+        assert topic.startswith(namespace), path
+        assert topic[len(namespace):] in published, path
