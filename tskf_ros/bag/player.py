@@ -33,6 +33,7 @@ from rosgraph_msgs.msg import Clock
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_to_rclpy
 from tskf_ros.bag.reader import BagError, BagReader, exit_status, RawMessage
 from tskf_ros.core.units import NS
+from tskf_ros.messages.qos import DEFAULT_DEPTH
 
 NODE_NAME = 'player'
 
@@ -95,7 +96,8 @@ class Player(Node):
         if not self.pubs:
             raise PlayerError(f'{bag}: nothing to play')
         self.published: dict = {self.out_topic[t]: 0 for t in self.pubs}
-        self.clock_pub = self.create_publisher(Clock, '/clock', 10) if clock_hz > 0 else None
+        self.clock_pub = (self.create_publisher(Clock, '/clock', DEFAULT_DEPTH)
+                          if clock_hz > 0 else None)
         self.clock_period_ns = int(NS / clock_hz) if clock_hz > 0 else 0
         self.last_clock_wall = 0
         self.offset_ns = int(round(start_offset * NS))
