@@ -47,7 +47,7 @@ from typing import Callable, Optional
 from rclpy.serialization import deserialize_message, serialize_message
 
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_from_rclpy, typestore
-from tskf_ros.bag.reader import BagError, BagReader, Damage, exit_status
+from tskf_ros.bag.reader import BagError, BagReader, Damage, error_exit, exit_status
 from tskf_ros.bag.writer import BagExistsError, BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_session import AlignmentSession
@@ -402,13 +402,8 @@ def main(argv: Optional[list] = None) -> int:
                      overwrite=args.overwrite, compress=args.compress,
                      diagnostics=not args.no_diagnostics, log=log, filter=args.filter,
                      input_topic=args.input_topic)
-    except (BagError, ParamsError, BagTypeError) as exc:
-        print(f'{PROG}: error: {exc}', file=sys.stderr)
-        return 1
-    except OSError as exc:
-        print(f'{PROG}: error: {exc.filename or args.bag}: {exc.strerror or exc}',
-              file=sys.stderr)
-        return 1
+    except (BagError, ParamsError, BagTypeError, OSError) as exc:
+        return error_exit(PROG, exc, args.bag)
     rate = res.read / res.seconds if res.seconds else float('nan')
     statuses = ', '.join(f'{k} {v}' for k, v in sorted(res.statuses.items()))
     if res.input_topic:

@@ -48,6 +48,15 @@ DAMAGE_ERRORS = (McapError, EOFError, struct.error, ValueError, UnicodeDecodeErr
                  TypeError, IndexError)
 
 
+def error_exit(prog: str, exc: Exception, path: object = '') -> int:
+    """Print a command's error in one line (an OSError names its file) and return 1."""
+    if isinstance(exc, OSError):
+        print(f'{prog}: error: {exc.filename or path}: {exc.strerror or exc}', file=sys.stderr)
+    else:
+        print(f'{prog}: error: {exc}', file=sys.stderr)
+    return 1
+
+
 def exit_status(prog: str, damage: Optional['Damage'], what: str) -> int:
     """Return 0, or print the damage in one line (prefixed by prog and what) and EXIT_DAMAGED."""
     if damage is None:

@@ -29,7 +29,7 @@ import re
 import sys
 from typing import Optional
 
-from tskf_ros.bag.reader import BagError, EXIT_DAMAGED, MCAP_MAGIC
+from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED, MCAP_MAGIC
 from tskf_ros.bag.writer import scan_mcap, seal_mcap, write_metadata
 
 import yaml
@@ -140,13 +140,8 @@ def main(argv: Optional[list] = None) -> int:
     args = parser.parse_args(argv)
     try:
         bag, count, damage = reindex(args.path, args.output)
-    except BagError as exc:
-        print(f'{PROG}: error: {exc}', file=sys.stderr)
-        return 1
-    except OSError as exc:
-        print(f'{PROG}: error: {exc.filename or args.path}: {exc.strerror or exc}',
-              file=sys.stderr)
-        return 1
+    except (BagError, OSError) as exc:
+        return error_exit(PROG, exc, args.path)
     print(f'{PROG}: wrote {bag} ({count} messages)')
     if damage is not None:
         print(f'{PROG}: damaged: {damage}', file=sys.stderr)

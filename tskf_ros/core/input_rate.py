@@ -60,3 +60,32 @@ class InputRate:
             return 'WARN', (f'input rate {rate:.3g} Hz is below {self.min_fraction:g} of '
                             f'the nominal {self.nominal_rate:.3g} Hz'), values
         return 'OK', '', values
+
+
+LEVELS = ('OK', 'WARN', 'ERROR')
+
+
+def worst(level: str, other: str) -> str:
+    """Return the more severe of two diagnostics levels."""
+    return max(level, other, key=LEVELS.index)
+
+
+def report_head(rate: InputRate, now_ns: Optional[int],
+                self_restart: str) -> tuple[str, list, dict]:
+    """
+    Begin a session's diagnostics: (level, messages, values) from the input and a restart.
+
+    The input's rate and staleness count when the receiver clock now_ns is given; a
+    non-empty self_restart (why the session restarted itself since the last report) is
+    an ERROR.
+    """
+    level, msgs, values = 'OK', [], {}
+    if now_ns is not None:
+        rate_level, why, values = rate.level(now_ns)
+        if why:
+            level = rate_level
+            msgs.append(why)
+    if self_restart:
+        level = 'ERROR'
+        msgs.append(self_restart)
+    return level, msgs, values

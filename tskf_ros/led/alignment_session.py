@@ -42,7 +42,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from tskf_ros import led
-from tskf_ros.core.input_rate import InputRate
+from tskf_ros.core.input_rate import InputRate, report_head, worst
 from tskf_ros.core.units import MAX_STAMP_NS, NS
 
 GAP_FACTOR = 1.5        # an interval longer than this many dt is a gap (samples missing)
@@ -366,18 +366,11 @@ class AlignmentSession:
         self restart).  With now_ns (receiver clock) the input rate and staleness count.
         """
         st, cfg = self.stats, self.config
-        level, msgs = 'OK', []
-        values: dict = {}
-        if now_ns is not None:
-            rate_level, why, values = self.input_rate.level(now_ns)
-            if why:
-                level = rate_level
-                msgs.append(why)
-        if self.health_error:
-            level = 'ERROR'
-            msgs.append(f'aligner restarted itself: {self.health_error}')
+        level, msgs, values = report_head(
+            self.input_rate, now_ns,
+            self.health_error and f'aligner restarted itself: {self.health_error}')
         if st.gaps_over_bound:
-            level = 'WARN' if level == 'OK' else level
+            level = worst(level, 'WARN')
             msgs.append(f'{st.gaps_over_bound} gap(s) longer than max_gap = {cfg.max_gap} s')
         if st.bad_since:
             msgs.append(f'{st.bad_since} sample(s) missing or rejected')
@@ -401,7 +394,7 @@ class AlignmentSession:
                            'covariance_trace': float(np.trace(P)),
                            'singular_updates': st.singular})
             if st.used and not x[0] > 0:
-                level = 'WARN' if level == 'OK' else level
+                level = worst(level, 'WARN')
                 msgs.append(f'x1hat = {x[0]:.3g} <= 0: the EKF has lost the transmitter')
         if consume:
             st.gaps_over_bound = 0

@@ -63,7 +63,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from tskf_ros.core import irregular_sampling as irregular
-from tskf_ros.core.input_rate import InputRate
+from tskf_ros.core.input_rate import InputRate, report_head, worst
 from tskf_ros.core.linear_models import LinearModel
 from tskf_ros.core.timescale_kalman import (FilterError, is_psd, NonRegressiveError,
                                             TRANSITIONS)
@@ -507,23 +507,16 @@ class EstimatorSession:
         staleness are judged too (InputRate).
         """
         st, cfg = self.stats, self.config
-        level, msgs = 'OK', []
-        values: dict = {}
-        if now_ns is not None:
-            rate_level, why, values = self.input_rate.level(now_ns)
-            if why:
-                level = rate_level
-                msgs.append(why)
-        if self.health_error:
-            level = 'ERROR'
-            msgs.append(f'filter re-initialised itself: {self.health_error}')
+        level, msgs, values = report_head(
+            self.input_rate, now_ns,
+            self.health_error and f'filter re-initialised itself: {self.health_error}')
         if st.gaps_over_bound:
-            level = 'WARN' if level == 'OK' else level
+            level = worst(level, 'WARN')
             msgs.append(f'{st.gaps_over_bound} gap(s) longer than max_gap = {cfg.max_gap} s')
         if st.rejected_since:
             msgs.append(f'{st.rejected_since} sample(s) rejected')
         if st.interval_warnings:
-            level = 'WARN' if level == 'OK' else level
+            level = worst(level, 'WARN')
             msgs.append('sampling interval(s) ' + ', '.join(
                 str(k) for k, _ in st.interval_warnings) + ' break observability (Fang & '
                 'de Callafon Section III)')

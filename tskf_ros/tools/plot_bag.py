@@ -34,7 +34,7 @@ from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.message_types import BagTypeError, message_class
 from tskf_ros.bag.offline_replay import replay
-from tskf_ros.bag.reader import BagError, BagReader, exit_status
+from tskf_ros.bag.reader import BagError, BagReader, error_exit, exit_status
 from tskf_ros.core.units import NS
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages import conversions
@@ -321,13 +321,8 @@ def main(argv: Optional[list] = None) -> int:
                      log=lambda s: print(f'{PROG}: {s}'))
     except PlotDamageError as exc:
         return exit_status(PROG, exc.damage, 'bag damaged, nothing before the damage to plot')
-    except (BagError, ParamsError, BagTypeError) as exc:
-        print(f'{PROG}: error: {exc}', file=sys.stderr)
-        return 1
-    except OSError as exc:
-        print(f'{PROG}: error: {exc.filename or args.out}: {exc.strerror or exc}',
-              file=sys.stderr)
-        return 1
+    except (BagError, ParamsError, BagTypeError, OSError) as exc:
+        return error_exit(PROG, exc, args.out)
     for p in paths:
         print(f'{PROG}: wrote {p}')
     return exit_status(PROG, paths.damage, 'bag damaged; plotted what came before')

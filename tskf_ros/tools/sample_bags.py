@@ -39,6 +39,7 @@ from rclpy.serialization import serialize_message
 
 from tskf_ros import led
 from tskf_ros.bag.message_types import qos_from_rclpy
+from tskf_ros.bag.reader import error_exit
 from tskf_ros.bag.writer import BagError, BagWriter
 from tskf_ros.core.time_scales import cai_td
 from tskf_ros.core.units import NS
@@ -187,13 +188,8 @@ def main(argv: Optional[list] = None) -> int:
     for name in names:
         try:
             path = make(name, args.out, args.seed, overwrite=args.overwrite)
-        except BagError as exc:
-            print(f'{PROG}: error: {exc}', file=sys.stderr)
-            return 1
-        except OSError as exc:
-            print(f'{PROG}: error: {exc.filename or args.out}: {exc.strerror or exc}',
-                  file=sys.stderr)
-            return 1
+        except (BagError, OSError) as exc:
+            return error_exit(PROG, exc, args.out)
         size = sum(f.stat().st_size for f in path.iterdir())
         print(f'{PROG}: wrote {path} ({size / 1e6:.2f} MB, seed {args.seed})')
     return 0
