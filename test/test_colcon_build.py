@@ -21,7 +21,7 @@ LIB_DIR = (
     "print(os.path.join(get_package_prefix(sys.argv[1]), 'lib', sys.argv[1]))"
 )
 
-pytestmark = pytest.mark.colcon
+pytestmark = [pytest.mark.colcon, pytest.mark.slow]
 
 # What each executable's --help must name: its parameters file (the nodes, which take ROS
 # parameters) or its real options (the programs).

@@ -386,6 +386,7 @@ def test_drogue_rms_velocity_error():
     assert ir.theorem1(m['A'], m['C'], T).stable
 
 
+@pytest.mark.slow
 def test_drogue_rms_over_seeds_1_to_20():
     # README: over seeds 1-20 the RMS error after the first dive ranges over 0.0047-0.0115
     v = [drogue.run(drogue.DrogueConfig(seed=seed)).rms()['drogue_velocity']

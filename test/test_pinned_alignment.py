@@ -53,6 +53,7 @@ def fig10():
     return run_sweep('noise', sorted(FIG10))
 
 
+@pytest.mark.slow
 def test_fig10_table(fig10):
     for i, noise in enumerate(sorted(FIG10)):
         for name, (mean, std) in zip(ALGORITHMS, FIG10[noise]):
@@ -77,6 +78,7 @@ def test_clipped_three_point_beats_the_ekf():
     assert np.all(np.array(means) > ekf)
 
 
+@pytest.mark.slow
 def test_dropout_table():
     link = dataclasses.replace(led.TrackingLinkConfig(beta=1.2), noise=1.0,
                                beta=alignment_mc.DROPOUT_BETA)

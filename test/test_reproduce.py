@@ -67,6 +67,7 @@ def test_example_320_on_2z_estimation_error_exceeds_measurement_error():
     assert max(rmshn) < 0.2
 
 
+@pytest.mark.slow
 def test_command_writes_whole_json_and_pngs(tmp_path, capsys):
     rc = reproduce.main(['--out', str(tmp_path), '--iterations', '6', '--long-iterations',
                          '12', '--td-dense-step', '0.5'])
