@@ -41,7 +41,7 @@ NS = 1_000_000_000
 
 
 class Relay(Node):
-    """Subscribe to received_power and republish each message unchanged."""
+    """Subscribe to measurement and republish each message unchanged."""
 
     def __init__(self, context: Context, copies: int = 1) -> None:
         super().__init__('relay', context=context)
@@ -51,7 +51,7 @@ class Relay(Node):
         def relay(msg: Illuminance) -> None:
             for pub in pubs:
                 pub.publish(msg)
-        self.create_subscription(Illuminance, 'received_power', relay,
+        self.create_subscription(Illuminance, 'measurement', relay,
                                  QoSProfile(depth=100,
                                             reliability=qos_profile_sensor_data.reliability))
 
@@ -71,7 +71,7 @@ def throughput(kind: str, messages: int, window: int) -> float:
     got = []
     driver.create_subscription(out_type, out_topic, lambda m: got.append(1),
                                QoSProfile(depth=1000))
-    pub = driver.create_publisher(Illuminance, 'received_power', QoSProfile(depth=1000))
+    pub = driver.create_publisher(Illuminance, 'measurement', QoSProfile(depth=1000))
     executor.add_node(node)
     executor.add_node(driver)
     rng = np.random.default_rng(0)

@@ -5,7 +5,8 @@ The OWC pipeline: the power-meter simulator and the time-scale estimator.
     ros2 launch tskf_ros owc_pipeline.launch.py namespace:=bench1 log_level:=debug \
         params_file:=/path/to/my_estimator.yaml
 
-The simulator publishes `received_power` and the estimator reads it, in the namespace.
+The simulator publishes `received_power`; the estimator reads its neutral `measurement`
+topic, remapped here to `received_power` (the launch file restores the OWC name).
 """
 
 import os
@@ -45,5 +46,6 @@ def generate_launch_description():
         Node(package='tskf_ros', executable='timescale_estimator',
              name='timescale_estimator', namespace=namespace, output='screen',
              parameters=[LaunchConfiguration('params_file'), {'use_sim_time': use_sim_time}],
+             remappings=[('measurement', 'received_power')],
              arguments=['--ros-args', '--log-level', log_level]),
     ])

@@ -4,8 +4,8 @@ Replay a bag into the estimator on the bag's clock (use_sim_time).
     ros2 launch tskf_ros replay_estimator.launch.py bag:=/path/to/bag rate:=10
 
 `play` publishes the bag's topics and /clock; the estimator follows /clock, so its
-diagnostics and clock-jump handling run on bag time.  Its `received_power` topic is
-remapped to the bag's measurement topic (`topic`, /received_power by default).
+diagnostics and clock-jump handling run on bag time.  Its `measurement` topic is remapped
+to the bag's measurement topic (`topic`, /received_power by default).
 """
 
 import os
@@ -46,6 +46,6 @@ def generate_launch_description():
              name='timescale_estimator', namespace=namespace, output='screen',
              parameters=[LaunchConfiguration('params_file'),
                          {'use_sim_time': LaunchConfiguration('use_sim_time')}],
-             remappings=[('received_power', LaunchConfiguration('topic'))],
+             remappings=[('measurement', LaunchConfiguration('topic'))],
              arguments=['--ros-args', '--log-level', log_level]),
     ])

@@ -132,7 +132,7 @@ def test_live_replay_equals_offline_replay(ros_context):
                              + [Parameter('use_sim_time', value=True),
                                 Parameter('queue_depth', value=DEEP)])
     player = Player(BAG, rate=100.0, clock_hz=200.0, topics=['/received_power'],
-                    context=ros_context)
+                    remap={'/received_power': '/measurement'}, context=ros_context)
     client = rclpy.create_node('replay_client', context=ros_context)
     kinds = {t: TimeReference if t.endswith('mu') else TwistWithCovarianceStamped
              for t in offline}
@@ -254,7 +254,7 @@ def test_offline_alignment_reproduces_the_recorded_run_until_a_sample_is_missing
     for topic, _, msg in res.outputs:
         if topic == '/alignment/estimate':
             msg = deserialize_message(msg.data, message_class(msg.msgtype))
-            stamp, x, _ = conversions.msg_to_estimate(msg, 2)
+            stamp, x, _ = conversions.msg_to_alignment_estimate(msg)   # the node's units
             recorded[stamp] = x
         elif topic == '/photodiode':
             stamps.append(msg.log_time_ns)

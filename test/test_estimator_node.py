@@ -46,7 +46,7 @@ class Harness:
         self.node = TimescaleEstimator(context=context, parameter_overrides=overrides)
         self.client = rclpy.create_node('client', context=context)
         qos = qos_profile_sensor_data if best_effort else QoSProfile(depth=100)
-        self.pub = self.client.create_publisher(Illuminance, 'received_power', qos)
+        self.pub = self.client.create_publisher(Illuminance, 'measurement', qos)
         self.got = {k: [] for k in OUTPUTS}
         for topic, kind in OUTPUTS.items():
             self.client.create_subscription(kind, 'estimate/' + topic,

@@ -180,3 +180,41 @@ def test_a_measurement_of_the_wrong_size_is_bad_size():
     out = session.add(T0, [300.0, 301.0])
     assert (out.status, out.reason) == ('rejected', 'bad_size')
     assert session.diagnostics()[2]['rejected_bad_size'] == 1
+
+
+def test_the_measurement_topic_takes_the_stamped_scalar_type_a_parameter_names(ros_context):
+    from sensor_msgs.msg import Temperature
+    from std_msgs.msg import Float64
+
+    from tskf_ros.messages.estimator_interface import ConfigError
+
+    node = TimescaleEstimator(context=ros_context, parameter_overrides=[
+        Parameter('measurement_type', value='sensor_msgs/msg/Temperature')])
+    try:
+        assert node.sub.msg_type is Temperature and node.sub.topic_name == '/measurement'
+        msg = Temperature(temperature=300.0, variance=4.0)
+        msg.header.stamp = conversions.ns_to_stamp(T0)
+        node._on_measurement(msg)
+        assert node.session.pending() == T0
+    finally:
+        node.destroy_node()
+    node = TimescaleEstimator(context=ros_context, parameter_overrides=[
+        Parameter('measurement_type', value='std_msgs/msg/Float64')])
+    try:
+        before = node.get_clock().now().nanoseconds
+        node._on_measurement(Float64(data=300.0))
+        assert node.session.pending() >= before           # stamped on arrival
+    finally:
+        node.destroy_node()
+    with pytest.raises(ConfigError, match='measurement_type must be one of'):
+        TimescaleEstimator(context=ros_context, parameter_overrides=[
+            Parameter('measurement_type', value='nav_msgs/msg/Odometry')])
+
+
+def test_the_remap_in_the_owc_launch_file_restores_received_power(ros_context):
+    node = TimescaleEstimator(context=ros_context,
+                              cli_args=['--ros-args', '-r', 'measurement:=received_power'])
+    try:
+        assert node.sub.topic_name == '/received_power'
+    finally:
+        node.destroy_node()

@@ -161,9 +161,10 @@ def run_processes(args: argparse.Namespace) -> Summary:
             blockage=args.blockage, drop_probability=float(args.drop_probability)),
             env=env))
 
+    # the estimator's neutral `measurement` is the power meter's received_power here
     procs.append(subprocess.Popen(node_command(
-        'timescale_estimator', cfg / 'owc_estimator.yaml', transition=args.transition),
-        env=env))
+        'timescale_estimator', cfg / 'owc_estimator.yaml', transition=args.transition)
+        + ['-r', 'measurement:=received_power'], env=env))
     try:
         samples = int(round(args.duration * args.rate))
         timeout = args.duration * args.duration_scale * 3 + 30

@@ -17,6 +17,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 import numpy as np
 from rclpy.qos import QoSProfile
+from sensor_msgs.msg import (FluidPressure, Illuminance, Range, RelativeHumidity,
+                             Temperature)
+from std_msgs.msg import Float32, Float64
 
 from tskf_ros.core.linear_models import owc
 from tskf_ros.messages import conversions
@@ -73,10 +76,12 @@ MEASUREMENT_RANGE_HELP = ('[lo, hi]: a physical reading outside is rejected (out
                           'empty: any finite value')
 PARAMETERS = MATRICES + tuple(SCALARS) + (
     'model_name', 'state_names', 'transition', 'history_size', 'queue_depth', 'frame_id',
-    'nonpositive_is_gap', 'measurement_range', 'gate_patience', 'use_message_variance')
+    'nonpositive_is_gap', 'measurement_range', 'gate_patience', 'use_message_variance',
+    'measurement_type')
 
 # topics, relative: resolved in the node's namespace
-POWER_TOPIC = 'received_power'
+MEASUREMENT_TOPIC = 'measurement'   # the estimator's y: neutral, remapped per application
+POWER_TOPIC = 'received_power'      # the OWC power meter's (the simulator's, the bags')
 INPUT_TOPIC = 'input'
 # (estimate kind, revised) -> output topic; '<kind>_states' is the JointState mirror
 OUTPUT_TOPICS = {
@@ -111,11 +116,13 @@ INPUT_TYPE = 'geometry_msgs/msg/AccelStamped'
 DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 
 __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'BAG_POWER_TOPIC', 'BAG_TRUTH_TOPIC',
-           'bag_outcome_messages', 'ConfigError', 'default_parameters', 'DIAGNOSTICS_TOPIC',
+           'bag_outcome_messages', 'ConfigError', 'DEFAULT_MEASUREMENT_TYPE',
+           'default_parameters', 'DIAGNOSTICS_TOPIC',
            'DIAGNOSTICS_TYPE', 'diagnostics_message', 'ESTIMATE_TYPE', 'extractor',
            'INPUT_TOPIC', 'INPUT_TYPE', 'INPUT_TYPES', 'input_from_msg', 'InputType',
            'output_type',
-           'JUMP_TYPE', 'load_config', 'MATRICES', 'MATRIX_HELP', 'MEASUREMENT_RANGE_HELP',
+           'JUMP_TYPE', 'load_config', 'MATRICES', 'MATRIX_HELP', 'measurement_class',
+           'MEASUREMENT_RANGE_HELP', 'MEASUREMENT_TOPIC',
            'NODE_NAME', 'NodeConfig',
            'outcome_messages', 'OUTPUT_TOPICS', 'output_qos', 'PARAMETERS',
            'parameters_to_config', 'ParamsError', 'POWER_TOPIC', 'SCALARS']
@@ -123,6 +130,7 @@ __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'BAG_POWER_TOPIC', 'BAG_TRUTH
 
 def parameters_to_config(values: dict) -> NodeConfig:
     """Build the config from parameter values; raise ConfigError with the reason if bad."""
+    measurement_class(values.get('measurement_type', DEFAULT_MEASUREMENT_TYPE))
     flat = {}
     for key in MATRICES + ('measurement_range',):
         v = values[key]
@@ -158,7 +166,8 @@ def default_parameters() -> dict:
     values.update({'model_name': d.name, 'state_names': list(d.state_names),
                    'transition': 'euler', 'history_size': 1000, 'queue_depth': 100,
                    'nonpositive_is_gap': True, 'frame_id': '', 'measurement_range': [],
-                   'gate_patience': 5, 'use_message_variance': False})
+                   'gate_patience': 5, 'use_message_variance': False,
+                   'measurement_type': DEFAULT_MEASUREMENT_TYPE})
     return values
 
 
@@ -234,6 +243,21 @@ INPUT_TYPES = {
     'std_msgs/msg/Float64': InputType('data', None, stamped=False),
     'std_msgs/msg/Float32': InputType('data', None, stamped=False),
 }
+DEFAULT_MEASUREMENT_TYPE = 'sensor_msgs/msg/Illuminance'
+INPUT_CLASSES = {
+    'sensor_msgs/msg/Illuminance': Illuminance, 'sensor_msgs/msg/Temperature': Temperature,
+    'sensor_msgs/msg/FluidPressure': FluidPressure,
+    'sensor_msgs/msg/RelativeHumidity': RelativeHumidity, 'sensor_msgs/msg/Range': Range,
+    'std_msgs/msg/Float64': Float64, 'std_msgs/msg/Float32': Float32,
+}
+
+
+def measurement_class(msgtype: str) -> type:
+    """Return the message class of a type of INPUT_TYPES; raise ConfigError for another."""
+    if msgtype not in INPUT_TYPES:
+        raise ConfigError(f'measurement_type must be one of {", ".join(INPUT_TYPES)}, got '
+                          f'{msgtype!r}')
+    return INPUT_CLASSES[msgtype]
 
 
 def extractor(msgtype: str) -> Callable[[Any, int], tuple[int, float, float]]:

@@ -79,9 +79,10 @@ class ReconfigurableNode(Node):
     SESSION: type = object       # the session class of the core, built from config.session
 
     def __init__(self, node_name: str, *, context=None, namespace: Optional[str] = None,
-                 parameter_overrides: Optional[list] = None) -> None:
+                 parameter_overrides: Optional[list] = None,
+                 cli_args: Optional[list] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
-                         parameter_overrides=parameter_overrides)
+                         parameter_overrides=parameter_overrides, cli_args=cli_args)
         self._declare()
         self.config = self.start_watching_parameters()
         self.session = self.SESSION(self.config.session)

@@ -1,8 +1,9 @@
 """
 timescale_estimator: the time-scale Kalman filter on a stream of received-power samples.
 
-Subscribes to `received_power` (sensor_msgs/msg/Illuminance, best effort so that both
-reliable and best-effort publishers match), feeds EstimatorSession
+Subscribes to `measurement` (sensor_msgs/msg/Illuminance by default, or another stamped
+scalar chosen by `measurement_type`; best effort so that both reliable and best-effort
+publishers match; the OWC launch file remaps it to `received_power`), feeds EstimatorSession
 (tskf_ros.owc.estimator_session) and publishes what it returns.  The parameters, topics,
 QoS and messages are in tskf_ros.messages.estimator_interface, which the offline replay
 uses too.
@@ -16,19 +17,19 @@ from typing import Optional
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
-from sensor_msgs.msg import Illuminance, JointState, TimeReference
+from sensor_msgs.msg import JointState, TimeReference
 
 from tskf_ros.core.timescale_kalman import FilterError, TRANSITIONS
-from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.estimator_interface import (ConfigError, default_parameters,
-                                                   diagnostics_message, input_from_msg,
-                                                   INPUT_TOPIC, JUMP_TYPE, MATRICES,
-                                                   MATRIX_HELP, MEASUREMENT_RANGE_HELP,
-                                                   NODE_NAME, NodeConfig, outcome_messages,
-                                                   output_qos, OUTPUT_TOPICS, output_type,
-                                                   PARAMETERS, parameters_to_config,
-                                                   POWER_TOPIC, SCALARS)
+                                                   diagnostics_message, extractor,
+                                                   input_from_msg, INPUT_TOPIC, INPUT_TYPES,
+                                                   JUMP_TYPE, MATRICES, MATRIX_HELP,
+                                                   measurement_class, MEASUREMENT_RANGE_HELP,
+                                                   MEASUREMENT_TOPIC, NODE_NAME, NodeConfig,
+                                                   outcome_messages, output_qos, OUTPUT_TOPICS,
+                                                   output_type, PARAMETERS,
+                                                   parameters_to_config, SCALARS)
 from tskf_ros.messages.parameters import float_range
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
@@ -43,12 +44,15 @@ class TimescaleEstimator(ReconfigurableNode):
     CONFIG_ERRORS = (ConfigError, FilterError, KeyError, TypeError, ValueError)
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
-                 node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
+                 node_name: str = NODE_NAME, namespace: Optional[str] = None,
+                 cli_args: Optional[list] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
-                         parameter_overrides=parameter_overrides)
+                         parameter_overrides=parameter_overrides, cli_args=cli_args)
         qos_in = sensor_input_qos(self.config.queue_depth)
-        self.sub = self.create_subscription(Illuminance, POWER_TOPIC, self._on_power,
-                                            qos_in)
+        msgtype = self.get_parameter('measurement_type').value
+        self.extract = extractor(msgtype)
+        self.sub = self.create_subscription(measurement_class(msgtype), MEASUREMENT_TOPIC,
+                                            self._on_measurement, qos_in)
         self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
                                                   qos_in)
         qos_out = output_qos(self.config)
@@ -109,6 +113,14 @@ class TimescaleEstimator(ReconfigurableNode):
             'gate re-initialises the filter (an unstable model need not widen its gate)',
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=0, to_value=1_000_000)]))
+        self.declare_parameter('measurement_type', defaults['measurement_type'],
+                               ParameterDescriptor(
+                                   description='the message type of the measurement topic: a '
+                                   'stamped scalar (the value and, where the type has one, '
+                                   'its variance); an unstamped std_msgs type is stamped '
+                                   'with its time of arrival', read_only=True,
+                                   additional_constraints='one of ' + ', '.join(INPUT_TYPES),
+                                   type=ParameterType.PARAMETER_STRING))
         self.declare_parameter('use_message_variance', defaults['use_message_variance'],
                                ParameterDescriptor(
                                    description="a sample's own variance (> 0) is its "
@@ -132,10 +144,11 @@ class TimescaleEstimator(ReconfigurableNode):
 
     # -- data -----------------------------------------------------------------------------
 
-    def _on_power(self, msg: Illuminance) -> None:
-        stamp_ns, power, variance = conversions.msg_to_power(msg)
-        out = self.session.add(stamp_ns, power, variance,
-                               now_ns=self.get_clock().now().nanoseconds)
+    def _on_measurement(self, msg: object) -> None:
+        now_ns = self.get_clock().now().nanoseconds
+        # an unstamped type (std_msgs Float64, Float32) is stamped with its time of arrival
+        stamp_ns, value, variance = self.extract(msg, now_ns)
+        out = self.session.add(stamp_ns, value, variance, now_ns=now_ns)
         self._report(out)
         self._publish(out)
 

@@ -114,7 +114,8 @@ def run_in_process(*, duration: float = 300.0, time_factor: float = 30.0, seed: 
     try:
         collector = Collector(context=context)
         estimator = TimescaleEstimator(context=context, parameter_overrides=[
-            Parameter(k, value=v) for k, v in (estimator_parameters or {}).items()])
+            Parameter(k, value=v) for k, v in (estimator_parameters or {}).items()],
+            cli_args=['--ros-args', '-r', 'measurement:=received_power'])
         sim = {'duration': float(duration), 'time_factor': float(time_factor),
                'seed': int(seed), 'rate': float(rate), 'start_time': 1.0,
                'wait_for_subscribers': 2, **(simulator_parameters or {})}
