@@ -13,9 +13,12 @@ estimator offline, in memory): estimator.png, with Cai Fig. 2's two styles side 
 the corrected estimate with +-2 sigma bands; their errors against the truth; mu.
 Alignment bags (/alignment/*): alignment.png as Solanki et al. Fig. 8: x1hat and x1,
 x2hat and the true scan mean, the true angle of incidence, and the measured intensity.
-An offline alignment replay (base_position_controller/commands present) is drawn the
-same way from the node's estimate/corrected (x2 converted back to degrees), with the
-recorded run's /alignment/estimate, if any, dashed for comparison (open loop).
+The bag is in the node's units (/alignment/estimate as the node publishes it, x2 in rad;
+/alignment/truth's `incidence` and `scan_mean` in rad, `intensity_factor` in V); the plot
+shows the angles in degrees, as the paper does.  An offline alignment replay
+(base_position_controller/commands present) is drawn the same way from the node's
+estimate/corrected, with the recorded run's /alignment/estimate, if any, dashed for
+comparison (open loop).
 
 Exit status: 0 plotted; 1 the bag or an option cannot be used (one-line error, nothing
 written); 2 usage; 3 the bag is damaged: what came before the damage is plotted (if
@@ -158,11 +161,9 @@ def estimator_figure(data: dict, measurement: list, C: float, D: float, title: s
     return fig
 
 
-def _alignment_series(msgs: list, node_units: bool) -> tuple:
-    """Turn EKF estimate messages into (t in s, x [V, deg], sd [V, deg])."""
-    convert = conversions.msg_to_alignment_estimate if node_units else \
-        (lambda m: conversions.msg_to_estimate(m, 2))
-    rows = [convert(m) for _, m in msgs]
+def _alignment_series(msgs: list) -> tuple:
+    """Turn the node's EKF estimate messages (x2 in rad) into (t in s, x, sd) in [V, deg]."""
+    rows = [conversions.msg_to_alignment_estimate(m) for _, m in msgs]
     t = np.array([r[0] for r in rows], float) / NS
     x = np.array([r[1] for r in rows]).reshape(-1, 2)
     sd = np.sqrt(np.array([[r[2][0, 0], r[2][1, 1]] for r in rows]).clip(0)).reshape(-1, 2)
@@ -174,15 +175,16 @@ def alignment_figure(data: dict, title: str, *, replayed: bool = False,
     """
     Draw Solanki et al. Fig. 8 from an alignment bag; return the figure.
 
-    replayed: the estimates are the alignment node's (estimate/corrected, x2 in rad) of an
-    offline replay; the recorded /alignment/estimate (x2 in deg) is then dashed.
+    replayed: the estimates are the alignment node's (estimate/corrected) of an offline
+    replay; the recorded /alignment/estimate is then dashed.  Both are in the node's units
+    (x2 in rad), as are the truth's angles; all angles are drawn in degrees.
     """
     recorded = data.get('/alignment/estimate') or []
     if replayed:
-        t, x, sd = _alignment_series(data[aligner.BAG_OUTPUT_TOPICS['corrected']], True)
+        t, x, sd = _alignment_series(data[aligner.BAG_OUTPUT_TOPICS['corrected']])
         label = 'x(t|t) of the replay (open loop)'
     else:
-        t, x, sd = _alignment_series(recorded, False)
+        t, x, sd = _alignment_series(recorded)
         label = 'EKF'
     truth = data.get('/alignment/truth') or []
     tt = np.array([conversions.stamp_to_ns(m.header.stamp) for _, m in truth], float) / NS
@@ -193,20 +195,22 @@ def alignment_figure(data: dict, title: str, *, replayed: bool = False,
     vz = np.array([conversions.msg_to_power(m)[1] for _, m in z])
     t0 = t.min()
     fig, axes = plt.subplots(4, 1, figsize=(10, 11), sharex=True)
-    for ax, i, name, key, unit in ((axes[0], 0, 'x1hat', 'intensity_factor_v', 'V'),
-                                   (axes[1], 1, 'x2hat', 'scan_mean_deg', 'deg')):
+    # the truth's angles are in rad (REP 103), drawn in deg; the intensity factor is in V
+    for ax, i, name, key, unit, scale in (
+            (axes[0], 0, 'x1hat', 'intensity_factor', 'V', 1.0),
+            (axes[1], 1, 'x2hat', 'scan_mean', 'deg', np.rad2deg(1.0))):
         ax.plot(t - t0, x[:, i], 'C3-', lw=1, label=f'{name} ({label})')
         if replayed and recorded:
-            tr, xr, _ = _alignment_series(recorded, False)
+            tr, xr, _ = _alignment_series(recorded)
             ax.plot(tr - t0, xr[:, i], 'C0--', lw=0.8, label=f'{name} of the recorded run')
         ax.fill_between(t - t0, x[:, i] - 2 * sd[:, i], x[:, i] + 2 * sd[:, i], color='C3',
                         alpha=0.2, label='+-2 sigma')
         if key in pos:
-            ax.plot(tt - t0, tv[:, pos[key]], 'k-', lw=1, label=f'true {key}')
+            ax.plot(tt - t0, tv[:, pos[key]] * scale, 'k-', lw=1, label=f'true {key}')
         ax.set_ylabel(f'{name} ({unit})')
         ax.legend(fontsize=7)
-    if 'incidence_angle_deg' in pos:
-        axes[2].plot(tt - t0, tv[:, pos['incidence_angle_deg']], 'k-', lw=1)
+    if 'incidence' in pos:
+        axes[2].plot(tt - t0, np.rad2deg(tv[:, pos['incidence']]), 'k-', lw=1)
     axes[2].axhspan(-15, 15, color='C2', alpha=0.1, label='tracking zone +-15 deg')
     axes[2].set_ylabel('true angle of incidence (deg)')
     axes[2].legend(fontsize=7)

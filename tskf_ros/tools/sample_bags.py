@@ -16,7 +16,15 @@ The bags hold what the drivers would publish (no estimates; `replay_offline` add
   bad -> good 0.05 per sample: bursts of 20 ms on average, 3.8 % of the time blocked) on
   top of the vibration's own dropouts (readings at or below zero are not published).
 - led_alignment: the scanning-EKF alignment of Solanki et al. (tskf_ros.led.simulate_tracking,
-  Table I parameters, 400 steps of 50 ms, 5 % missing measurements).
+  Table I parameters, 400 steps of 50 ms, 5 % missing measurements), in the live alignment
+  node's units (REP 103: angles in rad): the photodiode V_d on /photodiode, the truth on
+  /alignment/truth (JointState LED_TRUTH: the angle of incidence phi and the scan mean x2
+  in rad, and the intensity factor x1 in volts, not an angle), the EKF's estimate on
+  /alignment/estimate as the node publishes it (conversions.alignment_estimate_to_msg: x1 in
+  V, x2 in rad) and its command on /alignment/command as the node would send it
+  (std_msgs/Float64MultiArray, one entry: the absolute base position in rad, i.e. the sum
+  of the motor turns so far from base 0; not the node's base_position_controller/commands,
+  which plot_bag takes for an alignment replay's output).
 - drogue: Fang & de Callafon's drogue (tskf_ros.experiments.drogue.run with the seed, 4 h
   at T = 5 s): the position fixes at the surface on /received_power as the estimator's
   measurement (Illuminance used as a stamped scalar: displacement in m, variance
@@ -44,6 +52,7 @@ from tskf_ros.bag.writer import BagError, BagWriter
 from tskf_ros.core.time_scales import cai_td
 from tskf_ros.core.units import NS
 from tskf_ros.experiments import drogue as drogue_sim
+from tskf_ros.messages import alignment_interface as aligner_interface
 from tskf_ros.messages import conversions
 from tskf_ros.owc.vibrating_link import OwcLink, OwcLinkConfig
 
@@ -55,6 +64,8 @@ JOINT_STATE = 'sensor_msgs/msg/JointState'
 ESTIMATE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
 ACCEL = 'geometry_msgs/msg/AccelStamped'
 DROGUE_TRUTH = ('displacement_m', 'velocity_m_s', 'depth_m', 'flow_velocity_m_s')
+# /alignment/truth of led_alignment: phi and x2 in rad, x1 in V
+LED_TRUTH = ('incidence', 'scan_mean', 'intensity_factor')
 SENSOR_QOS = [qos_from_rclpy(qos_profile_sensor_data)]
 RELIABLE_QOS = [qos_from_rclpy(QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))]
 # Gilbert-Elliott parameters of owc_ge_1khz
@@ -119,22 +130,24 @@ def led_alignment(writer: BagWriter, seed: int) -> None:
     writer.add_topic('/photodiode', ILLUMINANCE, qos=SENSOR_QOS)
     writer.add_topic('/alignment/truth', JOINT_STATE, qos=RELIABLE_QOS)
     writer.add_topic('/alignment/estimate', ESTIMATE, qos=RELIABLE_QOS)
-    writer.add_topic('/alignment/command', JOINT_STATE, qos=RELIABLE_QOS)
+    writer.add_topic('/alignment/command', aligner_interface.COMMAND_TYPE, qos=RELIABLE_QOS)
     var = link.noise ** 2
+    base = np.cumsum(traj.command[:, 0])     # deg: the absolute base, from 0
     for k, t in enumerate(traj.t):
         stamp = START_S * NS + int(round(t * NS))
-        truth = [traj.phi[k, 0], traj.x2[k, 0], traj.x1[k, 0]]
-        writer.write('/alignment/truth', stamp, serialize_message(conversions.angle_to_msg(
-            stamp, truth, ['incidence_angle_deg', 'scan_mean_deg', 'intensity_factor_v'])))
+        truth = [np.deg2rad(traj.phi[k, 0]), np.deg2rad(traj.x2[k, 0]), traj.x1[k, 0]]
+        writer.write('/alignment/truth', stamp, serialize_message(
+            conversions.angle_to_msg(stamp, truth, LED_TRUTH)))
         z = traj.z[k, 0]
         if np.isfinite(z):
             writer.write('/photodiode', stamp, serialize_message(
                 conversions.power_to_msg(stamp, z, var, frame_id='photodiode')))
         writer.write('/alignment/estimate', stamp, serialize_message(
-            conversions.estimate_to_msg(stamp, traj.estimate[k, 0], aligner.P_history[k],
-                                        frame_id='scanning_ekf')))
-        writer.write('/alignment/command', stamp, serialize_message(conversions.angle_to_msg(
-            stamp, [traj.command[k, 0]], ['motor_command_deg'])))
+            conversions.alignment_estimate_to_msg(stamp, traj.estimate[k, 0],
+                                                  aligner.P_history[k],
+                                                  frame_id='scanning_ekf')))
+        writer.write('/alignment/command', stamp, serialize_message(
+            conversions.base_command_to_msg(base[k])))
 
 
 def drogue(writer: BagWriter, seed: int) -> None:
