@@ -156,7 +156,7 @@ def main() -> None:
     est = throughput('estimator', args.messages, args.window)
     print(f'bare relay (1 out):          {relay:8.0f} msg/s')
     print(f'bare relay (3 out per in):   {relay3:8.0f} msg/s')
-    print(f'timescale_estimator (3 out): {est:8.0f} msg/s')
+    print(f'timescale_estimator (5 out): {est:8.0f} msg/s')
     print(f'ratio estimator/relay: {est / relay:.2f}; estimator/relay with 3 outputs: '
           f'{est / relay3:.2f}')
     print('per-step cost (us)      filter.step  session.add  textbook numpy KF step')
