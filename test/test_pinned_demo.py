@@ -2,10 +2,9 @@
 The README's demo numbers (seed 0), reproduced without ROS from the same configurations.
 
 The demo runs the simulators and the nodes as processes over DDS; what they compute is the
-seeded simulator stream through the ROS-free sessions, which is what is pinned here.  The
-README's run lost the last sample of each stream on the way (279 of the 280 valid power
-readings, 1199 of the 1200 intensities), so the OWC figures are those of the stream
-without its last valid reading.
+seeded simulator stream through the ROS-free sessions, which is what is pinned here (all
+280 valid power readings: the simulator now sends each reading before its true angle, so
+the demo's collector, which stops at the last true angle, no longer misses the last one).
 """
 
 import dataclasses
@@ -36,10 +35,10 @@ def yaml_fields(name, cls, **extra):
 
 
 def test_owc_demo_numbers():
-    # README: 300 true angles, 279 received-power samples, 15 gaps (J > 1.5 s) from
+    # README: 300 true angles, 280 received-power samples, 15 gaps (J > 1.5 s) from
     # 'J = 2 s before t = 20, J = 4 s before t = 25, J = 2 s before t = 44' to 'J = 3 s
-    # before t = 254, J = 2 s before t = 271'; RMS predictor 0.6833, corrected 0.2383,
-    # in the linear range 0.7976 and 0.0153 rad
+    # before t = 254, J = 2 s before t = 271'; RMS predictor 0.6825, corrected 0.2379,
+    # in the linear range 0.7955 and 0.0152 rad
     link = simulate_link(yaml_fields('power_meter_simulator.yaml', OwcLinkConfig, seed=0), 300)
     stamps = 1.0 + link.t                              # start_time 1 s, 1 Hz
     valid = np.flatnonzero(link.valid)
@@ -51,11 +50,11 @@ def test_owc_demo_numbers():
     session = EstimatorSession(estimator_interface.load_config(
         CONFIG / 'owc_estimator.yaml').session)
     pred, corr = {}, {}
-    for i in valid[:-1]:                               # the live run lost the last one
+    for i in valid:
         out = session.add(int(round(stamps[i] * NS)), float(link.reading[i]), 100.0)
         for e in out.estimates:
             (pred if e.kind == 'predicted' else corr)[e.stamp_ns] = e.x[0]
-    assert (len(pred), len(corr)) == (279, 278)
+    assert (len(pred), len(corr)) == (280, 279)
     truth = {int(round(t * NS)): th for t, th in zip(stamps, link.theta)}
     common = [k for k in sorted(pred) if k in corr]
     lo, hi = OWC_LINEAR_RANGE
@@ -64,10 +63,10 @@ def test_owc_demo_numbers():
     def rms(est, keys):
         return float(np.sqrt(np.mean([(est[k] - truth[k]) ** 2 for k in keys])))
     half = 0.5e-4 * 1.001
-    assert rms(pred, common) == pytest.approx(0.6833, abs=half)
-    assert rms(corr, common) == pytest.approx(0.2383, abs=half)
-    assert rms(pred, linear) == pytest.approx(0.7976, abs=half)
-    assert rms(corr, linear) == pytest.approx(0.0153, abs=half)
+    assert rms(pred, common) == pytest.approx(0.6825, abs=half)
+    assert rms(corr, common) == pytest.approx(0.2379, abs=half)
+    assert rms(pred, linear) == pytest.approx(0.7955, abs=half)
+    assert rms(corr, linear) == pytest.approx(0.0152, abs=half)
 
 
 def test_led_demo_numbers():

@@ -21,6 +21,7 @@ import argparse
 from dataclasses import dataclass
 import os
 from pathlib import Path
+import shutil
 import signal
 import subprocess
 import sys
@@ -128,6 +129,11 @@ def replay_sample_bag(out: Path) -> int:
     estimated = out / 'owc_cai_td_1hz_estimated'
     print(f'replaying the sample bag {bag.name} through the estimator (no DDS) -> {estimated}',
           flush=True)
+    if (estimated / 'metadata.yaml').is_file() and {
+            f.suffix for f in estimated.iterdir()} <= {'.yaml', '.mcap'}:
+        # the demo's own output of an earlier run: a bag written before the writer marked
+        # its bags would be refused by --overwrite, which replaces only marked ones
+        shutil.rmtree(estimated)
     rc = offline_replay.main([str(bag), str(estimated), '--params-file', str(params),
                               '--overwrite'])
     if rc == 0:

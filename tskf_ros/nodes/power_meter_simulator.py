@@ -136,17 +136,21 @@ class PowerMeterSimulator(LinkSimulatorNode):
             self.get_logger().info(f'published all {self.total} samples; stopping')
 
     def publish_samples(self, s: Samples) -> None:
-        """Publish a batch of samples: the truth always, the power unless it is a gap."""
+        """
+        Publish a batch of samples: the power unless it is a gap, then the truth always.
+
+        The power goes first, so that a client that stops at the last true angle has had
+        the last reading sent before it (the demo's collector stopped one reading short).
+        """
         cfg = self.config
         var = cfg.link.noise_std ** 2
         for i in range(len(s)):
             stamp = self.stamp0_ns + int(round(int(s.index[i]) * NS / cfg.link.rate))
+            if not s.blocked[i] and (s.reading[i] > 0 or cfg.publish_invalid):
+                self.sensor_pub.publish(conversions.power_to_msg(stamp, s.reading[i], var,
+                                                                 frame_id=cfg.frame_id))
             self.truth_pub.publish(conversions.angle_to_msg(stamp, [s.theta[i]],
                                                             [cfg.angle_name]))
-            if s.blocked[i] or not (s.reading[i] > 0 or cfg.publish_invalid):
-                continue
-            self.sensor_pub.publish(conversions.power_to_msg(stamp, s.reading[i], var,
-                                                             frame_id=cfg.frame_id))
         self.published += len(s)
 
 
