@@ -8,12 +8,13 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import COMMAND_TOPIC
+from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.tools.demo_collector import spin_until
 
 
@@ -35,8 +36,9 @@ class AlignmentMonitor(Node):
         self.record = AlignmentRecord()
         self.create_subscription(JointState, 'true_angle', self._on_truth,
                                  QoSProfile(depth=10_000))
+        # best effort as the simulator publishes, but deep: a short queue drops under load
         self.create_subscription(Illuminance, 'intensity', self._on_intensity,
-                                 qos_profile_sensor_data)
+                                 sensor_input_qos(10_000))
         self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command,
                                  QoSProfile(depth=10_000))
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
