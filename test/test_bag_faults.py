@@ -14,6 +14,7 @@ import pytest
 import rclpy
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
+from recording import stop, wait_until_recording
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Illuminance
 
@@ -146,11 +147,8 @@ def test_record_command_says_the_disk_filled_and_keeps_the_bag(tmp_path):
     proc = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
+        wait_until_recording(pub, proc, TIMEOUT, pub.topic_name)
         deadline = time.monotonic() + TIMEOUT
-        while pub.get_subscription_count() == 0:
-            assert proc.poll() is None, proc.communicate()[1]
-            assert time.monotonic() < deadline, 'the recorder never subscribed'
-            time.sleep(0.05)
         k = 0
         while proc.poll() is None:      # publish until the recorder gives up
             assert time.monotonic() < deadline, 'the recorder never stopped'
@@ -159,10 +157,7 @@ def test_record_command_says_the_disk_filled_and_keeps_the_bag(tmp_path):
             time.sleep(0.002)           # pacing, not synchronisation
         _, err = proc.communicate(timeout=TIMEOUT)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        node.destroy_node()
-        context.try_shutdown()
+        stop(proc, node, context)
     assert proc.returncode == 1, err
     assert 'Traceback' not in err
     lines = [line for line in err.splitlines() if line.startswith('record: ')]
@@ -250,11 +245,8 @@ def test_sigkill_loses_at_most_the_flush_interval(tmp_path, capsys):
          '--flush-interval', '0.2'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     on_disk = 0
     try:
+        wait_until_recording(pub, proc, TIMEOUT, pub.topic_name)
         deadline = time.monotonic() + TIMEOUT
-        while pub.get_subscription_count() == 0:
-            assert proc.poll() is None, proc.communicate()[1]
-            assert time.monotonic() < deadline, 'the recorder never subscribed'
-            time.sleep(0.05)
         k = 0
         while on_disk < 30:             # until flushes have put 30 messages on disk
             assert time.monotonic() < deadline, 'nothing reached the disk'
@@ -267,10 +259,7 @@ def test_sigkill_loses_at_most_the_flush_interval(tmp_path, capsys):
         proc.send_signal(signal.SIGKILL)
         proc.communicate(timeout=TIMEOUT)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        node.destroy_node()
-        context.try_shutdown()
+        stop(proc, node, context)
     assert not bag.exists()
     partials = list(tmp_path.glob('.killed.partial-*'))
     assert len(partials) == 1

@@ -16,6 +16,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
                        ReliabilityPolicy)
 from rclpy.serialization import deserialize_message
+from recording import stop, wait_until_recording
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Illuminance, JointState
@@ -221,20 +222,13 @@ def test_record_command_closes_the_bag_on_a_signal(tmp_path, sig):
         [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag), '/sig_power'],
         env=dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + TIMEOUT
-        while pub.get_subscription_count() == 0:
-            assert proc.poll() is None, proc.communicate()[1]
-            assert time.monotonic() < deadline, 'the recorder never subscribed to /sig_power'
-            time.sleep(0.05)
+        wait_until_recording(pub, proc, TIMEOUT, pub.topic_name)
         assert pub.wait_for_all_acked(Duration(seconds=TIMEOUT)), \
             'the recorder never acknowledged the 20 messages'
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=TIMEOUT)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        node.destroy_node()
-        context.try_shutdown()
+        stop(proc, node, context)
     assert proc.returncode == 0, err
     assert 'wrote' in err
     with Reader(bag) as reader:
