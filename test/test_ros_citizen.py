@@ -218,3 +218,24 @@ def test_the_remap_in_the_owc_launch_file_restores_received_power(ros_context):
         assert node.sub.topic_name == '/received_power'
     finally:
         node.destroy_node()
+
+
+def test_a_parameter_file_that_sets_nothing_is_said_loudly(tmp_path):
+    from tskf_ros.nodes.node_base import unused_parameter_file
+    wrong = tmp_path / 'wrong.yaml'
+    wrong.write_text('some_other_node:\n  ros__parameters:\n    period: 2.0\n')
+    for path, expect_warning in ((wrong, True), (CONFIG / 'owc_estimator.yaml', False)):
+        argv = ['--ros-args', '--params-file', str(path)]
+        context = rclpy.context.Context()
+        rclpy.init(context=context, args=argv)
+        try:
+            node = TimescaleEstimator(context=context)
+            try:
+                warning = unused_parameter_file(node, argv)
+                assert bool(warning) == expect_warning, warning
+                if expect_warning:
+                    assert 'set none of the parameters of /timescale_estimator' in warning
+            finally:
+                node.destroy_node()
+        finally:
+            context.try_shutdown()

@@ -35,6 +35,23 @@ def parse_args(prog: str, description: str,
     return parser.parse_known_args(args)[0]
 
 
+def unused_parameter_file(node: Node, argv: Sequence[str]) -> str:
+    """
+    Return a warning if a --params-file was given but set none of this node's parameters.
+
+    (A section keyed with another node's name, or a bare name in another namespace, applies
+    to nothing: the node would silently run on its defaults.)
+    """
+    files = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == '--params-file']
+    own = set(node._parameter_overrides) - {'use_sim_time'}
+    if files and not own:
+        return (f'the parameter file(s) {", ".join(files)} set none of the parameters of '
+                f'{node.get_fully_qualified_name()}: it runs on its built-in defaults. Key '
+                f'the section /**/{node.get_name()} (or /**) so that it applies in any '
+                'namespace')
+    return ''
+
+
 def run_node(factory: Callable[[], Node], *, name: str, description: str,
              startup_errors: tuple = (), args: Optional[list] = None) -> None:
     """
@@ -48,6 +65,9 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
     node = None
     try:
         node = factory()
+        warning = unused_parameter_file(node, sys.argv if args is None else args)
+        if warning:
+            node.get_logger().error(warning)
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
