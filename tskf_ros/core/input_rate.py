@@ -30,6 +30,12 @@ class InputRate:
         self.receipts: deque = deque(maxlen=MAX_RECEIPTS)
         self.first_report_ns: Optional[int] = None
 
+    @classmethod
+    def for_config(cls, period: float, config: object) -> 'InputRate':
+        """Build the monitor of a session config (its rate_window, min_rate_fraction, ...)."""
+        return cls(1.0 / period, window=config.rate_window,
+                   min_fraction=config.min_rate_fraction, stale_after=config.stale_timeout)
+
     def note(self, now_ns: int) -> None:
         """Count one receipt at now_ns (receiver clock)."""
         self.receipts.append(int(now_ns))

@@ -218,14 +218,8 @@ class AlignmentSession:
         self.stats = AlignStats()
         self.base = float(config.base_initial)
         self.health_error = ''          # why the aligner restarted itself
-        self.input_rate = self._input_rate(config)
+        self.input_rate = InputRate.for_config(config.dt, config)
         self._restart()
-
-    @staticmethod
-    def _input_rate(config: AlignmentConfig) -> InputRate:
-        return InputRate(1.0 / config.dt, window=config.rate_window,
-                         min_fraction=config.min_rate_fraction,
-                         stale_after=config.stale_timeout)
 
     def _restart(self) -> None:
         self.aligner = self.config.make_aligner()
@@ -340,7 +334,7 @@ class AlignmentSession:
     def reconfigure(self, config: AlignmentConfig) -> str:
         """Switch to a new (validated) config; in place if only TUNABLE fields changed."""
         old, self.config = self.config, config
-        self.input_rate = self._input_rate(config)
+        self.input_rate = InputRate.for_config(config.dt, config)
         changed = {f.name for f in fields(config)
                    if getattr(config, f.name) != getattr(old, f.name)}
         if changed - set(TUNABLE):

@@ -335,13 +335,7 @@ class EstimatorSession:
         self.health_error = ''                      # why the filter re-initialised itself
         self.gated_in_a_row = 0
         self._variance = 0.0                        # of the sample being added
-        self.input_rate = self._input_rate(config)
-
-    @staticmethod
-    def _input_rate(config: EstimatorConfig) -> InputRate:
-        return InputRate(1.0 / config.period, window=config.rate_window,
-                         min_fraction=config.min_rate_fraction,
-                         stale_after=config.stale_timeout)
+        self.input_rate = InputRate.for_config(config.period, config)
 
     # -- public API -----------------------------------------------------------------------
 
@@ -488,7 +482,7 @@ class EstimatorSession:
                               'them at the next sample')
         kf.set_state(self.kf.x, self.kf.P)
         self.kf = kf
-        self.input_rate = self._input_rate(config)
+        self.input_rate = InputRate.for_config(config.period, config)
         self._checker = None
         self._check_intervals()          # the same intervals may mean something else now
         return Outcome('accepted', 'reconfigured', 'new parameters in use')
