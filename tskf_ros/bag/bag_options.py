@@ -1,0 +1,132 @@
+"""
+What `record` and `play` share of `ros2 bag`'s options: topic selection, QoS overrides.
+
+Both follow rosbag2 Jazzy: a topic is taken if it is named, or matches the include regular
+expression (or everything is taken when neither is given), and is not excluded by name or by
+the exclude regular expression.  `record` searches the regular expressions anywhere in the
+name (rosbag2_transport's TopicFilter, std::regex_search), `play` matches the whole name
+(rosbag2's MCAP storage filter, std::regex_match).
+
+A QoS override file is rosbag2's YAML: topic name -> policies (history, depth, reliability,
+durability, deadline, lifespan, liveliness, liveliness_lease_duration,
+avoid_ros_namespace_conventions; durations as {sec, nsec}), as ros2bag's
+convert_yaml_to_qos_profile reads it.
+"""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+import re
+from typing import Optional
+
+from rclpy.duration import Duration
+from rclpy.qos import (QoSDurabilityPolicy, QoSHistoryPolicy, QoSLivelinessPolicy, QoSProfile,
+                       QoSReliabilityPolicy)
+
+from tskf_ros.bag.reader import BagError
+
+import yaml
+
+# the only storage this package writes (and, besides sqlite3 bags, reads)
+STORAGE_ID = 'mcap'
+_POLICIES = {
+    'history': QoSHistoryPolicy,
+    'reliability': QoSReliabilityPolicy,
+    'durability': QoSDurabilityPolicy,
+    'liveliness': QoSLivelinessPolicy,
+}
+_DURATIONS = ('deadline', 'lifespan', 'liveliness_lease_duration')
+_VALUES = ('depth', 'avoid_ros_namespace_conventions')
+
+
+class OptionError(BagError):
+    """A bad option value found after parsing (a QoS file, a regular expression)."""
+
+
+def compile_regex(flag: str, pattern: str) -> Optional['re.Pattern']:
+    """Compile a --regex style option ('' -> None); raise OptionError naming the flag."""
+    if not pattern:
+        return None
+    try:
+        return re.compile(pattern)
+    except re.error as exc:
+        raise OptionError(f'{flag}: not a regular expression ({exc})') from None
+
+
+@dataclass
+class TopicFilter:
+    """Which topic names are taken; `take(name)` says it (see the module doc)."""
+
+    topics: list = field(default_factory=list)
+    regex: Optional['re.Pattern'] = None
+    exclude_topics: list = field(default_factory=list)
+    exclude_regex: Optional['re.Pattern'] = None
+    whole_name: bool = False        # play: the regex matches the whole name
+
+    def _matches(self, pattern: 're.Pattern', name: str) -> bool:
+        return bool(pattern.fullmatch(name) if self.whole_name else pattern.search(name))
+
+    def take(self, name: str) -> bool:
+        """Say whether the topic `name` is selected."""
+        if self.topics or self.regex is not None:
+            if name not in self.topics and not (
+                    self.regex is not None and self._matches(self.regex, name)):
+                return False
+        if name in self.exclude_topics:
+            return False
+        return not (self.exclude_regex is not None and self._matches(self.exclude_regex, name))
+
+
+def _duration(topic: str, key: str, value: object) -> Duration:
+    if not isinstance(value, dict) or 'sec' not in value or 'nsec' not in value:
+        raise OptionError(f'{topic}: {key} must be {{sec: S, nsec: N}}, got {value!r}')
+    try:
+        sec, nsec = int(value['sec']), int(value['nsec'])
+    except (TypeError, ValueError):
+        raise OptionError(f'{topic}: {key} must be integers, got {value!r}') from None
+    if sec < 0 or nsec < 0:
+        raise OptionError(f'{topic}: {key} may not be negative, got {value!r}')
+    return Duration(seconds=sec, nanoseconds=nsec)
+
+
+def _profile(topic: str, policies: object) -> QoSProfile:
+    if not isinstance(policies, dict):
+        raise OptionError(f'{topic}: expected a mapping of QoS policies, got {policies!r}')
+    kwargs: dict = {}
+    for key, value in policies.items():
+        if key in _POLICIES:
+            try:
+                kwargs[key] = _POLICIES[key].get_from_short_key(str(value))
+            except KeyError:
+                raise OptionError(f'{topic}: {key} {value!r} is not one of '
+                                  f'{", ".join(_POLICIES[key].short_keys())}') from None
+        elif key in _DURATIONS:
+            kwargs[key] = _duration(topic, key, value)
+        elif key in _VALUES:
+            if isinstance(value, bool) != (key == 'avoid_ros_namespace_conventions') or \
+                    not isinstance(value, int) or value < 0:
+                raise OptionError(f'{topic}: {key} {value!r} is not valid')
+            kwargs[key] = value
+        else:
+            raise OptionError(f'{topic}: unexpected key {key!r} for a QoS profile')
+    kwargs.setdefault('depth', 10)
+    return QoSProfile(**kwargs)
+
+
+def load_qos_overrides(path: Optional[Path]) -> dict:
+    """Read a rosbag2 QoS override file: topic -> rclpy QoSProfile ({} for None)."""
+    if path is None:
+        return {}
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+    except OSError as exc:
+        raise OptionError(f'{path}: {exc.strerror or exc}') from None
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise OptionError(f'{path}: not YAML ({str(exc).splitlines()[0]})') from None
+    if doc is None:
+        return {}
+    if not isinstance(doc, dict):
+        raise OptionError(f'{path}: expected topic names mapped to QoS policies')
+    try:
+        return {str(topic): _profile(str(topic), policies) for topic, policies in doc.items()}
+    except OptionError as exc:
+        raise OptionError(f'{path}: {exc}') from None
