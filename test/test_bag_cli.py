@@ -150,7 +150,7 @@ def test_replay_offline_refuses_to_write_into_its_input(tmp_path, capsys):
 
 def test_record_to_a_path_under_a_file_is_refused_up_front(tmp_path, capsys):
     (tmp_path / 'file').write_text('x')
-    code = recorder.main(['record', '-o', str(tmp_path / 'file' / 'bag'), '/x'])
+    code = recorder.main(['record', '-o', str(tmp_path / 'file' / 'bag'), '--topics', '/x'])
     assert code == 1
     one_line(capsys.readouterr().err, 'record: error: ', 'is not a directory')
     assert sorted(p.name for p in tmp_path.iterdir()) == ['file']
@@ -159,16 +159,26 @@ def test_record_to_a_path_under_a_file_is_refused_up_front(tmp_path, capsys):
 def test_record_to_an_unwritable_path_is_one_line(tmp_path):
     # /proc refuses new directories even to root
     proc = subprocess.run([sys.executable, '-m', 'tskf_ros.bag.recorder', '-o',
-                           '/proc/tskf_no_such_bag', '/x'], capture_output=True, text=True,
+                           '/proc/tskf_no_such_bag', '--topics', '/x'], capture_output=True,
+                          text=True,
                           timeout=TIMEOUT)
     assert proc.returncode == 1, proc.stderr
     one_line(proc.stderr, 'record: error: /proc/tskf_no_such_bag: ')
 
 
 @pytest.mark.parametrize('args, text', [
-    (['/x', '--max-duration', 'nan'], '--max-duration must be a finite number >= 0, got nan'),
-    (['/x', '--flush-interval', '-1'], '--flush-interval must be a finite number >= 0, got -1.0'),
-    (['/bad topic'], 'not a topic name: /bad topic'),
+    (['--topics', '/x', '--flush-interval', '-1'],
+     '--flush-interval must be a finite number >= 0, got -1.0'),
+    (['--topics', '/bad topic'], 'not a topic name: /bad topic'),
+    (['--topics', '/x', '-b', '-1'], '--max-bag-size must be >= 0, got -1'),
+    (['--topics', '/x', '-d', '-2'], '--max-bag-duration must be >= 0, got -2'),
+    (['--topics', '/x', '--compression-format', 'zstd'],
+     '--compression-format needs --compression-mode file or message'),
+    (['--topics', '/x', '--exclude-topics', '/y'], '--exclude-topics needs --all or --regex'),
+    (['--topics', '/x', '--exclude-regex', 'y'], '--exclude-regex needs --all or --regex'),
+    ([], 'need --all, --topics or --regex'),
+    (['--topics', '/x', '--custom-data', 'novalue'],
+     "--custom-data: expected KEY=VALUE, got 'novalue'"),
 ])
 def test_record_refuses_bad_values(tmp_path, capsys, args, text):
     with pytest.raises(SystemExit) as exit_:
