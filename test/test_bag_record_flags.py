@@ -46,7 +46,7 @@ def parsed(*argv):
 
 
 def powers(bag):
-    """The illuminance values of a bag's /p messages, in storage order."""
+    """Return the illuminance values of a bag's /p messages, in storage order."""
     return [deserialize_message(m.data, Illuminance).illuminance
             for m in BagReader(bag).messages(['/p'])]
 
@@ -164,7 +164,7 @@ def test_max_bag_size_splits_into_valid_files_that_together_hold_everything(
 
 
 def rec_payload():
-    """The CDR bytes of one /p message (all have the same length)."""
+    """Return the CDR bytes of one /p message (all have the same length)."""
     from rclpy.serialization import serialize_message
     return serialize_message(conversions.power_to_msg(T0, 1.0, 1.0))
 
@@ -231,17 +231,17 @@ def test_storage_sqlite3_is_refused_in_one_line(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_regex_exclusions_and_qos_overrides_decide_what_is_subscribed(ros_context,
-                                                                     tmp_path):
+def test_regex_exclusions_and_qos_overrides_decide_what_is_subscribed(
+        ros_context, tmp_path):
     overrides = tmp_path / 'qos.yaml'
     overrides.write_text('/a/angle:\n  reliability: best_effort\n  history: keep_last\n'
                          '  depth: 7\n')
     kwargs = parsed('-e', '^/a/', '--exclude-regex', 'power', '--exclude-topics', '/a/skip',
                     '--qos-profile-overrides-path', str(overrides), '-p', '20')
     source = rclpy.create_node('regex_source', context=ros_context)
-    pubs = {name: source.create_publisher(cls, name, RELIABLE) for name, cls in (
-        ('/a/angle', JointState), ('/a/power', Illuminance), ('/a/skip', JointState),
-        ('/b/angle', JointState), ('/a/last', JointState))}
+    for name, cls in (('/a/angle', JointState), ('/a/power', Illuminance),
+                      ('/a/skip', JointState), ('/b/angle', JointState), ('/a/last', JointState)):
+        source.create_publisher(cls, name, RELIABLE)
     rec = recorder.Recorder(tmp_path / 'r', context=ros_context, **kwargs)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(rec)
