@@ -272,6 +272,8 @@ class Player(Node):
     def _tick(self) -> None:
         now = self.bag_now()
         self._publish_clock(now, time.monotonic_ns())
+        if self.paused:
+            return              # not even a message due at the paused time
         while self._next is not None and self._next.log_time_ns <= now:
             self._publish(self._next)
             self._advance()
