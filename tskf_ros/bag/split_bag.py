@@ -112,7 +112,7 @@ class SplitBagWriter:
 
     @property
     def bagdir(self) -> Path:
-        """The bag directory while it is written (in the hidden .partial directory)."""
+        """Return the bag directory while it is written (in the hidden .partial directory)."""
         return self._tmp / self.path.name
 
     def check_target(self) -> None:
