@@ -29,8 +29,8 @@ HELP_MUST_NAME = {
     'reproduce': ('--out', '--seed', '--noise-scaling', '--td-dense-step'),
     'power_meter_simulator': ('--ros-args --params-file', 'config/power_meter_simulator.yaml'),
     'timescale_estimator': ('--ros-args --params-file', 'config/owc_estimator.yaml'),
-    'record': ('-o OUTPUT', '--overwrite', 'topics'),
-    'play': ('--rate', '--loop', '--remap', 'bag'),
+    'record': ('-o OUTPUT', '--overwrite', '--topics', '--max-bag-size', '--compression-mode'),
+    'play': ('--rate', '--loop', '--remap', 'bag', '--clock [HZ]', '--start-paused'),
     'replay_offline': ('--filter {estimator,alignment}', '--params-file', '--topic'),
     'plot_bag': ('--out', '--params-file', 'bag'),
     'make_sample_bags': ('--out', '--seed', '--only'),
@@ -134,3 +134,15 @@ def test_launch_files_are_installed_and_name_installed_executables(install):
             if (isinstance(node, ast.Constant) and isinstance(node.value, str)
                     and node.value.endswith('.yaml')):
                 assert (share / 'config' / node.value).is_file(), (path.name, node.value)
+
+
+def test_readme_ros2_run_names_are_found_through_ament_index(install):
+    # the README's `ros2 run tskf_ros NAME` commands (test_command_names checks the venv's)
+    from test_command_names import named, README, readme_commands
+    _, ros2_run, _ = named(readme_commands(README.read_text()))
+    assert {'record', 'play'} <= ros2_run
+    result = in_sourced_workspace(install, sys.executable, '-c', LIB_DIR, PACKAGE)
+    assert result.returncode == 0, result.stdout + result.stderr
+    lib = Path(result.stdout.strip())
+    missing = sorted(name for name in ros2_run if not (lib / name).is_file())
+    assert not missing, f'the README runs {missing} with ros2 run, not in {lib}'
