@@ -219,7 +219,7 @@ def test_record_command_closes_the_bag_on_a_signal(tmp_path, sig):
     for k in range(20):
         pub.publish(conversions.power_to_msg(T0 + k * NS, 1.0, 0.0))
     proc = subprocess.Popen(
-        [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag), '/sig_power'],
+        [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag), '--topics', '/sig_power'],
         env=dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         wait_until_recording(pub, proc, TIMEOUT, pub.topic_name)

@@ -1,0 +1,125 @@
+"""A bag split into files (record -b/-d): crashes, a full disk, overwrite, the smallest limit."""
+
+import errno
+import os
+
+import pytest
+from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.rosbag2 import Reader
+from sensor_msgs.msg import Illuminance
+
+from tskf_ros.bag import writer as writer_module
+from tskf_ros.bag.reader import BagReader
+from tskf_ros.bag.split_bag import SplitBagWriter
+from tskf_ros.bag.writer import BagExistsError, DiskFullError
+from tskf_ros.messages import conversions
+
+import yaml
+
+NS = 1_000_000_000
+T0 = 1_700_000_000 * NS
+TOPIC = '/received_power'
+
+
+def sample(k):
+    """Return message k: log time T0 + k s, the value k."""
+    return T0 + k * NS, serialize_message(conversions.power_to_msg(T0 + k * NS, float(k), 1.0))
+
+
+def values(bag):
+    """Return the values of a bag's messages in storage order, and the reader's damage."""
+    reader = BagReader(bag)
+    got = [deserialize_message(m.data, Illuminance).illuminance for m in reader.messages()]
+    return got, reader.damage
+
+
+def metadata(bag):
+    """Return a bag's rosbag2_bagfile_information."""
+    return yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+
+
+def open_split(path, **kwargs):
+    """Open a SplitBagWriter with the one topic."""
+    w = SplitBagWriter(path, **kwargs)
+    w.open()
+    w.add_topic(TOPIC, 'sensor_msgs/msg/Illuminance')
+    return w
+
+
+def test_a_limit_of_one_byte_gives_one_message_per_file(tmp_path):
+    w = open_split(tmp_path / 'one', max_bytes=1)
+    for k in range(5):
+        w.write(TOPIC, *sample(k))
+    assert w.close() == tmp_path / 'one'
+    meta = metadata(tmp_path / 'one')
+    assert meta['relative_file_paths'] == [f'one_{i}.mcap' for i in range(5)]
+    assert [f['message_count'] for f in meta['files']] == [1] * 5
+    # independent of our merge: the start and duration from the messages themselves
+    assert meta['starting_time']['nanoseconds_since_epoch'] == T0
+    assert meta['duration']['nanoseconds'] == 4 * NS
+    assert meta['topics_with_message_count'][0]['message_count'] == 5
+    assert values(tmp_path / 'one') == ([0.0, 1.0, 2.0, 3.0, 4.0], None)
+    with Reader(tmp_path / 'one') as r:
+        assert [t for _, t, _ in r.messages()] == [T0 + k * NS for k in range(5)]
+
+
+def test_a_crash_leaves_the_finished_files_as_a_bag_and_nothing_under_the_name(tmp_path):
+    w = open_split(tmp_path / 'crash', max_bytes=1)
+    for k in range(4):
+        w.write(TOPIC, *sample(k))
+    # the process dies here: nothing is closed
+    assert not (tmp_path / 'crash').exists()
+    partial = w.bagdir
+    assert partial.parent.name.startswith('.crash.partial-')
+    # the three finished files, with their metadata; the fourth is in its own .partial
+    assert metadata(partial)['relative_file_paths'] == [f'crash_{i}.mcap' for i in range(3)]
+    assert values(partial) == ([0.0, 1.0, 2.0], None)
+    w.abort()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_in_a_later_file_keeps_everything_written_before(tmp_path, monkeypatch):
+    # a disk of 9000 bytes for all the files together
+    used = {}
+    real = writer_module._File._write_some
+
+    def write_some(self, view):
+        room = 9000 - sum(used.values())
+        if room <= 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        n = real(self, view[:room])
+        used[self.path] = used.get(self.path, 0) + n
+        return n
+    monkeypatch.setattr(writer_module._File, '_write_some', write_some)
+    w = open_split(tmp_path / 'full', max_bytes=1500, chunk_size=300)
+    written = 0
+    with pytest.raises(DiskFullError):
+        for k in range(1000):
+            w.write(TOPIC, *sample(k))
+            written += 1
+    assert w.close() == tmp_path / 'full'
+    assert isinstance(w.error, DiskFullError)
+    got, damage = values(tmp_path / 'full')
+    meta = metadata(tmp_path / 'full')
+    assert damage is None and len(meta['relative_file_paths']) >= 2
+    assert 0 < len(got) <= written
+    assert got == [float(k) for k in range(len(got))], 'a run of what was written, in order'
+    assert w.counts == {TOPIC: len(got)} and meta['message_count'] == len(got)
+    assert 'disk is full' in meta['custom_data']['tskf_ros.incomplete']
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['full']
+
+
+def test_overwrite_replaces_only_our_own_split_bag(tmp_path):
+    for round_ in range(2):
+        w = open_split(tmp_path / 'b', max_bytes=1, overwrite=round_ > 0)
+        for k in range(3 - round_):
+            w.write(TOPIC, *sample(k))
+        w.close()
+    assert values(tmp_path / 'b') == ([0.0, 1.0], None)
+    assert sorted(p.name for p in (tmp_path / 'b').iterdir()) == \
+        ['b_0.mcap', 'b_1.mcap', 'metadata.yaml']
+    (tmp_path / 'b' / 'notes.txt').write_text('mine')
+    with pytest.raises(BagExistsError, match='also holds notes.txt'):
+        open_split(tmp_path / 'b', max_bytes=1, overwrite=True)
+    with pytest.raises(BagExistsError, match='exists already'):
+        open_split(tmp_path / 'b', max_bytes=1)
