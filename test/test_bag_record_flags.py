@@ -14,9 +14,11 @@ from mcap.records import Chunk
 from mcap.stream_reader import StreamReader
 import pytest
 import rclpy
+from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
+from recording import stop, wait_until_recording
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance, JointState
@@ -283,3 +285,33 @@ def test_a_bad_qos_override_file_is_one_line(tmp_path, capsys, text, error):
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and err.startswith(f'record: error: {path}: {error}'), err
     assert sorted(p.name for p in tmp_path.iterdir()) == ['qos.yaml']
+
+
+@pytest.mark.slow
+def test_record_command_splits_by_size_and_loses_nothing(tmp_path):
+    # the command as a user runs it; a reliable, transient-local publisher whose
+    # acknowledgements say when all 40 messages are in the recorder (no timing)
+    bag = tmp_path / 'split'
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('split_source', context=context)
+    pub = node.create_publisher(Illuminance, 'p', QoSProfile(
+        depth=100, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    for k in range(40):
+        pub.publish(conversions.power_to_msg(T0 + k * NS, float(k), 1.0))
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag), '--topics', '/p',
+         '--max-bag-size', '1000', '--compression-mode', 'file'], env=dict(os.environ),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_until_recording(pub, proc, TIMEOUT, pub.topic_name)
+        assert pub.wait_for_all_acked(Duration(seconds=TIMEOUT)), 'never acknowledged'
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=TIMEOUT)
+    finally:
+        stop(proc, node, context)
+    assert proc.returncode == 0, err
+    assert f'record: wrote {bag}: /p 40' in err
+    meta, per_file = check_split(bag, 40)
+    assert len(per_file) >= 3

@@ -116,6 +116,10 @@ class Player(Node):
             if missing:
                 raise PlayerError(f'{bag}: no topic {", ".join(missing)} (topics: '
                                   f'{", ".join(sorted(self.reader.topics))})')
+        if topic_filter is not None:
+            for name in topic_filter.topics:
+                if name not in self.reader.topics:
+                    self.get_logger().warning(f'{bag}: no topic {name}; ignored')
         take = topic_filter.take if topic_filter is not None else (
             lambda name: topics is None or name in topics)
         # a bag's own /clock is not played when the player publishes /clock (rosbag2)
