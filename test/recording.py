@@ -2,6 +2,15 @@
 
 import time
 
+import rclpy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Illuminance
+
+from tskf_ros.messages import conversions
+
+NS = 1_000_000_000
+T0 = 1_700_000_000 * NS
+
 
 def wait_until_recording(pub, proc, timeout: float, topic: str) -> None:
     """Poll the graph until the recorder process subscribes to pub's topic; fail if it exits."""
@@ -18,3 +27,22 @@ def stop(proc, node, context) -> None:
         proc.kill()
     node.destroy_node()
     context.try_shutdown()
+
+
+def latched_source(node_name: str, topic: str, values) -> tuple:
+    """
+    Return (context, node, publisher) with one Illuminance per value already published.
+
+    Reliable and transient-local: the recorder takes its QoS from the graph, so every
+    message reaches it whenever it matches, and the publisher's wait_for_all_acked says
+    when all are in its reader (no timing).  Message k is stamped T0 + k s.
+    """
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node(node_name, context=context)
+    pub = node.create_publisher(Illuminance, topic, QoSProfile(
+        depth=100, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    for k, value in enumerate(values):
+        pub.publish(conversions.power_to_msg(T0 + k * NS, value, 0.0))
+    return context, node, pub

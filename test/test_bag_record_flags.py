@@ -16,9 +16,9 @@ import pytest
 import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from recording import stop, wait_until_recording
+from recording import latched_source, stop, wait_until_recording
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance, JointState
@@ -289,17 +289,9 @@ def test_a_bad_qos_override_file_is_one_line(tmp_path, capsys, text, error):
 
 @pytest.mark.slow
 def test_record_command_splits_by_size_and_loses_nothing(tmp_path):
-    # the command as a user runs it; a reliable, transient-local publisher whose
-    # acknowledgements say when all 40 messages are in the recorder (no timing)
+    # the command as a user runs it, 40 messages from a latched_source
     bag = tmp_path / 'split'
-    context = rclpy.context.Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('split_source', context=context)
-    pub = node.create_publisher(Illuminance, 'p', QoSProfile(
-        depth=100, reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    for k in range(40):
-        pub.publish(conversions.power_to_msg(T0 + k * NS, float(k), 1.0))
+    context, node, pub = latched_source('split_source', 'p', [float(k) for k in range(40)])
     proc = subprocess.Popen(
         [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag), '--topics', '/p',
          '--max-bag-size', '1000', '--compression-mode', 'file'], env=dict(os.environ),

@@ -13,10 +13,9 @@ import pytest
 import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
-                       ReliabilityPolicy)
+from rclpy.qos import HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from recording import stop, wait_until_recording
+from recording import latched_source, stop, wait_until_recording
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Illuminance, JointState
@@ -210,14 +209,7 @@ def test_record_command_closes_the_bag_on_a_signal(tmp_path, sig):
     # every message reaches it whenever it matches, and wait_for_all_acked says when all
     # 20 are in its reader; on the signal the recorder drains them before closing.
     bag = tmp_path / 'sig'
-    context = rclpy.context.Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('sig_source', context=context)
-    pub = node.create_publisher(Illuminance, 'sig_power', QoSProfile(
-        depth=100, reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    for k in range(20):
-        pub.publish(conversions.power_to_msg(T0 + k * NS, 1.0, 0.0))
+    context, node, pub = latched_source('sig_source', 'sig_power', [1.0] * 20)
     proc = subprocess.Popen(
         [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag), '--topics', '/sig_power'],
         env=dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
