@@ -148,6 +148,10 @@ def test_positional_topics_still_work_with_a_deprecation_warning(tmp_path, capsy
     assert parsed('/a', '/b')['topic_filter'].topics == ['/a', '/b']
     with pytest.raises(SystemExit):         # a mutually exclusive group, as in Jazzy
         parsed('/a', '--topics', '/b')
+    capsys.readouterr()
+    assert parsed('-a', '--topics', '/a')['topics'] is None
+    assert capsys.readouterr().err == \
+        '[WARN] [record]: --all overrides --topics (as in ros2 bag record)\n'
 
 
 def test_max_bag_size_splits_into_valid_files_that_together_hold_everything(

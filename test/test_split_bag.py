@@ -8,7 +8,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Illuminance
 
-from tskf_ros.bag import writer as writer_module
+from tskf_ros.bag import reindex, writer as writer_module
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.split_bag import SplitBagWriter
 from tskf_ros.bag.writer import BagExistsError, DiskFullError
@@ -67,13 +67,19 @@ def test_a_crash_leaves_the_finished_files_as_a_bag_and_nothing_under_the_name(t
     w = open_split(tmp_path / 'crash', max_bytes=1)
     for k in range(4):
         w.write(TOPIC, *sample(k))
+    w.flush()       # the flush timer's work: the fourth message reaches the disk
     # the process dies here: nothing is closed
     assert not (tmp_path / 'crash').exists()
     partial = w.bagdir
     assert partial.parent.name.startswith('.crash.partial-')
-    # the three finished files, with their metadata; the fourth is in its own .partial
+    # the three finished files, with their metadata; the fourth is in its own .partial,
+    # which reindex makes a bag of its own
     assert metadata(partial)['relative_file_paths'] == [f'crash_{i}.mcap' for i in range(3)]
     assert values(partial) == ([0.0, 1.0, 2.0], None)
+    nested = list(partial.parent.glob('.crash_3.partial-*'))
+    assert len(nested) == 1
+    assert reindex.main([str(nested[0])]) == 0
+    assert values(partial.parent / 'crash_3') == ([3.0], None)
     w.abort()
     assert list(tmp_path.iterdir()) == []
 

@@ -345,6 +345,10 @@ def check_options(parser: argparse.ArgumentParser, opts: argparse.Namespace) -> 
         print('[WARN] [record]: positional topics are deprecated (as in ros2 bag record); '
               'use --topics', file=sys.stderr)
         opts.topics = opts.topics_positional
+    for given, flag in ((opts.topics, '--topics'), (opts.regex, '--regex')):
+        if opts.all and given:
+            print(f'[WARN] [record]: --all overrides {flag} (as in ros2 bag record)',
+                  file=sys.stderr)
     if not (opts.all or opts.topics or opts.regex):
         parser.error('need --all, --topics or --regex')
     if opts.exclude_regex and not (opts.all or opts.regex):
