@@ -75,8 +75,8 @@ def test_replies_that_are_not_a_power_are_refused_with_the_reason(reply, unit, r
                        .map(lambda t: f'{t[0]!r} {t[1]}')),
        unit=st.sampled_from(['W', 'MW', 'UW', 'NW', 'DBM', None]),
        max_power=st.floats(1e-9, 1e12))
-def test_whatever_the_meter_says_a_published_power_is_finite_and_in_range(reply, unit,
-                                                                       max_power):
+def test_whatever_the_meter_says_a_published_power_is_finite_and_in_range(
+        reply, unit, max_power):
     power, reason, _ = to_milliwatts(reply, unit, max_power)
     if power is None:
         assert reason in SKIP_REASONS

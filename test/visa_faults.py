@@ -81,7 +81,7 @@ class FaultyResource:
         return self.inner.query(message)
 
     def clear(self) -> None:
-        """Device clear (pyvisa-sim has none): counted."""
+        """Count the device clears: pyvisa-sim has none."""
         self._check()
         self.clears += 1
 
