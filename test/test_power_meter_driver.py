@@ -21,6 +21,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Illuminance
+from std_srvs.srv import Trigger
 
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
@@ -245,6 +246,23 @@ def test_parameters_change_live_or_are_refused_with_the_reason(loop, tmp_path):
     loop.until(lambda: b.query('SENS:CORR:WAV?') == '9.800000E+02',
                'the new wavelength sent to the meter')
     assert driver.poll_timer.timer_period_ns == NS // 40
+
+
+def test_the_reset_service_reconnects_at_once(loop, tmp_path):
+    b = bench(tmp_path)
+    opener = FaultyOpener(b.backend)
+    driver = loop.driver(b, opener=opener, reconnect_initial=3600.0, reconnect_max=3600.0)
+    loop.until(lambda: len(loop.power) >= 1, 'a reading')
+    client = loop.listener.create_client(Trigger, '/power_meter_driver/reset')
+    loop.until(client.service_is_ready, 'the ~/reset service')
+    future = client.call_async(Trigger.Request())
+    loop.until(future.done, 'the answer of ~/reset')
+    assert future.result().success
+    # no backoff (an hour here): the next poll opens the meter again
+    loop.until(lambda: driver.session.connects == 2, 'the second connection')
+    start = len(loop.power)
+    loop.until(lambda: len(loop.power) > start, 'a reading after the reset')
+    assert opener.resources[0].closed and len(opener.resources) == 2
 
 
 def test_destroying_the_node_closes_the_visa_resource(ros_context, tmp_path):
