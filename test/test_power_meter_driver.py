@@ -27,12 +27,14 @@ from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import DEFAULT_MEASUREMENT_TYPE, extractor, \
     POWER_TOPIC
+from tskf_ros.messages.power_meter_interface import default_parameters, PARAMETERS
 from tskf_ros.messages.qos import sensor_input_qos, SENSOR_OUTPUT_QOS
 from tskf_ros.nodes.power_meter_driver import PowerMeterDriver
 from tskf_ros.nodes.power_meter_simulator import PowerMeterSimulator
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.tools.demo_collector import wait_for
 from visa_faults import bench, FaultyOpener, SIM_YAML
+import yaml
 
 REPO = Path(__file__).resolve().parent.parent
 TIMEOUT = 60.0
@@ -97,6 +99,19 @@ def loop(ros_context):
 
 def values(status):
     return {kv.key: kv.value for kv in status.values}
+
+
+def test_the_parameter_file_sets_every_parameter_to_its_default():
+    doc = yaml.safe_load((REPO / 'config' / 'power_meter_driver.yaml').read_text())
+    assert list(doc) == ['/**/power_meter_driver']
+    assert doc['/**/power_meter_driver']['ros__parameters'] == default_parameters()
+    assert set(default_parameters()) == set(PARAMETERS)
+
+
+def test_the_default_backend_is_pyvisa_py_and_the_default_resource_is_simulated():
+    values = default_parameters()
+    assert values['backend'] == '@py'
+    assert values['resource'] in yaml.safe_load(SIM_YAML.read_text())['resources']
 
 
 def test_publishes_the_meter_reading_in_mw_as_the_simulator_does(loop, tmp_path):
