@@ -142,6 +142,8 @@ def test_the_stamp_is_the_midpoint_of_the_query():
     assert (r.stamp_ns, r.latency_ns, r.power_mw) == (3000, 4000, 1.0)
     time.ticks = [7, 8]                      # odd latency: the midpoint rounds down
     assert m.poll().stamp_ns == 7
+    time.ticks = [0, 0]                      # a clock not running yet (sim time, no /clock)
+    assert m.poll() is None and m.skipped['no_clock'] == 1
 
 
 def test_over_range_readings_are_skipped_counted_and_warned(tmp_path):

@@ -32,7 +32,9 @@ Faults (each counted; see `SKIP_REASONS` and `PowerMeter.diagnostics`):
 - a unit other than the configured one: W, mW and dBm convert to mW without ambiguity,
   so a reading in any of them is converted (and counted as 'unit_converted'); a unit
   the driver does not know is refused ('wrong_unit').  The unit is the one the reply
-  names ('1.2E-3 W'), else the last answer to the unit query.
+  names ('1.2E-3 W'), else the last answer to the unit query;
+- a stamping clock that reads 0 (use_sim_time before the first /clock): the reading is
+  skipped ('no_clock'), since a zero stamp means 'unset'.
 """
 
 from collections import deque
@@ -59,8 +61,10 @@ DBM = 'DBM'
 UNITS = {'W': 'W', 'mW': 'MW', 'dBm': DBM}      # the unit parameter -> its SCPI word
 # SCPI's overflow (+-9.9E37) and not-a-number (9.91E37) sentinels
 SCPI_OVERFLOW = 9.9e37
+# why a reading was not published; 'no_clock': the stamping clock read 0 (a node on
+# use_sim_time before /clock arrives), a stamp the estimator would reject
 SKIP_REASONS = ('timeout', 'overflow', 'not_finite', 'negative', 'above_max', 'unparseable',
-                'wrong_unit')
+                'wrong_unit', 'no_clock')
 # the error-queue reply that means 'empty' starts with this code
 NO_ERROR = '0'
 MAX_ERRORS_READ = 20
@@ -350,6 +354,8 @@ class PowerMeter:
         self.consecutive_timeouts = 0
         self.latency_ns.append(int((m1 - m0) * NS))
         power, reason, unit = to_milliwatts(reply, self.device_unit, c.max_power)
+        if power is not None and t0 <= 0:
+            power, reason = None, 'no_clock'
         if power is None:
             self.skipped[reason] += 1
             self.last_error = f'reading {reply.strip()[:40]!r} ({unit or "unknown unit"}) ' \
