@@ -60,6 +60,7 @@ setup(
             'make_sample_bags = tskf_ros.tools.sample_bags:console_main',
             'led_link_simulator = tskf_ros.nodes.led_link_simulator:main',
             'alignment = tskf_ros.nodes.alignment:main',
+            'power_meter_driver = tskf_ros.nodes.power_meter_driver:main',
         ],
     },
 )

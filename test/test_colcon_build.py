@@ -37,6 +37,8 @@ HELP_MUST_NAME = {
     'led_link_simulator': ('--ros-args --params-file', 'config/led_link_simulator.yaml'),
     'alignment': ('--ros-args --params-file', 'config/alignment.yaml'),
     'reindex': ('-o OUTPUT', 'path', '.partial'),
+    'power_meter_driver': ('--ros-args --params-file', 'config/power_meter_driver.yaml',
+                           'pm100_sim.yaml@sim'),
 }
 
 
@@ -146,3 +148,48 @@ def test_readme_ros2_run_names_are_found_through_ament_index(install):
     lib = Path(result.stdout.strip())
     missing = sorted(name for name in ros2_run if not (lib / name).is_file())
     assert not missing, f'the README runs {missing} with ros2 run, not in {lib}'
+
+
+def test_installed_driver_publishes_from_the_installed_simulated_meter(install):
+    """
+    As `ros2 run` would: the installed driver with the installed simulated meter publishes.
+
+    ros2 run tskf_ros power_meter_driver --ros-args -p backend:=<share>/config/pm100_sim.yaml@sim
+    """
+    import signal
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Illuminance
+
+    from tskf_ros.tools.demo_collector import wait_for
+
+    sim_yaml = install / PACKAGE / 'share' / PACKAGE / 'config' / 'pm100_sim.yaml'
+    exe = install / PACKAGE / 'lib' / PACKAGE / 'power_meter_driver'
+    assert sim_yaml.is_file() and exe.is_file()
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('listener', context=context)
+    got = []
+    node.create_subscription(Illuminance, 'received_power', got.append,
+                             qos_profile_sensor_data)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    proc = subprocess.Popen(
+        ['bash', '-c', 'source "$0/setup.bash" && exec "$@"', str(install), str(exe),
+         '--ros-args', '-p', f'backend:={sim_yaml}@sim', '-p', 'rate:=20.0'],
+        env=build_env(install.parent), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        text=True)
+    try:
+        wait_for(executor, lambda: len(got) >= 3 or proc.poll() is not None,
+                 'readings from the installed driver', 120.0)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out = proc.communicate(timeout=120)[0]
+        executor.shutdown()
+        node.destroy_node()
+        context.try_shutdown()
+    assert len(got) >= 3, out
+    # 0.24804 W, the simulated meter's default reading, in mW
+    assert all(abs(m.illuminance - 248.04) < 1e-9 for m in got), out

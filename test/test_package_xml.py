@@ -13,6 +13,7 @@ KEYS = {
     'mcap': 'python3-mcap-pip', 'rosbags': 'python3-rosbags-pip',
     'pytest': 'python3-pytest', 'hypothesis': 'python3-hypothesis',
     'mcap_ros2': 'python3-mcap-ros2-support-pip',
+    'pyvisa': 'python3-pyvisa-pip', 'pyvisa_sim': 'python3-pyvisa-sim-pip',
 }
 RUN = ('exec_depend', 'depend')
 TEST = RUN + ('test_depend',)
