@@ -133,15 +133,16 @@ def is_psd(P: np.ndarray, tol: float = 1e-9) -> bool:
     which succeeds exactly when the smallest eigenvalue of P is above -tol * scale.
     """
     n = P.shape[0]
-    d = np.diag(P)
-    scale = max(1.0, float(np.max(np.abs(d))))
-    eps = tol * scale
     if n == 1:
-        return float(P[0, 0]) >= -eps
+        a = P.item()
+        return a >= -tol * max(1.0, abs(a))
     if n == 2:
-        a, b, c = float(P[0, 0]), float(P[0, 1]), float(P[1, 1])
+        (a, b), (_, c) = P.tolist()
         # smallest eigenvalue of [[a, b], [b, c]]: (a + c) / 2 - sqrt(((a - c) / 2)^2 + b^2)
-        return (a + c) / 2 - ((a - c) ** 2 / 4 + b * b) ** 0.5 >= -eps
+        # (a - c) * (a - c), not ** 2, which raises OverflowError past 1e154
+        h = (a - c) / 2
+        return (a + c) / 2 - (h * h + b * b) ** 0.5 >= -tol * max(1.0, abs(a), abs(c))
+    eps = tol * max(1.0, float(np.max(np.abs(np.diag(P)))))
     try:
         np.linalg.cholesky(P + eps * np.eye(n))
     except np.linalg.LinAlgError:
@@ -208,6 +209,7 @@ class StepResult:
 JUMP_CACHE_SIZE = 64
 _FLOAT = np.dtype(float)
 _INF = float('inf')
+_NOT_POSITIVE = 'R + mu C P C^T is not positive at mu = {}: P has lost semi-definiteness'
 
 
 def _checked(v: ArrayLike, size: int, name: str) -> np.ndarray:
@@ -496,6 +498,8 @@ class TimeScaleKalmanFilter:
             e = y - float(c.dot(x)) - self._d
             CP = c.dot(P)
             RmuCPC = R.item() + mu * float(CP.dot(c))
+            if not RmuCPC > 0:
+                raise FilterError(_NOT_POSITIVE.format(mu))
             s = RmuCPC / mu
             L = CP * (mu / RmuCPC)
             x_c = x + L * e
@@ -574,6 +578,8 @@ class TimeScaleKalmanFilter:
             CP = c * P
             # R + mu C P C^T and W = (R + mu C P C^T)^-1 C P
             RmuCPC = r + mu * (CP * c)
+            if not RmuCPC > 0:
+                raise FilterError(_NOT_POSITIVE.format(mu))
             W = CP / RmuCPC
             # corrected estimate: L = mu W^T, Joseph form with R_d = R / mu
             S = RmuCPC / mu
@@ -593,6 +599,7 @@ class TimeScaleKalmanFilter:
             else:
                 x_new = F * x_c + bu
                 P_new = F * P_c * F + Qd
+        P_new = (P_new + P_new) / 2    # as (P + P^T) / 2: it overflows where that does
         if not math.isfinite(x_new + P_new):
             raise FilterError(f'step with mu = {mu} overflowed; the filter state is unchanged')
         return StepResult(mu, np.array((x_c,)), np.array(((P_c,),)), np.array((x_new,)),
@@ -623,6 +630,8 @@ class TimeScaleKalmanFilter:
             e = y - (c0 * x0 + c1 * x1) - self._d
             h0, h1 = c0 * p00 + c1 * p10, c0 * p01 + c1 * p11
             RmuCPC = r + mu * (h0 * c0 + h1 * c1)
+            if not RmuCPC > 0:
+                raise FilterError(_NOT_POSITIVE.format(mu))
             S = RmuCPC / mu
             l0, l1 = mu * (h0 / RmuCPC), mu * (h1 / RmuCPC)
             xc0, xc1 = x0 + l0 * e, x1 + l1 * e
@@ -636,6 +645,7 @@ class TimeScaleKalmanFilter:
         t10, t11 = f10 * c00 + f11 * c10, f10 * c01 + f11 * c11
         n00 = t00 * f00 + t01 * f01 + q00
         n11 = t10 * f10 + t11 * f11 + q11
+        n00, n11 = (n00 + n00) / 2, (n11 + n11) / 2   # as (P + P^T) / 2, overflow included
         n01 = ((t00 * f10 + t01 * f11 + q01) + (t10 * f00 + t11 * f01 + q10)) / 2
         if not math.isfinite(xn0 + xn1 + n00 + n01 + n11):
             raise FilterError(f'step with mu = {mu} overflowed; the filter state is unchanged')
