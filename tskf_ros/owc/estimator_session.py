@@ -705,19 +705,22 @@ class EstimatorSession:
               ) -> tuple[list, Jump, np.ndarray, np.ndarray]:
         """step(mu, y) from point to sigma; raises FilterError on a bad step."""
         mu = (sigma_ns - point.stamp_ns) / NS
+        u = point.u if self.config.model.B is not None else None   # no B: u is 0
         if point.variance > 0 and point.y is not None:
             # the sample's own variance is its R_d = R / mu (Table 3's noise on the point);
             # a product that underflows is the smallest normal variance instead
-            res = self.kf.step(mu, point.y, point.u, R=max(point.variance * mu, 1e-300))
+            res = self.kf.step(mu, point.y, u, R=max(point.variance * mu, 1e-300))
         else:
-            res = self.kf.step(mu, point.y, point.u)
-        P_c = res.P_corrected
-        if P_c.shape[0] > 1:
+            res = self.kf.step(mu, point.y, u)
+        P_c, P_p = res.P_corrected, res.P_predicted
+        # the filter refuses a non-finite prediction itself
+        if P_c.shape[0] == 1:
+            finite = math.isfinite(res.x_corrected.item() + P_c.item())
+        else:
             P_c = P_c + P_c.T
             P_c *= 0.5
-        P_p = res.P_predicted
-        # the filter refuses a non-finite prediction itself
-        if not _finite(res.x_corrected, P_c):
+            finite = _finite(res.x_corrected, P_c)
+        if not finite:
             raise FilterError(f'non-finite estimate at mu = {mu}')
         for name, P in (('P(t|t)', P_c), ('P(sigma(t))', P_p)):
             if not is_psd(P):
@@ -857,10 +860,16 @@ class EstimatorSession:
             return ''
         kf = self.kf
         if kf.p == 1:           # plain floats: e^2 / S
-            c = kf.C[0]
-            e = y.item() - c.dot(x).item() - kf.D.item()
+            C = kf.C
             Rd = self._variance if self._variance > 0 else kf.R.item() / self.config.period
-            S = c.dot(P).dot(c).item() + Rd
+            if P.shape[0] == 1:
+                c = C.item()
+                e = y.item() - c * x.item() - kf.D.item()
+                S = c * P.item() * c + Rd
+            else:
+                c = C[0]
+                e = y.item() - c.dot(x).item() - kf.D.item()
+                S = c.dot(P).dot(c).item() + Rd
             if S == 0.0:
                 return ''
             d2 = e * e / S
