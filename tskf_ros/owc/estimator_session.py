@@ -319,10 +319,13 @@ def _health(x: np.ndarray, P: np.ndarray, limit: float) -> tuple[str, float]:
     Absurd: |x_i| or sqrt(trace P) beyond limit.  On plain floats: numpy's reductions
     cost more than the work on the few entries of a state.
     """
-    big = max(map(abs, x.tolist())) if x.size else 0.0
+    if x.size == 1:
+        big, trace = abs(x.item()), P.item()
+    else:
+        big = max(map(abs, x.tolist())) if x.size else 0.0
+        trace = P.trace().item() if P.shape[0] > 2 else sum(P.diagonal().tolist())
     if big > limit:
         return f'|x| = {big:.3g} > state_limit = {limit:g}', math.nan
-    trace = P.trace().item() if P.shape[0] > 2 else sum(P.diagonal().tolist())
     if not trace <= limit * limit:
         return (f'sqrt(trace P) = {math.sqrt(max(trace, 0.0)):.3g} > state_limit = '
                 f'{limit:g}', trace)
@@ -367,9 +370,11 @@ class EstimatorSession:
         cfg = self.config
         if power.__class__ is float:            # one reading: checked on plain floats
             y, values = np.array((power,)), (power,)
+            lowest = power
         else:
             y = np.atleast_1d(np.asarray(power, dtype=float)).reshape(-1)
             values = y.tolist()
+            lowest = min(values, default=0.0)
         if stamp_ns <= 0:
             return self._reject('zero_stamp', 'the header stamp is unset (0)')
         if stamp_ns > MAX_STAMP_NS:
@@ -384,7 +389,7 @@ class EstimatorSession:
         if y.size != self.kf.p:
             return self._reject('bad_size', f'measurement has {y.size} entries, the model '
                                 f'{self.kf.p}')
-        if cfg.nonpositive_is_gap and any(v <= 0 for v in values):
+        if cfg.nonpositive_is_gap and lowest <= 0:
             # Cai et al. IV-C: a reading at or below zero is an interruption, not a point
             st.rejected['invalid_power'] += 1
             return Outcome('gap', 'invalid_power', f'reading {y} <= 0: an interruption')
@@ -873,6 +878,8 @@ class EstimatorSession:
             if S == 0.0:
                 return ''
             d2 = e * e / S
+            if d2 <= gate * gate:
+                return ''
             e = np.array((e,))
         else:
             e = y - kf.C @ x - kf.D
