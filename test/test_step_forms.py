@@ -225,3 +225,15 @@ def test_a_per_step_r_is_the_model_with_that_r(n):
     for bad in (0.0, -1.0, np.nan, [[-1.0]]):
         with pytest.raises(FilterError, match='R'):
             kf.step(0.5, 1.0, R=bad)
+
+
+def test_a_transition_switched_later_is_used():
+    m = random_model(np.random.default_rng(7), 3, 1, 1)
+    kf = TimeScaleKalmanFilter(**m)
+    kf.step(0.4, 1.0, [0.2])                # caches the Euler transition for mu = 0.4
+    fresh = TimeScaleKalmanFilter(**{**m, 'x0': kf.x, 'P0': kf.P}, transition='exact')
+    kf.transition = 'exact'
+    np.testing.assert_array_equal(kf.step(0.4, 1.0, [0.2]).P_predicted,
+                                  fresh.step(0.4, 1.0, [0.2]).P_predicted)
+    with pytest.raises(FilterError, match='transition'):
+        kf.transition = 'rk4'

@@ -325,7 +325,7 @@ class TimeScaleKalmanFilter:
         if transition not in TRANSITIONS:
             raise FilterError(f'transition must be one of {TRANSITIONS}, got {transition!r}')
         self._A, self._C, self._G, self._Q, self._R, self._B, self._D = A, C, G, Q, R, B, D
-        self.transition = transition
+        self._transition = transition
         # Definition 2.12 asks I + mu A to be invertible; Table 3 itself never inverts it,
         # so a user who knowingly runs a non-regressive model (as Cai et al. do with
         # system (1) at mu = 1) can say so.  Off by default: such a step is refused.
@@ -354,6 +354,18 @@ class TimeScaleKalmanFilter:
         self._a, self._c = A.ravel().tolist(), C.ravel().tolist()
         self._r, self._d = float(self._R[0, 0]), float(self._D[0])
         self._gqg, self._b = self.GQGt.ravel().tolist(), B.tolist()
+
+    @property
+    def transition(self) -> str:
+        """'euler' (the paper's I + mu A) or 'exact' (e^{A mu}); assigning it is checked."""
+        return self._transition
+
+    @transition.setter
+    def transition(self, value: str) -> None:
+        if value not in TRANSITIONS:
+            raise FilterError(f'transition must be one of {TRANSITIONS}, got {value!r}')
+        self._transition = value
+        self._jumps = {}
 
     @property
     def n(self) -> int:
