@@ -396,7 +396,7 @@ class TimeScaleKalmanFilter:
 
     def transition_matrices(self, mu: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(F, Q_d, B_d) for a jump of mu: the paper's Euler form or the exact sampled plant."""
-        if self.transition == 'euler':
+        if self._transition == 'euler':
             # x(sigma) = (I + mu A) x + mu B u + mu G w, Var(mu G w) = mu GQG^T
             return self._I + mu * self._A, mu * self.GQGt, mu * self._B
         F, Qd = van_loan(self._A, self.GQGt, mu)
@@ -412,7 +412,7 @@ class TimeScaleKalmanFilter:
         hit = self._jumps.get(mu)
         if hit is None:
             F, Qd, Bd = self.transition_matrices(mu)
-            regressive = self.transition == 'exact' or is_invertible(F)
+            regressive = self._transition == 'exact' or is_invertible(F)
             hit = (F, Qd, Bd, regressive, F.ravel().tolist(), Qd.ravel().tolist(),
                    Bd.tolist())
             if len(self._jumps) >= JUMP_CACHE_SIZE:
@@ -567,7 +567,7 @@ class TimeScaleKalmanFilter:
         """Make the step for n = p = 1 on plain floats: Table 3 term by term (Euler)."""
         x, P = self.x.item(), self.P.item()
         a, c, r, d, gqg = self._a[0], self._c[0], R.item(), self._d, self._gqg[0]
-        if self.transition == 'euler':
+        if self._transition == 'euler':
             F = 1.0 + mu * a
             if F == 0.0 and not self.allow_nonregressive:
                 self._jump(mu)          # raises NonRegressiveError
@@ -599,7 +599,7 @@ class TimeScaleKalmanFilter:
             x_c = x + L * e
             I_LC = 1.0 - L * c
             P_c = I_LC * P * I_LC + L * (r / mu) * L
-            if self.transition == 'euler':
+            if self._transition == 'euler':
                 # K = (I + mu A) W^T; xhat^Delta = A xhat + B u + K [y - C xhat - D]
                 K = F * W
                 x_delta = a * x + bu + K * e
@@ -621,7 +621,7 @@ class TimeScaleKalmanFilter:
                    R: np.ndarray) -> StepResult:
         """Make the step for n = 2, p = 1 on plain floats: P(t|t), then F P(t|t) F^T + Q_d."""
         (x0, x1), ((p00, p01), (p10, p11)) = self.x.tolist(), self.P.tolist()
-        if self.transition == 'euler':
+        if self._transition == 'euler':
             a00, a01, a10, a11 = self._a
             f00, f01, f10, f11 = 1.0 + mu * a00, mu * a01, mu * a10, 1.0 + mu * a11
             if not self.allow_nonregressive and not _invertible_2x2(f00, f01, f10, f11):
