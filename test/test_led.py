@@ -309,3 +309,35 @@ def test_experiment_writes_the_schema(tmp_path, capsys):
             inside = np.mean(np.abs((traj.phi + 180.0) % 360.0 - 180.0) <= 15.0, axis=0)
             assert got['angular']['mean'][i] == pytest.approx(100 * np.mean(inside), abs=1e-9)
     assert 'noise' in capsys.readouterr().out
+
+
+class _SameResponse(led.IncidenceResponse):
+    """The same g and g'; its own type sends one run through the vectorised form."""
+
+
+@pytest.mark.parametrize('floor', [None, 0.5])
+def test_one_run_on_floats_equals_the_vectorised_form(floor):
+    # the live node's form (runs = 1, plain floats) against the Monte-Carlo one (numpy,
+    # the form the Fig. 10 table is computed with), through gaps, missing and bad
+    # measurements, a clamped turn and the innovation gate's distance
+    rng = np.random.default_rng(11)
+    cfg = led.EKFConfig(x1_floor=floor)
+    one, vec = led.ScanningEKF(cfg), led.ScanningEKF(cfg, _SameResponse())
+    t = 3.0
+    for k in range(400):
+        t += 0.05 * float(rng.choice([1.0, 1.0, 1.0, 0.5, 3.0]))
+        z = rng.choice([None, float('nan'), float('inf'), float(rng.uniform(0.0, 3.0))],
+                       p=[0.05, 0.05, 0.02, 0.88])
+        np.testing.assert_allclose(one.innovation_distance(t, z),
+                                   vec.innovation_distance(t, z), rtol=1e-9)
+        np.testing.assert_allclose(one.step(t, z), vec.step(t, z), rtol=1e-9, atol=1e-12)
+        for name in ('x', 'P', 'x_prior', 'P_prior', 'C', 'y', 'det', 'u', 'since',
+                     'z_prev', 'psi_prev'):
+            a, b = getattr(one, name), getattr(vec, name)
+            assert a.shape == b.shape, name
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * max(1.0, np.nanmax(
+                np.abs(b), initial=0.0)), err_msg=f'{name} at {k}')
+        assert one.updated[0] == vec.updated[0] and one.singular[0] == vec.singular[0]
+        if k % 50 == 7:
+            for ekf in (one, vec):
+                ekf.correct_last_turn(np.array([-0.3]))

@@ -115,3 +115,57 @@ def test_alignment_session_survives_anything_and_recovers(ops, algorithm):
     outs = [session.add(start + k * NS // 20, 2.0, now_ns=T0) for k in range(10)]
     assert all(o.status == 'used' and o.command is not None for o in outs[-5:]), [
         (o.status, o.reason) for o in outs]
+
+
+def latest_estimates(outs):
+    """(kind, stamp) -> (x, P) of the last estimate published for it (revisions win)."""
+    latest = {}
+    for out in outs:
+        for e in out.estimates:
+            latest[(e.kind, e.stamp_ns)] = (e.x, e.P)
+    return latest
+
+
+@SETTINGS
+@given(st.lists(st.tuples(st.integers(0, 6), st.floats(-50.0, 50.0)), min_size=2,
+                max_size=40),
+       st.sampled_from(['euler', 'exact']), st.sampled_from([0.5, 1.0]))
+def test_late_samples_end_where_the_same_samples_in_order_end(samples, transition, spacing):
+    # each sample (after the first) may arrive up to 6 places late; the late-sample
+    # re-run (only the tail after the insertion point) must give every stamp the same
+    # final estimate as in-order delivery, and the same filter state at the end
+    config = EstimatorConfig(OWC, transition=transition, gate=0.0, history_window=10.0)
+    stamps = [T0 + int(k * spacing * NS) for k in range(len(samples))]
+    values = [GOOD + v for _, v in samples]
+    order = sorted(range(len(samples)), key=lambda k: k + (samples[k][0] if k else 0))
+    in_order, late = EstimatorSession(config), EstimatorSession(config)
+    want = latest_estimates([in_order.add(stamps[k], values[k]) for k in range(len(stamps))])
+    outs = [late.add(stamps[k], values[k]) for k in order]
+    assert all(o.status in ('accepted', 'inserted') for o in outs), [o.reason for o in outs]
+    got = latest_estimates(outs)
+    assert got.keys() == want.keys()
+    for key, (x, P) in want.items():
+        np.testing.assert_allclose(got[key][0], x, rtol=1e-9, err_msg=str(key))
+        np.testing.assert_allclose(got[key][1], P, rtol=1e-9, err_msg=str(key))
+    np.testing.assert_allclose(late.kf.x, in_order.kf.x, rtol=1e-9)
+    np.testing.assert_allclose(late.kf.P, in_order.kf.P, rtol=1e-9)
+    assert [p.stamp_ns for p in late.points] == [p.stamp_ns for p in in_order.points]
+    assert late.stats.inserted == sum(1 for o in outs if o.status == 'inserted')
+
+
+def test_a_late_sample_leaves_the_older_history_untouched():
+    # O(lateness): the points before the insertion are neither copied nor re-run
+    session = EstimatorSession(EstimatorConfig(OWC, period=0.001, history_size=1000,
+                                               history_window=1e3, max_backward=1e3))
+    stamps = [T0 + k * 1_000_000 for k in range(600)]
+    for stamp in stamps:
+        session.add(stamp, GOOD)
+    before = list(session.points)
+    out = session.add(stamps[-3] + 500_000, GOOD)           # between the 3rd and 2nd last
+    assert out.status == 'inserted'
+    after = list(session.points)
+    assert len(after) == len(before) + 1
+    assert all(a is b for a, b in zip(after[:-4], before[:-3]))
+    # revised: the new point's corrected estimate and predictor, and the two after it
+    assert [(e.kind, e.stamp_ns) for e in out.estimates if e.kind == 'predicted'] == [
+        ('predicted', p.stamp_ns) for p in after[-3:]]

@@ -294,10 +294,12 @@ class AlignmentSession:
             ekf = self.aligner
             prior = (ekf.x_prior[0].copy(), _sym(ekf.P_prior[0]))
             posterior = (ekf.x[0].copy(), _sym(ekf.P[0]))
-            if not all(np.all(np.isfinite(a)) for a in (*prior, *posterior)):
+            # on plain floats: numpy's reductions cost more than these eight entries
+            if not all(math.isfinite(v) for a in (*prior, *posterior)
+                       for v in a.ravel().tolist()):
                 return self._fail(stamp_ns, 'the EKF estimate is not finite')
-            big = max(float(np.max(np.abs(posterior[0]))),
-                      math.sqrt(max(float(np.trace(posterior[1])), 0.0)))
+            big = max(max(map(abs, posterior[0].tolist())),
+                      math.sqrt(max(posterior[1].trace().item(), 0.0)))
             if big > cfg.state_limit:
                 self.health_error = (f'EKF state or covariance {big:.3g} beyond state_limit '
                                      f'{cfg.state_limit:g}')

@@ -56,7 +56,8 @@ sampling-interval statistics are over measurement points; mu over all points.
 """
 
 from collections import Counter, deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+import math
 from math import isqrt
 from typing import Optional, Sequence
 
@@ -225,7 +226,7 @@ class EstimatorConfig:
                 raise ConfigError(f'a step of mu = period = {mu:g} s from x0, P0 gives {why}')
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Estimate:
     """One estimate: 'predicted' (xhat(t) from data before t) or 'corrected' (x(t|t))."""
 
@@ -236,7 +237,7 @@ class Estimate:
     revised: bool = False
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Jump:
     """The graininess used at a point: mu(t) = sigma(t) - t."""
 
@@ -301,22 +302,41 @@ class _Point:
 
 
 def _finite(*arrays: np.ndarray) -> bool:
-    # a sum is finite only if every entry is (or, harmlessly, rejects sums past 1e308)
-    return all(np.isfinite(a.sum()) for a in arrays)
+    """Tell whether every entry is finite (plain floats for the few entries of a small state)."""
+    for a in arrays:
+        if a.size > 16:
+            if not np.isfinite(a).all():
+                return False
+        elif not all(map(math.isfinite, a.ravel().tolist())):
+            return False
+    return True
+
+
+def _health(x: np.ndarray, P: np.ndarray, limit: float) -> tuple[str, float]:
+    """
+    Return (why (x, P) is absurd or '', trace P) for a finite (x, P).
+
+    Absurd: |x_i| or sqrt(trace P) beyond limit.  On plain floats: numpy's reductions
+    cost more than the work on the few entries of a state.
+    """
+    if x.size == 1:
+        big, trace = abs(x.item()), P.item()
+    else:
+        big = max(map(abs, x.tolist())) if x.size else 0.0
+        trace = P.trace().item() if P.shape[0] > 2 else sum(P.diagonal().tolist())
+    if big > limit:
+        return f'|x| = {big:.3g} > state_limit = {limit:g}', math.nan
+    if not trace <= limit * limit:
+        return (f'sqrt(trace P) = {math.sqrt(max(trace, 0.0)):.3g} > state_limit = '
+                f'{limit:g}', trace)
+    return '', trace
 
 
 def _unhealthy(x: np.ndarray, P: np.ndarray, limit: float) -> str:
     """Return why (x, P) is absurd (non-finite, or beyond limit), or '' if it is not."""
-    with np.errstate(all='ignore'):
-        if not _finite(x, P):
-            return 'a non-finite state or covariance'
-        big = float(np.max(np.abs(x))) if x.size else 0.0
-        if big > limit:
-            return f'|x| = {big:.3g} > state_limit = {limit:g}'
-        trace = float(np.trace(P))
-        if not trace <= limit * limit:
-            return f'sqrt(trace P) = {np.sqrt(max(trace, 0.0)):.3g} > state_limit = {limit:g}'
-    return ''
+    if not _finite(x, P):
+        return 'a non-finite state or covariance'
+    return _health(x, P, limit)[0]
 
 
 class EstimatorSession:
@@ -348,27 +368,33 @@ class EstimatorSession:
             self.input_rate.note(now_ns)
         stamp_ns = int(stamp_ns)
         cfg = self.config
-        y = np.atleast_1d(np.asarray(power, dtype=float)).reshape(-1)
+        if power.__class__ is float:            # one reading: checked on plain floats
+            y, values = np.array((power,)), (power,)
+            lowest = power
+        else:
+            y = np.atleast_1d(np.asarray(power, dtype=float)).reshape(-1)
+            values = y.tolist()
+            lowest = min(values, default=0.0)
         if stamp_ns <= 0:
             return self._reject('zero_stamp', 'the header stamp is unset (0)')
         if stamp_ns > MAX_STAMP_NS:
             return self._reject('stamp_range', f'stamp {stamp_ns} ns is beyond what a ROS '
                                 'message can hold (sec is an int32)')
-        if not _finite(y):
+        if not all(map(math.isfinite, values)):
             return self._reject('non_finite', f'measurement {y} is not finite')
-        if not (np.isfinite(variance) and variance >= 0):
+        if not (math.isfinite(variance) and variance >= 0):
             return self._reject('bad_variance', f'variance {variance} is not a finite value '
                                 '>= 0')
         self._variance = float(variance) if cfg.use_message_variance else 0.0
         if y.size != self.kf.p:
             return self._reject('bad_size', f'measurement has {y.size} entries, the model '
                                 f'{self.kf.p}')
-        if cfg.nonpositive_is_gap and np.any(y <= 0):
+        if cfg.nonpositive_is_gap and lowest <= 0:
             # Cai et al. IV-C: a reading at or below zero is an interruption, not a point
             st.rejected['invalid_power'] += 1
             return Outcome('gap', 'invalid_power', f'reading {y} <= 0: an interruption')
-        if cfg.measurement_range and not np.all(
-                (y >= cfg.measurement_range[0]) & (y <= cfg.measurement_range[1])):
+        if cfg.measurement_range and not all(
+                cfg.measurement_range[0] <= v <= cfg.measurement_range[1] for v in values):
             return self._reject('out_of_range', f'reading {y} outside measurement_range '
                                 f'{list(cfg.measurement_range)}')
         if (now_ns is not None and cfg.max_future > 0
@@ -391,13 +417,20 @@ class EstimatorSession:
         if -dt > cfg.max_backward * NS:
             return self._restart('backward_jump', stamp_ns, y,
                                  f'stamp jumped {-dt / NS:.3f} s backward (> max_backward)')
-        same = [p for p in self.points if p.stamp_ns == stamp_ns]
-        if same and same[0].y is not None:
-            return self._reject('duplicate', f'stamp {stamp_ns / NS:.9f} s is already a point')
-        if -dt > cfg.history_window * NS or stamp_ns < self.points[0].stamp_ns:
+        first = self.points[0]
+        if -dt > cfg.history_window * NS or stamp_ns < first.stamp_ns:
+            # every point but the first is within history_window of the newest (_trim)
+            if stamp_ns == first.stamp_ns and first.y is not None:
+                return self._reject('duplicate', f'stamp {stamp_ns / NS:.9f} s is already a '
+                                    'point')
             return self._reject('too_old', f'stamp {stamp_ns / NS:.9f} s is {-dt / NS:.3f} s '
                                 'late, older than the history')
-        return self._insert(stamp_ns, y)
+        i = self._index(stamp_ns)
+        if i < len(self.points) and self.points[i].stamp_ns == stamp_ns:
+            if self.points[i].y is not None:
+                return self._reject('duplicate', f'stamp {stamp_ns / NS:.9f} s is already a '
+                                    'point')
+        return self._insert(stamp_ns, y, i)
 
     def add_input(self, stamp_ns: int, u: Sequence[float]) -> Outcome:
         """
@@ -594,11 +627,11 @@ class EstimatorSession:
         out.status, out.reason, out.message = 'reset', reason, message + '; re-initialised'
         return out
 
-    def _accepted(self, stamp_ns: int, P: np.ndarray) -> None:
+    def _accepted(self, stamp_ns: int, P: np.ndarray, trace: Optional[float] = None) -> None:
         st = self.stats
         st.accepted += 1
         st.last_stamp_ns = max(st.last_stamp_ns, stamp_ns)
-        st.covariance_trace = float(np.trace(P))
+        st.covariance_trace = float(np.trace(P)) if trace is None else trace
 
     def _record_gap(self, start_ns: int, end_ns: int, *, add: bool = True) -> None:
         """Keep the gap statistics: an interval longer than jump_factor * period is a jump."""
@@ -677,19 +710,22 @@ class EstimatorSession:
               ) -> tuple[list, Jump, np.ndarray, np.ndarray]:
         """step(mu, y) from point to sigma; raises FilterError on a bad step."""
         mu = (sigma_ns - point.stamp_ns) / NS
-        kf = self.kf
+        u = point.u if self.config.model.B is not None else None   # no B: u is 0
         if point.variance > 0 and point.y is not None:
-            # the sample's own variance is its R_d = R / mu (Table 3's noise on the point)
-            R_model, kf.R = kf.R, np.eye(kf.p) * point.variance * mu
-            try:
-                res = kf.step(mu, point.y, point.u)
-            finally:
-                kf.R = R_model
+            # the sample's own variance is its R_d = R / mu (Table 3's noise on the point);
+            # a product that underflows is the smallest normal variance instead
+            res = self.kf.step(mu, point.y, u, R=max(point.variance * mu, 1e-300))
         else:
-            res = kf.step(mu, point.y, point.u)
-        P_c = (res.P_corrected + res.P_corrected.T) / 2
-        P_p = res.P_predicted
-        if not _finite(res.x_corrected, P_c, res.x_predicted, P_p):
+            res = self.kf.step(mu, point.y, u)
+        P_c, P_p = res.P_corrected, res.P_predicted
+        # the filter refuses a non-finite prediction itself
+        if P_c.shape[0] == 1:
+            finite = math.isfinite(res.x_corrected.item() + P_c.item())
+        else:
+            P_c = P_c + P_c.T
+            P_c *= 0.5
+            finite = _finite(res.x_corrected, P_c)
+        if not finite:
             raise FilterError(f'non-finite estimate at mu = {mu}')
         for name, P in (('P(t|t)', P_c), ('P(sigma(t))', P_p)):
             if not is_psd(P):
@@ -703,25 +739,26 @@ class EstimatorSession:
                 u: Optional[np.ndarray] = None) -> Outcome:
         """Step the newest point to a new one: a measurement (y) or an input (u)."""
         last = self.points[-1]
-        saved = self.kf.state()
+        kf = self.kf
+        saved = kf.x, kf.P      # a step replaces them, never writes into them
         try:
             est, jump, x, P = self._step(last, stamp_ns, False)
         except FilterError as exc:
-            self.kf.set_state(*saved)       # the step may have moved it before the check
+            kf.x, kf.P = saved              # the step may have moved it before the check
             if y is None or isinstance(exc, NonRegressiveError):
                 # this mu only: the state is sound and the next sample's mu will differ
                 return self._reject('filter_error', f'step refused: {exc}')
             return self._unhealthy_restart(stamp_ns, y, f'step refused: {exc}')
-        why = _unhealthy(x, P, self.config.state_limit)
+        why, trace = _health(x, P, self.config.state_limit)
         if why:
-            self.kf.set_state(*saved)
+            kf.x, kf.P = saved
             if y is None:
                 return self._reject('filter_error', f'step refused: {why}')
             return self._unhealthy_restart(stamp_ns, y, f'the step gave {why}')
         if y is not None:
             gated = self._gate(y, x, P)
             if gated:
-                self.kf.set_state(*saved)
+                kf.x, kf.P = saved
                 if self.gated_in_a_row >= self.config.gate_patience:
                     self.gated_in_a_row = 0
                     return self._restart('gate_lockout', stamp_ns, y, gated + (
@@ -737,67 +774,86 @@ class EstimatorSession:
         self.stats.mu_max = max(self.stats.mu_max, jump.mu)
         if y is not None:
             self._measured(stamp_ns)
-            self._accepted(stamp_ns, P)
+            self._accepted(stamp_ns, P, trace)
         else:
             self.stats.last_stamp_ns = max(self.stats.last_stamp_ns, stamp_ns)
-            self.stats.covariance_trace = float(np.trace(P))
+            self.stats.covariance_trace = trace
         self._trim()
         return Outcome('accepted', estimates=est, jumps=[jump])
 
-    def _insert(self, stamp_ns: int, y: np.ndarray) -> Outcome:
-        """
-        Insert a late measurement after points[j], rewind to t_j and re-run to the newest.
+    def _index(self, stamp_ns: int) -> int:
+        """Return the index of the first point at or after stamp_ns, scanning from the newest."""
+        i = len(self.points)
+        for point in reversed(self.points):
+            if point.stamp_ns < stamp_ns:
+                break
+            i -= 1
+        return i
 
-        A late measurement at the stamp of an input-only point merges into it (j is that
-        point).  A new point takes the input in force at t_j (zero-order hold).
+    def _insert(self, stamp_ns: int, y: np.ndarray, i: int) -> Outcome:
         """
-        old_points = [replace(p) for p in self.points]
-        points = list(old_points)
-        i = int(np.searchsorted([p.stamp_ns for p in points], stamp_ns))
+        Insert a late measurement before points[i], rewind to t_j and re-run to the newest.
+
+        j = i - 1, the left neighbour; a late measurement at the stamp of an input-only
+        point merges into it (j = i).  A new point takes the input in force at t_j
+        (zero-order hold).  Only the points from t_j on are taken off the history and
+        re-run, so the cost grows with the lateness, not with history_size.
+        """
+        points = self.points
         merged = i < len(points) and points[i].stamp_ns == stamp_ns
+        j = i if merged else i - 1
+        tail = [points.pop() for _ in range(len(points) - j)]
+        tail.reverse()                  # the old points[j:], put back if the re-run fails
+        left = tail[0]
         if merged:
-            j = i
-            points[j] = replace(points[j], y=y, variance=self._variance)
+            rerun = [_Point(left.stamp_ns, y, left.x, left.P, left.u, left.has_input,
+                            self._variance)] + tail[1:]
         else:
-            j = i - 1
-            points.insert(i, _Point(stamp_ns, y, np.zeros(0), np.zeros((0, 0)), points[j].u,
-                                    variance=self._variance))
-        saved = self.kf.state()
+            rerun = [left, _Point(stamp_ns, y, np.zeros(0), np.zeros((0, 0)), left.u,
+                                  variance=self._variance)] + tail[1:]
+        kf = self.kf
+        saved = kf.x, kf.P
         estimates, jumps = [], []
         try:
-            self.kf.set_state(points[j].x, points[j].P)
-            for k in range(j, len(points) - 1):
-                est, jump, x, P = self._step(points[k], points[k + 1].stamp_ns, True)
-                points[k + 1] = replace(points[k + 1], x=x, P=P)
+            kf.x, kf.P = left.x, left.P
+            for k in range(len(rerun) - 1):
+                nxt = rerun[k + 1]
+                est, jump, x, P = self._step(rerun[k], nxt.stamp_ns, True)
+                rerun[k + 1] = _Point(nxt.stamp_ns, nxt.y, x, P, nxt.u, nxt.has_input,
+                                      nxt.variance)
                 estimates += est
                 jumps.append(jump)
-            why = _unhealthy(self.kf.x, self.kf.P, self.config.state_limit)
+            why = _unhealthy(kf.x, kf.P, self.config.state_limit)
             if why:
                 raise FilterError(why)
         except FilterError as exc:
-            self.points = deque(old_points)
-            self.kf.set_state(*saved)
+            points.extend(tail)
+            kf.x, kf.P = saved
             return self._reject('filter_error', f're-run after a late sample refused: {exc}')
-        new = j if merged else j + 1
-        gated = self._gate(y, points[new].x, points[new].P) if new > 0 else ''
+        new = 0 if merged else 1
+        gated = self._gate(y, rerun[new].x, rerun[new].P) if j + new > 0 else ''
         if gated:
-            self.points = deque(old_points)
-            self.kf.set_state(*saved)
+            points.extend(tail)
+            kf.x, kf.P = saved
             return self._reject('gated', gated)
-        self.points = deque(points)
+        points.extend(rerun)
         # the interval between the measurement points around it is now two intervals
-        before = [p.stamp_ns for p in points[:new] if p.y is not None]
-        after = [p.stamp_ns for p in points[new + 1:] if p.y is not None]
-        if after:
-            self._record_gap(0, after[0], add=False)
-            self._record_gap(stamp_ns, after[0])
-        if before:
-            self._record_gap(before[-1], stamp_ns)
+        after = next((p.stamp_ns for p in rerun[new + 1:] if p.y is not None), None)
+        before = next((p.stamp_ns for p in reversed(rerun[:new]) if p.y is not None), None)
+        if before is None:
+            head = len(points) - len(rerun)
+            before = next((points[k].stamp_ns for k in range(head - 1, -1, -1)
+                           if points[k].y is not None), None)
+        if after is not None:
+            self._record_gap(0, after, add=False)
+            self._record_gap(stamp_ns, after)
+        if before is not None:
+            self._record_gap(before, stamp_ns)
         self.stats.last_measurement_ns = max(self.stats.last_measurement_ns, stamp_ns)
         self.stats.inserted += 1
         self.stats.mu_current = jumps[-1].mu
         self.stats.mu_max = max(self.stats.mu_max, max(jp.mu for jp in jumps))
-        self._accepted(stamp_ns, self.kf.P)
+        self._accepted(stamp_ns, kf.P)
         self._trim()
         return Outcome('inserted', 'late', f'late sample {stamp_ns / NS:.9f} s inserted; '
                        f'{len(estimates)} estimates revised', estimates, jumps)
@@ -808,16 +864,35 @@ class EstimatorSession:
         if not gate > 0 or x.size == 0:
             return ''
         kf = self.kf
-        e = y - kf.C @ x - kf.D
-        Rd = np.eye(kf.p) * self._variance if self._variance > 0 else kf.R / self.config.period
-        S = kf.C @ P @ kf.C.T + Rd
-        with np.errstate(all='ignore'):
-            try:
-                d2 = float(e @ np.linalg.solve(S, e))
-            except np.linalg.LinAlgError:
+        if kf.p == 1:           # plain floats: e^2 / S
+            C = kf.C
+            Rd = self._variance if self._variance > 0 else kf.R.item() / self.config.period
+            if P.shape[0] == 1:
+                c = C.item()
+                e = y.item() - c * x.item() - kf.D.item()
+                S = c * P.item() * c + Rd
+            else:
+                c = C[0]
+                e = y.item() - c.dot(x).item() - kf.D.item()
+                S = c.dot(P).dot(c).item() + Rd
+            if S == 0.0:
                 return ''
-        if d2 > gate * gate or not np.isfinite(d2):
-            return (f'innovation {e} is {np.sqrt(d2):.3g} standard deviations from the '
+            d2 = e * e / S
+            if d2 <= gate * gate:
+                return ''
+            e = np.array((e,))
+        else:
+            e = y - kf.C @ x - kf.D
+            Rd = (np.eye(kf.p) * self._variance if self._variance > 0
+                  else kf.R / self.config.period)
+            S = kf.C @ P @ kf.C.T + Rd
+            with np.errstate(all='ignore'):
+                try:
+                    d2 = float(e @ np.linalg.solve(S, e))
+                except np.linalg.LinAlgError:
+                    return ''
+        if d2 > gate * gate or not math.isfinite(d2):
+            return (f'innovation {e} is {math.sqrt(abs(d2)):.3g} standard deviations from the '
                     f'prediction (gate {gate:g})')
         return ''
 
