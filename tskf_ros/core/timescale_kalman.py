@@ -478,7 +478,14 @@ class TimeScaleKalmanFilter:
         if small:
             y = None if y is None else _float(y, 'y')
             u = None if u is None else _floats(u, self._B.shape[1], 'u')
-            res = (self._step_scalar if small == 1 else self._step_pair)(mu, y, u, R)
+            if small == 1:
+                x_c, P_c, x_new, P_new, e, S = self.scalar_step(mu, self.x.item(),
+                                                                self.P.item(), y, u, R.item())
+                res = StepResult(mu, np.array((x_c,)), np.array(((P_c,),)),
+                                 np.array((x_new,)), np.array(((P_new,),)), np.array((e,)),
+                                 np.array(((S,),)))
+            else:
+                res = self._step_pair(mu, y, u, R)
         else:
             if y is not None:
                 y = _float(y, 'y') if self._C.shape[0] == 1 else _checked(y, self.p, 'y')
@@ -562,11 +569,19 @@ class TimeScaleKalmanFilter:
             return [0.0] * len(Bd)
         return [sum(b * v for b, v in zip(row, u)) for row in Bd]
 
-    def _step_scalar(self, mu: float, y: Optional[float], u: Optional[list],
-                     R: np.ndarray) -> StepResult:
-        """Make the step for n = p = 1 on plain floats: Table 3 term by term (Euler)."""
-        x, P = self.x.item(), self.P.item()
-        a, c, r, d, gqg = self._a[0], self._c[0], R.item(), self._d, self._gqg[0]
+    def scalar_step(self, mu: float, x: float, P: float, y: Optional[float],
+                    u: Optional[list], r: float) -> tuple:
+        """
+        Make the step for n = p = 1 on plain floats: Table 3 term by term (Euler).
+
+        From (x, P) at t with the variance r in place of R; returns the floats
+        (x(t|t), P(t|t), x(sigma), P(sigma), innovation, S) and changes nothing: `step`
+        wraps them in a StepResult and moves the filter, and a caller that checks them
+        first (the estimator session) moves it itself.  mu > 0 finite, y (None: no
+        measurement) and u (a list of B's columns, or None) finite, r > 0: not checked
+        here.  Raises FilterError as `step` does.
+        """
+        a, c, d, gqg = self._a[0], self._c[0], self._d, self._gqg[0]
         if self._transition == 'euler':
             F = 1.0 + mu * a
             if F == 0.0 and not self.allow_nonregressive:
@@ -614,8 +629,7 @@ class TimeScaleKalmanFilter:
         P_new = (P_new + P_new) / 2    # as (P + P^T) / 2: it overflows where that does
         if not math.isfinite(x_new + P_new):
             raise FilterError(f'step with mu = {mu} overflowed; the filter state is unchanged')
-        return StepResult(mu, np.array((x_c,)), np.array(((P_c,),)), np.array((x_new,)),
-                          np.array(((P_new,),)), np.array((e,)), np.array(((S,),)))
+        return x_c, P_c, x_new, P_new, e, S
 
     def _step_pair(self, mu: float, y: Optional[float], u: Optional[list],
                    R: np.ndarray) -> StepResult:

@@ -81,6 +81,8 @@ RESET_REASONS = ('forward_jump', 'backward_jump', 'clock_jump', 'reconfigured',
                  'state_health', 'gate_lockout', 'set_state', 'service')
 # diagnostics list at most this many of the sampling intervals seen
 INTERVALS_SHOWN = 20
+_INF = math.inf
+_empty = np.empty
 
 
 class ConfigError(ValueError):
@@ -251,7 +253,7 @@ class Jump:
         return (self.sigma_ns - self.stamp_ns) / NS
 
 
-@dataclass
+@dataclass(slots=True)
 class Outcome:
     """What one sample did: status, reason and message, and what to publish."""
 
@@ -290,10 +292,10 @@ class Stats:
     last_measurement_ns: int = 0
 
 
-@dataclass
+@dataclass(slots=True)
 class _Point:
     stamp_ns: int
-    y: Optional[np.ndarray]    # None: an input-only point (no measurement)
+    y: object                  # ndarray (a float on the scalar path); None: input only
     x: np.ndarray              # the predictor at this point (before stepping from it)
     P: np.ndarray
     u: np.ndarray              # the input in force on [t, sigma(t))
@@ -345,7 +347,7 @@ class EstimatorSession:
     GAP_MEMORY = 1000       # gaps remembered individually for diagnostics
 
     def __init__(self, config: EstimatorConfig) -> None:
-        self.config = config
+        self.config = config                        # derives the scalar path's bounds
         self.stats = Stats()
         self.kf = config.model.make_filter(config.transition)
         self.points: deque = deque()
@@ -357,15 +359,44 @@ class EstimatorSession:
         self._variance = 0.0                        # of the sample being added
         self.input_rate = InputRate.for_config(config.period, config)
 
+    @property
+    def config(self) -> EstimatorConfig:
+        """The config in use; assigning one re-derives the bounds the scalar path reads."""
+        return self._config
+
+    @config.setter
+    def config(self, config: EstimatorConfig) -> None:
+        self._config = config
+        lo, hi = config.measurement_range or (-_INF, _INF)
+        # the bounds add() and _append test, as the same floats: a reading is in bounds
+        # exactly when low < y < inf and lo <= y <= hi
+        self._bounds = (0.0 if config.nonpositive_is_gap else -_INF, lo, hi,
+                        config.max_jump * NS, config.state_limit,
+                        config.state_limit * config.state_limit,
+                        config.gate * config.gate if config.gate > 0 else None,
+                        config.model.B is not None, config.use_message_variance,
+                        config.history_size, config.history_window * NS)
+        self._quiet_ns = 0      # an interval between measurements known to record nothing
+
     # -- public API -----------------------------------------------------------------------
 
     def add(self, stamp_ns: int, power: float, variance: float = 0.0, *,
             now_ns: Optional[int] = None) -> Outcome:
         """Take one sample (stamp in ns, measurement, its variance); say what it did."""
-        st = self.stats
-        st.received += 1
+        self.stats.received += 1
         if now_ns is not None:
             self.input_rate.note(now_ns)
+        if (power.__class__ is float and stamp_ns.__class__ is int
+                and variance.__class__ is float and self.kf._small == 1 and self.points):
+            out = self._append_scalar(stamp_ns, power, variance, now_ns)
+            if out is not None:
+                return out
+        return self._add(stamp_ns, power, variance, now_ns)
+
+    def _add(self, stamp_ns: int, power: float, variance: float,
+             now_ns: Optional[int]) -> Outcome:
+        """add() after counting: every check, then start, append, insert or restart."""
+        st = self.stats
         stamp_ns = int(stamp_ns)
         cfg = self.config
         if power.__class__ is float:            # one reading: checked on plain floats
@@ -705,6 +736,96 @@ class EstimatorSession:
             st.peak_bounds = irregular.scalar_peak_bounds(
                 float(A_h[0, 0]), float(kf.C[0, 0]), float(Q_h[0, 0]),
                 float(kf.R[0, 0]) / cfg.period, min(st.intervals), max(st.intervals))
+
+    def _append_scalar(self, stamp_ns: int, y: float, variance: float,
+                       now_ns: Optional[int]) -> Optional[Outcome]:
+        """
+        _append of an ordinary sample to a model with n = p = 1, on plain floats.
+
+        Ordinary: a reading and a variance that pass add()'s checks, a stamp after the
+        newest point (a measurement point) by at most max_jump and not ahead of the clock,
+        and a step that passes every check of _step and _append (finite, positive
+        semi-definite, within state_limit, within the gate).  The filter's own float step
+        is made without moving it, and the tests are those of the general path on the
+        same floats, in a form that passes a subset of what it passes: anything else
+        returns None having changed nothing, and add() takes the general path, which
+        decides and says why.
+        """
+        low, lo, hi, max_jump_ns, limit, limit2, gate2, has_B, message_variance, size, \
+            window_ns = self._bounds
+        if not (low < y < _INF and lo <= y <= hi and 0.0 <= variance < _INF
+                and stamp_ns <= MAX_STAMP_NS):
+            return None
+        cfg = self._config
+        if (now_ns is not None and cfg.max_future > 0
+                and stamp_ns - int(now_ns) > cfg.max_future * NS):
+            return None
+        points = self.points
+        last = points[-1]
+        t, y_t = last.stamp_ns, last.y
+        if not 0 < stamp_ns - t <= max_jump_ns or y_t is None:
+            return None
+        if y_t.__class__ is not float:
+            y_t = y_t.item()
+        kf = self.kf
+        mu = (stamp_ns - t) / NS
+        if last.variance > 0:
+            r = max(last.variance * mu, 1e-300)     # as _step; kf.step refuses r = inf
+            if r == _INF:
+                return None
+        else:
+            r = kf._r
+        try:
+            x_c, P_c, x_p, P_p, _, _ = kf.scalar_step(
+                mu, kf.x.item(), kf.P.item(), y_t, last.u.tolist() if has_B else None, r)
+        except FilterError:
+            return None
+        # finite (the step checked x_p, P_p), PSD, state_limit (_step, _health)
+        if not (math.isfinite(x_c + P_c) and P_c >= 0.0 and P_p >= 0.0
+                and abs(x_p) <= limit and P_p <= limit2):
+            return None
+        v = variance if message_variance else 0.0
+        if gate2 is not None:       # _gate on the same floats
+            c = kf._c[0]
+            e = y - c * x_p - kf._d
+            S = c * P_p * c + (v if v > 0 else kf._r / cfg.period)
+            if S != 0.0 and not e * e / S <= gate2:
+                return None
+        # accepted: move the filter and keep the point, as _append does
+        self.gated_in_a_row = 0
+        self._variance = v
+        xc, Pc, xp, Pp = _empty(1), _empty((1, 1)), _empty(1), _empty((1, 1))
+        xc[0], Pc[0, 0], xp[0], Pp[0, 0] = x_c, P_c, x_p, P_p
+        kf.x, kf.P, kf.x_corrected, kf.P_corrected = xp, Pp, xc, Pc
+        points.append(_Point(stamp_ns, y, xp, Pp, self.u, False, v))
+        st = self.stats
+        st.mu_current = mu
+        if mu > st.mu_max:
+            st.mu_max = mu
+        gap = stamp_ns - st.last_measurement_ns
+        if gap == self._quiet_ns:
+            st.last_measurement_ns = stamp_ns
+        else:
+            self._measured(stamp_ns)
+            self._quiet_ns = gap if self._records_nothing(gap) else 0
+        st.accepted += 1
+        if stamp_ns > st.last_stamp_ns:
+            st.last_stamp_ns = stamp_ns
+        st.covariance_trace = P_p
+        n = len(points)
+        if n > 2 and (n > size or stamp_ns - points[1].stamp_ns > window_ns):
+            self._trim()
+        return Outcome('accepted', '', '', [Estimate('corrected', t, xc, Pc, False),
+                                            Estimate('predicted', stamp_ns, xp, Pp, False)],
+                       [Jump(t, stamp_ns, False)])
+
+    def _records_nothing(self, gap_ns: int) -> bool:
+        """Tell whether _measured of an interval gap_ns after the last measurement is a no-op."""
+        cfg = self._config
+        J = gap_ns / NS
+        kappa = int(round(J / cfg.period))
+        return (gap_ns > 0 and kappa >= 1 and kappa in self.stats.intervals
+                and not J > cfg.jump_factor * cfg.period)
 
     def _step(self, point: _Point, sigma_ns: int, revised: bool
               ) -> tuple[list, Jump, np.ndarray, np.ndarray]:
