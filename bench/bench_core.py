@@ -13,7 +13,8 @@ of a goal alternate within each repeat, so a load that comes and goes hits them 
    below, the same numpy calls as FilterPy 2.0.0's predict and update.  Goals: n = 1
    <= 0.25x, n = 2 <= 0.5x, n <= 6 <= 1.0x, n = 20, 50 <= 1.0x.
 2. `EstimatorSession.add` (the OWC model, 1 kHz, in order) against the step of the same
-   filter: <= 1.5x.  A late sample (one point late) against history_size 10 .. 10 000:
+   filter: <= 1.5x.  Both make the filter's float step (`scalar_step`); it is printed alone,
+   and the add without it (the session's own work).  A late sample (one point late) against history_size 10 .. 10 000:
    flat (the largest / the smallest <= 2).
 3. One scanning-EKF step (runs = 1, as the live alignment node runs it) and the alignment
    session's whole `add` (gate, step, checks): <= 50 us.  The vectorised form, which the
@@ -177,12 +178,19 @@ def goal_session(repeats: int, quick: bool) -> None:
     def step() -> None:
         kf.step(0.001, yv)
 
-    # what the session adds: the same add with the filter's step replaced by its result
+    # both run the filter's float step (Table 3 on floats): alone, it is the part they share
+    floats = model.make_filter()
+    x0, P0 = floats.x.item(), floats.P.item()
+
+    def kernel() -> None:
+        floats.scalar_step(0.001, x0, P0, y, None, floats._r)
+
+    # what the session adds: the same add with the float step replaced by its result
     replay = owc_session()
     replay.add(T0, y)
     replay.add(T0 + 1_000_000, y)
-    result = replay.kf.step(0.001, yv)
-    replay.kf.step = lambda *args, **kwargs: result
+    result = replay.kf.scalar_step(0.001, x0, P0, y, None, replay.kf._r)
+    replay.kf.scalar_step = lambda *args: result
     replay_stamp = [T0 + 1_000_000]
 
     def add_without_step() -> None:
@@ -190,13 +198,15 @@ def goal_session(repeats: int, quick: bool) -> None:
         replay.add(replay_stamp[0], y)
 
     calls = 2000 // (10 if quick else 1)
-    got = alternate({'add': add, 'step': step, 'rest': add_without_step},
-                    {'add': calls, 'step': calls, 'rest': calls}, repeats)
+    got = alternate({'add': add, 'step': step, 'rest': add_without_step, 'kernel': kernel},
+                    {'add': calls, 'step': calls, 'rest': calls, 'kernel': calls}, repeats)
     ratio = min(got['add']) / min(got['step'])
     print('\n2. EstimatorSession.add (OWC, n = 1, in order) vs the step of the same filter')
     print(f'   session.add {mm(got["add"])} us   step {mm(got["step"])} us   '
           f'ratio {ratio:.2f}   <= 1.50x {verdict(ratio <= 1.5)}')
-    print(f'   session.add without the step (checks, gate, history, stats, outcome): '
+    print(f'   the float step both make (scalar_step): {mm(got["kernel"])} us; the step wraps '
+          'it in checks of mu, y, u and a StepResult of six arrays')
+    print(f'   session.add without the float step (checks, gate, history, stats, outcome): '
           f'{mm(got["rest"])} us')
 
     print('   a sample one point late (insert + re-run of 2 steps) vs history_size '

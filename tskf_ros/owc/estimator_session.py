@@ -813,8 +813,9 @@ class EstimatorSession:
             st.last_stamp_ns = stamp_ns
         st.covariance_trace = P_p
         n = len(points)
-        if n > 2 and (n > size or stamp_ns - points[1].stamp_ns > window_ns):
-            self._trim()
+        while n > 2 and (n > size or stamp_ns - points[1].stamp_ns > window_ns):
+            points.popleft()        # _trim
+            n -= 1
         return Outcome('accepted', '', '', [Estimate('corrected', t, xc, Pc, False),
                                             Estimate('predicted', stamp_ns, xp, Pp, False)],
                        [Jump(t, stamp_ns, False)])
@@ -1023,9 +1024,10 @@ class EstimatorSession:
         return self._restart('state_health', stamp_ns, y, why)
 
     def _trim(self) -> None:
-        cfg = self.config
-        newest = self.points[-1].stamp_ns
-        while len(self.points) > 2 and (
-                len(self.points) > cfg.history_size
-                or newest - self.points[1].stamp_ns > cfg.history_window * NS):
-            self.points.popleft()
+        """Keep history_size points, and the newest history_window plus the one before."""
+        size, window_ns = self._bounds[-2:]
+        points = self.points
+        newest = points[-1].stamp_ns
+        while len(points) > 2 and (
+                len(points) > size or newest - points[1].stamp_ns > window_ns):
+            points.popleft()
