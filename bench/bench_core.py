@@ -13,9 +13,9 @@ of a goal alternate within each repeat, so a load that comes and goes hits them 
    below, the same numpy calls as FilterPy 2.0.0's predict and update.  Goals: n = 1
    <= 0.25x, n = 2 <= 0.5x, n <= 6 <= 1.0x, n = 20, 50 <= 1.0x.
 2. `EstimatorSession.add` (the OWC model, 1 kHz, in order) against the step of the same
-   filter: <= 1.5x.  Both make the filter's float step (`scalar_step`); it is printed alone,
-   and the add without it (the session's own work).  A late sample (one point late) against history_size 10 .. 10 000:
-   flat (the largest / the smallest <= 2).
+   filter: <= 1.5x.  Both make the filter's float step (`scalar_step`); it is printed
+   alone, and so is the add without it (the session's own work).  A late sample (one
+   point late) against history_size 10 .. 10 000: flat (the largest / the smallest <= 2).
 3. One scanning-EKF step (runs = 1, as the live alignment node runs it) and the alignment
    session's whole `add` (gate, step, checks): <= 50 us.  The vectorised form, which the
    Monte-Carlo experiments use, is printed beside it.

@@ -75,7 +75,7 @@ def close(got, want):
 
 
 def check_step(out, t, sigma, ref_values):
-    """The outcome of an ordinary sample: corrected at t, predicted at sigma, mu."""
+    """Check the outcome of an ordinary sample: corrected at t, predicted at sigma."""
     x_c, P_c, x_p, P_p = ref_values
     assert out.status == 'accepted', (out.reason, out.message)
     (corr, pred), (jump,) = out.estimates, out.jumps

@@ -53,6 +53,11 @@ An input older than the newest point is rejected ('input_late') rather than inse
 would change the input in force on every later interval up to the next input.  Inputs
 before the first point (or after a reset) only set the input in force.  The gap and
 sampling-interval statistics are over measurement points; mu over all points.
+
+Cost: for a scalar model (n = p = 1, Cai's OWC model) an ordinary in-order sample is
+taken on plain floats, through the filter's float step (`scalar_step`) and the same tests
+on the same floats; anything else goes through the general path, which decides and says
+why.  The two give the same outcomes bit for bit (test_session_scalar_path.py).
 """
 
 from collections import Counter, deque
@@ -361,7 +366,7 @@ class EstimatorSession:
 
     @property
     def config(self) -> EstimatorConfig:
-        """The config in use; assigning one re-derives the bounds the scalar path reads."""
+        """Return the config in use; assigning one re-derives the scalar path's bounds."""
         return self._config
 
     @config.setter
