@@ -258,7 +258,7 @@ class Jump:
         return (self.sigma_ns - self.stamp_ns) / NS
 
 
-@dataclass(slots=True)
+@dataclass
 class Outcome:
     """What one sample did: status, reason and message, and what to publish."""
 
