@@ -142,7 +142,7 @@ class EstimateEncoder:
         return divmod(int(ns), NS_PER_S)
 
     def estimate(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> bytes:
-        """TwistWithCovarianceStamped of conversions.estimate_to_msg, serialized."""
+        """Return the TwistWithCovarianceStamped of conversions.estimate_to_msg, serialized."""
         n = self.n
         v = np.asarray(x, dtype=float).reshape(-1).tolist()
         cov = self._zeros.copy()
@@ -154,7 +154,7 @@ class EstimateEncoder:
         return CDR_HEADER + self._estimate.pack(sec, nsec, self._frame, *v, *cov)
 
     def states(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> bytes:
-        """JointState of conversions.estimate_to_joint_state, serialized."""
+        """Return the JointState of conversions.estimate_to_joint_state, serialized."""
         n = self.n
         P = np.asarray(P, dtype=float).reshape(n, n)
         # as np.maximum(diag, 0.0): -0.0 gives 0.0 and NaN stays NaN
@@ -166,7 +166,7 @@ class EstimateEncoder:
             self._states_mid, *sd, self._states_tail)
 
     def jump(self, stamp_ns: int, sigma_ns: int) -> bytes:
-        """TimeReference of conversions.jump_to_msg, serialized."""
+        """Return the TimeReference of conversions.jump_to_msg, serialized."""
         sec, nsec = self._stamp(stamp_ns)
         ref_sec, ref_nsec = self._stamp(sigma_ns)
         return CDR_HEADER + self._jump.pack(sec, nsec, b'\x01\0\0\0', b'\0\0\0\0', ref_sec,
