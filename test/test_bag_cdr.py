@@ -99,8 +99,9 @@ def test_the_same_message_gives_the_same_bytes():
     # the canonical size, by hand: header (4 + 4 + 4 + 1, padded to 16), name[] (4 + 4 + 6,
     # padded to 16), position[] (4, padded to 8, + 8), velocity[] (4), effort[] (4)
     assert len(first) == 4 + 16 + 16 + 4 + 4 + 8 + 4 + 4 == 60
-    padded = serialize_message(msg)
-    assert len(padded) == 68 and padded[:60] == first     # Fast-CDR's trailing padding
+    padded = serialize_message(msg)          # Fast-CDR: 8 bytes of trailing padding, and
+    assert len(padded) == 68                 # its padding bytes are left uninitialised
+    assert deserialize_message(padded, JointState) == deserialize_message(first, JointState)
 
 
 def padded_and_canonical_bags(tmp_path):
@@ -155,7 +156,7 @@ text = st.text(st.characters(blacklist_categories=('Cs',), blacklist_characters=
 
 @settings(max_examples=150, deadline=None)
 @given(n=st.integers(1, 6), data=st.data(), frame=text,
-       stamp=st.integers(0, 2 ** 31 - 1).map(lambda s: s * NS),
+       stamp=st.integers(0, 2 ** 31 - 10 ** 4 - 2).map(lambda s: s * NS),
        nsec=st.integers(0, NS - 1), sigma=st.integers(-10 * NS, 10 ** 4 * NS))
 def test_the_fixed_layout_equals_the_library_byte_for_byte(n, data, frame, stamp, nsec,
                                                            sigma):

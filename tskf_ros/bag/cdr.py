@@ -46,8 +46,20 @@ def type_name(msg: Any) -> str:
     return f'{pkg}/{sub}/{cls.__name__}'
 
 
+_CLASSES: dict = {}      # rclpy class -> (typestore class, field names)
+
+
+def _store_class(msg: Any) -> tuple:
+    cls = type(msg)
+    entry = _CLASSES.get(cls)
+    if entry is None:
+        entry = _CLASSES[cls] = (typestore().types[type_name(msg)],
+                                 tuple(msg.get_fields_and_field_types()))
+    return entry
+
+
 def _convert(value: Any) -> Any:
-    if hasattr(value, 'get_fields_and_field_types'):
+    if hasattr(value, '_fields_and_field_types'):
         return to_store(value)
     if isinstance(value, array.array):
         return np.array(value, dtype=_NUMPY[value.typecode])
@@ -62,14 +74,13 @@ def _convert(value: Any) -> Any:
 
 def to_store(msg: Any) -> Any:
     """Copy an rclpy message into the rosbags typestore's class of the same type."""
-    cls = typestore().types[type_name(msg)]
-    return cls(**{name: _convert(getattr(msg, name))
-                  for name in msg.get_fields_and_field_types()})
+    cls, names = _store_class(msg)
+    return cls(**{name: _convert(getattr(msg, name)) for name in names})
 
 
 def serialize(msg: Any) -> bytes:
     """Return the canonical CDR bytes of an rclpy message (rosbags' serializer)."""
-    return bytes(typestore().serialize_cdr(to_store(msg), type_name(msg)))
+    return bytes(typestore().serialize_cdr(to_store(msg), _store_class(msg)[0].__msgtype__))
 
 
 class _Layout:

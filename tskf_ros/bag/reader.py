@@ -46,6 +46,7 @@ DAMAGE_ERRORS = (McapError, EOFError, struct.error, ValueError, UnicodeDecodeErr
                  TypeError, IndexError)
 _RECORD_HEAD = struct.Struct('<BQ')         # opcode, length
 _MESSAGE_HEAD = struct.Struct('<H4xQ')      # channel id, (sequence), log time
+MESSAGE = int(Opcode.MESSAGE)
 
 
 def error_exit(prog: str, exc: Exception, path: object = '') -> int:
@@ -136,6 +137,25 @@ def parse_qos(value: object) -> list:
         return rosbags_parse_qos(value)
     except (ReaderError, KeyError, TypeError, AttributeError, ValueError):
         return []
+
+
+class _Records(StreamReader):
+    """
+    The mcap package's StreamReader, reading MessageIndex records as bytes, unparsed.
+
+    A sequential read has no use for the indexes, and parsing their entries one by one
+    costs a fifth of reading a bag; their bytes are still read (and in the data-section
+    CRC), and the record is yielded as SKIPPED so that the caller knows where the next one
+    starts.  Overrides StreamReader._read_record (mcap pinned in requirements.txt).
+    """
+
+    SKIPPED = b'MessageIndex'
+
+    def _read_record(self, opcode: int, length: int) -> object:
+        if opcode == Opcode.MESSAGE_INDEX:
+            self._stream.read(length)
+            return self.SKIPPED
+        return super()._read_record(opcode, length)
 
 
 class BagReader:
@@ -296,8 +316,8 @@ class BagReader:
             offset = len(MCAP_MAGIC)
             try:
                 # a record longer than the file is truncation, not a reason to allocate it
-                for record in StreamReader(f, emit_chunks=True, validate_crcs=True,
-                                           record_size_limit=size).records:
+                for record in _Records(f, emit_chunks=True, validate_crcs=True,
+                                       record_size_limit=size).records:
                     if isinstance(record, Chunk):
                         for msg in self._chunk(record, schemas, channels, wanted):
                             count += 1
@@ -377,21 +397,24 @@ class BagReader:
                              f'{chunk.uncompressed_size}')
         data = stream.read(end)
         pos = 0
+        record_head, message_head = _RECORD_HEAD.unpack_from, _MESSAGE_HEAD.unpack_from
         while pos < end:
             if end - pos < 9:
                 raise ValueError('chunk ends inside a record header')
-            opcode, length = _RECORD_HEAD.unpack_from(data, pos)
+            opcode, length = record_head(data, pos)
             body = pos + 9
             pos = body + length
             if pos > end:
                 raise ValueError(f'record of {length} bytes overruns its chunk')
-            if opcode == Opcode.MESSAGE:
+            if opcode == MESSAGE:
                 if length < 22:
                     raise ValueError('message record too short')
-                cid, log_time = _MESSAGE_HEAD.unpack_from(data, body)
-                msg = self._message(cid, log_time, data[body + 22:pos], channels, wanted)
-                if msg is not None:
-                    yield msg
+                cid, log_time = message_head(data, body)
+                ch = channels.get(cid)
+                if ch is None:
+                    raise ValueError(f'message on unknown channel {cid}')
+                if wanted is None or ch[0] in wanted:
+                    yield RawMessage(ch[0], ch[1], log_time, data[body + 22:pos])
             elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
                 sub = ReadDataStream(BytesIO(data[body:pos]))
                 if opcode == Opcode.SCHEMA:
