@@ -31,8 +31,8 @@ def messages(path):
     """
     Return (topic, type, log time, decoded message) of every message.
 
-    Decoded, not bytes: rclpy's CDR serializer leaves its alignment padding uninitialised,
-    so the same message does not always give the same bytes.
+    Decoded, not bytes: numpy's results differ in the last bits from one CPU to another,
+    so a regenerated bag need not have the same bytes (see assert_same_messages).
     """
     reader = BagReader(path)
     out = [(m.topic, m.msgtype, m.log_time_ns,
