@@ -19,6 +19,11 @@ the log times, a clock that jumps from boot time to the present), one /diagnosti
 message is written at the latest due time, not one per period (the output stays bounded by
 the input, however long the span of its clock).
 
+Outputs are canonical CDR (tskf_ros.bag.cdr); the input topics are copied as they are.
+
+Analysis mode: --npz FILE writes no bag but the outputs as numpy arrays (ArraySink); from
+Python, replay_arrays(bag, config) returns them.
+
 --filter alignment runs the alignment node's AlignmentSession instead (tskf_ros.messages.
 alignment_interface) on the intensity topic (default /intensity, else the only stamped scalar
 topic, e.g. /photodiode of bags/led_alignment) and writes what that node publishes:
