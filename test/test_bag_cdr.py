@@ -1,7 +1,5 @@
 """Canonical CDR: what the package writes, every library reads; both forms are read."""
 
-import array
-import dataclasses
 from pathlib import Path
 import shutil
 import struct
@@ -14,11 +12,12 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import JointState
+from test_bag_samples import flatten
 
 from tskf_ros.bag import offline_replay
 from tskf_ros.bag.cdr import EstimateEncoder, serialize, type_name
 from tskf_ros.bag.message_types import message_class, typestore
-from tskf_ros.bag.reader import BagReader, EXIT_DAMAGED, MetadataError
+from tskf_ros.bag.reader import BagReader, EXIT_DAMAGED, MetadataError, RawMessage
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.messages import conversions
 from tskf_ros.tools import plot_bag
@@ -31,31 +30,6 @@ SAMPLES = ('owc_cai_td_1hz', 'owc_ge_1khz', 'led_alignment', 'drogue')
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS
-
-
-def values(msg, prefix=''):
-    """Return {field path: value} of an rclpy or a rosbags message (nested, flattened)."""
-    if dataclasses.is_dataclass(msg):
-        names = [f.name for f in dataclasses.fields(msg) if not f.name.startswith('__')]
-    elif hasattr(msg, 'get_fields_and_field_types'):
-        names = list(msg.get_fields_and_field_types())
-    elif type(msg).__module__ == 'mcap_ros2._dynamic':
-        names = list(msg.__slots__)
-    else:
-        names = None
-    if names is not None:
-        out = {}
-        for name in names:
-            out.update(values(getattr(msg, name), f'{prefix}.{name}'))
-        return out
-    if isinstance(msg, (list, tuple, array.array, np.ndarray)):
-        out = {f'{prefix}.len': len(msg)}
-        for i, item in enumerate(msg):
-            out.update(values(item, f'{prefix}[{i}]'))
-        return out
-    if isinstance(msg, bytes) and len(msg) == 1:      # rclpy's `byte`; rosbags gives an int
-        return {prefix: msg[0]}
-    return {prefix: msg.item() if isinstance(msg, np.generic) else msg}
 
 
 def mcap_file(bag):
@@ -83,10 +57,10 @@ def test_every_sample_message_is_canonical_for_rosbags_mcap_ros2_and_rclpy(name)
         raw = ours[k]
         by_rosbags = store.deserialize_cdr(raw.data, raw.msgtype)
         by_rclpy = deserialize_message(raw.data, message_class(raw.msgtype))
-        want = values(by_rclpy)
-        assert values(by_rosbags) == want, f'{name} message {k}'
+        want = flatten(by_rclpy)
+        assert flatten(by_rosbags) == want, f'{name} message {k}'
         assert decoded[k][:2] == (raw.topic, raw.log_time_ns)
-        assert values(decoded[k][2]) == want, f'{name} message {k} (mcap_ros2)'
+        assert flatten(decoded[k][2]) == want, f'{name} message {k} (mcap_ros2)'
         assert serialize(by_rclpy) == raw.data, f'{name} message {k} is not canonical'
     for raw in ours:     # all of them, strictly: rosbags refuses trailing or missing bytes
         store.deserialize_cdr(raw.data, raw.msgtype)
@@ -183,18 +157,23 @@ def test_the_fixed_layout_refuses_what_does_not_fit():
         EstimateEncoder('', ['a'], 2)
 
 
-def test_a_replayed_bag_is_canonical_and_equals_the_in_memory_replay(tmp_path):
-    bag = BAGS / 'owc_cai_td_1hz'
+@pytest.mark.parametrize('bag, params, extra', [
+    ('owc_cai_td_1hz', 'owc_estimator.yaml', []),
+    ('led_alignment', 'alignment.yaml', ['--filter', 'alignment'])])
+def test_a_replayed_bag_is_canonical_and_equals_the_in_memory_replay(tmp_path, bag, params,
+                                                                     extra):
+    bag, params = BAGS / bag, REPO / 'config' / params
     assert offline_replay.main([str(bag), str(tmp_path / 'est'), '-q',
-                                '--params-file', str(PARAMS)]) == 0
-    memory = offline_replay.replay(bag, None, params_file=PARAMS)
+                                '--params-file', str(params)] + extra) == 0
+    memory = offline_replay.replay(bag, None, params_file=params,
+                                   filter='alignment' if extra else 'estimator')
     store = typestore()
     written = list(BagReader(tmp_path / 'est').messages())
     assert [(m.topic, m.log_time_ns) for m in written] == \
         [(t, n) for t, n, _ in memory.outputs]
     for raw, (_, _, msg) in zip(written, memory.outputs):
         store.deserialize_cdr(raw.data, raw.msgtype)        # strict: canonical
-        if raw.topic.startswith('/estimate') or raw.topic == '/diagnostics':
+        if not isinstance(msg, RawMessage):       # an output, not a copied input
             assert deserialize_message(raw.data, type(msg)) == msg
             assert raw.data == serialize(msg)
     with mcap_file(tmp_path / 'est').open('rb') as f:
@@ -247,6 +226,21 @@ def test_replay_arrays_hold_what_the_output_bag_holds(tmp_path, capsys):
     assert offline_replay.main([str(bag), '--npz', str(tmp_path / 'a.npz'), '-q']) == 1
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and 'exists already' in err
+
+
+def test_the_arrays_file_is_whole_or_absent(tmp_path, monkeypatch, capsys):
+    out = tmp_path / 'a.npz'
+
+    def fail(*args, **kwargs):
+        raise OSError(28, 'No space left on device')
+    monkeypatch.setattr(offline_replay.np, 'savez', fail)
+    assert offline_replay.main([str(BAGS / 'owc_cai_td_1hz'), '--npz', str(out), '-q']) == 1
+    assert 'No space left on device' in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(SystemExit) as info:       # --npz writes no bag: no output with it
+        offline_replay.main([str(BAGS / 'owc_cai_td_1hz'), str(tmp_path / 'o'), '--npz',
+                             str(out)])
+    assert info.value.code == 2 and list(tmp_path.iterdir()) == []
 
 
 def flip_in_third_chunk(src, dst):
