@@ -2,6 +2,7 @@
 
 import array
 import copy
+import dataclasses
 import json
 from pathlib import Path
 import re
@@ -31,8 +32,8 @@ def messages(path):
     """
     Return (topic, type, log time, decoded message) of every message.
 
-    Decoded, not bytes: rclpy's CDR serializer leaves its alignment padding uninitialised,
-    so the same message does not always give the same bytes.
+    Decoded, not bytes: numpy's results differ in the last bits from one CPU to another,
+    so a regenerated bag need not have the same bytes (see assert_same_messages).
     """
     reader = BagReader(path)
     out = [(m.topic, m.msgtype, m.log_time_ns,
@@ -42,11 +43,23 @@ def messages(path):
     return out
 
 
+def field_names(msg):
+    """Return the field names of an rclpy, rosbags or mcap_ros2 message, or None."""
+    if dataclasses.is_dataclass(msg):                       # rosbags
+        return [f.name for f in dataclasses.fields(msg) if not f.name.startswith('__')]
+    if hasattr(msg, 'get_fields_and_field_types'):         # rclpy
+        return list(msg.get_fields_and_field_types())
+    if type(msg).__module__ == 'mcap_ros2._dynamic':        # mcap_ros2
+        return list(msg.__slots__)
+    return None
+
+
 def flatten(msg, prefix=''):
     """Return {field path: value} of a message, recursing into nested messages and lists."""
-    if hasattr(msg, 'get_fields_and_field_types'):
+    names = field_names(msg)
+    if names is not None:
         out = {}
-        for name in msg.get_fields_and_field_types():
+        for name in names:
             out.update(flatten(getattr(msg, name), f'{prefix}.{name}'))
         return out
     if isinstance(msg, (list, tuple, array.array, np.ndarray)):
@@ -54,7 +67,11 @@ def flatten(msg, prefix=''):
         for i, item in enumerate(msg):
             out.update(flatten(item, f'{prefix}[{i}]'))
         return out
-    return {prefix: float(msg) if isinstance(msg, (float, np.floating)) else msg}
+    if isinstance(msg, bytes) and len(msg) == 1:      # rclpy's `byte`; the others give an int
+        return {prefix: msg[0]}
+    if isinstance(msg, (float, np.floating)):
+        return {prefix: float(msg)}
+    return {prefix: msg.item() if isinstance(msg, np.generic) else msg}
 
 
 def assert_same_messages(got, want, rtol=1e-9):

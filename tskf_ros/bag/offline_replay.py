@@ -19,6 +19,11 @@ the log times, a clock that jumps from boot time to the present), one /diagnosti
 message is written at the latest due time, not one per period (the output stays bounded by
 the input, however long the span of its clock).
 
+Outputs are canonical CDR (tskf_ros.bag.cdr); the input topics are copied as they are.
+
+Analysis mode: --npz FILE writes no bag but the outputs as numpy arrays (ArraySink); from
+Python, replay_arrays(bag, config) returns them.
+
 --filter alignment runs the alignment node's AlignmentSession instead (tskf_ros.messages.
 alignment_interface) on the intensity topic (default /intensity, else the only stamped scalar
 topic, e.g. /photodiode of bags/led_alignment) and writes what that node publishes:
@@ -41,13 +46,17 @@ from dataclasses import dataclass, field
 import os
 from pathlib import Path
 import sys
+import tempfile
 import time
 from typing import Callable, Optional
 
-from rclpy.serialization import deserialize_message, serialize_message
+import numpy as np
+from rclpy.serialization import deserialize_message
 
+from tskf_ros.bag.cdr import EstimateEncoder, serialize
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_from_rclpy, typestore
-from tskf_ros.bag.reader import BagError, BagReader, Damage, error_exit, exit_status
+from tskf_ros.bag.reader import (BagError, BagReader, Damage, error_exit, EXIT_DAMAGED,
+                                 exit_status)
 from tskf_ros.bag.writer import BagExistsError, BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_session import AlignmentSession
@@ -167,9 +176,11 @@ class OfflineEstimator:
         self.config = config
         self.session = self.session_class(config.session)
         self.cls = message_class(msgtype)
+        self.input_cls = message_class(INPUT_TYPE)
         self.extract = extractor(msgtype)
         self.period_ns = int(round(config.diagnostics_period * NS))
         self.next_diag: Optional[int] = None
+        self._encoder: Optional[EstimateEncoder] = None
 
     def output_topics(self) -> list:
         """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
@@ -194,18 +205,39 @@ class OfflineEstimator:
         self.next_diag = due + self.period_ns
         return [(due, self.interface.diagnostics_message(self.session, self.config, due))]
 
-    def process(self, data: bytes, log_ns: int) -> tuple[str, list]:
-        """Deserialize one measurement and run it; return (status, [(topic, msg)])."""
-        msg = deserialize_message(data, self.cls)
-        stamp_ns, value, variance = self.extract(msg, log_ns)
-        out = self.session.add(stamp_ns, value, variance, now_ns=log_ns)
-        return out.status, bag_outcome_messages(out, self.config)
+    def process(self, data: bytes, log_ns: int) -> tuple[tuple, object]:
+        """Deserialize one measurement and run it; return ((stamp, value, variance), outcome)."""
+        sample = self.extract(deserialize_message(data, self.cls), log_ns)
+        return sample, self.session.add(*sample, now_ns=log_ns)
 
-    def process_input(self, data: bytes, log_ns: int) -> tuple[str, list]:
-        """Deserialize one input u and run it; return (status, [(topic, msg)])."""
-        msg = deserialize_message(data, message_class(INPUT_TYPE))
-        out = self.session.add_input(*input_from_msg(msg, self.session))
-        return out.status, bag_outcome_messages(out, self.config)
+    def process_input(self, data: bytes, log_ns: int) -> tuple[tuple, object]:
+        """Deserialize one input u and run it; return ((stamp, u), outcome)."""
+        sample = input_from_msg(deserialize_message(data, self.input_cls), self.session)
+        return sample, self.session.add_input(*sample)
+
+    def messages(self, out: object) -> list:
+        """Return the (bag topic, rclpy message) pairs the live node publishes for out."""
+        return bag_outcome_messages(out, self.config)
+
+    def encoded(self, out: object) -> list:
+        """Return what messages(out) returns, serialized (canonical CDR, fixed layout)."""
+        enc = self._encoder
+        if enc is None:
+            names = self.config.session.model.state_names
+            enc = self._encoder = EstimateEncoder(self.config.frame_id, names, len(names))
+        pairs = []
+        for e in out.estimates:
+            pairs.append((_ESTIMATE_TOPICS[e.kind, e.revised], enc.estimate(e.stamp_ns, e.x, e.P)))
+            pairs.append((_STATES_TOPICS[e.kind, e.revised], enc.states(e.stamp_ns, e.x, e.P)))
+        pairs += [(_ESTIMATE_TOPICS['mu', j.revised], enc.jump(j.stamp_ns, j.sigma_ns))
+                  for j in out.jumps]
+        return pairs
+
+
+_ESTIMATE_TOPICS = BAG_OUTPUT_TOPICS
+_STATES_TOPICS = {(kind, revised): BAG_OUTPUT_TOPICS[kind + '_states', revised]
+                  for kind, revised in BAG_OUTPUT_TOPICS if not kind.endswith('_states')
+                  and kind != 'mu'}
 
 
 class OfflineAligner(OfflineEstimator):
@@ -219,12 +251,42 @@ class OfflineAligner(OfflineEstimator):
         return [(name, aligner.OUTPUT_TYPES[key], aligner.output_qos(self.config, key))
                 for key, name in aligner.BAG_OUTPUT_TOPICS.items()]
 
-    def process(self, data: bytes, log_ns: int) -> tuple[str, list]:
-        """Deserialize one intensity sample and run it; return (status, [(topic, msg)])."""
-        msg = deserialize_message(data, self.cls)
-        stamp_ns, volts, _ = self.extract(msg, log_ns)
-        out = self.session.add(stamp_ns, volts, now_ns=log_ns)
-        return out.status, aligner.bag_outcome_messages(out, self.config)
+    def process(self, data: bytes, log_ns: int) -> tuple[tuple, object]:
+        """Deserialize one intensity sample and run it; return (sample, outcome)."""
+        sample = self.extract(deserialize_message(data, self.cls), log_ns)
+        return sample, self.session.add(sample[0], sample[1], now_ns=log_ns)
+
+    def messages(self, out: object) -> list:
+        """Return the (bag topic, rclpy message) pairs the live node publishes for out."""
+        return aligner.bag_outcome_messages(out, self.config)
+
+    def encoded(self, out: object) -> list:
+        """Return what messages(out) returns, serialized (canonical CDR, rosbags)."""
+        return [(topic, serialize(msg)) for topic, msg in self.messages(out)]
+
+
+def _prepare(bag: os.PathLike, config: object, topic: Optional[str], filter: str,  # noqa: A002
+             input_topic: Optional[str], log: Callable[[str], None]
+             ) -> tuple[BagReader, OfflineEstimator, ReplayResult]:
+    """Open the bag, load the config, choose the topics; raise before anything is written."""
+    if filter not in FILTERS:
+        raise ValueError(f'filter must be one of {FILTERS}, got {filter!r}')
+    reader = BagReader(bag)
+    aligning = filter == 'alignment'
+    if not isinstance(config, (estimator.NodeConfig, aligner.NodeConfig)):
+        config = (aligner.load_config if aligning else load_config)(config)
+    result = ReplayResult()
+    result.topic, result.msgtype, result.assumptions = choose_topic(
+        reader, topic, FILTER_INPUT[filter][0])
+    if aligning:
+        result.assumptions.append(aligner.OPEN_LOOP_NOTE)
+    else:
+        result.input_topic, notes = choose_input_topic(reader, input_topic)
+        result.assumptions += notes
+    for line in result.assumptions:
+        log(line)
+    est = (OfflineAligner if aligning else OfflineEstimator)(config, result.msgtype)
+    return reader, est, result
 
 
 def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
@@ -238,63 +300,70 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
 
     filter='alignment' runs the alignment node's session instead (open loop, see above).
     input_topic: the estimator's input u (default /input if present; see choose_input_topic).
+    In memory, `result.outputs` holds (topic, log time, rclpy message or the input's
+    RawMessage) in order.
 
     Raises BagError / ParamsError / BagTypeError before anything is written if the bag or
     the parameters cannot be used.  Damage met while reading stops the replay; what came
     before is processed and written, and `result.damage` says where it stopped.
     """
     t0 = time.perf_counter()
-    if filter not in FILTERS:
-        raise ValueError(f'filter must be one of {FILTERS}, got {filter!r}')
     if output is not None:
         _check_output(Path(bag), Path(output), overwrite)
-    reader = BagReader(bag)
-    aligning = filter == 'alignment'
-    config = (aligner.load_config if aligning else load_config)(params_file)
-    result = ReplayResult()
-    result.topic, result.msgtype, result.assumptions = choose_topic(
-        reader, topic, FILTER_INPUT[filter][0])
-    if aligning:
-        result.assumptions.append(aligner.OPEN_LOOP_NOTE)
-    else:
-        result.input_topic, notes = choose_input_topic(reader, input_topic)
-        result.assumptions += notes
-    for line in result.assumptions:
-        log(line)
-    est = (OfflineAligner if aligning else OfflineEstimator)(config, result.msgtype)
-    writer = None
-    store = typestore()
-    if output is not None:
-        writer = BagWriter(output, overwrite=overwrite, compress=compress)
-        writer.open()
+    reader, est, result = _prepare(bag, params_file, topic, filter, input_topic, log)
+    if output is None:
+        result.damage = _run(reader, est, _Collect(result), result, diagnostics)
+        result.seconds = time.perf_counter() - t0
+        return result
+    writer = BagWriter(output, overwrite=overwrite, compress=compress)
+    writer.open()
     try:
-        if writer is not None:
-            for name, info in reader.topics.items():
-                if info.msgtype in store.fielddefs or info.msgdef:
-                    writer.add_topic(name, info.msgtype, qos=info.qos, msgdef=info.msgdef)
-                else:
-                    log(f'{name}: type {info.msgtype} has no definition here; not copied')
-            for name, msgtype, qos in est.output_topics():
-                if not writer.has_topic(name):
-                    writer.add_topic(name, msgtype, qos=[qos_from_rclpy(qos)])
-            if diagnostics and not writer.has_topic(DIAGNOSTICS_TOPIC):
-                writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, qos=[qos_from_rclpy(
-                    est.output_topics()[0][2])])
-            if aligning:
-                writer.set_custom_data('tskf_ros.open_loop', aligner.OPEN_LOOP_NOTE)
-        damage = _run(reader, est, writer, result, diagnostics)
-        if damage is not None:
-            result.damage = damage
-            if writer is not None:
-                writer.set_custom_data('tskf_ros.input_damage', str(damage))
-        if writer is not None:
-            writer.close()
+        _add_topics(writer, reader, est, diagnostics, log)
+        if filter == 'alignment':
+            writer.set_custom_data('tskf_ros.open_loop', aligner.OPEN_LOOP_NOTE)
+        result.damage = _run(reader, est, _BagSink(writer, result), result, diagnostics)
+        if result.damage is not None:
+            writer.set_custom_data('tskf_ros.input_damage', str(result.damage))
+        writer.close()
     except BaseException:
-        if writer is not None:
-            writer.abort()
+        writer.abort()
         raise
     result.seconds = time.perf_counter() - t0
     return result
+
+
+def replay_arrays(bag: os.PathLike, config: object = None, *, topic: Optional[str] = None,
+                  input_topic: Optional[str] = None, diagnostics: bool = True,
+                  log: Callable[[str], None] = lambda s: None) -> dict:
+    """
+    Run the estimator over `bag` and return its outputs as numpy arrays; write nothing.
+
+    config: a NodeConfig (estimator_interface.load_config / parameters_to_config), a
+    parameter file, or None for the node's defaults.  The keys (see ArraySink) hold what
+    the output bag's topics hold, one row per message; 'meta.damage' is '' or the damage
+    that stopped the reading (the rows are what came before it).  Raises as replay().
+    """
+    reader, est, result = _prepare(bag, config, topic, 'estimator', input_topic, log)
+    sink = ArraySink(est)
+    result.damage = _run(reader, est, sink, result, diagnostics)
+    return sink.arrays(result)
+
+
+def _add_topics(writer: BagWriter, reader: BagReader, est: OfflineEstimator,
+                diagnostics: bool, log: Callable[[str], None]) -> None:
+    """Add the input bag's topics (those with a definition) and the node's outputs."""
+    store = typestore()
+    for name, info in reader.topics.items():
+        if info.msgtype in store.fielddefs or info.msgdef:
+            writer.add_topic(name, info.msgtype, qos=info.qos, msgdef=info.msgdef)
+        else:
+            log(f'{name}: type {info.msgtype} has no definition here; not copied')
+    for name, msgtype, qos in est.output_topics():
+        if not writer.has_topic(name):
+            writer.add_topic(name, msgtype, qos=[qos_from_rclpy(qos)])
+    if diagnostics and not writer.has_topic(DIAGNOSTICS_TOPIC):
+        writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, qos=[qos_from_rclpy(
+            est.output_topics()[0][2])])
 
 
 def _check_output(bag: Path, output: Path, overwrite: bool) -> None:
@@ -306,54 +375,162 @@ def _check_output(bag: Path, output: Path, overwrite: bool) -> None:
     BagWriter(output, overwrite=overwrite).check_target()
 
 
-def _run(reader: BagReader, est: OfflineEstimator, writer: Optional[BagWriter],
-         result: ReplayResult, diagnostics: bool) -> Optional[Damage]:
-    """Read, estimate, write; return the damage that stopped the reading, if any."""
-    topic = result.topic
-    collect = writer is None
+class _Collect:
+    """Outputs kept in memory as rclpy messages (result.outputs)."""
+
+    def __init__(self, result: ReplayResult) -> None:
+        self.result = result
+
+    def copy(self, raw: object) -> None:
+        self.result.outputs.append((raw.topic, raw.log_time_ns, raw))
+
+    def outcome(self, est: OfflineEstimator, log_ns: int, sample: tuple, out: object,
+                is_input: bool) -> None:
+        for topic, msg in est.messages(out):
+            self.result.written[topic] += 1
+            self.result.outputs.append((topic, log_ns, msg))
+
+    def diagnostics(self, stamp_ns: int, msg: object) -> None:
+        self.result.written[DIAGNOSTICS_TOPIC] += 1
+        self.result.outputs.append((DIAGNOSTICS_TOPIC, stamp_ns, msg))
+
+
+class _BagSink:
+    """Outputs written to a bag, serialized to canonical CDR."""
+
+    def __init__(self, writer: BagWriter, result: ReplayResult) -> None:
+        self.writer = writer
+        self.written = result.written
+
+    def copy(self, raw: object) -> None:
+        if self.writer.has_topic(raw.topic):
+            self.writer.write(raw.topic, raw.log_time_ns, raw.data)
+
+    def outcome(self, est: OfflineEstimator, log_ns: int, sample: tuple, out: object,
+                is_input: bool) -> None:
+        write = self.writer.write
+        for topic, data in est.encoded(out):
+            self.written[topic] += 1
+            write(topic, log_ns, data)
+
+    def diagnostics(self, stamp_ns: int, msg: object) -> None:
+        self.written[DIAGNOSTICS_TOPIC] += 1
+        self.writer.write(DIAGNOSTICS_TOPIC, stamp_ns, serialize(msg))
+
+
+class ArraySink:
+    """
+    The estimator's outputs as numpy arrays, one row per message of the output bag.
+
+    Keys ('<topic>.<field>', the topic without its leading '/'):
+
+    - sample.{log_ns, stamp_ns, value, variance, status, reason}: every measurement read
+      (status accepted / inserted / gap / rejected / reset; reason why, or '');
+    - input.{log_ns, stamp_ns, status}: every input u read (if the bag has one);
+    - estimate/{predicted,corrected}.{log_ns, stamp_ns, x (rows x n), P (rows x n x n)},
+      and estimate/revised/... for the estimates revised by a late sample: the
+      TwistWithCovarianceStamped topics (their *_states mirrors are x and sqrt(diag P));
+    - estimate/mu.{log_ns, stamp_ns, sigma_ns, mu} (mu in s) and estimate/revised/mu;
+    - diagnostics.{log_ns, level, message} (level 0 OK .. 3 STALE);
+    - meta.{topic, input_topic, damage, assumptions}: strings.
+    """
+
+    def __init__(self, est: OfflineEstimator) -> None:
+        self.n = len(est.config.session.model.state_names)
+        self.samples: list = []
+        self.inputs: list = []
+        self.estimates: dict = {key: [] for key in _ESTIMATE_TOPICS}
+        self.diag: list = []
+
+    def copy(self, raw: object) -> None:
+        pass
+
+    def outcome(self, est: OfflineEstimator, log_ns: int, sample: tuple, out: object,
+                is_input: bool) -> None:
+        if is_input:
+            self.inputs.append((log_ns, sample[0], out.status))
+        else:
+            self.samples.append((log_ns, sample[0], sample[1], sample[2], out.status,
+                                 out.reason))
+        rows = self.estimates
+        for e in out.estimates:
+            rows[e.kind, e.revised].append((log_ns, e.stamp_ns, e.x, e.P))
+        for j in out.jumps:
+            rows['mu', j.revised].append((log_ns, j.stamp_ns, j.sigma_ns))
+
+    def diagnostics(self, stamp_ns: int, msg: object) -> None:
+        status = msg.status[0]
+        level = status.level
+        self.diag.append((stamp_ns, level[0] if isinstance(level, bytes) else int(level),
+                          status.message))
+
+    def arrays(self, result: ReplayResult) -> dict:
+        """Return the dict of numpy arrays, keys as the class doc says."""
+        out = {}
+        i8, f8, n = np.int64, np.float64, self.n
+        _columns(out, 'sample', self.samples, (('log_ns', i8), ('stamp_ns', i8),
+                                               ('value', f8), ('variance', f8),
+                                               ('status', str), ('reason', str)))
+        if result.input_topic:
+            _columns(out, 'input', self.inputs, (('log_ns', i8), ('stamp_ns', i8),
+                                                 ('status', str)))
+        for key, rows in self.estimates.items():
+            name = _ESTIMATE_TOPICS[key].lstrip('/')
+            if key[0] == 'mu':
+                _columns(out, name, rows, (('log_ns', i8), ('stamp_ns', i8),
+                                           ('sigma_ns', i8)))
+                out[f'{name}.mu'] = (out[f'{name}.sigma_ns'] - out[f'{name}.stamp_ns']) / NS
+            elif not key[0].endswith('_states'):
+                _columns(out, name, [r[:2] for r in rows], (('log_ns', i8), ('stamp_ns', i8)))
+                out[f'{name}.x'] = np.array([r[2] for r in rows], dtype=f8).reshape(-1, n)
+                out[f'{name}.P'] = np.array([r[3] for r in rows], dtype=f8).reshape(-1, n, n)
+        _columns(out, 'diagnostics', self.diag, (('log_ns', i8), ('level', np.int8),
+                                                 ('message', str)))
+        out['meta.topic'] = np.array(result.topic)
+        out['meta.input_topic'] = np.array(result.input_topic)
+        out['meta.damage'] = np.array(str(result.damage or ''))
+        out['meta.assumptions'] = np.array(result.assumptions, dtype=str)
+        return out
+
+
+def _columns(out: dict, name: str, rows: list, columns: tuple) -> None:
+    """Store the columns of `rows` (tuples) as out['name.column'] arrays of their dtypes."""
+    cols = list(zip(*rows)) if rows else [()] * len(columns)
+    for (column, dtype), values in zip(columns, cols):
+        out[f'{name}.{column}'] = np.array(values, dtype=dtype)
+
+
+def _run(reader: BagReader, est: OfflineEstimator, sink: object, result: ReplayResult,
+         diagnostics: bool) -> Optional[Damage]:
+    """Read, estimate, hand the outputs to the sink; return the damage that stopped it."""
+    topic, input_topic = result.topic, result.input_topic
+    process, process_input = est.process, est.process_input
     for raw in reader.messages():
         result.read += 1
         log_ns = raw.log_time_ns
         if diagnostics:
             for t, msg in est.diagnostics_due(log_ns):
-                _emit(writer, result, DIAGNOSTICS_TOPIC, t, msg, collect)
-        if writer is not None and writer.has_topic(raw.topic):
-            writer.write(raw.topic, log_ns, raw.data)
-        process, msgs = None, []
-        if raw.topic == result.input_topic:
-            process, msgtype = est.process_input, INPUT_TYPE
-        elif raw.topic == topic:
-            process, msgtype = est.process, result.msgtype
-        if process is not None:
-            try:
-                status, msgs = process(raw.data, log_ns)
-            except DESERIALIZE_ERRORS as exc:
-                return Damage(str(reader.path), -1, f'message {result.read} on {raw.topic} '
-                              f'does not deserialize as {msgtype} ({exc})', result.read - 1)
-        if collect:
-            result.outputs.append((raw.topic, log_ns, raw))
-        if process is None:
+                sink.diagnostics(t, msg)
+        sink.copy(raw)
+        is_input = raw.topic == input_topic
+        if not is_input and raw.topic != topic:
             continue
-        if process == est.process:
-            result.samples += 1
-            result.statuses[status] += 1
-        else:
+        try:
+            sample, out = (process_input if is_input else process)(raw.data, log_ns)
+        except DESERIALIZE_ERRORS as exc:
+            msgtype = INPUT_TYPE if is_input else result.msgtype
+            return Damage(str(reader.path), -1, f'message {result.read} on {raw.topic} '
+                          f'does not deserialize as {msgtype} ({exc})', result.read - 1)
+        if is_input:
             result.inputs += 1
-            result.input_statuses[status] += 1
-        for name, msg in msgs:
-            _emit(writer, result, name, log_ns, msg, collect)
+            result.input_statuses[out.status] += 1
+        else:
+            result.samples += 1
+            result.statuses[out.status] += 1
+        sink.outcome(est, log_ns, sample, out, is_input)
     if result.samples == 0 and reader.damage is None:
         raise InputError(f'{reader.path}: no messages on {topic}')
     return reader.damage
-
-
-def _emit(writer: Optional[BagWriter], result: ReplayResult, topic: str, log_ns: int,
-          msg: object, collect: bool) -> None:
-    result.written[topic] += 1
-    if collect:
-        result.outputs.append((topic, log_ns, msg))
-    else:
-        writer.write(topic, log_ns, serialize_message(msg))
 
 
 def default_output(bag: Path, filter: str = 'estimator') -> Path:  # noqa: A002
@@ -389,14 +566,23 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--compress', action='store_true', help='zstd-compress the chunks')
     parser.add_argument('--no-diagnostics', action='store_true',
                         help='do not write /diagnostics')
+    parser.add_argument('--npz', type=Path, metavar='FILE',
+                        help='analysis mode: write no bag, write the outputs as numpy arrays '
+                        'to FILE (.npz; keys: see ArraySink); the estimator only')
     parser.add_argument('-q', '--quiet', action='store_true', help='only errors')
     args = parser.parse_args(argv)
+    if args.npz is not None and (args.output is not None or args.filter != 'estimator'
+                                 or args.compress):
+        parser.error('--npz writes no bag: no output bag, --compress or --filter alignment '
+                     'with it')
     output = args.output or default_output(args.bag, args.filter)
 
     def log(line: str) -> None:
         if line.startswith('WARNING') or not args.quiet:
             print(f'{PROG}: {line}', file=sys.stderr if line.startswith('WARNING')
                   else sys.stdout, flush=True)
+    if args.npz is not None:
+        return _npz_main(args, log)
     try:
         res = replay(args.bag, output, params_file=args.params_file, topic=args.topic,
                      overwrite=args.overwrite, compress=args.compress,
@@ -413,6 +599,48 @@ def main(argv: Optional[list] = None) -> int:
         f'({rate:,.0f} msgs/s)')
     log(f'wrote {output}')
     return exit_status(PROG, res.damage, 'input damaged; the output holds what came before')
+
+
+def _npz_main(args: argparse.Namespace, log: Callable[[str], None]) -> int:
+    """Analysis mode (--npz): write the arrays of replay_arrays into one .npz file."""
+    path = args.npz if args.npz.suffix == '.npz' else args.npz.with_name(args.npz.name + '.npz')
+    t0 = time.perf_counter()
+    try:
+        if path.exists() and not args.overwrite:
+            raise BagExistsError(f'{path}: exists already, not overwriting (use --overwrite)')
+        arrays = replay_arrays(args.bag, args.params_file, topic=args.topic,
+                               input_topic=args.input_topic,
+                               diagnostics=not args.no_diagnostics, log=log)
+        save_npz(path, arrays)
+    except (BagError, ParamsError, BagTypeError, OSError) as exc:
+        return error_exit(PROG, exc, path)
+    seconds = time.perf_counter() - t0
+    statuses = Counter(arrays['sample.status'].tolist())
+    log(f"{len(arrays['sample.log_ns'])} samples on {arrays['meta.topic']} ("
+        + ', '.join(f'{k} {v}' for k, v in sorted(statuses.items()))
+        + f'); {seconds:.2f} s')
+    log(f'wrote {path}')
+    damage = str(arrays['meta.damage'])
+    if damage:
+        print(f'{PROG}: input damaged; the arrays hold what came before: {damage}',
+              file=sys.stderr)
+        return EXIT_DAMAGED
+    return 0
+
+
+def save_npz(path: Path, arrays: dict) -> None:
+    """Write arrays to path (.npz) whole or not at all: a temporary file, then a rename."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=path.parent)
+    try:
+        with os.fdopen(fd, 'wb') as f:
+            np.savez(f, **arrays)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
 
 
 def console_main() -> None:

@@ -33,6 +33,8 @@ The bags hold what the drivers would publish (no estimates; `replay_offline` add
   /drogue/truth, every T.  At a stamp with a fix, the input is written first.
 
 Stamps start at START_S (2023-11-14T22:13:20Z) plus the sample time; log time = stamp.
+Messages are canonical CDR (tskf_ros.bag.cdr.serialize, rosbags' serializer): the same
+message always gives the same bytes, and rosbags, mcap_ros2 and rclpy all read them.
 Topics and types are listed in bags/README.md.
 """
 
@@ -43,9 +45,9 @@ from typing import Callable, Optional
 
 import numpy as np
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import serialize_message
 
 from tskf_ros import led
+from tskf_ros.bag.cdr import serialize
 from tskf_ros.bag.message_types import qos_from_rclpy
 from tskf_ros.bag.reader import error_exit
 from tskf_ros.bag.writer import BagError, BagWriter
@@ -89,10 +91,10 @@ def _owc(writer: BagWriter, link: OwcLinkConfig, n: int,
     var = link.noise_std ** 2
     for i in range(n):
         stamp = START_S * NS + int(round(int(s.index[i]) * NS / link.rate))
-        writer.write('/true_angle', stamp, serialize_message(
+        writer.write('/true_angle', stamp, serialize(
             conversions.angle_to_msg(stamp, [s.theta[i]], ['theta'])))
         if publish[i]:
-            writer.write('/received_power', stamp, serialize_message(
+            writer.write('/received_power', stamp, serialize(
                 conversions.power_to_msg(stamp, s.reading[i], var)))
 
 
@@ -136,17 +138,17 @@ def led_alignment(writer: BagWriter, seed: int) -> None:
     for k, t in enumerate(traj.t):
         stamp = START_S * NS + int(round(t * NS))
         truth = [np.deg2rad(traj.phi[k, 0]), np.deg2rad(traj.x2[k, 0]), traj.x1[k, 0]]
-        writer.write('/alignment/truth', stamp, serialize_message(
+        writer.write('/alignment/truth', stamp, serialize(
             conversions.angle_to_msg(stamp, truth, LED_TRUTH)))
         z = traj.z[k, 0]
         if np.isfinite(z):
-            writer.write('/photodiode', stamp, serialize_message(
+            writer.write('/photodiode', stamp, serialize(
                 conversions.power_to_msg(stamp, z, var, frame_id='photodiode')))
-        writer.write('/alignment/estimate', stamp, serialize_message(
+        writer.write('/alignment/estimate', stamp, serialize(
             conversions.alignment_estimate_to_msg(stamp, traj.estimate[k, 0],
                                                   aligner.P_history[k],
                                                   frame_id='scanning_ekf')))
-        writer.write('/alignment/command', stamp, serialize_message(
+        writer.write('/alignment/command', stamp, serialize(
             conversions.base_command_to_msg(base[k])))
 
 
@@ -160,12 +162,12 @@ def drogue(writer: BagWriter, seed: int) -> None:
     for k, t in enumerate(truth.t):
         stamp = START_S * NS + int(round(t * NS))
         values = [truth.x[k, 0], truth.x[k, 1], truth.z[k], truth.v_flow[k]]
-        writer.write('/drogue/truth', stamp, serialize_message(
+        writer.write('/drogue/truth', stamp, serialize(
             conversions.angle_to_msg(stamp, values, DROGUE_TRUTH)))
-        writer.write('/input', stamp, serialize_message(
+        writer.write('/input', stamp, serialize(
             conversions.input_to_msg(stamp, [run.u[k]], frame_id='drogue')))
         if truth.gamma[k]:
-            writer.write('/received_power', stamp, serialize_message(conversions.power_to_msg(
+            writer.write('/received_power', stamp, serialize(conversions.power_to_msg(
                 stamp, run.y[k, 0], cfg.gps_sd ** 2, frame_id='drogue_gps')))
 
 

@@ -1,0 +1,184 @@
+"""
+Canonical CDR for every message this package generates.
+
+rclpy's serialize_message (Fast-CDR) ends some messages with alignment padding that it
+leaves uninitialised (a sensor_msgs/JointState of 60 bytes comes out as 68), so the same
+message does not give the same bytes twice and rosbags' deserializer refuses it.  The
+messages the package writes (the sample bags, replay_offline's outputs) are serialized
+here instead:
+
+- `serialize(msg)`: any rclpy message, through rosbags' typestore serializer (its
+  canonical XCDR1 little-endian encoding), after `to_store` has copied it field by field
+  into the typestore's own message class.
+- `EstimateEncoder`: the estimator's three output types (TwistWithCovarianceStamped,
+  JointState, TimeReference) written directly in their fixed layout from the session's
+  estimates, for offline replay, where building the rclpy message and serializing it cost
+  more than the filter (bench/bench_offline.py measures both routes).  Its bytes equal
+  `serialize` of the message tskf_ros.messages.conversions builds, for every state size
+  (test/test_bag_cdr.py).
+
+Readers accept both forms: rclpy's deserializer takes the padded and the canonical one.
+"""
+
+import array
+import math
+import struct
+from typing import Any, Sequence
+
+import numpy as np
+
+from tskf_ros.bag.message_types import typestore
+
+__all__ = ['EstimateEncoder', 'serialize', 'to_store', 'type_name']
+
+CDR_HEADER = b'\x00\x01\x00\x00'    # XCDR1, little endian, no options
+NS_PER_S = 1_000_000_000
+ESTIMATE_SLOTS = 6
+_NUMPY = {'d': np.float64, 'f': np.float32, 'b': np.int8, 'B': np.uint8, 'h': np.int16,
+          'H': np.uint16, 'i': np.int32, 'I': np.uint32, 'l': np.int64, 'L': np.uint64,
+          'q': np.int64, 'Q': np.uint64}
+
+
+def type_name(msg: Any) -> str:
+    """Return 'package/msg/Name' of an rclpy message instance."""
+    cls = type(msg)
+    pkg, sub = cls.__module__.split('.')[:2]
+    return f'{pkg}/{sub}/{cls.__name__}'
+
+
+_CLASSES: dict = {}      # rclpy class -> (typestore class, field names)
+
+
+def _store_class(msg: Any) -> tuple:
+    cls = type(msg)
+    entry = _CLASSES.get(cls)
+    if entry is None:
+        entry = _CLASSES[cls] = (typestore().types[type_name(msg)],
+                                 tuple(msg.get_fields_and_field_types()))
+    return entry
+
+
+def _convert(value: Any) -> Any:
+    if hasattr(value, '_fields_and_field_types'):
+        return to_store(value)
+    if isinstance(value, array.array):
+        return np.array(value, dtype=_NUMPY[value.typecode])
+    if isinstance(value, bytes) and len(value) == 1:     # a `byte` field
+        return value[0]
+    if isinstance(value, list):
+        if value and isinstance(value[0], bytes):        # byte[]: a list of 1-byte bytes
+            return np.frombuffer(b''.join(value), dtype=np.uint8)
+        return [_convert(v) for v in value]
+    return value
+
+
+def to_store(msg: Any) -> Any:
+    """Copy an rclpy message into the rosbags typestore's class of the same type."""
+    cls, names = _store_class(msg)
+    return cls(**{name: _convert(getattr(msg, name)) for name in names})
+
+
+def serialize(msg: Any) -> bytes:
+    """Return the canonical CDR bytes of an rclpy message (rosbags' serializer)."""
+    return bytes(typestore().serialize_cdr(to_store(msg), _store_class(msg)[0].__msgtype__))
+
+
+class _Layout:
+    """CDR bytes being laid out: pos is the offset in the body (after the 4-byte header)."""
+
+    def __init__(self, pos: int) -> None:
+        self.data = bytearray()
+        self.pos = pos
+
+    def put(self, raw: bytes, align: int = 1) -> None:
+        pad = -self.pos % align
+        self.data += b'\0' * pad + raw
+        self.pos += pad + len(raw)
+
+    def string(self, text: str) -> None:
+        raw = text.encode('utf-8') + b'\0'
+        self.put(struct.pack('<I', len(raw)) + raw, 4)
+
+    def cut(self, skip: int) -> bytes:
+        """Return the bytes so far and start anew after `skip` bytes laid out elsewhere."""
+        out = bytes(self.data)
+        self.data = bytearray()
+        self.pos += skip
+        return out
+
+
+class EstimateEncoder:
+    """
+    The estimator's outputs as canonical CDR, written directly in their fixed layout.
+
+    One encoder per replay: the frame id and the state names are fixed, so everything
+    after the stamp is laid out once; each message is then one struct.pack.
+    """
+
+    def __init__(self, frame_id: str, names: Sequence[str], n: int) -> None:
+        if not 0 < n <= ESTIMATE_SLOTS:
+            raise ValueError(f'a state of {n} entries does not fit the estimate message')
+        if len(names) != n:
+            raise ValueError(f'{len(names)} state names for {n} states')
+        self.n = n
+        head = _Layout(8)                       # after the stamp: frame_id
+        head.string(frame_id)
+        head.put(b'', 8)                        # then float64s
+        frame = head.cut(0)
+        self._estimate = struct.Struct(f'<iI{len(frame)}s{ESTIMATE_SLOTS}d'
+                                       f'{ESTIMATE_SLOTS ** 2}d')
+        self._frame = frame
+        self._zeros = [0.0] * (ESTIMATE_SLOTS ** 2)
+        # JointState: header, name[], position[], velocity[], effort[] (empty)
+        lay = _Layout(8)
+        lay.string(frame_id)
+        lay.put(struct.pack('<I', len(names)), 4)
+        for name in names:
+            lay.string(name)
+        lay.put(struct.pack('<I', n), 4)
+        lay.put(b'', 8)
+        self._states_prefix = lay.cut(8 * n)
+        lay.put(struct.pack('<I', n), 4)
+        lay.put(b'', 8)
+        self._states_mid = lay.cut(8 * n)
+        lay.put(struct.pack('<I', 0), 4)
+        self._states_tail = lay.cut(0)
+        self._states = struct.Struct(f'<iI{len(self._states_prefix)}s{n}d'
+                                     f'{len(self._states_mid)}s{n}d{len(self._states_tail)}s')
+        # TimeReference: header (stamp, frame_id ''), time_ref, source 'sigma'
+        self._jump = struct.Struct('<iI4s4siI4s6s')
+
+    @staticmethod
+    def _stamp(ns: int) -> tuple[int, int]:
+        return divmod(int(ns), NS_PER_S)
+
+    def estimate(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> bytes:
+        """Return the TwistWithCovarianceStamped of conversions.estimate_to_msg, serialized."""
+        n = self.n
+        v = np.asarray(x, dtype=float).reshape(-1).tolist()
+        cov = self._zeros.copy()
+        rows = np.asarray(P, dtype=float).reshape(n, n).tolist()
+        for i in range(n):
+            cov[i * ESTIMATE_SLOTS:i * ESTIMATE_SLOTS + n] = rows[i]
+        v += [0.0] * (ESTIMATE_SLOTS - n)
+        sec, nsec = self._stamp(stamp_ns)
+        return CDR_HEADER + self._estimate.pack(sec, nsec, self._frame, *v, *cov)
+
+    def states(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> bytes:
+        """Return the JointState of conversions.estimate_to_joint_state, serialized."""
+        n = self.n
+        P = np.asarray(P, dtype=float).reshape(n, n)
+        # as np.maximum(diag, 0.0): -0.0 gives 0.0 and NaN stays NaN
+        sd = [math.sqrt(d if d > 0.0 or d != d else 0.0)
+              for d in (float(P[i, i]) for i in range(n))]
+        sec, nsec = self._stamp(stamp_ns)
+        return CDR_HEADER + self._states.pack(
+            sec, nsec, self._states_prefix, *np.asarray(x, dtype=float).reshape(-1).tolist(),
+            self._states_mid, *sd, self._states_tail)
+
+    def jump(self, stamp_ns: int, sigma_ns: int) -> bytes:
+        """Return the TimeReference of conversions.jump_to_msg, serialized."""
+        sec, nsec = self._stamp(stamp_ns)
+        ref_sec, ref_nsec = self._stamp(sigma_ns)
+        return CDR_HEADER + self._jump.pack(sec, nsec, b'\x01\0\0\0', b'\0\0\0\0', ref_sec,
+                                            ref_nsec, b'\x06\0\0\0', b'sigma\0')
