@@ -27,6 +27,7 @@ import json
 import os
 from pathlib import Path
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -49,12 +50,14 @@ from rclpy.executors import ExternalShutdownException  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
 from sensor_msgs.msg import Illuminance, JointState, TimeReference  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from tskf_ros.messages import conversions  # noqa: E402
 from tskf_ros.messages.estimator_interface import (load_config, outcome_messages,  # noqa: E402
-                                                   output_qos, OUTPUT_TOPICS)
+                                                   OutcomeMessages, output_qos,
+                                                   OUTPUT_TOPICS)
 from tskf_ros.messages.qos import DEFAULT_DEPTH, sensor_input_qos  # noqa: E402
 from tskf_ros.nodes.node_base import make_executor, spin  # noqa: E402
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator  # noqa: E402
@@ -137,8 +140,8 @@ class Meter:
     @staticmethod
     def sample() -> dict:
         """Return the clocks: executor thread CPU, process CPU, wall (s)."""
-        t = os.times()
-        return {'thread_cpu': time.thread_time(), 'process_cpu': t.user + t.system,
+        usage = resource.getrusage(resource.RUSAGE_SELF)
+        return {'thread_cpu': time.thread_time(), 'process_cpu': usage.ru_utime + usage.ru_stime,
                 'wall': time.perf_counter()}
 
 
@@ -265,15 +268,31 @@ def in_process_costs(messages: int, repeat: int = 3) -> dict:
         session = EstimatorSession(config.session)
         return [session.add(t, y) for t, y in zip(stamps, values)]
     outcomes = run_session()
-    t_add = min(timeit.repeat(run_session, number=1, repeat=repeat)) / messages
-    t_build = min(timeit.repeat(lambda: [outcome_messages(o, config) for o in outcomes],
-                                number=1, repeat=repeat)) / messages
-    msgs = [outcome_messages(o, config) for o in outcomes]
-    from rclpy.serialization import serialize_message
-    t_ser = min(timeit.repeat(lambda: [serialize_message(m) for pairs in msgs
-                                       for _, m in pairs], number=1, repeat=repeat)) / messages
-    return {'session.add': t_add * 1e6, 'outcome_messages': t_build * 1e6,
-            'serialize_message x5': t_ser * 1e6}
+    reused = OutcomeMessages(config)
+
+    def fill() -> None:
+        for out in outcomes:
+            for _ in reused.messages(out):
+                pass
+
+    def fill_and_serialize() -> None:
+        for out in outcomes:
+            for _, msg in reused.messages(out):
+                serialize_message(msg)
+
+    def build_and_serialize() -> None:
+        for out in outcomes:
+            for _, msg in outcome_messages(out, config):
+                serialize_message(msg)
+    parts = {'session.add': run_session,
+             'build 5 messages (outcome_messages)': lambda: [
+                 outcome_messages(o, config) for o in outcomes],
+             'fill 5 reused (OutcomeMessages)': fill,
+             'build + serialize_message': build_and_serialize,
+             'fill + serialize_message': fill_and_serialize}
+    return {name: min(timeit.repeat(f, timer=time.thread_time, number=1, repeat=repeat))
+            / messages * 1e6
+            for name, f in parts.items()}
 
 
 def main() -> None:
