@@ -77,7 +77,7 @@ GOAL = 2.0                                  # node CPU per input <= GOAL x the r
 
 
 def power(k: int) -> float:
-    """Return the k-th received power (mW): model (3)'s y at x0 plus deterministic noise."""
+    """Return sample k's received power in mW: model (3)'s y at x0 plus deterministic noise."""
     return 165.6 + 10.0 * np.sin(0.7 * k)
 
 

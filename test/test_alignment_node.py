@@ -22,8 +22,8 @@ from tskf_ros.led.led_link import closed_loop
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import COMMAND_TOPIC
 from tskf_ros.nodes.alignment import Alignment
-from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.led_link_simulator import LedLinkSimulator
+from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.tools.demo_collector import wait_for
 
 import yaml

@@ -22,7 +22,7 @@ stamps = st.integers(min_value=0, max_value=2**31 * NS - 1)
 
 @st.composite
 def outcomes(draw, n):
-    """An Outcome of n-state estimates (repeated kinds: a late sample's revisions) and jumps."""
+    """Draw an Outcome of n-state estimates (repeated kinds, as revisions come) and jumps."""
     estimates = [Estimate(draw(st.sampled_from(['predicted', 'corrected'])), draw(stamps),
                           np.array(draw(st.lists(finite, min_size=n, max_size=n))),
                           np.array(draw(st.lists(finite, min_size=n * n, max_size=n * n)))
@@ -35,7 +35,7 @@ def outcomes(draw, n):
 
 @st.composite
 def configs_and_outcomes(draw):
-    """A node config with n states (1..6), a frame_id, and outcomes of that size."""
+    """Draw a node config with n states (1..6), a frame_id, and outcomes of that size."""
     n = draw(st.integers(1, 6))
     names = draw(st.lists(st.text('abcxyz_', min_size=1, max_size=12), min_size=n,
                           max_size=n))

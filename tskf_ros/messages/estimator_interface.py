@@ -234,16 +234,25 @@ class OutcomeMessages:
                 msg = TimeReference(source='sigma')
             self.msgs[key] = msg
 
-    def messages(self, out: Outcome) -> Iterator[tuple]:
-        """Yield the ((kind, revised), message) pairs to publish for an Outcome, in order."""
+    def messages(self, out: Outcome,
+                 wanted: Optional[Callable[[tuple], bool]] = None) -> Iterator[tuple]:
+        """
+        Yield the ((kind, revised), message) pairs to publish for an Outcome, in order.
+
+        With `wanted`, only the outputs for which wanted(key) is true are filled and yielded
+        (the node skips the topics nobody subscribes to).
+        """
         msgs = self.msgs
         for e in out.estimates:
             key, mirror = (e.kind, e.revised), (e.kind + '_states', e.revised)
-            yield key, conversions.fill_estimate_msg(msgs[key], e.stamp_ns, e.x, e.P)
-            yield mirror, conversions.fill_joint_state(msgs[mirror], e.stamp_ns, e.x, e.P)
+            if wanted is None or wanted(key):
+                yield key, conversions.fill_estimate_msg(msgs[key], e.stamp_ns, e.x, e.P)
+            if wanted is None or wanted(mirror):
+                yield mirror, conversions.fill_joint_state(msgs[mirror], e.stamp_ns, e.x, e.P)
         for j in out.jumps:
             key = ('mu', j.revised)
-            yield key, conversions.fill_jump_msg(msgs[key], j.stamp_ns, j.sigma_ns)
+            if wanted is None or wanted(key):
+                yield key, conversions.fill_jump_msg(msgs[key], j.stamp_ns, j.sigma_ns)
 
 
 def bag_outcome_messages(out: Outcome, config: NodeConfig) -> list[tuple[str, Any]]:

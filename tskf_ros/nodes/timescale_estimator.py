@@ -171,9 +171,13 @@ class TimescaleEstimator(ReconfigurableNode):
             log.debug(out.message)
 
     def _publish(self, out: Outcome) -> None:
-        # each message is reused: published (serialized) before the next one is filled
-        for key, msg in self.outputs.messages(out):
+        # each message is reused: published (serialized) before the next one is filled; an
+        # output nobody subscribes to (its topic is volatile) is neither filled nor published
+        for key, msg in self.outputs.messages(out, self._subscribed):
             self.pubs[key].publish(msg)
+
+    def _subscribed(self, key: tuple) -> bool:
+        return self.pubs[key].get_subscription_count() > 0
 
     def restart(self, why: str, reason: str = 'clock_jump') -> None:
         """Re-initialise the filter, saying why (nothing to do before a sample)."""
