@@ -26,6 +26,7 @@ Types (all from common_interfaces, no custom messages):
 - input u of the estimator: geometry_msgs/msg/AccelStamped (see input_to_msg below).
 """
 
+import math
 from typing import Mapping, Sequence
 
 from builtin_interfaces.msg import Time
@@ -142,14 +143,17 @@ def fill_joint_state(msg: JointState, stamp_ns: int, x: np.ndarray,
                      P: np.ndarray) -> JointState:
     """Fill a JointState in place as estimate_to_joint_state builds one (names kept)."""
     x = np.asarray(x, dtype=float).reshape(-1)
-    sd = np.sqrt(np.maximum(np.diag(np.asarray(P, dtype=float).reshape(x.size, x.size)), 0.0))
+    n = x.size
+    # sqrt(max(P_ii, 0)) in plain floats, as np.sqrt(np.maximum(diag, 0)) does (NaN stays)
+    sd = [math.sqrt(p) if p > 0.0 else (p if p != p else 0.0)
+          for p in np.asarray(P, dtype=float).reshape(n, n).diagonal().tolist()]
     set_stamp(msg.header.stamp, stamp_ns)
-    if len(msg.position) == x.size and len(msg.velocity) == x.size:
-        position, velocity = msg.position, msg.velocity
-        for i, (xi, si) in enumerate(zip(x.tolist(), sd.tolist())):
+    position, velocity = msg.position, msg.velocity
+    if len(position) == n and len(velocity) == n:
+        for i, (xi, si) in enumerate(zip(x.tolist(), sd)):
             position[i], velocity[i] = xi, si
     else:
-        msg.position, msg.velocity = x.tolist(), sd.tolist()
+        msg.position, msg.velocity = x.tolist(), sd
     return msg
 
 
