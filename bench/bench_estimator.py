@@ -61,7 +61,8 @@ from tskf_ros.messages.estimator_interface import (load_config, outcome_messages
 from tskf_ros.messages.qos import DEFAULT_DEPTH, sensor_input_qos  # noqa: E402
 from tskf_ros.nodes.node_base import make_executor, spin  # noqa: E402
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator  # noqa: E402
-from tskf_ros.owc.estimator_session import EstimatorSession  # noqa: E402
+from tskf_ros.owc.estimator_session import (Estimate, EstimatorSession, Jump,  # noqa: E402
+                                            Outcome)
 
 NS = 1_000_000_000
 PERIOD_NS = 1_000_000                       # the stream: one sample per ms of stamp time
@@ -145,6 +146,34 @@ class Meter:
                 'wall': time.perf_counter()}
 
 
+class StubSession:
+    """A session that filters nothing: add() returns a steady-state Outcome at the stamp."""
+
+    def __init__(self, session: EstimatorSession) -> None:
+        self.session, self.stats = session, session.stats
+        self.x, self.P = session.kf.x.copy(), session.kf.P.copy()
+
+    def add(self, stamp_ns: int, value: float, variance: float = 0.0, *,
+            now_ns: int = None) -> Outcome:
+        """Count the sample; return corrected at stamp_ns, predicted and mu 1 ms on."""
+        self.stats.received += 1
+        return Outcome('accepted', estimates=[
+            Estimate('corrected', stamp_ns, self.x, self.P),
+            Estimate('predicted', stamp_ns + PERIOD_NS, self.x, self.P)],
+            jumps=[Jump(stamp_ns, stamp_ns + PERIOD_NS)])
+
+    def __getattr__(self, name: str):
+        return getattr(self.session, name)
+
+
+class StubbedEstimator(TimescaleEstimator):
+    """The estimator node with a session that filters nothing (the node's cost minus it)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.session = StubSession(self.session)
+
+
 def metered(cls: type, meter: Meter) -> type:
     """Return a subclass of cls whose measurement callback ticks the meter."""
     class Metered(cls):
@@ -159,7 +188,8 @@ def worker(kind: str, executor_kind: str, warmup: int, messages: int, ros_args: 
     context = Context()
     rclpy.init(args=['worker', '--ros-args', *ros_args], context=context)
     meter = Meter(warmup, messages, context)
-    cls = metered(TimescaleEstimator if kind == 'node' else Relay, meter)
+    cls = metered({'node': TimescaleEstimator, 'stub': StubbedEstimator, 'relay': Relay}[kind],
+                  meter)
     node = cls(context=context, parameter_overrides=[
         Parameter(k, value=v) for k, v in NODE_PARAMETERS.items()])
     executor = make_executor(executor_kind, context=context)
@@ -306,6 +336,9 @@ def main() -> None:
     parser.add_argument('--warmup', type=int, default=300)
     parser.add_argument('--window', type=int, default=20)
     parser.add_argument('--repeats', type=int, default=5)
+    parser.add_argument('--cases', nargs='+', default=['relay', 'node', 'stub'],
+                        choices=['relay', 'node', 'stub'],
+                        help='stub: the node with a session that filters nothing')
     parser.add_argument('--executors', nargs='+', default=['single', 'events'],
                         choices=['single', 'events'])
     args = parser.parse_args()
@@ -321,7 +354,7 @@ def main() -> None:
     try:
         for executor_kind in args.executors:
             for _ in range(args.repeats):
-                for kind in ('relay', 'node'):
+                for kind in args.cases:
                     case += 1
                     r = run_case(kind, executor_kind, args, case, context, executor)
                     results.setdefault((executor_kind, kind), []).append(r)
@@ -357,8 +390,14 @@ def main() -> None:
     for executor_kind in args.executors:
         node_us = statistics.median(per_input_us(results[(executor_kind, 'node')],
                                                  'thread_cpu'))
-        print(f'{executor_kind}: session.add is {costs["session.add"] / node_us:.0%} of the '
-              f"node's executor thread CPU per input ({node_us:.1f} us)")
+        line = (f'{executor_kind}: session.add in-process is {costs["session.add"] / node_us:.0%}'
+                f" of the node's executor thread CPU per input ({node_us:.1f} us)")
+        if (executor_kind, 'stub') in results:
+            stub_us = statistics.median(per_input_us(results[(executor_kind, 'stub')],
+                                                     'thread_cpu'))
+            line += (f'; the node minus its stubbed twin (no filter, {stub_us:.1f} us): '
+                     f'{node_us - stub_us:.1f} us = {(node_us - stub_us) / node_us:.0%}')
+        print(line)
 
 
 if __name__ == '__main__':
