@@ -20,6 +20,7 @@ import rclpy
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile
+from test_pipeline_nodes import stop
 
 from tskf_ros.nodes import node_base
 from tskf_ros.nodes.node_base import make_executor
@@ -83,18 +84,6 @@ def start(args, log, env=None):
         stdout=log, stderr=subprocess.STDOUT, text=True)
 
 
-def stop_with(proc, sig, log):
-    """Send sig; return (exit status, output), killing the process if it hangs."""
-    proc.send_signal(sig)
-    try:
-        proc.wait(timeout=TIMEOUT)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(timeout=TIMEOUT)
-    log.seek(0)
-    return proc.returncode, log.read()
-
-
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 @pytest.mark.parametrize('how', ['flag', 'environment'])
 def test_the_node_process_stops_cleanly(ros_context, tmp_path, executor_kind, sig, how):
@@ -120,9 +109,9 @@ def test_the_node_process_stops_cleanly(ros_context, tmp_path, executor_kind, si
     finally:
         executor.shutdown()
         client.destroy_node()
-        code, out = stop_with(proc, sig, log)
+        out = stop(proc, log, sig)
         log.close()
-    assert code == 0 and 'Traceback' not in out, out
+    assert proc.returncode == 0 and 'Traceback' not in out, out
 
 
 def test_an_unknown_executor_is_refused_in_one_line():

@@ -137,17 +137,17 @@ def run_node(module, *args):
     return proc.returncode, proc.stdout
 
 
-def stop(proc, log):
-    """SIGINT the node process, wait (killing it if it hangs); return its output."""
+def stop(proc, log, sig=signal.SIGINT):
+    """Signal the node process (SIGINT), wait (killing it if it hangs); return its output."""
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
     try:
         proc.wait(timeout=TIMEOUT)
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait(timeout=TIMEOUT)
         log.seek(0)
-        raise AssertionError(f'the node ignored SIGINT for {TIMEOUT:g} s:\n{log.read()}')
+        raise AssertionError(f'the node ignored {sig.name} for {TIMEOUT:g} s:\n{log.read()}')
     log.seek(0)
     return log.read()
 
