@@ -2,6 +2,7 @@
 Benchmark: the estimator node against a relay that publishes the same messages.
 
     python bench/bench_estimator.py [--messages 3000] [--repeats 5] [--executors single events]
+                                    [--cases relay node stub]
 
 Each case runs in a process of its own (this script with `worker`), spinning as
 `python -m tskf_ros.nodes.timescale_estimator --executor ...` does (node_base.spin):
@@ -10,14 +11,16 @@ Each case runs in a process of its own (this script with `worker`), spinning as
 - relay: a node with the same entities (measurement and input subscriptions, the same
   five output publishers, /diagnostics on a 1 s timer, ~/reset, the parameter services)
   that fills preallocated messages of the same types from each input and publishes the
-  same five per input (predicted, corrected, their JointState mirrors, mu), no filter.
+  same five per input (predicted, corrected, their JointState mirrors, mu), no filter;
+- stub: the node with a session that filters nothing (StubSession: a fixed steady-state
+  outcome at each stamp), so that node - stub is the session's cost in place.
 
 A driver in this process publishes Illuminance samples 1 ms apart (the stamp is the
 sequence number), keeping at most `--window` without their predicted estimate, and
 subscribes to the five outputs with the same types in both cases.  The worker measures,
 between its warm-up'th and last input, the CPU time of its executor thread
 (time.thread_time), of its whole process (DDS threads included) and the wall time.  The
-cases alternate (relay, node, relay, node, ...) for `--repeats` rounds per executor;
+cases alternate (relay, node, stub, relay, ...) for `--repeats` rounds per executor;
 min and median are printed, and the ratio node / relay with the goal (<= 2).
 Then the in-process cost of the parts of the node's callback, on the same stream.
 """
@@ -213,6 +216,7 @@ class Driver:
         self.pub = self.node.create_publisher(Illuminance, 'measurement',
                                               QoSProfile(depth=1000))
         self.window, self.sent, self.acked = window, 0, 0
+        self.stalls = 0         # times no estimate came for 1 s: the window was reopened
         self.counts = [0] * len(OUTPUTS)
         for i, (topic, cls) in enumerate(OUTPUTS):
             self.node.create_subscription(cls, topic, self._counter(i, topic),
@@ -264,7 +268,7 @@ def run_case(kind: str, executor_kind: str, args: argparse.Namespace, case: int,
             elif time.monotonic() - stalled_since > 1.0:
                 # a best-effort input was lost (or the worker is slow): open the window
                 driver.acked, stalled_since = driver.sent, time.monotonic()
-                driver.lost_windows = getattr(driver, 'lost_windows', 0) + 1
+                driver.stalls += 1
         out, _ = proc.communicate(timeout=60.0)
     finally:
         executor.remove_node(driver.node)
@@ -274,7 +278,7 @@ def run_case(kind: str, executor_kind: str, args: argparse.Namespace, case: int,
             proc.wait()
     result = json.loads(out.strip().splitlines()[-1])
     result.update(sent=driver.sent, outputs=list(driver.counts),
-                  stalls=getattr(driver, 'lost_windows', 0))
+                  stalls=driver.stalls)
     return result
 
 
@@ -362,7 +366,8 @@ def main() -> None:
                           f'{r["thread_cpu"] / r["messages"] * 1e6:7.1f} us, process '
                           f'{r["process_cpu"] / r["messages"] * 1e6:7.1f} us per input, '
                           f'{r["messages"] / r["wall"]:6.0f} inputs/s; outputs '
-                          f'{r["outputs"]} for {r["sent"]} sent', flush=True)
+                          f'{r["outputs"]} for {r["sent"]} sent, {r["stalls"]} stalls',
+                          flush=True)
     finally:
         executor.shutdown()
         context.try_shutdown()
