@@ -1,10 +1,13 @@
-"""The node's reused output messages equal the ones built afresh, byte for byte."""
+"""The node's reused output messages equal the ones built afresh; unwatched ones go unsent."""
 
 from pathlib import Path
+import time
 
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
+import rclpy
+from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
@@ -12,9 +15,12 @@ from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import (load_config, outcome_messages,
                                                    OutcomeMessages)
+from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.owc.estimator_session import Estimate, EstimatorSession, Jump, Outcome
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
+TIMEOUT = 60.0      # s: only a bound on waiting for DDS; no assertion depends on timing
 finite = st.floats(allow_nan=False, allow_infinity=False)
 # a stamp the session passes on: [0, 2^31) s in integer nanoseconds
 stamps = st.integers(min_value=0, max_value=2**31 * NS - 1)
@@ -110,3 +116,36 @@ def test_a_late_sample_publishes_every_revision():
                if key == ('corrected', True)]
     want = [e.stamp_ns for e in out.estimates if (e.kind, e.revised) == ('corrected', True)]
     assert len(want) >= 2 and [s for _, s in revised] == want
+
+
+def test_the_node_publishes_only_what_somebody_subscribes_to(ros_context, executor_kind):
+    node = TimescaleEstimator(context=ros_context)
+    client = rclpy.create_node('only_predicted', context=ros_context)
+    predicted = []
+    client.create_subscription(TwistWithCovarianceStamped, 'estimate/predicted',
+                               predicted.append, QoSProfile(depth=100))
+    published = {key: 0 for key in node.pubs}
+    for key, pub in node.pubs.items():
+        def counting(msg, key=key, publish=pub.publish):
+            published[key] += 1
+            publish(msg)
+        pub.publish = counting
+    executor = make_executor(executor_kind, context=ros_context)
+    executor.add_node(node)
+    executor.add_node(client)
+    deadline = time.monotonic() + TIMEOUT
+    try:
+        while node.pubs[('predicted', False)].get_subscription_count() < 1:
+            assert time.monotonic() < deadline, 'our subscription never matched'
+            executor.spin_once(timeout_sec=0.05)
+        for k in (1, 2, 3):
+            node._on_measurement(conversions.power_to_msg(k * NS, 165.0))
+        while len(predicted) < 3:
+            assert time.monotonic() < deadline, 'the predicted estimates never came'
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        client.destroy_node()
+    assert published == {key: 3 if key == ('predicted', False) else 0 for key in node.pubs}
+    assert [conversions.stamp_to_ns(m.header.stamp) for m in predicted] == [NS, 2 * NS, 3 * NS]
