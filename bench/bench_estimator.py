@@ -1,167 +1,408 @@
 """
-Benchmark: the estimator node against a bare rclpy relay, and the filter step against numpy.
+Benchmark: the estimator node against a relay that publishes the same messages.
 
-    python bench/bench_estimator.py [--messages 3000] [--window 20]
+    python bench/bench_estimator.py [--messages 3000] [--repeats 5] [--executors single events]
+                                    [--cases relay node stub]
 
-1. Node throughput, in one process on one SingleThreadedExecutor: a driver publishes
-   stamped Illuminance messages (1 ms apart) keeping at most `window` in flight, and a
-   sink counts what comes out.  Once through a bare relay (subscribe, republish, no work),
-   once through TimescaleEstimator (subscribe, filter, publish predicted, corrected, mu).
-2. Per-step cost of the core: TimeScaleKalmanFilter.step, EstimatorSession.add, and a
-   textbook numpy Kalman step (F = I + mu A, Q_d = mu GQG^T, R_d = R / mu) on the same model.
+Each case runs in a process of its own (this script with `worker`), spinning as
+`python -m tskf_ros.nodes.timescale_estimator --executor ...` does (node_base.spin):
+
+- node: TimescaleEstimator on the OWC model (3), period 1 ms;
+- relay: a node with the same entities (measurement and input subscriptions, the same
+  five output publishers, /diagnostics on a 1 s timer, ~/reset, the parameter services)
+  that fills preallocated messages of the same types from each input and publishes the
+  same five per input (predicted, corrected, their JointState mirrors, mu), no filter;
+- stub: the node with a session that filters nothing (StubSession: a fixed steady-state
+  outcome at each stamp), so that node - stub is the session's cost in place.
+
+A driver in this process publishes Illuminance samples 1 ms apart (the stamp is the
+sequence number), keeping at most `--window` without their predicted estimate, and
+subscribes to the five outputs with the same types in both cases.  The worker measures,
+between its warm-up'th and last input, the CPU time of its executor thread
+(time.thread_time), of its whole process (DDS threads included) and the wall time.  The
+cases alternate (relay, node, stub, relay, ...) for `--repeats` rounds per executor;
+min and median are printed, and the ratio node / relay with the goal (<= 2).
+Then the in-process cost of the parts of the node's callback, on the same stream.
 """
 
 import argparse
+import json
 import os
 from pathlib import Path
 import platform
+import resource
+import statistics
+import subprocess
 import sys
 import time
 import timeit
 
 # runnable from a source checkout without installing: the repository root on the path
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 1))
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped  # noqa: E402
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.executors import ExternalShutdownException  # noqa: E402
 from rclpy.node import Node  # noqa: E402
-from rclpy.qos import qos_profile_sensor_data, QoSProfile  # noqa: E402
-from sensor_msgs.msg import Illuminance  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
+from sensor_msgs.msg import Illuminance, JointState, TimeReference  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
 
-from tskf_ros.core.linear_models import owc, spring_mass  # noqa: E402
 from tskf_ros.messages import conversions  # noqa: E402
+from tskf_ros.messages.estimator_interface import (load_config, outcome_messages,  # noqa: E402
+                                                   OutcomeMessages, output_qos,
+                                                   OUTPUT_TOPICS)
+from tskf_ros.messages.qos import DEFAULT_DEPTH, sensor_input_qos  # noqa: E402
+from tskf_ros.nodes.node_base import make_executor, spin  # noqa: E402
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator  # noqa: E402
-from tskf_ros.owc.estimator_session import EstimatorConfig, EstimatorSession  # noqa: E402
+from tskf_ros.owc.estimator_session import (Estimate, EstimatorSession, Jump,  # noqa: E402
+                                            Outcome)
 
 NS = 1_000_000_000
+PERIOD_NS = 1_000_000                       # the stream: one sample per ms of stamp time
+T0_NS = 1_000 * NS
+# the node's parameters for this stream (everything else: the defaults, model (3))
+NODE_PARAMETERS = {'period': PERIOD_NS / NS}
+# what the node publishes per input in steady state: (topic, type), the relay the same
+OUTPUTS = [(OUTPUT_TOPICS[(kind, False)], cls) for kind, cls in (
+    ('corrected', TwistWithCovarianceStamped), ('corrected_states', JointState),
+    ('predicted', TwistWithCovarianceStamped), ('predicted_states', JointState),
+    ('mu', TimeReference))]
+GOAL = 2.0                                  # node CPU per input <= GOAL x the relay's
+
+
+def power(k: int) -> float:
+    """Return sample k's received power in mW: model (3)'s y at x0 plus deterministic noise."""
+    return 165.6 + 10.0 * np.sin(0.7 * k)
 
 
 class Relay(Node):
-    """Subscribe to measurement and republish each message unchanged."""
+    """The node's entities and output messages, without the filter."""
 
-    def __init__(self, context: Context, copies: int = 1) -> None:
-        super().__init__('relay', context=context)
-        pubs = [self.create_publisher(Illuminance, 'relayed' + ('' if i == 0 else str(i)),
-                                      QoSProfile(depth=100)) for i in range(copies)]
+    def __init__(self, *, context=None, parameter_overrides=None) -> None:
+        super().__init__('timescale_estimator', context=context,
+                         parameter_overrides=parameter_overrides)
+        config = load_config(overrides=NODE_PARAMETERS)
+        qos_in = sensor_input_qos(config.queue_depth)
+        self.create_subscription(Illuminance, 'measurement', self._on_measurement, qos_in)
+        self.create_subscription(AccelStamped, 'input', lambda msg: None, qos_in)
+        qos_out = output_qos(config)
+        self.pubs = [self.create_publisher(cls, topic, qos_out) for topic, cls in OUTPUTS]
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DEFAULT_DEPTH)
+        self.create_timer(config.diagnostics_period,
+                          lambda: self.diag_pub.publish(DiagnosticArray()))
+        self.create_service(Trigger, '~/reset', lambda request, response: response)
+        names = list(config.session.model.state_names)
+        self.msgs = [TwistWithCovarianceStamped(),
+                     JointState(name=names, position=[0.0], velocity=[0.0]),
+                     TwistWithCovarianceStamped(),
+                     JointState(name=names, position=[0.0], velocity=[0.0]),
+                     TimeReference(source='sigma')]
 
-        def relay(msg: Illuminance) -> None:
-            for pub in pubs:
-                pub.publish(msg)
-        self.create_subscription(Illuminance, 'measurement', relay,
-                                 QoSProfile(depth=100,
-                                            reliability=qos_profile_sensor_data.reliability))
+    def _on_measurement(self, msg: Illuminance) -> None:
+        stamp = msg.header.stamp
+        value = msg.illuminance
+        for out in self.msgs:
+            out.header.stamp = stamp
+        corrected, corrected_states, predicted, predicted_states, mu = self.msgs
+        corrected.twist.twist.linear.x = value
+        corrected_states.position[0] = value
+        predicted.twist.twist.linear.x = value
+        predicted_states.position[0] = value
+        mu.time_ref = stamp
+        for pub, out in zip(self.pubs, self.msgs):
+            pub.publish(out)
 
 
-def throughput(kind: str, messages: int, window: int) -> float:
-    """Messages per second through the relay or the estimator (in one process)."""
+class Meter:
+    """Count inputs; measure CPU and wall time from the warm-up'th to the last; then stop."""
+
+    def __init__(self, warmup: int, messages: int, context: Context) -> None:
+        self.count, self.warmup, self.last, self.context = 0, warmup, warmup + messages, context
+        self.start = self.result = None
+
+    def tick(self) -> None:
+        """Call after each input's callback."""
+        self.count += 1
+        if self.count == self.warmup:
+            self.start = self.sample()
+        elif self.count == self.last:
+            end = self.sample()
+            self.result = {k: end[k] - self.start[k] for k in end}
+            self.result['messages'] = self.last - self.warmup
+            self.context.try_shutdown()
+
+    @staticmethod
+    def sample() -> dict:
+        """Return the clocks: executor thread CPU, process CPU, wall (s)."""
+        usage = resource.getrusage(resource.RUSAGE_SELF)
+        return {'thread_cpu': time.thread_time(), 'process_cpu': usage.ru_utime + usage.ru_stime,
+                'wall': time.perf_counter()}
+
+
+class StubSession:
+    """A session that filters nothing: add() returns a steady-state Outcome at the stamp."""
+
+    def __init__(self, session: EstimatorSession) -> None:
+        self.session, self.stats = session, session.stats
+        self.x, self.P = session.kf.x.copy(), session.kf.P.copy()
+
+    def add(self, stamp_ns: int, value: float, variance: float = 0.0, *,
+            now_ns: int = None) -> Outcome:
+        """Count the sample; return corrected at stamp_ns, predicted and mu 1 ms on."""
+        self.stats.received += 1
+        return Outcome('accepted', estimates=[
+            Estimate('corrected', stamp_ns, self.x, self.P),
+            Estimate('predicted', stamp_ns + PERIOD_NS, self.x, self.P)],
+            jumps=[Jump(stamp_ns, stamp_ns + PERIOD_NS)])
+
+    def __getattr__(self, name: str):
+        return getattr(self.session, name)
+
+
+class StubbedEstimator(TimescaleEstimator):
+    """The estimator node with a session that filters nothing (the node's cost minus it)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.session = StubSession(self.session)
+
+
+def metered(cls: type, meter: Meter) -> type:
+    """Return a subclass of cls whose measurement callback ticks the meter."""
+    class Metered(cls):
+        def _on_measurement(self, msg):
+            super()._on_measurement(msg)
+            meter.tick()
+    return Metered
+
+
+def worker(kind: str, executor_kind: str, warmup: int, messages: int, ros_args: list) -> None:
+    """Run the node or the relay until it has taken warmup + messages inputs; print JSON."""
     context = Context()
-    rclpy.init(context=context)
-    executor = SingleThreadedExecutor(context=context)
-    driver = rclpy.create_node('driver', context=context)
-    if kind.startswith('relay'):
-        node, out_topic, out_type = Relay(context, 3 if kind == 'relay3' else 1), 'relayed', \
-            Illuminance
-    else:
-        node, out_topic = TimescaleEstimator(context=context), 'estimate/predicted'
-        from geometry_msgs.msg import TwistWithCovarianceStamped as out_type
-    got = []
-    driver.create_subscription(out_type, out_topic, lambda m: got.append(1),
-                               QoSProfile(depth=1000))
-    pub = driver.create_publisher(Illuminance, 'measurement', QoSProfile(depth=1000))
+    rclpy.init(args=['worker', '--ros-args', *ros_args], context=context)
+    meter = Meter(warmup, messages, context)
+    cls = metered({'node': TimescaleEstimator, 'stub': StubbedEstimator, 'relay': Relay}[kind],
+                  meter)
+    node = cls(context=context, parameter_overrides=[
+        Parameter(k, value=v) for k, v in NODE_PARAMETERS.items()])
+    executor = make_executor(executor_kind, context=context)
     executor.add_node(node)
-    executor.add_node(driver)
-    rng = np.random.default_rng(0)
-    power = rng.normal(200.0, 10.0, messages + 1)
     try:
-        while pub.get_subscription_count() < 1 or driver.count_publishers(out_topic) < 1:
-            executor.spin_once(timeout_sec=0.01)
-        # warm up, then time `messages` messages with at most `window` in flight
-        sent = 0
-
-        def send() -> None:
-            nonlocal sent
-            sent += 1
-            pub.publish(conversions.power_to_msg(sent * NS // 1000, power[sent % power.size]))
-        send()
-        while not got:
-            executor.spin_once(timeout_sec=0.01)
-        got.clear()
-        sent_before = sent
-        start = time.perf_counter()
-        while len(got) < messages:
-            while sent - sent_before - len(got) < window and sent - sent_before < messages:
-                send()
-            executor.spin_once(timeout_sec=0.1)
-            if time.perf_counter() - start > 120:
-                raise TimeoutError(f'{kind}: {len(got)} of {messages} messages came back')
-        return messages / (time.perf_counter() - start)
+        spin(executor, context)
+    except ExternalShutdownException:
+        pass                    # EventsExecutor's spin_once, after the meter's shutdown
     finally:
         executor.shutdown()
         node.destroy_node()
-        driver.destroy_node()
         context.try_shutdown()
+    print(json.dumps(meter.result), flush=True)
 
 
-def textbook_step(F, Qd, C, Rd, D, x, P, y):
-    """Textbook predictive Kalman step: update with y, then predict through F."""
-    S = C @ P @ C.T + Rd
-    K = P @ C.T @ np.linalg.inv(S)
-    x = x + K @ (y - C @ x - D)
-    P = (np.eye(P.shape[0]) - K @ C) @ P
-    return F @ x, F @ P @ F.T + Qd
+class Driver:
+    """Publish the stream into a worker's namespace and take its five outputs."""
+
+    def __init__(self, context: Context, namespace: str, window: int) -> None:
+        self.node = rclpy.create_node('driver', namespace=namespace, context=context)
+        self.pub = self.node.create_publisher(Illuminance, 'measurement',
+                                              QoSProfile(depth=1000))
+        self.window, self.sent, self.acked = window, 0, 0
+        self.stalls = 0         # times no estimate came for 1 s: the window was reopened
+        self.counts = [0] * len(OUTPUTS)
+        for i, (topic, cls) in enumerate(OUTPUTS):
+            self.node.create_subscription(cls, topic, self._counter(i, topic),
+                                          QoSProfile(depth=1000))
+
+    def _counter(self, i: int, topic: str):
+        def count(msg) -> None:
+            self.counts[i] += 1
+            if topic == 'estimate/predicted':
+                seq = (conversions.stamp_to_ns(msg.header.stamp) - T0_NS) // PERIOD_NS
+                self.acked = max(self.acked, seq)
+        return count
+
+    def ready(self) -> bool:
+        """Return whether the worker matched our publisher and we its five outputs."""
+        return self.pub.get_subscription_count() >= 1 and all(
+            self.node.count_publishers(topic) >= 1 for topic, _ in OUTPUTS)
+
+    def send_window(self) -> None:
+        """Publish while fewer than `window` samples wait for their estimate."""
+        while self.sent - self.acked < self.window:
+            self.sent += 1
+            self.pub.publish(conversions.power_to_msg(T0_NS + self.sent * PERIOD_NS,
+                                                      power(self.sent)))
 
 
-def step_costs(repeat: int = 20000) -> list:
-    """(model, filter step us, session add us, textbook step us) per model."""
-    rows = []
-    for model, mu, y in ((owc(), 1.0, np.array([200.0])), (spring_mass(), 0.5, np.array([0.5]))):
-        kf = model.make_filter()
-        t_step = min(timeit.repeat(lambda: kf.step(mu, y), number=repeat, repeat=3)) / repeat
-        session = EstimatorSession(EstimatorConfig(model, nonpositive_is_gap=False))
-        stamp = [NS]
+def run_case(kind: str, executor_kind: str, args: argparse.Namespace, case: int,
+             context: Context, executor) -> dict:
+    """Run one worker with a driver; return its measurements and the driver's counts."""
+    namespace = f'/bench{os.getpid()}_{case}'
+    cmd = [sys.executable, __file__, 'worker', kind, executor_kind, str(args.warmup),
+           str(args.messages), '--ros-args', '-r', f'__ns:={namespace}']
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    driver = Driver(context, namespace, args.window)
+    executor.add_node(driver.node)
+    try:
+        deadline = time.monotonic() + 60.0
+        while not driver.ready():
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise RuntimeError(f'{kind}: the worker never matched (exit {proc.poll()})')
+            executor.spin_once(timeout_sec=0.01)
+        stalled_since = time.monotonic()
+        while proc.poll() is None:
+            acked = driver.acked
+            driver.send_window()
+            executor.spin_once(timeout_sec=0.01)
+            if driver.acked != acked:
+                stalled_since = time.monotonic()
+            elif time.monotonic() - stalled_since > 1.0:
+                # a best-effort input was lost (or the worker is slow): open the window
+                driver.acked, stalled_since = driver.sent, time.monotonic()
+                driver.stalls += 1
+        out, _ = proc.communicate(timeout=60.0)
+    finally:
+        executor.remove_node(driver.node)
+        driver.node.destroy_node()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    result = json.loads(out.strip().splitlines()[-1])
+    result.update(sent=driver.sent, outputs=list(driver.counts),
+                  stalls=driver.stalls)
+    return result
 
-        def add() -> None:
-            stamp[0] += int(mu * NS)
-            session.add(stamp[0], y)
-        t_add = min(timeit.repeat(add, number=repeat, repeat=3)) / repeat
-        n = model.A.shape[0]
-        G = model.G if model.G is not None else np.eye(n)
-        F, Qd = np.eye(n) + mu * model.A, mu * G @ model.Q @ G.T
-        D = model.D if model.D is not None else np.zeros(1)
-        state = [model.x0.copy(), model.P0.copy()]
 
-        def textbook() -> None:
-            state[:] = textbook_step(F, Qd, model.C, model.R / mu, D, *state, y)
-        t_text = min(timeit.repeat(textbook, number=repeat, repeat=3)) / repeat
-        rows.append((model.name, t_step * 1e6, t_add * 1e6, t_text * 1e6))
-    return rows
+def per_input_us(results: list, key: str) -> list:
+    """Return the key's time per input in us, one value per repeat."""
+    return [r[key] / r['messages'] * 1e6 for r in results]
+
+
+def fmt(values: list, unit: str = 'us') -> str:
+    """Return 'min / median unit'."""
+    return f'{min(values):7.1f} / {statistics.median(values):7.1f} {unit}'
+
+
+def in_process_costs(messages: int, repeat: int = 3) -> dict:
+    """Return the us per input of the parts of the node's callback, on the same stream."""
+    config = load_config(overrides=NODE_PARAMETERS)
+    stamps = [T0_NS + k * PERIOD_NS for k in range(1, messages + 1)]
+    values = [power(k) for k in range(1, messages + 1)]
+
+    def run_session() -> list:
+        session = EstimatorSession(config.session)
+        return [session.add(t, y) for t, y in zip(stamps, values)]
+    outcomes = run_session()
+    reused = OutcomeMessages(config)
+
+    def fill() -> None:
+        for out in outcomes:
+            for _ in reused.messages(out):
+                pass
+
+    def fill_and_serialize() -> None:
+        for out in outcomes:
+            for _, msg in reused.messages(out):
+                serialize_message(msg)
+
+    def build_and_serialize() -> None:
+        for out in outcomes:
+            for _, msg in outcome_messages(out, config):
+                serialize_message(msg)
+    parts = {'session.add': run_session,
+             'build 5 messages (outcome_messages)': lambda: [
+                 outcome_messages(o, config) for o in outcomes],
+             'fill 5 reused (OutcomeMessages)': fill,
+             'build + serialize_message': build_and_serialize,
+             'fill + serialize_message': fill_and_serialize}
+    return {name: min(timeit.repeat(f, timer=time.thread_time, number=1, repeat=repeat))
+            / messages * 1e6
+            for name, f in parts.items()}
 
 
 def main() -> None:
-    """Run both benchmarks and print the figures."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    """Run the cases alternately and print the figures."""
+    if len(sys.argv) > 1 and sys.argv[1] == 'worker':
+        kind, executor_kind, warmup, messages = sys.argv[2:6]
+        worker(kind, executor_kind, int(warmup), int(messages), sys.argv[7:])
+        return
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--messages', type=int, default=3000)
+    parser.add_argument('--warmup', type=int, default=300)
     parser.add_argument('--window', type=int, default=20)
-    parser.add_argument('--repeat', type=int, default=20000)
+    parser.add_argument('--repeats', type=int, default=5)
+    parser.add_argument('--cases', nargs='+', default=['relay', 'node', 'stub'],
+                        choices=['relay', 'node', 'stub'],
+                        help='stub: the node with a session that filters nothing')
+    parser.add_argument('--executors', nargs='+', default=['single', 'events'],
+                        choices=['single', 'events'])
     args = parser.parse_args()
-    print(f'machine: {platform.machine()}, {os.cpu_count()} CPUs, {platform.processor() or ""} '
-          f'Python {platform.python_version()}, numpy {np.__version__}, '
-          f'{platform.platform()}')
-    relay = throughput('relay', args.messages, args.window)
-    relay3 = throughput('relay3', args.messages, args.window)
-    est = throughput('estimator', args.messages, args.window)
-    print(f'bare relay (1 out):          {relay:8.0f} msg/s')
-    print(f'bare relay (3 out per in):   {relay3:8.0f} msg/s')
-    print(f'timescale_estimator (5 out): {est:8.0f} msg/s')
-    print(f'ratio estimator/relay: {est / relay:.2f}; estimator/relay with 3 outputs: '
-          f'{est / relay3:.2f}')
-    print('per-step cost (us)      filter.step  session.add  textbook numpy KF step')
-    for name, t_step, t_add, t_text in step_costs(args.repeat):
-        print(f'  {name:20s} {t_step:10.1f} {t_add:12.1f} {t_text:14.1f}')
+    print(f'machine: {platform.machine()}, {os.cpu_count()} CPUs, load average '
+          f'{os.getloadavg()[0]:.2f}, Python {platform.python_version()}, numpy '
+          f'{np.__version__}; {args.messages} inputs per case after {args.warmup} warm-up, '
+          f'window {args.window}, {args.repeats} rounds, relay and node alternating')
+    context = Context()
+    rclpy.init(context=context)
+    executor = make_executor('single', context=context)
+    results = {}
+    case = 0
+    try:
+        for executor_kind in args.executors:
+            for _ in range(args.repeats):
+                for kind in args.cases:
+                    case += 1
+                    r = run_case(kind, executor_kind, args, case, context, executor)
+                    results.setdefault((executor_kind, kind), []).append(r)
+                    print(f'  {executor_kind:6s} {kind:5s} thread '
+                          f'{r["thread_cpu"] / r["messages"] * 1e6:7.1f} us, process '
+                          f'{r["process_cpu"] / r["messages"] * 1e6:7.1f} us per input, '
+                          f'{r["messages"] / r["wall"]:6.0f} inputs/s; outputs '
+                          f'{r["outputs"]} for {r["sent"]} sent, {r["stalls"]} stalls',
+                          flush=True)
+    finally:
+        executor.shutdown()
+        context.try_shutdown()
+    print('per input, min / median over the rounds:')
+    print(f'{"executor":8s} {"case":5s} {"executor thread CPU":>22s} {"process CPU":>22s} '
+          f'{"wall rate":>24s}')
+    for (executor_kind, kind), rs in results.items():
+        rate = [r['messages'] / r['wall'] for r in rs]
+        print(f'{executor_kind:8s} {kind:5s} {fmt(per_input_us(rs, "thread_cpu")):>22s} '
+              f'{fmt(per_input_us(rs, "process_cpu")):>22s} '
+              f'{max(rate):8.0f} / {statistics.median(rate):6.0f} inputs/s')
+    for executor_kind in args.executors:
+        relay, node = results[(executor_kind, 'relay')], results[(executor_kind, 'node')]
+        for key, what in (('thread_cpu', 'executor thread CPU'),
+                          ('process_cpu', 'process CPU')):
+            ratio = (statistics.median(per_input_us(node, key))
+                     / statistics.median(per_input_us(relay, key)))
+            best = min(per_input_us(node, key)) / min(per_input_us(relay, key))
+            print(f'{executor_kind}: node / relay, {what}: {ratio:.2f} (medians), '
+                  f'{best:.2f} (minima): {"MET" if ratio <= GOAL else "NOT MET"} '
+                  f'(goal <= {GOAL:g}x the relay)')
+    costs = in_process_costs(args.messages)
+    print('in-process cost of the parts of the node callback (us per input, min of 3): '
+          + ', '.join(f'{k} {v:.1f}' for k, v in costs.items()))
+    for executor_kind in args.executors:
+        node_us = statistics.median(per_input_us(results[(executor_kind, 'node')],
+                                                 'thread_cpu'))
+        line = (f'{executor_kind}: session.add in-process is {costs["session.add"] / node_us:.0%}'
+                f" of the node's executor thread CPU per input ({node_us:.1f} us)")
+        if (executor_kind, 'stub') in results:
+            stub_us = statistics.median(per_input_us(results[(executor_kind, 'stub')],
+                                                     'thread_cpu'))
+            line += (f'; the node minus its stubbed twin (no filter, {stub_us:.1f} us): '
+                     f'{node_us - stub_us:.1f} us = {(node_us - stub_us) / node_us:.0%}')
+        print(line)
 
 
 if __name__ == '__main__':

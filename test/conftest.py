@@ -32,6 +32,12 @@ def ros_context():
         context.try_shutdown()
 
 
+@pytest.fixture(params=['single', 'events'])
+def executor_kind(request):
+    """Return each executor a node can run on (tskf_ros.nodes.node_base.EXECUTORS) in turn."""
+    return request.param
+
+
 @pytest.fixture
 def lint_paths():
     """Return the repository's top-level source paths (no hidden, venv or generated trees)."""

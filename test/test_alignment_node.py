@@ -10,7 +10,6 @@ from geometry_msgs.msg import TwistWithCovarianceStamped
 import numpy as np
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
@@ -24,6 +23,7 @@ from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import COMMAND_TOPIC
 from tskf_ros.nodes.alignment import Alignment
 from tskf_ros.nodes.led_link_simulator import LedLinkSimulator
+from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.tools.demo_collector import wait_for
 
 import yaml
@@ -60,7 +60,8 @@ def spin_until(executor, condition, what):
     ('hill_climbing', {'seed': 6}, 6.40),
     ('three_point', {'seed': 7}, 6.91),
 ])
-def test_loop_tracks_and_equals_the_core_loop(ros_context, algorithm, link, worst):
+def test_loop_tracks_and_equals_the_core_loop(ros_context, executor_kind, algorithm, link,
+                                              worst):
     steps = 400
     sim_params = yaml_parameters('led_link_simulator.yaml', '/**/led_link_simulator', **link,
                                  time_factor=0.0, duration=steps * DT, start_time=1.0,
@@ -79,7 +80,7 @@ def test_loop_tracks_and_equals_the_core_loop(ros_context, algorithm, link, wors
     # one process, lockstep: each sample waits for the command answering the last (the
     # command timeout, wall clock, is only a bound: a late command would be counted in
     # sim.timeouts), and everything is delivered within the publish call into deep queues
-    executor = SingleThreadedExecutor(context=ros_context)
+    executor = make_executor(executor_kind, context=ros_context)
     for n in (sim, node, client):
         executor.add_node(n)
     try:
@@ -112,7 +113,7 @@ def test_loop_tracks_and_equals_the_core_loop(ros_context, algorithm, link, wors
 class Harness:
     """The alignment node and a client node (publisher, subscribers) on one executor."""
 
-    def __init__(self, context, overrides):
+    def __init__(self, context, overrides, executor_kind):
         self.node = Alignment(context=context, parameter_overrides=overrides)
         self.client = rclpy.create_node('client', context=context)
         self.pub = self.client.create_publisher(Illuminance, 'intensity', QoSProfile(depth=100))
@@ -126,7 +127,7 @@ class Harness:
                                         self.corrected.append, deep)
         self.client.create_subscription(DiagnosticArray, '/diagnostics',
                                         self.diagnostics.append, 10)
-        self.executor = SingleThreadedExecutor(context=context)
+        self.executor = make_executor(executor_kind, context=context)
         self.executor.add_node(self.node)
         self.executor.add_node(self.client)
         self.spin_until(lambda: self.pub.get_subscription_count() > 0 and all(
@@ -167,8 +168,8 @@ class Harness:
 
 
 @pytest.fixture
-def make(ros_context):
-    """Build a Harness in this test's own context; close it afterwards."""
+def make(ros_context, executor_kind):
+    """Build a Harness in this test's own context, on each executor; close it afterwards."""
     made = []
 
     def factory(**extra):
@@ -178,7 +179,8 @@ def make(ros_context):
         # nor rate or staleness verdicts: they follow the wall clock (test_hardening has them)
         extra.setdefault('stale_timeout', 0.0)
         extra.setdefault('min_rate_fraction', 0.0)
-        h = Harness(ros_context, yaml_parameters('alignment.yaml', '/**/alignment', **extra))
+        h = Harness(ros_context, yaml_parameters('alignment.yaml', '/**/alignment', **extra),
+                    executor_kind)
         made.append(h)
         return h
     yield factory

@@ -8,7 +8,6 @@ from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 import numpy as np
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock
@@ -17,6 +16,7 @@ from sensor_msgs.msg import Illuminance, TimeReference
 from tskf_ros.core.linear_models import owc, run_filter, spring_mass
 from tskf_ros.core.time_scales import discrete
 from tskf_ros.messages import conversions
+from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.owc.estimator_session import NS
 
@@ -42,7 +42,7 @@ def yaml_parameters(name, **extra):
 class Harness:
     """The estimator and a client node (publisher, subscribers) on one executor."""
 
-    def __init__(self, context, overrides, *, best_effort=False):
+    def __init__(self, context, overrides, executor_kind, *, best_effort=False):
         self.node = TimescaleEstimator(context=context, parameter_overrides=overrides)
         self.client = rclpy.create_node('client', context=context)
         qos = qos_profile_sensor_data if best_effort else QoSProfile(depth=100)
@@ -54,7 +54,7 @@ class Harness:
         self.diagnostics = []
         self.client.create_subscription(DiagnosticArray, '/diagnostics',
                                         self.diagnostics.append, 10)
-        self.executor = SingleThreadedExecutor(context=context)
+        self.executor = make_executor(executor_kind, context=context)
         self.executor.add_node(self.node)
         self.executor.add_node(self.client)
         self.spin_until(lambda: self.pub.get_subscription_count() > 0 and all(
@@ -93,8 +93,8 @@ class Harness:
 
 
 @pytest.fixture
-def make(ros_context):
-    """Build a Harness in this test's own context; close it afterwards."""
+def make(ros_context, executor_kind):
+    """Build a Harness in this test's own context, on each executor; close it afterwards."""
     made = []
 
     def factory(overrides=None, **kwargs):
@@ -105,7 +105,8 @@ def make(ros_context):
                  Parameter('min_rate_fraction', value=0.0)]
         given = overrides or yaml_parameters('owc_estimator.yaml')
         names = {p.name for p in given}
-        h = Harness(ros_context, given + [p for p in quiet if p.name not in names], **kwargs)
+        h = Harness(ros_context, given + [p for p in quiet if p.name not in names],
+                    executor_kind, **kwargs)
         made.append(h)
         return h
     yield factory

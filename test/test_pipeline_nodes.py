@@ -11,7 +11,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Illuminance, JointState
@@ -20,6 +19,7 @@ from tskf_ros.core.linear_models import owc, run_filter
 from tskf_ros.core.time_scales import discrete
 from tskf_ros.experiments.demo import summarise
 from tskf_ros.messages import conversions
+from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.power_meter_simulator import PowerMeterSimulator
 from tskf_ros.owc.estimator_session import NS
 from tskf_ros.owc.vibrating_link import OwcLinkConfig, simulate_link
@@ -41,7 +41,8 @@ def spin_until(executor, condition, what):
 
 
 @pytest.mark.parametrize('publish_invalid', [False, True])
-def test_simulator_publishes_the_seeded_stream_with_gaps(ros_context, publish_invalid):
+def test_simulator_publishes_the_seeded_stream_with_gaps(ros_context, executor_kind,
+                                                         publish_invalid):
     params = {'seed': 3, 'duration': 120.0, 'time_factor': 200.0, 'start_time': 1.0,
               'knob_max': 1.5, 'knob_initial': 1.0, 'blockage': 'bernoulli',
               'drop_probability': 0.1, 'publish_invalid': publish_invalid,
@@ -61,7 +62,7 @@ def test_simulator_publishes_the_seeded_stream_with_gaps(ros_context, publish_in
                                QoSProfile(depth=1000, reliability=qos_profile_sensor_data
                                           .reliability))
     client.create_subscription(JointState, 'true_angle', truth.append, QoSProfile(depth=1000))
-    executor = SingleThreadedExecutor(context=ros_context)
+    executor = make_executor(executor_kind, context=ros_context)
     executor.add_node(sim)
     executor.add_node(client)
     try:
@@ -89,11 +90,11 @@ def test_simulator_publishes_the_seeded_stream_with_gaps(ros_context, publish_in
     assert any(g[1] <= 0 for g in got) == publish_invalid
 
 
-def test_simulator_at_1khz(ros_context):
+def test_simulator_at_1khz(ros_context, executor_kind):
     sim = PowerMeterSimulator(context=ros_context, parameter_overrides=[
         Parameter('rate', value=1000.0), Parameter('duration', value=0.3),
         Parameter('start_time', value=1.0)])
-    executor = SingleThreadedExecutor(context=ros_context)
+    executor = make_executor(executor_kind, context=ros_context)
     executor.add_node(sim)
     try:
         spin_until(executor, lambda: sim.published == 300, '300 samples')
@@ -136,27 +137,27 @@ def run_node(module, *args):
     return proc.returncode, proc.stdout
 
 
-def stop(proc, log):
-    """SIGINT the node process, wait (killing it if it hangs); return its output."""
+def stop(proc, log, sig=signal.SIGINT):
+    """Signal the node process (SIGINT), wait (killing it if it hangs); return its output."""
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
     try:
         proc.wait(timeout=TIMEOUT)
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait(timeout=TIMEOUT)
         log.seek(0)
-        raise AssertionError(f'the node ignored SIGINT for {TIMEOUT:g} s:\n{log.read()}')
+        raise AssertionError(f'the node ignored {sig.name} for {TIMEOUT:g} s:\n{log.read()}')
     log.seek(0)
     return log.read()
 
 
 @pytest.mark.slow
-def test_estimator_in_another_process(ros_context, tmp_path):
+def test_estimator_in_another_process(ros_context, executor_kind, tmp_path):
     log = (tmp_path / 'estimator.log').open('w+')
     # /diagnostics every 0.1 s: its arrival tells that the node has matched our readers
-    proc = node_process('timescale_estimator', '--ros-args', '--params-file',
-                        str(REPO / 'config' / 'owc_estimator.yaml'),
+    proc = node_process('timescale_estimator', '--executor', executor_kind, '--ros-args',
+                        '--params-file', str(REPO / 'config' / 'owc_estimator.yaml'),
                         '-p', 'diagnostics_period:=0.1',
                         '-r', 'measurement:=received_power', log=log)
     client = rclpy.create_node('client', context=ros_context)
@@ -170,7 +171,7 @@ def test_estimator_in_another_process(ros_context, tmp_path):
     client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append,
                                QoSProfile(depth=10))
     pub = client.create_publisher(Illuminance, 'received_power', QoSProfile(depth=100))
-    executor = SingleThreadedExecutor(context=ros_context)
+    executor = make_executor(executor_kind, context=ros_context)
     executor.add_node(client)
     executor.add_node(collector)
     stamps = np.array([1.0, 2.0, 3.0, 6.0, 7.0, 8.0, 8.5, 9.0, 13.0, 14.0])

@@ -13,7 +13,6 @@ import time
 import numpy as np
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool, Trigger
 
@@ -22,6 +21,7 @@ from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import load_config, outcome_messages
 from tskf_ros.nodes.alignment import Alignment
+from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.owc.estimator_session import Estimate, EstimatorConfig, EstimatorSession, Outcome
 import yaml
@@ -80,9 +80,9 @@ def call(executor, client, request):
 
 
 @pytest.fixture
-def loop(ros_context):
-    """Yield an executor with a client node; the nodes listed are destroyed after the test."""
-    executor = SingleThreadedExecutor(context=ros_context)
+def loop(ros_context, executor_kind):
+    """Yield an executor (each kind) with a client node; the nodes listed are destroyed after."""
+    executor = make_executor(executor_kind, context=ros_context)
     client = rclpy.create_node('citizen_client', context=ros_context)
     executor.add_node(client)
     nodes = [client]

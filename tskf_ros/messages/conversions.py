@@ -26,6 +26,7 @@ Types (all from common_interfaces, no custom messages):
 - input u of the estimator: geometry_msgs/msg/AccelStamped (see input_to_msg below).
 """
 
+import math
 from typing import Mapping, Sequence
 
 from builtin_interfaces.msg import Time
@@ -106,6 +107,56 @@ def estimate_to_msg(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
     return msg
 
 
+def set_stamp(stamp: Time, ns: int) -> Time:
+    """Set a builtin_interfaces/Time in place to integer nanoseconds (>= 0); return it."""
+    stamp.sec, stamp.nanosec = divmod(int(ns), NS)
+    return stamp
+
+
+def fill_estimate_msg(msg: TwistWithCovarianceStamped, stamp_ns: int, x: np.ndarray,
+                      P: np.ndarray) -> TwistWithCovarianceStamped:
+    """
+    Fill a TwistWithCovarianceStamped in place as estimate_to_msg builds one; return it.
+
+    The frame_id is left as it is: a publisher of estimates reuses one message per topic
+    (building nine nested message objects per estimate costs more than the filter step).
+    """
+    x = np.asarray(x, dtype=float).reshape(-1)
+    n = x.size
+    if n > SLOTS:
+        raise ValueError(f'a state of {n} > {SLOTS} entries does not fit the message')
+    P = np.asarray(P, dtype=float).reshape(n, n)
+    set_stamp(msg.header.stamp, stamp_ns)
+    v = x.tolist() + [0.0] * (SLOTS - n)
+    t = msg.twist.twist
+    t.linear.x, t.linear.y, t.linear.z = v[0], v[1], v[2]
+    t.angular.x, t.angular.y, t.angular.z = v[3], v[4], v[5]
+    cov = msg.twist.covariance
+    if cov.dtype != np.float64 or cov.shape != (SLOTS * SLOTS,):
+        cov = msg.twist.covariance = np.zeros(SLOTS * SLOTS)
+    cov.fill(0.0)
+    cov.reshape(SLOTS, SLOTS)[:n, :n] = P
+    return msg
+
+
+def fill_joint_state(msg: JointState, stamp_ns: int, x: np.ndarray,
+                     P: np.ndarray) -> JointState:
+    """Fill a JointState in place as estimate_to_joint_state builds one (names kept)."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    n = x.size
+    # sqrt(max(P_ii, 0)) in plain floats, as np.sqrt(np.maximum(diag, 0)) does (NaN stays)
+    sd = [math.sqrt(p) if p > 0.0 else (p if p != p else 0.0)
+          for p in np.asarray(P, dtype=float).reshape(n, n).diagonal().tolist()]
+    set_stamp(msg.header.stamp, stamp_ns)
+    position, velocity = msg.position, msg.velocity
+    if len(position) == n and len(velocity) == n:
+        for i, (xi, si) in enumerate(zip(x.tolist(), sd)):
+            position[i], velocity[i] = xi, si
+    else:
+        msg.position, msg.velocity = x.tolist(), sd
+    return msg
+
+
 def estimate_to_joint_state(stamp_ns: int, x: np.ndarray, P: np.ndarray,
                             names: Sequence[str], *, frame_id: str = '') -> JointState:
     """Convert x and P -> JointState: name = names, position = x, velocity = sqrt(diag P)."""
@@ -130,6 +181,13 @@ def jump_to_msg(stamp_ns: int, sigma_ns: int) -> TimeReference:
     """Convert the point t and sigma(t) -> TimeReference (mu = time_ref - stamp)."""
     msg = TimeReference(time_ref=ns_to_stamp(sigma_ns), source='sigma')
     msg.header.stamp = ns_to_stamp(stamp_ns)
+    return msg
+
+
+def fill_jump_msg(msg: TimeReference, stamp_ns: int, sigma_ns: int) -> TimeReference:
+    """Fill a TimeReference in place as jump_to_msg builds one (source kept); return it."""
+    set_stamp(msg.header.stamp, stamp_ns)
+    set_stamp(msg.time_ref, sigma_ns)
     return msg
 
 

@@ -2,6 +2,7 @@
 
 import argparse
 from dataclasses import fields
+import os
 import sys
 from typing import Callable, Optional, Sequence
 
@@ -10,7 +11,8 @@ from rcl_interfaces.msg import ParameterType, SetParametersResult
 import rclpy
 from rclpy.clock import ClockChange, JumpThreshold, TimeJump
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
@@ -25,12 +27,48 @@ from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPU
 MAX_BATCH = 10_000
 # the evaluation truth of both simulators (sensor_msgs/msg/JointState)
 TRUTH_TOPIC = 'true_angle'
+# The executors a node can run on (`--executor`, or TSKF_EXECUTOR in the environment).
+# 'single' is rclpy's SingleThreadedExecutor, which rebuilds its wait set on every spin;
+# 'events' is rclpy.experimental.EventsExecutor, which dispatches from callbacks of the
+# middleware (the README's benchmark section has both, measured).
+EXECUTORS = {'single': SingleThreadedExecutor, 'events': EventsExecutor}
+DEFAULT_EXECUTOR = 'events'
+EXECUTOR_VARIABLE = 'TSKF_EXECUTOR'
+# s: the longest spin_once between two checks of the context.  rclpy 7.1's
+# EventsExecutor.spin() (and its spin_once without a timeout) never returns after SIGINT
+# or SIGTERM, spinning a core; its spin_once with a timeout returns at once, raising
+# KeyboardInterrupt or ExternalShutdownException (test_executors checks both executors).
+SPIN_TIMEOUT = 1.0
+
+
+def executor_kind(kind: Optional[str] = None) -> str:
+    """Return the executor kind asked for: kind, else $TSKF_EXECUTOR, else the default."""
+    kind = kind or os.environ.get(EXECUTOR_VARIABLE) or DEFAULT_EXECUTOR
+    if kind not in EXECUTORS:
+        raise ValueError(f'executor must be one of {", ".join(EXECUTORS)}, got {kind!r}')
+    return kind
+
+
+def make_executor(kind: Optional[str] = None, *, context=None) -> Executor:
+    """Return a new executor of the kind (see executor_kind) in context."""
+    return EXECUTORS[executor_kind(kind)](context=context)
+
+
+def spin(executor: Executor, context=None) -> None:
+    """Spin executor until its context shuts down (SIGINT, SIGTERM, rclpy.shutdown)."""
+    context = context or rclpy.get_default_context()
+    while context.ok():
+        executor.spin_once(timeout_sec=SPIN_TIMEOUT)
 
 
 def parse_args(prog: str, description: str,
                argv: Optional[list] = None) -> argparse.Namespace:
     """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
     parser = argparse.ArgumentParser(prog=prog, description=description)
+    parser.add_argument('--executor', choices=sorted(EXECUTORS), default=None,
+                        help=f'the rclpy executor to spin on (default: ${EXECUTOR_VARIABLE} '
+                        f'if set, else {DEFAULT_EXECUTOR}): single = SingleThreadedExecutor, '
+                        'events = rclpy.experimental.EventsExecutor')
     args = remove_ros_args(sys.argv if argv is None else argv)[1:]
     return parser.parse_known_args(args)[0]
 
@@ -58,23 +96,33 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
     Run one node until Ctrl-C or shutdown, in the Jazzy form of ros2/demos.
 
     An exception of `startup_errors` (bad parameters) ends the process with its message
-    on stderr and exit code 1, not a traceback.
+    on stderr and exit code 1, not a traceback.  `--executor single|events` chooses the
+    executor (see EXECUTORS).
     """
-    parse_args(name, description, args)
+    options = parse_args(name, description, args)
+    try:
+        kind = executor_kind(options.executor)
+    except ValueError as exc:
+        print(f'{name}: cannot start: {exc}', file=sys.stderr)
+        sys.exit(1)
     rclpy.init(args=args)
-    node = None
+    node = executor = None
     try:
         node = factory()
         warning = unused_parameter_file(node, sys.argv if args is None else args)
         if warning:
             node.get_logger().error(warning)
-        rclpy.spin(node)
+        executor = make_executor(kind)
+        executor.add_node(node)
+        spin(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except startup_errors as exc:
         print(f'{name}: cannot start: {exc}', file=sys.stderr)
         sys.exit(1)
     finally:
+        if executor is not None:
+            executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

@@ -27,7 +27,7 @@ from tskf_ros.messages.estimator_interface import (ConfigError, default_paramete
                                                    JUMP_TYPE, MATRICES, MATRIX_HELP,
                                                    measurement_class, MEASUREMENT_RANGE_HELP,
                                                    MEASUREMENT_TOPIC, NODE_NAME, NodeConfig,
-                                                   outcome_messages, output_qos, OUTPUT_TOPICS,
+                                                   OutcomeMessages, output_qos, OUTPUT_TOPICS,
                                                    output_type, PARAMETERS,
                                                    parameters_to_config, SCALARS)
 from tskf_ros.messages.parameters import float_range
@@ -60,6 +60,7 @@ class TimescaleEstimator(ReconfigurableNode):
                  ESTIMATE_TYPE: TwistWithCovarianceStamped}
         self.pubs = {key: self.create_publisher(types[output_type(key)], topic, qos_out)
                      for key, topic in OUTPUT_TOPICS.items()}
+        self.outputs = OutcomeMessages(self.config)
         self.start_diagnostics()
         self.watch_clock_jumps()
         self.start_services()
@@ -140,6 +141,7 @@ class TimescaleEstimator(ReconfigurableNode):
 
     def reconfigure(self, config: NodeConfig) -> str:
         """Switch the session to a validated config; return what it did."""
+        self.outputs = OutcomeMessages(config)
         return self.session.reconfigure(config.session).message
 
     # -- data -----------------------------------------------------------------------------
@@ -169,8 +171,13 @@ class TimescaleEstimator(ReconfigurableNode):
             log.debug(out.message)
 
     def _publish(self, out: Outcome) -> None:
-        for key, msg in outcome_messages(out, self.config):
+        # each message is reused: published (serialized) before the next one is filled; an
+        # output nobody subscribes to (its topic is volatile) is neither filled nor published
+        for key, msg in self.outputs.messages(out, self._subscribed):
             self.pubs[key].publish(msg)
+
+    def _subscribed(self, key: tuple) -> bool:
+        return self.pubs[key].get_subscription_count() > 0
 
     def restart(self, why: str, reason: str = 'clock_jump') -> None:
         """Re-initialise the filter, saying why (nothing to do before a sample)."""
