@@ -165,7 +165,7 @@ def default_parameters() -> dict:
     values: dict = {key: [float(v) for v in np.ravel(matrices[key])] for key in MATRICES}
     values.update({name: spec[0] for name, spec in SCALARS.items()})
     values.update({'model_name': d.name, 'state_names': list(d.state_names),
-                   'transition': 'euler', 'history_size': 1000, 'queue_depth': 100,
+                   'transition': 'euler', 'history_size': 1000, 'queue_depth': 1000,
                    'nonpositive_is_gap': True, 'frame_id': '', 'measurement_range': [],
                    'gate_patience': 5, 'use_message_variance': False,
                    'measurement_type': DEFAULT_MEASUREMENT_TYPE})

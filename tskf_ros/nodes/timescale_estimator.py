@@ -101,7 +101,8 @@ class TimescaleEstimator(ReconfigurableNode):
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=2, to_value=1_000_000)]))
         self.declare_parameter('queue_depth', defaults['queue_depth'], ParameterDescriptor(
-            description='depth of the input and output queues', read_only=True,
+            description=('depth of the input and output queues (1000: 0.5 s of a 2 kHz '
+                         'stream, the margin a loaded machine needs)'), read_only=True,
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=1, to_value=100_000)]))
         gap_help = ('a measurement <= 0 is an invalid reading, a gap (Cai IV-C: power); '
