@@ -60,6 +60,8 @@ setup(
             'make_sample_bags = tskf_ros.tools.sample_bags:console_main',
             'led_link_simulator = tskf_ros.nodes.led_link_simulator:main',
             'alignment = tskf_ros.nodes.alignment:main',
+            'fit_noise = tskf_ros.experiments.fit_noise:console_main',
+            'sweep = tskf_ros.experiments.sweep:console_main',
         ],
     },
 )

@@ -37,6 +37,8 @@ HELP_MUST_NAME = {
     'led_link_simulator': ('--ros-args --params-file', 'config/led_link_simulator.yaml'),
     'alignment': ('--ros-args --params-file', 'config/alignment.yaml'),
     'reindex': ('-o OUTPUT', 'path', '.partial'),
+    'fit_noise': ('--params-file', '--topic', '--out', '--json', 'bag'),
+    'sweep': ('--bags', '--set', '--workers', '--scheduler', '--out', '--png'),
 }
 
 

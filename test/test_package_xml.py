@@ -13,6 +13,7 @@ KEYS = {
     'mcap': 'python3-mcap-pip', 'rosbags': 'python3-rosbags-pip',
     'pytest': 'python3-pytest', 'hypothesis': 'python3-hypothesis',
     'mcap_ros2': 'python3-mcap-ros2-support-pip',
+    'dask': 'python3-dask-pip', 'distributed': 'python3-distributed-pip', 'tqdm': 'python3-tqdm',
 }
 RUN = ('exec_depend', 'depend')
 TEST = RUN + ('test_depend',)

@@ -92,7 +92,7 @@ class _Collector:
 
     def new_segment(self) -> None:
         self.segment += 1
-        self.inputs[self.segment] = []
+        self.inputs.setdefault(self.segment, [])
         self.carry[self.segment] = self.last_u
 
     def u_at(self, seg: int, stamp_ns: int):
@@ -127,11 +127,12 @@ class _Collector:
             self.terms[key] = (e, self.C @ P @ self.C.T + Rd)
 
     def input_outcome(self, out, stamp_ns: int, u) -> None:
-        if out.status == 'reset':
-            self.new_segment()
         if out.status in TAKEN:
-            self.inputs[self.segment].append((stamp_ns, u))
+            # the input is in force from its stamp: in the new segment after a reset
+            seg = self.segment + (out.status == 'reset')
+            self.inputs.setdefault(seg, []).append((stamp_ns, u))
             self.last_u = u
+        self.outcome(out)       # an input point steps the filter from the previous point
 
     def segments(self) -> list:
         by_seg: dict = {}
