@@ -63,7 +63,7 @@ def simulate(path: Path, n: int, seed: int, q: float = Q_TRUE, r: float = R_TRUE
 
 def scalar_log_likelihood(t: np.ndarray, y: np.ndarray, a: float, c: float, q: float,
                           r: float, x0: float, p0: float) -> float:
-    """A predictive scalar Kalman filter with F = 1 + mu a, Q_d = mu q, R_d = r / mu."""
+    """Return log L of a predictive scalar KF: F = 1 + mu a, Q_d = mu q, R_d = r / mu."""
     x, P, ll = x0, p0, 0.0
     for k in range(len(t) - 1):
         mu = t[k + 1] - t[k]

@@ -267,7 +267,7 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
         return negative_log_likelihood(with_noise(model, Q, R), transition, segments)
 
     if not np.isfinite(nll(theta0)):
-        raise FitError('the likelihood is not finite at the parameter file\'s Q and R')
+        raise FitError("the likelihood is not finite at the parameter file's Q and R")
     big = 1e300
 
     def bounded(theta: np.ndarray) -> float:

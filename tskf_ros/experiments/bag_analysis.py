@@ -1,7 +1,7 @@
 """
-Read a bag into a measurement/input stream and evaluate the estimator on it: the one place
-where fit_noise and sweep touch bags.
+Read a bag into a measurement and input stream, and evaluate the estimator on it.
 
+This is the one place where fit_noise and sweep touch bags.
 `evaluate_bag(bag, config)` is the per-bag evaluation of the sweep: it reads the bag
 (tskf_ros.bag.reader.BagReader, rclpy deserialization, the node's extractor), runs the
 estimator session over it through tskf_ros.owc.innovation_trace (the node's code path,
@@ -60,9 +60,10 @@ class Stream:
 def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[str] = None,
                 input_topic: Optional[str] = None, truth: bool = True) -> Stream:
     """
-    Read the measurement topic (default /received_power), the input topic (default /input
-    if present) and, with truth, every JointState topic of the bag, in storage order.
+    Read a bag's measurements, inputs and (with truth) JointState topics in storage order.
 
+    The measurement topic defaults to /received_power, the input topic to /input if the
+    bag has it.
     Raises BagError / BagTypeError (one line) if the bag or its topics cannot be used;
     damage met while reading stops it, and `Stream.damage` says where.
     """

@@ -29,7 +29,6 @@ from typing import Optional
 
 import numpy as np
 import scipy.stats
-import yaml
 
 from tskf_ros.bag.message_types import BagTypeError
 from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED
@@ -39,6 +38,8 @@ from tskf_ros.experiments.output import write_json, write_text
 from tskf_ros.messages.estimator_interface import load_config, NODE_NAME, ParamsError
 from tskf_ros.owc.estimator_session import EstimatorConfig
 from tskf_ros.owc.innovation_trace import fit_stream, Measurement, run_stream, StreamFit
+
+import yaml
 
 PROG = 'fit_noise'
 EXIT_NO_FIT = 4
@@ -121,7 +122,7 @@ def main(argv: Optional[list] = None) -> int:
     """Run the command line; return the exit status."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Fit the noise intensities Q and R of the estimator model to a '
-        'bag by maximum likelihood over the time-scale filter\'s innovations.')
+        "bag by maximum likelihood over the time-scale filter's innovations.")
     parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
     parser.add_argument('--params-file', type=Path,
                         help='estimator parameters (the model and the start of the search), '
@@ -132,7 +133,7 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--out', type=Path, help='write the fitted parameter file here')
     parser.add_argument('--json', type=Path, help='write the fit report (JSON) here')
     parser.add_argument('--fix', choices=('Q', 'R'), action='append', default=[],
-                        help='keep Q (or R) at the parameter file\'s value; fit the other')
+                        help="keep Q (or R) at the parameter file's value; fit the other")
     parser.add_argument('-q', '--quiet', action='store_true', help='only errors')
     args = parser.parse_args(argv)
     try:

@@ -26,8 +26,8 @@ started); 5 at least one row has an error (the table is complete otherwise).
 """
 
 import argparse
-from dataclasses import dataclass, field
 import csv
+from dataclasses import dataclass, field
 import glob
 import hashlib
 import itertools
@@ -40,13 +40,14 @@ import time
 from typing import Iterable, Optional
 
 import numpy as np
-import yaml
 
 from tskf_ros.experiments.bag_analysis import evaluate_bag, METRICS, read_stream
 from tskf_ros.experiments.fit_noise import fit_events
 from tskf_ros.experiments.output import save_figure, write_text
 from tskf_ros.messages.estimator_interface import (default_parameters, load_config,
                                                    NodeConfig, ParamsError)
+
+import yaml
 
 PROG = 'sweep'
 EXIT_ROW_ERRORS = 5
@@ -80,8 +81,10 @@ class SweepResult:
 
 def find_bags(patterns: Iterable[str]) -> list:
     """
-    Resolve bag arguments: a bag (a directory with metadata.yaml, or a .mcap file), a
-    directory holding bags (searched recursively), or a glob pattern ('**' recursive).
+    Resolve bag arguments into a sorted list of bags.
+
+    An argument is a bag (a directory with metadata.yaml, or a .mcap file), a directory
+    holding bags (searched recursively), or a glob pattern ('**' recursive).
     """
     found = set()
 
@@ -246,7 +249,7 @@ class Table:
             reader = csv.reader(f)
             header = next(reader, None)
             if header != self.columns:
-                raise ValueError(f'{self.path}: its columns are not this sweep\'s (other '
+                raise ValueError(f"{self.path}: its columns are not this sweep's (other "
                                  '--set names or --fit); use --no-resume or another --out')
             for r in reader:
                 if len(r) == len(self.columns):

@@ -231,8 +231,8 @@ def fit_stream(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
         kept = [ev for ev in events
                 if not (isinstance(ev, Measurement) and int(ev.stamp_ns) in excluded)]
         trace = run_stream(base, kept)
-        k = (config.model.Q.shape[0] if fit_Q else 0) + (config.model.C.shape[0] if fit_R
-                                                          else 0)
+        k = ((config.model.Q.shape[0] if fit_Q else 0)
+             + (config.model.C.shape[0] if fit_R else 0))
         n = trace.innovations.count
         if n < MIN_STEPS_PER_PARAMETER * max(k, 1):
             raise FitError(f'too few samples: {n} measurement steps for {k} parameters '
