@@ -154,3 +154,18 @@ def test_cli_writes_the_table_and_the_figure(bags, tmp_path, capsys):
         assert rc == 1 and text in err and len(err.strip().splitlines()) == 1, err
     rc = sweep.main(['--bags', str(tmp_path / 'none*'), '--out', str(tmp_path / 'y.csv')])
     assert rc == 1 and 'no bags' in capsys.readouterr().err
+
+
+def test_an_existing_scheduler_runs_the_same_sweep(bags, tmp_path):
+    # --scheduler: the sweep submits to a cluster it did not start, and leaves it running
+    from dask.distributed import LocalCluster
+    found = sweep.find_bags([str(bags / 'terminal' / 'a')])
+    seq = sweep.sweep(found, out=tmp_path / 'seq.csv', params_file=PARAMS, sets=SETS[:1],
+                      workers=0)
+    with LocalCluster(n_workers=1, threads_per_worker=1, host='127.0.0.1',
+                      dashboard_address=None) as cluster:
+        remote = sweep.sweep(found, out=tmp_path / 'remote.csv', params_file=PARAMS,
+                             sets=SETS[:1], scheduler=cluster.scheduler_address)
+        assert len(cluster.scheduler.workers) == 1
+    assert len(remote.evaluated) == 2
+    assert_same({r['key']: r for r in seq.rows}, {r['key']: r for r in remote.rows})

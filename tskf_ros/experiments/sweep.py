@@ -51,6 +51,8 @@ import yaml
 
 PROG = 'sweep'
 EXIT_ROW_ERRORS = 5
+# a LocalCluster larger than this is a typo, not a plan (use --scheduler for a big cluster)
+MAX_WORKERS = 256
 FIT_COLUMNS = ['fit_Q', 'fit_R', 'fit_Q_stderr', 'fit_R_stderr', 'fit_log_likelihood',
                'fit_nis_mean', 'fit_error']
 # parameters a --set may not change: they do not affect an offline evaluation
@@ -415,8 +417,8 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--no-progress', dest='progress', action='store_false',
                         help='no progress bar (it is off anyway when stderr is not a terminal)')
     args = parser.parse_args(argv)
-    if args.workers < 0:
-        parser.error('--workers must be >= 0')
+    if not 0 <= args.workers <= MAX_WORKERS:
+        parser.error(f'--workers must be between 0 and {MAX_WORKERS}')
     try:
         defaults = default_parameters()
         sets = [parse_setting(s, defaults) for s in args.sets]
