@@ -31,7 +31,7 @@ import numpy as np
 import scipy.stats
 
 from tskf_ros.bag.message_types import BagTypeError
-from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED
+from tskf_ros.bag.reader import BagError, error_exit, exit_status
 from tskf_ros.core.noise_fit import FitError, negative_log_likelihood, nis_summary
 from tskf_ros.experiments.bag_analysis import read_stream
 from tskf_ros.experiments.output import write_json, write_text
@@ -177,11 +177,7 @@ def main(argv: Optional[list] = None) -> int:
               f'{report["gaps"]} gaps, {report["excluded_by_gate"]} gated')
         for note in sf.notes:
             print(f'{PROG}: note: {note}')
-    if stream.damage is not None:
-        print(f'{PROG}: input damaged; fitted on the messages before it: {stream.damage}',
-              file=sys.stderr)
-        return EXIT_DAMAGED
-    return 0
+    return exit_status(PROG, stream.damage, 'input damaged; fitted on the messages before it')
 
 
 def console_main() -> None:
