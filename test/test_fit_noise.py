@@ -204,3 +204,24 @@ def test_standard_errors_match_the_spread_over_seeds(tmp_path):
     assert np.all((ratio > 0.35) & (ratio < 2.0)), ratio
     assert np.all(np.abs(np.mean(est, axis=0) - np.log([Q_TRUE, R_TRUE]))
                   < 3 * np.mean(se, axis=0) / np.sqrt(6) + 0.05)
+
+
+def test_a_message_that_does_not_deserialize_is_damage(sim, tmp_path, capsys):
+    # 30 good samples, then bytes that are not an Illuminance: fitted on what came before
+    d = sim[0]
+    bag = tmp_path / 'bad'
+    t, y = simulate(tmp_path / 'good', 30, seed=2)
+    with BagWriter(bag) as w:
+        w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
+        for tk, yk in zip(t, y):
+            ns = int(round(tk * 1e9))
+            w.write('/received_power', ns,
+                    serialize_message(conversions.power_to_msg(ns, yk, 0.0)))
+        w.write('/received_power', int(t[-1] * 1e9) + 10**9, b'\x00\x01\x00\x00garbage')
+    out = tmp_path / 'f.json'
+    rc = fit_noise.main([str(bag), '--params-file', str(d / 'params.yaml'), '--json',
+                         str(out), '--fix', 'Q', '-q'])
+    err = capsys.readouterr().err
+    assert rc == 3 and 'does not deserialize' in err and len(err.strip().splitlines()) == 1
+    fit = json.loads(out.read_text())
+    assert fit['samples'] == 30 and 'does not deserialize' in fit['damage']

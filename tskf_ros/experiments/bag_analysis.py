@@ -20,7 +20,7 @@ import numpy as np
 from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.message_types import message_class
-from tskf_ros.bag.offline_replay import choose_input_topic, choose_topic
+from tskf_ros.bag.offline_replay import choose_input_topic, choose_topic, DESERIALIZE_ERRORS
 from tskf_ros.bag.reader import BagReader, Damage
 from tskf_ros.core.noise_fit import nis_summary
 from tskf_ros.messages import conversions
@@ -78,22 +78,28 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
     in_cls = message_class(INPUT_TYPE) if in_topic else None
     js_cls = message_class(JOINT_STATE_TYPE) if truth_topics else None
     values: dict = defaultdict(lambda: defaultdict(dict))
-    for raw in reader.messages([topic, in_topic] + sorted(truth_topics) if in_topic
-                               else [topic] + sorted(truth_topics)):
-        if raw.topic == topic:
-            stamp, value, variance = extract(deserialize_message(raw.data, cls),
-                                             raw.log_time_ns)
-            stream.events.append(Measurement(stamp, value, variance, raw.log_time_ns))
-        elif raw.topic == in_topic:
-            stamp, u = conversions.msg_to_input(deserialize_message(raw.data, in_cls), m)
-            stream.events.append(Input(stamp, u))
-        else:
-            msg = deserialize_message(raw.data, js_cls)
-            stamp, pos = conversions.msg_to_angle(msg)
-            for name, v in zip(msg.name, pos):
-                values[raw.topic][name][stamp] = float(v)
+    wanted = [topic] + ([in_topic] if in_topic else []) + sorted(truth_topics)
+    for count, raw in enumerate(reader.messages(wanted)):
+        try:
+            if raw.topic == topic:
+                stamp, value, variance = extract(deserialize_message(raw.data, cls),
+                                                 raw.log_time_ns)
+                stream.events.append(Measurement(stamp, value, variance, raw.log_time_ns))
+            elif raw.topic == in_topic:
+                stamp, u = conversions.msg_to_input(deserialize_message(raw.data, in_cls), m)
+                stream.events.append(Input(stamp, u))
+            else:
+                msg = deserialize_message(raw.data, js_cls)
+                stamp, pos = conversions.msg_to_angle(msg)
+                for name, v in zip(msg.name, pos):
+                    values[raw.topic][name][stamp] = float(v)
+        except DESERIALIZE_ERRORS as exc:
+            # as the offline replay: what came before is used, the rest is damage
+            stream.damage = Damage(str(reader.path), -1, f'message {count + 1} on {raw.topic} '
+                                   f'does not deserialize as {raw.msgtype} ({exc})', count)
+            break
     stream.truth = {t: dict(v) for t, v in values.items()}
-    stream.damage = reader.damage
+    stream.damage = stream.damage or reader.damage
     return stream
 
 

@@ -43,6 +43,8 @@ import yaml
 
 PROG = 'fit_noise'
 EXIT_NO_FIT = 4
+# a standard error of a log-parameter above this (a factor e) leaves it undetermined
+POORLY_DETERMINED = 1.0
 
 
 class NoFitError(FitError):
@@ -63,6 +65,10 @@ def fit_events(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
     lr = 2.0 * (res.log_likelihood - ll0)
     k = len(res.names)
     st = run.stats
+    for name, se in zip(res.names, res.theta_stderr):
+        if se > POORLY_DETERMINED:
+            sf.notes.append(f'{name} is not determined by this bag: the standard error of its '
+                            f'log is {se:.3g} (a factor e^{se:.3g}); consider --fix')
     report = {
         'Q': res.Q, 'R': res.R, 'Q_stderr': res.Q_stderr, 'R_stderr': res.R_stderr,
         'log_likelihood': run.innovations.log_likelihood(),
@@ -136,12 +142,15 @@ def main(argv: Optional[list] = None) -> int:
                         help="keep Q (or R) at the parameter file's value; fit the other")
     parser.add_argument('-q', '--quiet', action='store_true', help='only errors')
     args = parser.parse_args(argv)
+    if args.out and args.params_file and args.out.resolve() == args.params_file.resolve():
+        parser.error('--out is the parameter file: write the fit to another file')
     try:
         config = load_config(args.params_file).session
         stream = read_stream(args.bag, config, topic=args.topic, input_topic=args.input_topic,
                              truth=False)
         if stream.measurements == 0:
-            raise FitError(f'{args.bag}: no messages on {stream.topic}')
+            raise FitError(f'{args.bag}: no messages on {stream.topic}'
+                           + (f' ({stream.damage})' if stream.damage is not None else ''))
         sf, report = fit_events(config, stream.events, fit_Q='Q' not in args.fix,
                                 fit_R='R' not in args.fix)
     except (BagError, BagTypeError, ParamsError, OSError) as exc:
@@ -149,6 +158,9 @@ def main(argv: Optional[list] = None) -> int:
     except FitError as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return EXIT_NO_FIT if 'converge' in str(exc) else 1
+    except ValueError as exc:       # a config the fitted Q, R make unusable (ConfigError)
+        print(f'{PROG}: error: {exc}', file=sys.stderr)
+        return EXIT_NO_FIT
     try:
         check_usable(sf)
     except NoFitError as exc:
