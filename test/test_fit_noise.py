@@ -200,6 +200,9 @@ def test_standard_errors_match_the_spread_over_seeds(tmp_path):
         se.append(fit['log_stderr'])
     spread = np.std(est, axis=0, ddof=1)
     ratio = spread / np.mean(se, axis=0)
+    print(f'log q, log r: mean estimate {np.mean(est, axis=0)} (truth '
+          f'{np.log([Q_TRUE, R_TRUE])}), spread over seeds {spread}, mean Hessian '
+          f'standard error {np.mean(se, axis=0)}, ratio {ratio}')
     # with 6 seeds the sample sd is within a factor of about 2 of the truth (chi2(5))
     assert np.all((ratio > 0.35) & (ratio < 2.0)), ratio
     assert np.all(np.abs(np.mean(est, axis=0) - np.log([Q_TRUE, R_TRUE]))

@@ -24,11 +24,11 @@ from tskf_ros.bag.offline_replay import choose_input_topic, choose_topic, DESERI
 from tskf_ros.bag.reader import BagReader, Damage
 from tskf_ros.core.noise_fit import nis_summary
 from tskf_ros.messages import conversions
+from tskf_ros.messages.conversions import STATES_TYPE
 from tskf_ros.messages.estimator_interface import extractor, INPUT_TYPE, NodeConfig
 from tskf_ros.owc.estimator_session import EstimatorConfig, REJECT_REASONS, RESET_REASONS
 from tskf_ros.owc.innovation_trace import Input, Measurement, run_stream, StreamRun
 
-JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
 # metrics of evaluate_bag, in this order (the sweep's CSV columns after the key and settings)
 METRICS = (['n_messages', 'accepted', 'inputs', 'steps', 'gaps', 'resets',
             'nis_n', 'nis_mean', 'nis_band_lo', 'nis_band_hi', 'nis_consistent',
@@ -74,9 +74,9 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
     cls, extract = message_class(msgtype), extractor(msgtype)
     m = config.model.B.shape[1] if config.model.B is not None else 1
     truth_topics = {t for t, i in reader.topics.items()
-                    if truth and i.msgtype == JOINT_STATE_TYPE}
+                    if truth and i.msgtype == STATES_TYPE}
     in_cls = message_class(INPUT_TYPE) if in_topic else None
-    js_cls = message_class(JOINT_STATE_TYPE) if truth_topics else None
+    js_cls = message_class(STATES_TYPE) if truth_topics else None
     values: dict = defaultdict(lambda: defaultdict(dict))
     wanted = [topic] + ([in_topic] if in_topic else []) + sorted(truth_topics)
     for count, raw in enumerate(reader.messages(wanted)):
