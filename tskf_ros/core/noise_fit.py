@@ -40,6 +40,8 @@ LOG_SEARCH_RADIUS = 25.0
 HESSIAN_STEP = 1e-2
 # a parameter within this of its search bound has run to the bound
 AT_BOUND = 1e-3
+# the coarse search before the optimiser: these offsets of each log-parameter (e^-12..e^6)
+COARSE_OFFSETS = (-12.0, -9.0, -6.0, -3.0, 0.0, 3.0, 6.0)
 
 
 @dataclass(frozen=True)
@@ -244,6 +246,38 @@ class FitError(ValueError):
     """The likelihood could not be maximised (the message says why)."""
 
 
+def coarse_start(f: Callable[[np.ndarray], float], theta0: np.ndarray) -> np.ndarray:
+    """
+    Return the best point of a coarse search around theta0, to start the optimiser from.
+
+    The likelihood can have a valley that runs to a bound (at 1 kHz, model (3) with Q near
+    the paper's 1 improves as R -> 0), where a gradient method started at the file's
+    values ends.  So each log-parameter is first tried at theta0 + COARSE_OFFSETS: the full
+    grid for up to two parameters, one coordinate at a time (keeping the best) for more.
+    """
+    theta0 = np.asarray(theta0, dtype=float)
+    offsets = np.asarray(COARSE_OFFSETS, dtype=float)
+    if theta0.size <= 2:
+        grid = [theta0 + np.array(c) for c in _product(offsets, theta0.size)]
+        values = [f(t) for t in grid]
+        return grid[int(np.argmin(values))]
+    best, best_value = theta0.copy(), f(theta0)
+    for i in range(theta0.size):
+        for d in offsets:
+            t = best.copy()
+            t[i] = theta0[i] + d
+            v = f(t)
+            if v < best_value:
+                best, best_value = t, v
+    return best
+
+
+def _product(offsets: np.ndarray, k: int) -> list:
+    """Return every k-tuple of offsets."""
+    grids = np.meshgrid(*([offsets] * k), indexing='ij')
+    return np.stack([g.ravel() for g in grids], axis=1).tolist()
+
+
 def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRecord]], *,
         fit_Q: bool = True, fit_R: bool = True) -> FitResult:
     """
@@ -275,7 +309,8 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
         return value if np.isfinite(value) else big
 
     bounds = [(t - LOG_SEARCH_RADIUS, t + LOG_SEARCH_RADIUS) for t in theta0]
-    res = scipy.optimize.minimize(bounded, theta0, method='L-BFGS-B', bounds=bounds,
+    start = coarse_start(bounded, theta0)
+    res = scipy.optimize.minimize(bounded, start, method='L-BFGS-B', bounds=bounds,
                                   options={'maxiter': 500, 'ftol': 1e-13, 'gtol': 1e-7})
     theta, message, success = res.x, str(res.message), bool(res.success)
     if not success:
