@@ -42,8 +42,9 @@ PARAMS = """/**/timescale_estimator:
 """
 
 
-def simulate(path: Path, n: int, seed: int, q: float = Q_TRUE, r: float = R_TRUE) -> tuple:
-    """Write n samples at 1 s with 10% gaps of 2-6 s; return (stamps s, y)."""
+def simulate(path: Path, n: int, seed: int, q: float = Q_TRUE, r: float = R_TRUE,
+             spikes: tuple = ()) -> tuple:
+    """Write n samples at 1 s with 10% gaps of 2-6 s (y[k] = 1e300 for k in spikes)."""
     rng = np.random.default_rng(seed)
     dt = np.where(rng.random(n) < 0.1, rng.integers(2, 7, n), 1).astype(float)
     t = 1000.0 + np.concatenate([[0.0], np.cumsum(dt[:-1])])
@@ -52,6 +53,7 @@ def simulate(path: Path, n: int, seed: int, q: float = Q_TRUE, r: float = R_TRUE
     for k in range(n):
         ys[k] = x + np.sqrt(r / dt[k]) * rng.standard_normal()
         x = (1.0 + dt[k] * A_TRUE) * x + np.sqrt(dt[k] * q) * rng.standard_normal()
+    ys[list(spikes)] = 1e300
     with BagWriter(path) as w:
         w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
         for tk, yk in zip(t, ys):
@@ -228,3 +230,19 @@ def test_a_message_that_does_not_deserialize_is_damage(sim, tmp_path, capsys):
     assert rc == 3 and 'does not deserialize' in err and len(err.strip().splitlines()) == 1
     fit = json.loads(out.read_text())
     assert fit['samples'] == 30 and 'does not deserialize' in fit['damage']
+
+
+def test_absurd_readings_are_left_to_the_gate(tmp_path):
+    # 1e300 is finite: with the gate off it would make the likelihood infinite; the node's
+    # gate rejects it, and so the fit leaves it out and still recovers Q and R
+    (tmp_path / 'params.yaml').write_text(PARAMS)
+    simulate(tmp_path / 'bag', 2000, seed=7, spikes=(500, 1500))
+    assert fit_noise.main([str(tmp_path / 'bag'), '--params-file',
+                           str(tmp_path / 'params.yaml'), '--json', str(tmp_path / 'f.json'),
+                           '-q']) == 0
+    fit = json.loads((tmp_path / 'f.json').read_text())
+    assert fit['excluded_by_gate'] == 2 and fit['rejected'] == {'gated': 2}
+    assert fit['n'] == 1997 and fit['optimizer']['gate_stable']
+    for value, truth, se_log in zip(fit['log_parameters'], (Q_TRUE, R_TRUE),
+                                    fit['log_stderr']):
+        assert abs(value - np.log(truth)) <= 4 * se_log

@@ -215,8 +215,8 @@ def fit_stream(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
 
     The innovation gate is the one rejection that depends on Q and R: with it on, the
     optimiser could shrink the likelihood by rejecting samples.  So the likelihood is
-    maximised with the gate off over the samples that the node's gate rejects at the fitted
-    Q and R (none at first), and the fit is repeated until that set no longer changes (at
+    maximised with the gate off over the samples that the node's gate keeps at the fitted
+    Q and R (at first: at the config's Q and R), and the fit is repeated until that set no longer changes (at
     most GATE_ROUNDS).  Every other rejection, the transition, gap handling and resets are
     the session's.  use_message_variance is turned off (with it R would not be used).
     Raises FitError with the reason (too few samples, no convergence).
@@ -226,7 +226,9 @@ def fit_stream(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
         notes.append('use_message_variance was on: turned off, so that the fitted R is used')
         config = replace(config, use_message_variance=False)
     base = replace(config, gate=0.0)
-    excluded: set = set()
+    # start from what the node's gate rejects at the file's own Q and R (an absurd reading
+    # would make the likelihood infinite with the gate off)
+    excluded: set = set(run_stream(config, events).gated_stamps)
     for rounds in range(1, GATE_ROUNDS + 1):
         kept = [ev for ev in events
                 if not (isinstance(ev, Measurement) and int(ev.stamp_ns) in excluded)]
