@@ -54,13 +54,20 @@ def simulate(path: Path, n: int, seed: int, q: float = Q_TRUE, r: float = R_TRUE
         ys[k] = x + np.sqrt(r / dt[k]) * rng.standard_normal()
         x = (1.0 + dt[k] * A_TRUE) * x + np.sqrt(dt[k] * q) * rng.standard_normal()
     ys[list(spikes)] = 1e300
+    write_samples(path, t, ys)
+    return t, ys
+
+
+def write_samples(path: Path, t: np.ndarray, ys: np.ndarray, tail: bytes = b'') -> None:
+    """Write (t s, y) as Illuminance on /received_power, then the raw bytes `tail`."""
     with BagWriter(path) as w:
         w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
         for tk, yk in zip(t, ys):
             ns = int(round(tk * 1e9))
             w.write('/received_power', ns,
                     serialize_message(conversions.power_to_msg(ns, yk, 0.0)))
-    return t, ys
+        if tail:
+            w.write('/received_power', int(round(t[-1] * 1e9)) + 10**9, tail)
 
 
 def scalar_log_likelihood(t: np.ndarray, y: np.ndarray, a: float, c: float, q: float,
@@ -216,13 +223,7 @@ def test_a_message_that_does_not_deserialize_is_damage(sim, tmp_path, capsys):
     d = sim[0]
     bag = tmp_path / 'bad'
     t, y = simulate(tmp_path / 'good', 30, seed=2)
-    with BagWriter(bag) as w:
-        w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
-        for tk, yk in zip(t, y):
-            ns = int(round(tk * 1e9))
-            w.write('/received_power', ns,
-                    serialize_message(conversions.power_to_msg(ns, yk, 0.0)))
-        w.write('/received_power', int(t[-1] * 1e9) + 10**9, b'\x00\x01\x00\x00garbage')
+    write_samples(bag, t, y, tail=b'\x00\x01\x00\x00garbage')
     out = tmp_path / 'f.json'
     rc = fit_noise.main([str(bag), '--params-file', str(d / 'params.yaml'), '--json',
                          str(out), '--fix', 'Q', '-q'])

@@ -217,8 +217,9 @@ def fit_stream(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
     optimiser could shrink the likelihood by rejecting samples.  So the likelihood is
     maximised with the gate off over the samples that the node's gate keeps at the fitted
     Q and R (at first: at the config's Q and R), and the fit is repeated until that set no
-    longer changes (at most GATE_ROUNDS).  Every other rejection, the transition, gap handling and resets are
-    the session's.  use_message_variance is turned off (with it R would not be used).
+    longer changes (at most GATE_ROUNDS).  Every other rejection, the transition, gap
+    handling and resets are the session's.  use_message_variance is turned off (with it R
+    would not be used).
     Raises FitError with the reason (too few samples, no convergence).
     """
     notes = []
