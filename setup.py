@@ -61,6 +61,8 @@ setup(
             'led_link_simulator = tskf_ros.nodes.led_link_simulator:main',
             'alignment = tskf_ros.nodes.alignment:main',
             'power_meter_driver = tskf_ros.nodes.power_meter_driver:main',
+            'fit_noise = tskf_ros.experiments.fit_noise:console_main',
+            'sweep = tskf_ros.experiments.sweep:console_main',
         ],
     },
 )

@@ -39,6 +39,8 @@ HELP_MUST_NAME = {
     'reindex': ('-o OUTPUT', 'path', '.partial'),
     'power_meter_driver': ('--ros-args --params-file', 'config/power_meter_driver.yaml',
                            'pm100_sim.yaml@sim'),
+    'fit_noise': ('--params-file', '--topic', '--out', '--json', 'bag'),
+    'sweep': ('--bags', '--set', '--workers', '--scheduler', '--out', '--png'),
 }
 
 

@@ -14,6 +14,7 @@ KEYS = {
     'pytest': 'python3-pytest', 'hypothesis': 'python3-hypothesis',
     'mcap_ros2': 'python3-mcap-ros2-support-pip',
     'pyvisa': 'python3-pyvisa-pip', 'pyvisa_sim': 'python3-pyvisa-sim-pip',
+    'dask': 'python3-dask-pip', 'distributed': 'python3-distributed-pip', 'tqdm': 'python3-tqdm',
 }
 RUN = ('exec_depend', 'depend')
 TEST = RUN + ('test_depend',)

@@ -45,6 +45,11 @@ def write_json(path: Path, data: Any) -> Path:
     return _replace_from_temp(path, lambda f: f.write(text.encode()))
 
 
+def write_text(path: Path, text: str) -> Path:
+    """Write text (UTF-8) through a temporary file renamed into place."""
+    return _replace_from_temp(path, lambda f: f.write(text.encode()))
+
+
 def save_figure(fig, path: Path, dpi: int = 110) -> Path:
     """Save a matplotlib figure as PNG through a temporary file, then close it."""
     import matplotlib.pyplot as plt

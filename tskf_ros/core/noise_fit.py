@@ -1,0 +1,348 @@
+"""
+Maximum likelihood of the noise intensities Q and R from the time-scale filter's innovations.
+
+The time-scale filter (Bohner & Wintz Table 3) is, step by step, a predictive Kalman filter
+with F = I + mu A (or e^{A mu}), Q_d = mu G Q G^T and R_d = R / mu (see timescale_kalman).
+For Gaussian noise its innovations e_k = y_k - C xhat_k - D are independent with
+covariances S_k = C P_k C^T + R / mu_k (StepResult.S), so the log-likelihood of the
+measurements given Q and R is the prediction-error decomposition
+
+    log L(Q, R) = -1/2 sum_k [ log det S_k + e_k^T S_k^-1 e_k + p log 2 pi ]
+
+over every step that used a measurement.  `negative_log_likelihood` runs the core
+filter's own `step` over a fixed trace of steps (the mu, y and u the estimator session
+used, segment by segment: a segment starts from x0, P0 at a (re)start), so the filter is
+not written twice; only Q and R change between evaluations.
+
+The parameters are the logarithms of the diagonal entries of Q and of R (positive by
+construction; the off-diagonal entries are held at zero).  `fit` minimises the negative
+log-likelihood with scipy's L-BFGS-B (falling back to Nelder-Mead), and takes standard
+errors from the inverse of a central-difference Hessian of the negative log-likelihood in
+the log-parameters, carried to Q and R by the delta method: se(q) = q se(log q).
+`nis_summary` checks the normalised innovation squared e^T S^-1 e against its chi-square
+distribution.  No I/O, no ROS.
+"""
+
+from dataclasses import dataclass, field, replace
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+import scipy.optimize
+import scipy.stats
+
+from tskf_ros.core.linear_models import LinearModel
+from tskf_ros.core.timescale_kalman import FilterError
+
+LOG_2PI = float(np.log(2.0 * np.pi))
+# how far (in natural-log units) the optimiser may move a parameter from its start
+LOG_SEARCH_RADIUS = 25.0
+# central-difference step of the Hessian, in log-parameters (a 1% change of q or r)
+HESSIAN_STEP = 1e-2
+# a parameter within this of its search bound has run to the bound
+AT_BOUND = 1e-3
+# the coarse search before the optimiser: these offsets of each log-parameter (e^-12..e^6)
+COARSE_OFFSETS = (-12.0, -9.0, -6.0, -3.0, 0.0, 3.0, 6.0)
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """One step of the filter: mu (s), y (None: an input-only point) and the input u."""
+
+    mu: float
+    y: Optional[np.ndarray]
+    u: Optional[np.ndarray] = None
+    variance: float = 0.0       # the sample's own R_d (use_message_variance), 0: R / mu
+
+
+@dataclass
+class Innovations:
+    """Innovations e_k (N x p), their covariances S_k (N x p x p) and NIS_k (N)."""
+
+    e: np.ndarray
+    S: np.ndarray
+    nis: np.ndarray
+    log_det_S: np.ndarray
+
+    @property
+    def count(self) -> int:
+        """Return the number of measurement steps N."""
+        return int(self.nis.size)
+
+    def log_likelihood(self) -> float:
+        """Return log L = -1/2 sum [log det S + e^T S^-1 e + p log 2 pi]."""
+        p = self.e.shape[1] if self.e.ndim == 2 else 1
+        return -0.5 * float(np.sum(self.log_det_S) + np.sum(self.nis) + self.count * p * LOG_2PI)
+
+
+def innovation_terms(e: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return (NIS_k = e^T S^-1 e, log det S_k) through a Cholesky factor of each S_k."""
+    e = np.asarray(e, dtype=float).reshape(len(S), -1)
+    L = np.linalg.cholesky(np.asarray(S, dtype=float))
+    z = np.linalg.solve(L, e[..., None])[..., 0]
+    return np.sum(z * z, axis=1), 2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2)), axis=1)
+
+
+def with_noise(model: LinearModel, Q: np.ndarray, R: np.ndarray) -> LinearModel:
+    """Return the model with Q and R replaced."""
+    return replace(model, Q=np.asarray(Q, dtype=float), R=np.asarray(R, dtype=float))
+
+
+def run_trace(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRecord]]
+              ) -> Innovations:
+    """
+    Run the core filter's step over the trace; return the innovations of measurement steps.
+
+    Each segment starts from a fresh filter (x0, P0).  A step with a sample variance
+    (use_message_variance) is run with R = variance * mu, so that R / mu is that variance,
+    as the estimator session does.  Raises FilterError if a step fails.
+    """
+    es, Ss = [], []
+    for segment in segments:
+        kf = model.make_filter(transition, allow_nonregressive=True)
+        R_model = kf.R
+        for rec in segment:
+            if rec.y is not None and rec.variance > 0:
+                kf.R = np.eye(kf.p) * rec.variance * rec.mu
+                try:
+                    res = kf.step(rec.mu, rec.y, rec.u)
+                finally:
+                    kf.R = R_model
+            else:
+                res = kf.step(rec.mu, rec.y, rec.u)
+            if rec.y is not None:
+                es.append(res.innovation)
+                Ss.append(res.S)
+    p = model.C.shape[0]
+    if not es:
+        return Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0), np.zeros(0))
+    e, S = np.array(es), np.array(Ss)
+    nis, log_det = innovation_terms(e, S)
+    return Innovations(e, S, nis, log_det)
+
+
+@dataclass(frozen=True)
+class NoiseParameters:
+    """Which entries are fitted: the diagonals of Q (r x r) and R (p x p), as logs."""
+
+    r: int
+    p: int
+    fit_Q: bool = True
+    fit_R: bool = True
+
+    @property
+    def names(self) -> list:
+        """Return the parameter names, e.g. ['Q[0,0]', 'R[0,0]']."""
+        out = [f'Q[{i},{i}]' for i in range(self.r)] if self.fit_Q else []
+        return out + ([f'R[{i},{i}]' for i in range(self.p)] if self.fit_R else [])
+
+    def start(self, Q: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Return the log-parameters of Q and R (a non-positive diagonal entry starts at 1)."""
+        diag = []
+        if self.fit_Q:
+            diag += list(np.diag(Q))
+        if self.fit_R:
+            diag += list(np.diag(R))
+        return np.log(np.where(np.asarray(diag) > 0, diag, 1.0))
+
+    def matrices(self, theta: np.ndarray, Q: np.ndarray, R: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """Return (Q, R) for the log-parameters theta (entries not fitted: from Q, R)."""
+        theta = np.asarray(theta, dtype=float)
+        k = 0
+        if self.fit_Q:
+            Q = np.diag(np.exp(theta[:self.r]))
+            k = self.r
+        if self.fit_R:
+            R = np.diag(np.exp(theta[k:k + self.p]))
+        return np.asarray(Q, dtype=float), np.asarray(R, dtype=float)
+
+    def stderr_matrices(self, theta: np.ndarray, se_log: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Delta method: se(q) = q se(log q) on the fitted diagonals, 0 elsewhere."""
+        se = np.exp(np.asarray(theta, dtype=float)) * np.asarray(se_log, dtype=float)
+        Qs, Rs = np.zeros((self.r, self.r)), np.zeros((self.p, self.p))
+        k = 0
+        if self.fit_Q:
+            Qs[np.diag_indices(self.r)] = se[:self.r]
+            k = self.r
+        if self.fit_R:
+            Rs[np.diag_indices(self.p)] = se[k:k + self.p]
+        return Qs, Rs
+
+
+def negative_log_likelihood(model: LinearModel, transition: str,
+                            segments: Sequence[Sequence[StepRecord]]) -> float:
+    """Return -log L of the trace under the model's Q and R (inf if a step fails)."""
+    try:
+        with np.errstate(all='ignore'):
+            inn = run_trace(model, transition, segments)
+            value = -inn.log_likelihood()
+    except (FilterError, np.linalg.LinAlgError, ArithmeticError):
+        return float('inf')
+    return value if np.isfinite(value) else float('inf')
+
+
+def numerical_hessian(f: Callable[[np.ndarray], float], x: np.ndarray,
+                      h: float = HESSIAN_STEP) -> np.ndarray:
+    """Central-difference Hessian of f at x with step h in every coordinate."""
+    x = np.asarray(x, dtype=float)
+    n = x.size
+    H = np.zeros((n, n))
+    f0 = f(x)
+    step = np.eye(n) * h
+    for i in range(n):
+        H[i, i] = (f(x + step[i]) - 2.0 * f0 + f(x - step[i])) / (h * h)
+        for j in range(i):
+            H[i, j] = H[j, i] = (f(x + step[i] + step[j]) - f(x + step[i] - step[j])
+                                 - f(x - step[i] + step[j]) + f(x - step[i] - step[j])
+                                 ) / (4.0 * h * h)
+    return H
+
+
+def nis_summary(nis: np.ndarray, p: int, level: float = 0.95) -> dict:
+    """
+    Return the NIS consistency check of N innovations of dimension p.
+
+    mean NIS against the two-sided `level` band of the mean of N chi2(p) variables,
+    [chi2.ppf(a/2, N p) / N, chi2.ppf(1 - a/2, N p) / N], and the fraction of single NIS
+    values inside the chi2(p) band of the same level (expected: `level`).
+    """
+    nis = np.asarray(nis, dtype=float)
+    n = int(nis.size)
+    alpha = 1.0 - level
+    if n == 0:
+        return {'n': 0, 'mean': None, 'band': [None, None], 'consistent': None,
+                'fraction_in_band': None, 'level': level}
+    lo, hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], n * p) / n
+    one_lo, one_hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], p)
+    mean = float(np.mean(nis))
+    inside = float(np.mean((nis >= one_lo) & (nis <= one_hi)))
+    return {'n': n, 'mean': mean, 'expected': float(p), 'band': [float(lo), float(hi)],
+            'consistent': bool(lo <= mean <= hi), 'fraction_in_band': inside,
+            'single_band': [float(one_lo), float(one_hi)], 'level': level}
+
+
+@dataclass
+class FitResult:
+    """The maximum-likelihood Q and R, their standard errors and the optimiser's report."""
+
+    Q: np.ndarray
+    R: np.ndarray
+    Q_stderr: np.ndarray
+    R_stderr: np.ndarray
+    log_likelihood: float
+    theta: np.ndarray
+    theta_stderr: np.ndarray
+    covariance_log: np.ndarray
+    names: list
+    success: bool
+    message: str
+    evaluations: int
+    at_bound: list = field(default_factory=list)
+    hessian_ok: bool = True
+
+
+class FitError(ValueError):
+    """The likelihood could not be maximised (the message says why)."""
+
+
+def coarse_start(f: Callable[[np.ndarray], float], theta0: np.ndarray) -> np.ndarray:
+    """
+    Return the best point of a coarse search around theta0, to start the optimiser from.
+
+    The likelihood can have a valley that runs to a bound (at 1 kHz, model (3) with Q near
+    the paper's 1 improves as R -> 0), where a gradient method started at the file's
+    values ends.  So each log-parameter is first tried at theta0 + COARSE_OFFSETS: the full
+    grid for up to two parameters, one coordinate at a time (keeping the best) for more.
+    """
+    theta0 = np.asarray(theta0, dtype=float)
+    offsets = np.asarray(COARSE_OFFSETS, dtype=float)
+    if theta0.size <= 2:
+        grid = [theta0 + np.array(c) for c in _product(offsets, theta0.size)]
+        values = [f(t) for t in grid]
+        return grid[int(np.argmin(values))]
+    best, best_value = theta0.copy(), f(theta0)
+    for i in range(theta0.size):
+        for d in offsets:
+            t = best.copy()
+            t[i] = theta0[i] + d
+            v = f(t)
+            if v < best_value:
+                best, best_value = t, v
+    return best
+
+
+def _product(offsets: np.ndarray, k: int) -> list:
+    """Return every k-tuple of offsets."""
+    grids = np.meshgrid(*([offsets] * k), indexing='ij')
+    return np.stack([g.ravel() for g in grids], axis=1).tolist()
+
+
+def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRecord]], *,
+        fit_Q: bool = True, fit_R: bool = True) -> FitResult:
+    """
+    Maximise the innovation likelihood over log diag(Q) and log diag(R) from the model's.
+
+    Raises FitError when the likelihood is not finite at the start or the optimiser does
+    not converge.  A parameter that runs to its search bound (e^{+-25} times the start) is
+    listed in `at_bound` and its standard error is NaN.
+    """
+    r = model.Q.shape[0]
+    p = model.C.shape[0]
+    if not (fit_Q or fit_R):
+        raise FitError('nothing to fit: both Q and R are fixed')
+    par = NoiseParameters(r, p, fit_Q, fit_R)
+    theta0 = par.start(model.Q, model.R)
+    calls = [0]
+
+    def nll(theta: np.ndarray) -> float:
+        calls[0] += 1
+        Q, R = par.matrices(theta, model.Q, model.R)
+        return negative_log_likelihood(with_noise(model, Q, R), transition, segments)
+
+    if not np.isfinite(nll(theta0)):
+        raise FitError("the likelihood is not finite at the parameter file's Q and R")
+    big = 1e300
+
+    def bounded(theta: np.ndarray) -> float:
+        value = nll(theta)
+        return value if np.isfinite(value) else big
+
+    bounds = [(t - LOG_SEARCH_RADIUS, t + LOG_SEARCH_RADIUS) for t in theta0]
+    start = coarse_start(bounded, theta0)
+    res = scipy.optimize.minimize(bounded, start, method='L-BFGS-B', bounds=bounds,
+                                  options={'maxiter': 500, 'ftol': 1e-13, 'gtol': 1e-7})
+    theta, message, success = res.x, str(res.message), bool(res.success)
+    if not success:
+        nm = scipy.optimize.minimize(bounded, theta, method='Nelder-Mead', bounds=bounds,
+                                     options={'xatol': 1e-6, 'fatol': 1e-9, 'maxiter': 2000})
+        if nm.fun <= res.fun:
+            theta, success = nm.x, bool(nm.success)
+            message = f'L-BFGS-B: {res.message}; Nelder-Mead: {nm.message}'
+    best = nll(theta)
+    if not success or not np.isfinite(best):
+        raise FitError(f'the optimiser did not converge ({message})')
+    lo = np.array([b[0] for b in bounds])
+    hi = np.array([b[1] for b in bounds])
+    at_bound = [name for name, t, a, b in zip(par.names, theta, lo, hi)
+                if t - a < AT_BOUND or b - t < AT_BOUND]
+    H = numerical_hessian(nll, theta)
+    hessian_ok = bool(np.all(np.isfinite(H)))
+    cov = np.full_like(H, np.nan)
+    if hessian_ok:
+        try:
+            np.linalg.cholesky(H)
+            cov = np.linalg.inv(H)
+        except np.linalg.LinAlgError:
+            hessian_ok = False
+    se_log = np.sqrt(np.clip(np.diag(cov), 0.0, None)) if hessian_ok else np.full(
+        theta.size, np.nan)
+    for i, name in enumerate(par.names):
+        if name in at_bound:
+            se_log[i] = np.nan
+    Q, R = par.matrices(theta, model.Q, model.R)
+    Qs, Rs = par.stderr_matrices(theta, se_log)
+    return FitResult(Q=Q, R=R, Q_stderr=Qs, R_stderr=Rs, log_likelihood=-best, theta=theta,
+                     theta_stderr=se_log, covariance_log=cov, names=par.names,
+                     success=success, message=message, evaluations=calls[0],
+                     at_bound=at_bound, hessian_ok=hessian_ok)

@@ -1,0 +1,252 @@
+"""
+Run the estimator session over a recorded stream and keep what an analysis needs.
+
+`run_stream(config, events)` feeds measurements and inputs, in the order given, to the
+same EstimatorSession the timescale_estimator node runs (so mu comes from the stamps as
+the node computes it, with the node's transition, gap handling and rejections), and
+collects from its Outcomes:
+
+- the trace of filter steps, segment by segment (a segment starts at a (re)start from
+  x0, P0): the mu, y and input u of every step the session made, after late samples were
+  inserted; `tskf_ros.core.noise_fit` re-runs this trace with other Q and R;
+- the innovation of every measurement step as the session computed it:
+  e_k = y_k - C xhat_k - D against the predictor at t_k, S_k = C P_k C^T + R_d with
+  R_d = R / mu_k (or the sample's own variance under use_message_variance), the last
+  revision of a stamp superseding earlier ones;
+- the final corrected and predicted estimate at every stamp, and the session's counters.
+
+No ROS, no I/O.
+"""
+
+from bisect import bisect_right
+from dataclasses import dataclass, field, replace
+from typing import Iterable, Optional
+
+import numpy as np
+
+from tskf_ros.core.noise_fit import (fit, FitError, FitResult, innovation_terms, Innovations,
+                                     StepRecord, with_noise)
+from tskf_ros.core.units import NS
+from tskf_ros.owc.estimator_session import EstimatorConfig, EstimatorSession, Stats
+
+# statuses of a measurement or input that the session took as (part of) a point
+TAKEN = ('accepted', 'inserted', 'reset')
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """A measurement sample: stamp (ns), value(s), variance, and the receiver time (ns)."""
+
+    stamp_ns: int
+    value: object
+    variance: float = 0.0
+    log_ns: Optional[int] = None
+
+
+@dataclass(frozen=True)
+class Input:
+    """An input sample u at a stamp (ns)."""
+
+    stamp_ns: int
+    u: object
+
+
+@dataclass
+class StreamRun:
+    """What a session did over a stream (see the module docstring)."""
+
+    segments: list = field(default_factory=list)        # [[StepRecord]]
+    innovations: Optional[Innovations] = None
+    innovation_stamps: list = field(default_factory=list)   # (segment, stamp_ns)
+    corrected: dict = field(default_factory=dict)       # (segment, stamp_ns) -> x(t|t)
+    predicted: dict = field(default_factory=dict)       # (segment, stamp_ns) -> xhat(t)
+    stats: Stats = field(default_factory=Stats)
+    measurements: int = 0
+    inputs: int = 0
+    gated_stamps: set = field(default_factory=set)      # stamps the innovation gate rejected
+
+    @property
+    def steps(self) -> int:
+        """Return the number of filter steps in the trace."""
+        return sum(len(s) for s in self.segments)
+
+
+class _Collector:
+    """Follow the session's outcomes; keep the final revision of everything per stamp."""
+
+    def __init__(self, config: EstimatorConfig) -> None:
+        self.config = config
+        m = config.model
+        self.C = m.C
+        self.D = np.zeros(m.C.shape[0]) if m.D is None else np.asarray(m.D, dtype=float)
+        self.R = m.R
+        self.segment = 0
+        self.y: dict = {}          # (seg, stamp) -> (y, variance)
+        self.jumps: dict = {}      # (seg, stamp) -> sigma_ns
+        self.pred: dict = {}       # (seg, stamp) -> (x, P)
+        self.corr: dict = {}       # (seg, stamp) -> x
+        self.terms: dict = {}      # (seg, stamp) -> (e, S)
+        self.inputs: dict = {0: []}    # seg -> [(stamp, u)] accepted, in order
+        self.carry: dict = {0: None}   # seg -> the input in force when it started
+        self.last_u = None
+
+    def new_segment(self) -> None:
+        self.segment += 1
+        self.inputs.setdefault(self.segment, [])
+        self.carry[self.segment] = self.last_u
+
+    def u_at(self, seg: int, stamp_ns: int):
+        held = self.inputs[seg]
+        i = bisect_right([s for s, _ in held], stamp_ns)
+        return held[i - 1][1] if i else self.carry[seg]
+
+    def outcome(self, out, *, y=None, variance: float = 0.0, stamp_ns: int = 0) -> None:
+        if out.status == 'reset':
+            self.new_segment()
+        seg = self.segment
+        if y is not None and out.status in TAKEN:
+            self.y[(seg, stamp_ns)] = (y, variance)
+        jumps = {j.stamp_ns: j for j in out.jumps}
+        for j in out.jumps:
+            self.jumps[(seg, j.stamp_ns)] = j.sigma_ns
+        for est in out.estimates:
+            key = (seg, est.stamp_ns)
+            if est.kind == 'predicted':
+                self.pred[key] = (est.x, est.P)
+                continue
+            self.corr[key] = est.x
+            jump, prior, meas = jumps.get(est.stamp_ns), self.pred.get(key), self.y.get(key)
+            if jump is None or prior is None or meas is None:
+                continue
+            x, P = prior
+            yk, var = meas
+            mu = jump.mu
+            Rd = (np.eye(self.C.shape[0]) * var if self.config.use_message_variance and var > 0
+                  else self.R / mu)
+            e = yk - self.C @ x - self.D
+            self.terms[key] = (e, self.C @ P @ self.C.T + Rd)
+
+    def input_outcome(self, out, stamp_ns: int, u) -> None:
+        if out.status in TAKEN:
+            # the input is in force from its stamp: in the new segment after a reset
+            seg = self.segment + (out.status == 'reset')
+            self.inputs.setdefault(seg, []).append((stamp_ns, u))
+            self.last_u = u
+        self.outcome(out)       # an input point steps the filter from the previous point
+
+    def segments(self) -> list:
+        by_seg: dict = {}
+        for (seg, t), sigma in sorted(self.jumps.items()):
+            meas = self.y.get((seg, t))
+            # a point with a measurement that was later stepped from; input-only: y None
+            rec = StepRecord(mu=(sigma - t) / NS, y=None if meas is None else meas[0],
+                             u=self.u_at(seg, t),
+                             variance=(meas[1] if meas is not None
+                                       and self.config.use_message_variance else 0.0))
+            by_seg.setdefault(seg, []).append(rec)
+        return [by_seg[s] for s in sorted(by_seg)]
+
+
+def run_stream(config: EstimatorConfig, events: Iterable, *,
+               use_now: bool = False) -> StreamRun:
+    """
+    Feed Measurement and Input events to a fresh EstimatorSession; return a StreamRun.
+
+    use_now passes each measurement's log_ns as the receiver clock (now_ns), as the
+    offline replay does (it matters only for max_future and the input-rate statistics).
+    """
+    session = EstimatorSession(config)
+    col = _Collector(config)
+    run = StreamRun()
+    for ev in events:
+        if isinstance(ev, Input):
+            run.inputs += 1
+            u = np.asarray(ev.u, dtype=float).reshape(-1)
+            col.input_outcome(session.add_input(ev.stamp_ns, u), int(ev.stamp_ns), u)
+            continue
+        run.measurements += 1
+        out = session.add(ev.stamp_ns, ev.value, ev.variance,
+                          now_ns=ev.log_ns if use_now else None)
+        if out.status == 'rejected' and out.reason == 'gated':
+            run.gated_stamps.add(int(ev.stamp_ns))
+        y = np.atleast_1d(np.asarray(ev.value, dtype=float)).reshape(-1)
+        col.outcome(out, y=y, variance=float(ev.variance), stamp_ns=int(ev.stamp_ns))
+    run.stats = session.stats
+    run.segments = col.segments()
+    run.corrected = col.corr
+    run.predicted = {k: v[0] for k, v in col.pred.items()}
+    keys = sorted(col.terms)
+    run.innovation_stamps = keys
+    p = config.model.C.shape[0]
+    if keys:
+        e = np.array([col.terms[k][0] for k in keys]).reshape(len(keys), p)
+        S = np.array([col.terms[k][1] for k in keys]).reshape(len(keys), p, p)
+        nis, log_det = innovation_terms(e, S)
+        run.innovations = Innovations(e, S, nis, log_det)
+    else:
+        run.innovations = Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0),
+                                      np.zeros(0))
+    return run
+
+
+# the fewest measurement steps per fitted parameter
+MIN_STEPS_PER_PARAMETER = 10
+# rounds of (fit, then the node's gate at the fit) before the gated set must be stable
+GATE_ROUNDS = 4
+
+
+@dataclass
+class StreamFit:
+    """A fit of Q and R to a stream, and the session run with the fitted parameters."""
+
+    result: FitResult
+    config: EstimatorConfig         # the input config with the fitted Q and R
+    run: StreamRun                  # the session with the fitted config (node's gate on)
+    excluded: set                   # stamps left out of the likelihood: the gate's at the fit
+    rounds: int
+    gate_stable: bool
+    notes: list = field(default_factory=list)
+
+
+def fit_stream(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
+               fit_R: bool = True) -> StreamFit:
+    """
+    Fit Q and R by maximum likelihood over the innovations of the session's steps.
+
+    The innovation gate is the one rejection that depends on Q and R: with it on, the
+    optimiser could shrink the likelihood by rejecting samples.  So the likelihood is
+    maximised with the gate off over the samples that the node's gate keeps at the fitted
+    Q and R (at first: at the config's Q and R), and the fit is repeated until that set no
+    longer changes (at most GATE_ROUNDS).  Every other rejection, the transition, gap
+    handling and resets are the session's.  use_message_variance is turned off (with it R
+    would not be used).
+    Raises FitError with the reason (too few samples, no convergence).
+    """
+    notes = []
+    if config.use_message_variance:
+        notes.append('use_message_variance was on: turned off, so that the fitted R is used')
+        config = replace(config, use_message_variance=False)
+    base = replace(config, gate=0.0)
+    # start from what the node's gate rejects at the file's own Q and R (an absurd reading
+    # would make the likelihood infinite with the gate off)
+    excluded: set = set(run_stream(config, events).gated_stamps)
+    for rounds in range(1, GATE_ROUNDS + 1):
+        kept = [ev for ev in events
+                if not (isinstance(ev, Measurement) and int(ev.stamp_ns) in excluded)]
+        trace = run_stream(base, kept)
+        k = ((config.model.Q.shape[0] if fit_Q else 0)
+             + (config.model.C.shape[0] if fit_R else 0))
+        n = trace.innovations.count
+        if n < MIN_STEPS_PER_PARAMETER * max(k, 1):
+            raise FitError(f'too few samples: {n} measurement steps for {k} parameters '
+                           f'(at least {MIN_STEPS_PER_PARAMETER * max(k, 1)} needed)')
+        result = fit(base.model, base.transition, trace.segments, fit_Q=fit_Q, fit_R=fit_R)
+        fitted = replace(config, model=with_noise(config.model, result.Q, result.R))
+        run = run_stream(fitted, events)
+        stable = run.gated_stamps == excluded
+        if stable:
+            break
+        excluded = set(run.gated_stamps)
+    else:
+        notes.append(f'the gated set still changed after {GATE_ROUNDS} rounds')
+    return StreamFit(result, fitted, run, excluded, rounds, stable, notes)
