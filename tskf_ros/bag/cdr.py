@@ -140,6 +140,7 @@ class EstimateEncoder:
                                        f'{ESTIMATE_SLOTS ** 2}d')
         self._frame = frame
         self._zeros = [0.0] * (ESTIMATE_SLOTS ** 2)
+        self._pad = (0.0,) * (ESTIMATE_SLOTS - n)
         # JointState: header, name[], position[], velocity[], effort[] (empty)
         lay = _Layout(8)
         lay.string(frame_id)
@@ -186,6 +187,21 @@ class EstimateEncoder:
         return CDR_HEADER + self._states.pack(
             sec, nsec, self._states_prefix, *np.asarray(x, dtype=float).reshape(-1).tolist(),
             self._states_mid, *sd, self._states_tail)
+
+    def pair(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> tuple[bytes, bytes]:
+        """Return (estimate(...), states(...)) of one estimate, its arrays read once."""
+        n = self.n
+        v = np.asarray(x, dtype=float).reshape(-1).tolist()
+        flat = np.asarray(P, dtype=float).reshape(-1).tolist()
+        cov = self._zeros.copy()
+        for i in range(n):
+            cov[i * ESTIMATE_SLOTS:i * ESTIMATE_SLOTS + n] = flat[i * n:i * n + n]
+        # as np.maximum(diag, 0.0): -0.0 gives 0.0 and NaN stays NaN
+        sd = [math.sqrt(d if d > 0.0 or d != d else 0.0) for d in flat[::n + 1]]
+        sec, nsec = divmod(int(stamp_ns), NS_PER_S)
+        return (CDR_HEADER + self._estimate.pack(sec, nsec, self._frame, *v, *self._pad, *cov),
+                CDR_HEADER + self._states.pack(sec, nsec, self._states_prefix, *v,
+                                               self._states_mid, *sd, self._states_tail))
 
     def jump(self, stamp_ns: int, sigma_ns: int) -> bytes:
         """Return the TimeReference of conversions.jump_to_msg, serialized."""

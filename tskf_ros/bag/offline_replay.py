@@ -258,8 +258,9 @@ class OfflineEstimator:
             enc = self._encoder = EstimateEncoder(self.config.frame_id, names, len(names))
         pairs = []
         for e in out.estimates:
-            pairs.append((_ESTIMATE_TOPICS[e.kind, e.revised], enc.estimate(e.stamp_ns, e.x, e.P)))
-            pairs.append((_STATES_TOPICS[e.kind, e.revised], enc.states(e.stamp_ns, e.x, e.P)))
+            key = e.kind, e.revised
+            twist, states = enc.pair(e.stamp_ns, e.x, e.P)
+            pairs += ((_ESTIMATE_TOPICS[key], twist), (_STATES_TOPICS[key], states))
         pairs += [(_ESTIMATE_TOPICS['mu', j.revised], enc.jump(j.stamp_ns, j.sigma_ns))
                   for j in out.jumps]
         return pairs
@@ -466,6 +467,8 @@ class ArraySink:
     - meta.{topic, input_topic, damage, assumptions}: strings.
     """
 
+    copies = False      # copy() does nothing: _run need not call it
+
     def __init__(self, est: OfflineEstimator) -> None:
         self.n = len(est.config.session.model.state_names)
         self.samples: list = []
@@ -536,32 +539,47 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: object, result: ReplayR
     """Read, estimate, hand the outputs to the sink; return the damage that stopped it."""
     topic, input_topic = result.topic, result.input_topic
     process, process_input = est.process, est.process_input
+    copy = sink.copy if getattr(sink, 'copies', True) else None
+    outcome = sink.outcome
+    statuses = result.statuses
+    # the log time from which est.diagnostics_due may have something (None: never)
+    due_at = -1 if diagnostics else None
     for raw in reader.messages():
         result.read += 1
         log_ns = raw.log_time_ns
-        if diagnostics:
+        if due_at is not None and log_ns >= due_at:
             for t, msg in est.diagnostics_due(log_ns):
                 sink.diagnostics(t, msg)
-        sink.copy(raw)
-        is_input = raw.topic == input_topic
-        if not is_input and raw.topic != topic:
-            continue
-        try:
-            sample, out = (process_input if is_input else process)(raw.data, log_ns)
-        except DESERIALIZE_ERRORS as exc:
-            msgtype = INPUT_TYPE if is_input else result.msgtype
-            return Damage(str(reader.path), -1, f'message {result.read} on {raw.topic} '
-                          f'does not deserialize as {msgtype} ({exc})', result.read - 1)
-        if is_input:
+            due_at = est.next_diag
+        if copy is not None:
+            copy(raw)
+        name = raw.topic
+        if name == topic:
+            try:
+                sample, out = process(raw.data, log_ns)
+            except DESERIALIZE_ERRORS as exc:
+                return _undecodable(reader, result, name, result.msgtype, exc)
+            result.samples += 1
+            statuses[out.status] += 1
+            outcome(est, log_ns, sample, out, False)
+        elif name == input_topic:
+            try:
+                sample, out = process_input(raw.data, log_ns)
+            except DESERIALIZE_ERRORS as exc:
+                return _undecodable(reader, result, name, INPUT_TYPE, exc)
             result.inputs += 1
             result.input_statuses[out.status] += 1
-        else:
-            result.samples += 1
-            result.statuses[out.status] += 1
-        sink.outcome(est, log_ns, sample, out, is_input)
+            outcome(est, log_ns, sample, out, True)
     if result.samples == 0 and reader.damage is None:
         raise InputError(f'{reader.path}: no messages on {topic}')
     return reader.damage
+
+
+def _undecodable(reader: BagReader, result: ReplayResult, topic: str, msgtype: str,
+                 exc: Exception) -> Damage:
+    """Return the Damage of a message that does not deserialize (the replay stops there)."""
+    return Damage(str(reader.path), -1, f'message {result.read} on {topic} '
+                  f'does not deserialize as {msgtype} ({exc})', result.read - 1)
 
 
 def default_output(bag: Path, filter: str = 'estimator') -> Path:  # noqa: A002
