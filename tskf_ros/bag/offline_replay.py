@@ -515,9 +515,10 @@ class ArraySink:
                                            ('sigma_ns', i8)))
                 out[f'{name}.mu'] = (out[f'{name}.sigma_ns'] - out[f'{name}.stamp_ns']) / NS
             elif not key[0].endswith('_states'):
-                _columns(out, name, [r[:2] for r in rows], (('log_ns', i8), ('stamp_ns', i8)))
-                out[f'{name}.x'] = np.array([r[2] for r in rows], dtype=f8).reshape(-1, n)
-                out[f'{name}.P'] = np.array([r[3] for r in rows], dtype=f8).reshape(-1, n, n)
+                cols = list(zip(*rows)) if rows else [(), (), (), ()]
+                _columns(out, name, cols[:2], (('log_ns', i8), ('stamp_ns', i8)), zipped=True)
+                out[f'{name}.x'] = _stacked(cols[2], (-1, n))
+                out[f'{name}.P'] = _stacked(cols[3], (-1, n, n))
         _columns(out, 'diagnostics', self.diag, (('log_ns', i8), ('level', np.int8),
                                                  ('message', str)))
         out['meta.topic'] = np.array(result.topic)
@@ -527,11 +528,27 @@ class ArraySink:
         return out
 
 
-def _columns(out: dict, name: str, rows: list, columns: tuple) -> None:
+def _columns(out: dict, name: str, rows: list, columns: tuple, zipped: bool = False) -> None:
     """Store the columns of `rows` (tuples) as out['name.column'] arrays of their dtypes."""
-    cols = list(zip(*rows)) if rows else [()] * len(columns)
+    if zipped:
+        cols = rows
+    else:
+        cols = list(zip(*rows)) if rows else [()] * len(columns)
     for (column, dtype), values in zip(columns, cols):
-        out[f'{name}.{column}'] = np.array(values, dtype=dtype)
+        if dtype is str and len(values) > 64:
+            # few distinct strings (statuses, reasons): one array of them, indexed
+            codes: dict = {}
+            index = [codes.setdefault(v, len(codes)) for v in values]
+            out[f'{name}.{column}'] = np.array(list(codes), dtype=str)[index]
+        else:
+            out[f'{name}.{column}'] = np.array(values, dtype=dtype)
+
+
+def _stacked(arrays: tuple, shape: tuple) -> np.ndarray:
+    """Return the arrays (each of the same size) as one float64 array of `shape`."""
+    if not arrays:
+        return np.zeros(0, dtype=np.float64).reshape(shape)
+    return np.concatenate(arrays, axis=None, dtype=np.float64).reshape(shape)
 
 
 def _run(reader: BagReader, est: OfflineEstimator, sink: object, result: ReplayResult,
