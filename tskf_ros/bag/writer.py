@@ -81,7 +81,7 @@ class _FlatIndex(MessageIndex):
 
 
 class _ChunkRecords(ChunkBuilder):
-    """The mcap ChunkBuilder's records in a bytearray; add() packs a message in one call."""
+    """The mcap ChunkBuilder's records in a bytearray (_ChunkWriter.add_message adds them)."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -108,26 +108,7 @@ class _ChunkRecords(ChunkBuilder):
         self._record(schema)
 
     def add_message(self, message: Message) -> None:
-        self.add(message.channel_id, message.log_time, message.data, message.sequence,
-                 message.publish_time)
-
-    def add(self, channel: int, log_time: int, data: bytes, sequence: int,
-            publish_time: int) -> None:
-        buf = self.buf
-        index = self.message_indices.get(channel)
-        if index is None:
-            index = self.message_indices[channel] = _FlatIndex(channel, [])
-        index.records += (log_time, len(buf))
-        buf += _MESSAGE_HEAD.pack(Opcode.MESSAGE, _MESSAGE_FIXED + len(data), channel,
-                                  sequence, log_time, publish_time)
-        buf += data
-        if self.num_messages == 0:
-            self.message_start_time = log_time
-        elif log_time < self.message_start_time:
-            self.message_start_time = log_time
-        if log_time > self.message_end_time:
-            self.message_end_time = log_time
-        self.num_messages += 1
+        raise NotImplementedError('messages go in through _ChunkWriter.add_message')
 
     def reset(self) -> None:
         super().reset()
@@ -149,15 +130,29 @@ class _ChunkWriter(McapWriter):
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
                     sequence: int = 0) -> None:
         """Add a message to the chunk in progress (as the mcap Writer's add_message)."""
-        chunk = self._chunk
-        chunk.add(channel_id, log_time, data, sequence, publish_time)
+        chunk = self._chunk      # the hot path of replay_offline: one pack per message
+        buf = chunk.buf
+        index = chunk.message_indices.get(channel_id)
+        if index is None:
+            index = chunk.message_indices[channel_id] = _FlatIndex(channel_id, [])
+        index.records += (log_time, len(buf))
+        buf += _MESSAGE_HEAD.pack(Opcode.MESSAGE, _MESSAGE_FIXED + len(data), channel_id,
+                                  sequence, log_time, publish_time)
+        buf += data
+        if chunk.num_messages == 0:
+            chunk.message_start_time = log_time
+        elif log_time < chunk.message_start_time:
+            chunk.message_start_time = log_time
+        if log_time > chunk.message_end_time:
+            chunk.message_end_time = log_time
+        chunk.num_messages += 1
         counts = self._channel_counts
         counts[channel_id] = counts.get(channel_id, 0) + 1
         if self._first is None or log_time < self._first:
             self._first = log_time
         if log_time > self._last:
             self._last = log_time
-        if len(chunk.buf) > self._limit:
+        if len(buf) > self._limit:
             self._finalize()
 
     def finish(self) -> None:
