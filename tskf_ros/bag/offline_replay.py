@@ -382,7 +382,9 @@ def replay_arrays(bag: os.PathLike, config: object = None, *, topic: Optional[st
     sink = ArraySink(est)
     with _gc_paused():
         result.damage = _run(reader, est, sink, result, diagnostics)
-        return sink.arrays(result)
+        arrays = sink.arrays(result)
+        del sink            # its rows go now, before the collector would scan them
+    return arrays
 
 
 @contextmanager
