@@ -511,8 +511,7 @@ class ArraySink:
         if is_input:
             self.inputs.append((log_ns, sample[0], out.status))
         else:
-            self.samples.append((log_ns, sample[0], sample[1], sample[2], out.status,
-                                 out.reason))
+            self.samples.append((log_ns, *sample, out.status, out.reason))
         rows = self.estimates
         for e in out.estimates:
             rows[e.kind, e.revised].append((log_ns, e.stamp_ns, e.x, e.P))
@@ -575,7 +574,7 @@ def _stacked(arrays: tuple, shape: tuple) -> np.ndarray:
     """Return the arrays (each of the same size) as one float64 array of `shape`."""
     if not arrays:
         return np.zeros(0, dtype=np.float64).reshape(shape)
-    return np.concatenate(arrays, axis=None, dtype=np.float64).reshape(shape)
+    return np.concatenate(arrays, dtype=np.float64).reshape(shape)    # along their axis 0
 
 
 def _run(reader: BagReader, est: OfflineEstimator, sink: object, result: ReplayResult,
