@@ -561,13 +561,7 @@ def _columns(out: dict, name: str, rows: list, columns: tuple, zipped: bool = Fa
     else:
         cols = list(zip(*rows)) if rows else [()] * len(columns)
     for (column, dtype), values in zip(columns, cols):
-        if dtype is str and len(values) > 64:
-            # few distinct strings (statuses, reasons): one array of them, indexed
-            codes: dict = {}
-            index = [codes.setdefault(v, len(codes)) for v in values]
-            out[f'{name}.{column}'] = np.array(list(codes), dtype=str)[index]
-        else:
-            out[f'{name}.{column}'] = np.array(values, dtype=dtype)
+        out[f'{name}.{column}'] = np.array(values, dtype=dtype)
 
 
 def _stacked(arrays: tuple, shape: tuple) -> np.ndarray:
@@ -587,42 +581,47 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: object, result: ReplayR
     statuses = result.statuses
     # the log time from which est.diagnostics_due may have something (None: never)
     due_at = -1 if diagnostics else None
-    for raw in reader.messages():
-        result.read += 1
-        log_ns = raw.log_time_ns
-        if due_at is not None and log_ns >= due_at:
-            for t, msg in est.diagnostics_due(log_ns):
-                sink.diagnostics(t, msg)
-            due_at = est.next_diag
-        if copy is not None:
-            copy(raw)
-        name = raw.topic
-        if name == topic:
-            try:
-                sample, out = process(raw.data, log_ns)
-            except DESERIALIZE_ERRORS as exc:
-                return _undecodable(reader, result, name, result.msgtype, exc)
-            result.samples += 1
-            statuses[out.status] += 1
-            outcome(est, log_ns, sample, out, False)
-        elif name == input_topic:
-            try:
-                sample, out = process_input(raw.data, log_ns)
-            except DESERIALIZE_ERRORS as exc:
-                return _undecodable(reader, result, name, INPUT_TYPE, exc)
-            result.inputs += 1
-            result.input_statuses[out.status] += 1
-            outcome(est, log_ns, sample, out, True)
+    read = samples = 0          # result.read and result.samples, kept in locals
+    try:
+        for raw in reader.messages():
+            read += 1
+            log_ns = raw.log_time_ns
+            if due_at is not None and log_ns >= due_at:
+                for t, msg in est.diagnostics_due(log_ns):
+                    sink.diagnostics(t, msg)
+                due_at = est.next_diag
+            if copy is not None:
+                copy(raw)
+            name = raw.topic
+            if name == topic:
+                try:
+                    sample, out = process(raw.data, log_ns)
+                except DESERIALIZE_ERRORS as exc:
+                    return _undecodable(reader, read, name, result.msgtype, exc)
+                samples += 1
+                statuses[out.status] += 1
+                outcome(est, log_ns, sample, out, False)
+            elif name == input_topic:
+                try:
+                    sample, out = process_input(raw.data, log_ns)
+                except DESERIALIZE_ERRORS as exc:
+                    return _undecodable(reader, read, name, INPUT_TYPE, exc)
+                result.inputs += 1
+                result.input_statuses[out.status] += 1
+                outcome(est, log_ns, sample, out, True)
+    finally:
+        result.read += read
+        result.samples += samples
     if result.samples == 0 and reader.damage is None:
         raise InputError(f'{reader.path}: no messages on {topic}')
     return reader.damage
 
 
-def _undecodable(reader: BagReader, result: ReplayResult, topic: str, msgtype: str,
+def _undecodable(reader: BagReader, read: int, topic: str, msgtype: str,
                  exc: Exception) -> Damage:
-    """Return the Damage of a message that does not deserialize (the replay stops there)."""
-    return Damage(str(reader.path), -1, f'message {result.read} on {topic} '
-                  f'does not deserialize as {msgtype} ({exc})', result.read - 1)
+    """Return the Damage of message `read` (1 first), which does not deserialize."""
+    return Damage(str(reader.path), -1, f'message {read} on {topic} '
+                  f'does not deserialize as {msgtype} ({exc})', read - 1)
 
 
 def default_output(bag: Path, filter: str = 'estimator') -> Path:  # noqa: A002
