@@ -31,6 +31,7 @@ error) stands.  The frame_id is skipped, not decoded: rclpy accepts any bytes th
 
 import array
 import math
+import operator
 import struct
 from typing import Any, Callable, Optional, Sequence
 
@@ -266,6 +267,13 @@ def fixed_decoder(msgtype: str, fields: Sequence[str]) -> Callable[[Any], Option
     names = [name for name, _ in layout]
     picks = [names.index(f) for f in fields]
     codes = ''.join(code for _, code in layout)
+    if len(picks) == 1:
+        first = picks[0]
+
+        def pick(values: tuple) -> tuple:
+            return (values[first],)
+    else:
+        pick = operator.itemgetter(*picks)
     if not stamped:
         body = _tail(codes, 0)
         need = 4 + body.size
@@ -274,7 +282,7 @@ def fixed_decoder(msgtype: str, fields: Sequence[str]) -> Callable[[Any], Option
             if len(data) < need or data[0] != 0 or data[1] != 1:
                 return None
             values = body.unpack_from(data, 4)
-            return (None, *[values[i] for i in picks])
+            return (None, *pick(values))
         return decode_plain
     # after the frame_id's bytes (body offset 12 + length): one Struct per offset mod 8
     tails = [_tail(codes, k) for k in range(8)]
@@ -290,5 +298,5 @@ def fixed_decoder(msgtype: str, fields: Sequence[str]) -> Callable[[Any], Option
         if size < end + tail.size:
             return None
         values = tail.unpack_from(data, end)
-        return (sec * NS_PER_S + nanosec, *[values[i] for i in picks])
+        return (sec * NS_PER_S + nanosec, *pick(values))
     return decode
