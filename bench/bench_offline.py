@@ -52,8 +52,8 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 101))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from legacy_reader import LegacyReader, LibraryOnlyReader  # noqa: E402
-import numpy as np  # noqa: E402
 from mcap.writer import Writer as McapWriter  # noqa: E402
+import numpy as np  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 
 from tskf_ros.bag import offline_replay  # noqa: E402
@@ -104,7 +104,7 @@ def read_fixed_decode(ctx):
 
 
 def io_floor_mcap(ctx):
-    """The I/O floor with the mcap package's Writer in BagWriter (its chunk writer before)."""
+    """Run the I/O floor with the mcap package's Writer in BagWriter (as before)."""
     fast = bag_writer._ChunkWriter
     bag_writer._ChunkWriter = McapWriter
     try:
@@ -201,8 +201,8 @@ def context(bag: Path, tmp: Path) -> dict:
         elif raw.topic == result.input_topic:
             msg = deserialize_message(raw.data, decode[raw.topic])
             samples.append((1, input_from_msg(msg, est.session), raw.log_time_ns))
-    return {'bag': bag, 'tmp': tmp, 'decode': decode, 'fixed': fixed, 'plan': plan, 'prebuilt': prebuilt,
-            'samples': samples, 'count': memory.read, 'config': est.config,
+    return {'bag': bag, 'tmp': tmp, 'decode': decode, 'fixed': fixed, 'plan': plan,
+            'prebuilt': prebuilt, 'samples': samples, 'count': memory.read, 'config': est.config,
             'written': sum(memory.written.values()), 'n_samples': memory.samples}
 
 
@@ -324,7 +324,7 @@ def report(runs: dict, ctx: dict, serial: dict) -> None:
         ('issue 13.4: replay -> bag / read + deserialize (>= 0.25)', ratio('replay -> bag'),
          0.25),
         ('  I/O floor / read + deserialize (its ceiling)', ratio('I/O floor'), None),
-        ('  I/O floor with the mcap Writer / read + deserialize (the ceiling before)',
+        ('  I/O floor, mcap Writer / read + deserialize (the ceiling before)',
          ratio('I/O floor (mcap Writer)'), None),
         ('  read + fixed decode / read + deserialize', ratio('read + fixed decode'), None),
         ('issue 13.4: replay -> arrays / read + deserialize (>= 0.8)',
