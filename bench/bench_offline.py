@@ -13,10 +13,14 @@ machine hits them all), every one over the whole bag:
 - read: the package's reader (the mcap package, our record walk inside chunks);
 - read + deserialize: the reader, and rclpy's deserializer on the measurement topic: the
   reference of the replay goals;
+- read + fixed decode: the reader, and cdr.fixed_decoder (what replay uses, rclpy only for
+  what it does not take) on the measurement topic;
 - I/O floor: read + deserialize, plus writing a bag with the same messages replay writes
   (the inputs, and for every input the same number of output messages of the same types
-  at the same log times, pre-built and pre-serialized): everything replay does but the
-  filter and building its messages;
+  at the same log times, pre-built and pre-serialized) through the same BagWriter:
+  everything replay does but the filter and building its messages;
+- I/O floor (mcap Writer): the same, with the mcap package's own Writer in BagWriter (as
+  before this revision: its add_message costs several times the chunk writer's);
 - replay -> bag: replay_offline writing its output bag;
 - replay -> arrays: replay_arrays, the analysis mode (--npz without the file);
 - session only: EstimatorSession.add (and add_input) over the bag's samples, already
@@ -48,10 +52,12 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 101))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from legacy_reader import LegacyReader, LibraryOnlyReader  # noqa: E402
+from mcap.writer import Writer as McapWriter  # noqa: E402
 import numpy as np  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 
 from tskf_ros.bag import offline_replay  # noqa: E402
+from tskf_ros.bag import writer as bag_writer  # noqa: E402
 from tskf_ros.bag.cdr import EstimateEncoder, serialize  # noqa: E402
 from tskf_ros.bag.message_types import message_class, typestore  # noqa: E402
 from tskf_ros.bag.reader import BagReader, RawMessage  # noqa: E402
@@ -83,6 +89,28 @@ def read_deserialize(ctx):
         if cls is not None:
             deserialize_message(raw.data, cls)
     return n
+
+
+def read_fixed_decode(ctx):
+    """Read every message; decode the measurements as replay does (cdr.fixed_decoder)."""
+    n = 0
+    todo = ctx['fixed']
+    for raw in BagReader(ctx['bag']).messages():
+        n += 1
+        read = todo.get(raw.topic)
+        if read is not None:
+            read(raw.data, raw.log_time_ns)
+    return n
+
+
+def io_floor_mcap(ctx):
+    """Run the I/O floor with the mcap package's Writer in BagWriter (as before)."""
+    fast = bag_writer._ChunkWriter
+    bag_writer._ChunkWriter = McapWriter
+    try:
+        return io_floor(ctx)
+    finally:
+        bag_writer._ChunkWriter = fast
 
 
 def io_floor(ctx):
@@ -137,7 +165,9 @@ CASES = [('read (old)', read_only(LegacyReader)),
          ('read (library only)', read_only(LibraryOnlyReader)),
          ('read', read_only(BagReader)),
          ('read + deserialize', read_deserialize),
+         ('read + fixed decode', read_fixed_decode),
          ('I/O floor', io_floor),
+         ('I/O floor (mcap Writer)', io_floor_mcap),
          ('replay -> bag', replay_bag),
          ('replay -> arrays', replay_arrays),
          ('session only', session_only)]
@@ -148,6 +178,7 @@ def context(bag: Path, tmp: Path) -> dict:
     reader, est, result = offline_replay._prepare(bag, PARAMS, None, 'estimator', None,
                                                   lambda s: None)
     decode = {result.topic: est.cls}
+    fixed = {result.topic: est.read_sample}
     if result.input_topic:
         decode[result.input_topic] = message_class(INPUT_TYPE)
     memory = offline_replay.replay(bag, None, params_file=PARAMS)
@@ -170,8 +201,8 @@ def context(bag: Path, tmp: Path) -> dict:
         elif raw.topic == result.input_topic:
             msg = deserialize_message(raw.data, decode[raw.topic])
             samples.append((1, input_from_msg(msg, est.session), raw.log_time_ns))
-    return {'bag': bag, 'tmp': tmp, 'decode': decode, 'plan': plan, 'prebuilt': prebuilt,
-            'samples': samples, 'count': memory.read, 'config': est.config,
+    return {'bag': bag, 'tmp': tmp, 'decode': decode, 'fixed': fixed, 'plan': plan,
+            'prebuilt': prebuilt, 'samples': samples, 'count': memory.read, 'config': est.config,
             'written': sum(memory.written.values()), 'n_samples': memory.samples}
 
 
@@ -246,8 +277,9 @@ def profile(ctx: dict) -> None:
     wanted = [('estimator_session.py', 'add', 'session.add (the filter)'),
               ('offline_replay.py', 'encoded', 'encoding the outputs (fixed layout)'),
               ('offline_replay.py', 'diagnostics_due', '/diagnostics (build + serialize)'),
-              ('writer.py', 'write', 'BagWriter.write (mcap writer)'),
+              ('writer.py', 'write', 'BagWriter.write (chunk writer)'),
               ('reader.py', 'messages', 'BagReader.messages (read)'),
+              ('offline_replay.py', 'read', 'decoding the measurements (fixed layout)'),
               ('~', '<built-in method rclpy._rclpy_pybind11.rclpy_deserialize>',
                'rclpy deserialize')]
     shares = {}
@@ -292,6 +324,9 @@ def report(runs: dict, ctx: dict, serial: dict) -> None:
         ('issue 13.4: replay -> bag / read + deserialize (>= 0.25)', ratio('replay -> bag'),
          0.25),
         ('  I/O floor / read + deserialize (its ceiling)', ratio('I/O floor'), None),
+        ('  I/O floor, mcap Writer / read + deserialize (the ceiling before)',
+         ratio('I/O floor (mcap Writer)'), None),
+        ('  read + fixed decode / read + deserialize', ratio('read + fixed decode'), None),
         ('issue 13.4: replay -> arrays / read + deserialize (>= 0.8)',
          ratio('replay -> arrays'), 0.8),
         ('issue 13.4: fixed layout vs library serialization (>= 2x to keep it)',

@@ -148,6 +148,7 @@ def test_the_fixed_layout_equals_the_library_byte_for_byte(n, data, frame, stamp
                      (enc.jump(t, t + sigma), jump)):
         assert got == serialize(msg), type_name(msg)
         assert deserialize_message(got, type(msg)) == msg
+    assert enc.pair(t, x, P) == (serialize(est), serialize(states))
 
 
 def test_the_fixed_layout_refuses_what_does_not_fit():

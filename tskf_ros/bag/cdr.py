@@ -18,18 +18,30 @@ here instead:
   (test/test_bag_cdr.py).
 
 Readers accept both forms: rclpy's deserializer takes the padded and the canonical one.
+
+Reading: `fixed_decoder(msgtype, fields)` reads chosen fields of a message whose layout is
+fixed but for its header's frame_id (the stamped scalars replay_offline takes) straight from
+the CDR bytes, for offline replay, where rclpy's deserializer costs more than the filter.
+It takes the little-endian XCDR1 encapsulation (what rclpy, rosbag2 and rosbags write, the
+canonical and the padded form alike: trailing bytes are ignored, as rclpy ignores them) and
+returns None for anything else (a big-endian or another encapsulation, bytes too short for
+the layout): the caller then uses rclpy's deserializer, whose outcome (values, or its
+error) stands.  The frame_id is skipped, not decoded: rclpy accepts any bytes there too.
 """
 
 import array
 import math
+import operator
 import struct
-from typing import Any, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
+from rosbags.interfaces import Nodetype
 
 from tskf_ros.bag.message_types import typestore
 
-__all__ = ['EstimateEncoder', 'serialize', 'to_store', 'type_name']
+__all__ = ['EstimateEncoder', 'fixed_decoder', 'fixed_fields', 'serialize', 'to_store',
+           'type_name']
 
 CDR_HEADER = b'\x00\x01\x00\x00'    # XCDR1, little endian, no options
 NS_PER_S = 1_000_000_000
@@ -129,6 +141,7 @@ class EstimateEncoder:
                                        f'{ESTIMATE_SLOTS ** 2}d')
         self._frame = frame
         self._zeros = [0.0] * (ESTIMATE_SLOTS ** 2)
+        self._pad = (0.0,) * (ESTIMATE_SLOTS - n)
         # JointState: header, name[], position[], velocity[], effort[] (empty)
         lay = _Layout(8)
         lay.string(frame_id)
@@ -176,9 +189,114 @@ class EstimateEncoder:
             sec, nsec, self._states_prefix, *np.asarray(x, dtype=float).reshape(-1).tolist(),
             self._states_mid, *sd, self._states_tail)
 
+    def pair(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> tuple[bytes, bytes]:
+        """Return (estimate(...), states(...)) of one estimate, its arrays read once."""
+        n = self.n
+        v = np.asarray(x, dtype=float).reshape(-1).tolist()
+        flat = np.asarray(P, dtype=float).reshape(-1).tolist()
+        cov = self._zeros.copy()
+        for i in range(n):
+            cov[i * ESTIMATE_SLOTS:i * ESTIMATE_SLOTS + n] = flat[i * n:i * n + n]
+        # as np.maximum(diag, 0.0): -0.0 gives 0.0 and NaN stays NaN
+        sd = [math.sqrt(d if d > 0.0 or d != d else 0.0) for d in flat[::n + 1]]
+        sec, nsec = divmod(int(stamp_ns), NS_PER_S)
+        return (CDR_HEADER + self._estimate.pack(sec, nsec, self._frame, *v, *self._pad, *cov),
+                CDR_HEADER + self._states.pack(sec, nsec, self._states_prefix, *v,
+                                               self._states_mid, *sd, self._states_tail))
+
     def jump(self, stamp_ns: int, sigma_ns: int) -> bytes:
         """Return the TimeReference of conversions.jump_to_msg, serialized."""
         sec, nsec = self._stamp(stamp_ns)
         ref_sec, ref_nsec = self._stamp(sigma_ns)
         return CDR_HEADER + self._jump.pack(sec, nsec, b'\x01\0\0\0', b'\0\0\0\0', ref_sec,
                                             ref_nsec, b'\x06\0\0\0', b'sigma\0')
+
+
+# struct codes of the fixed-size base types a fixed-layout decoder reads
+_BASE_CODES = {'float64': 'd', 'float32': 'f', 'int8': 'b', 'uint8': 'B', 'byte': 'B',
+               'char': 'B', 'int16': 'h', 'uint16': 'H', 'int32': 'i', 'uint32': 'I',
+               'int64': 'q', 'uint64': 'Q'}
+_HEADER_TYPE = 'std_msgs/msg/Header'
+_STAMP_HEAD = struct.Struct('<iII')     # header.stamp sec, nanosec, frame_id length
+
+
+def fixed_fields(msgtype: str) -> tuple[bool, list]:
+    """
+    Return (stamped, [(field path, struct code)]) of a type of fixed layout.
+
+    stamped: the type starts with a std_msgs/Header (the only variable-length part
+    allowed); the fields are the rest, flattened ('accel.linear.x').  Raises ValueError
+    for a type with another string, a sequence, an array or a bool.
+    """
+    fields = typestore().fielddefs[msgtype][1]
+    stamped = bool(fields) and fields[0][1] == (Nodetype.NAME, _HEADER_TYPE)
+    out: list = []
+
+    def walk(prefix: str, defs: list) -> None:
+        for name, (node, spec) in defs:
+            if node == Nodetype.NAME and spec != _HEADER_TYPE:
+                walk(f'{prefix}{name}.', typestore().fielddefs[spec][1])
+            elif node == Nodetype.BASE and spec[0] in _BASE_CODES:
+                out.append((prefix + name, _BASE_CODES[spec[0]]))
+            else:
+                raise ValueError(f'{msgtype}: field {prefix}{name} has no fixed layout')
+    walk('', fields[1:] if stamped else fields)
+    return stamped, out
+
+
+def _tail(codes: str, start: int) -> struct.Struct:
+    """Return the Struct of `codes` laid out from body offset `start` (CDR alignment)."""
+    fmt, pos = '<', start
+    for code in codes:
+        size = struct.calcsize(code)
+        pad = -pos % size
+        fmt += 'x' * pad + code
+        pos += pad + size
+    return struct.Struct(fmt)
+
+
+def fixed_decoder(msgtype: str, fields: Sequence[str]) -> Callable[[Any], Optional[tuple]]:
+    """
+    Return decode(data) -> (stamp ns or None, *the values of `fields`), or None.
+
+    None: not the little-endian XCDR1 encapsulation, or too short for the layout (the
+    caller deserializes with rclpy).  stamp: header.stamp as sec * 1e9 + nanosec (None for
+    a type without a header).  See the module doc.
+    """
+    stamped, layout = fixed_fields(msgtype)
+    names = [name for name, _ in layout]
+    picks = [names.index(f) for f in fields]
+    codes = ''.join(code for _, code in layout)
+    if len(picks) == 1:
+        first = picks[0]
+
+        def pick(values: tuple) -> tuple:
+            return (values[first],)
+    else:
+        pick = operator.itemgetter(*picks)
+    if not stamped:
+        body = _tail(codes, 0)
+        need = 4 + body.size
+
+        def decode_plain(data: Any) -> Optional[tuple]:
+            if len(data) < need or data[0] != 0 or data[1] != 1:
+                return None
+            values = body.unpack_from(data, 4)
+            return (None, *pick(values))
+        return decode_plain
+    # after the frame_id's bytes (body offset 12 + length): one Struct per offset mod 8
+    tails = [_tail(codes, k) for k in range(8)]
+    head = _STAMP_HEAD.unpack_from
+
+    def decode(data: Any) -> Optional[tuple]:
+        size = len(data)
+        if size < 16 or data[0] != 0 or data[1] != 1:
+            return None
+        sec, nanosec, length = head(data, 4)
+        end = 16 + length
+        tail = tails[(end - 4) & 7]
+        if size < end + tail.size:
+            return None
+        values = tail.unpack_from(data, end)
+        return (sec * NS_PER_S + nanosec, *pick(values))
+    return decode

@@ -42,18 +42,20 @@ the damage is reported, and the output's metadata says so (custom_data).
 
 import argparse
 from collections import Counter
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+import gc
 import os
 from pathlib import Path
 import sys
 import tempfile
 import time
-from typing import Callable, Optional
+from typing import Callable, Iterator, Optional
 
 import numpy as np
 from rclpy.serialization import deserialize_message
 
-from tskf_ros.bag.cdr import EstimateEncoder, serialize
+from tskf_ros.bag.cdr import EstimateEncoder, fixed_decoder, serialize
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_from_rclpy, typestore
 from tskf_ros.bag.reader import (BagError, BagReader, Damage, error_exit, EXIT_DAMAGED,
                                  exit_status)
@@ -166,6 +168,36 @@ def choose_input_topic(reader: BagReader, topic: Optional[str]) -> tuple[str, li
                    'from each stamp to the next (zero-order hold)']
 
 
+def sample_reader(msgtype: str, cls: type, extract: Callable) -> Callable[[bytes, int], tuple]:
+    """
+    Return read(cdr bytes, log ns) -> (stamp ns, value, variance) for a type of INPUT_TYPES.
+
+    What extract(deserialize_message(data, cls), log_ns) returns, read from the bytes by
+    cdr.fixed_decoder; bytes it does not take (big-endian, too short) go through rclpy,
+    whose values or error stand (test/test_bag_replay.py compares the two on Hypothesis'
+    messages and mutations of them).
+    """
+    kind = INPUT_TYPES[msgtype]
+    decode = fixed_decoder(msgtype, [kind.value] + ([kind.variance] if kind.variance else []))
+
+    def slow(data: bytes, log_ns: int) -> tuple:
+        return extract(deserialize_message(data, cls), log_ns)
+    if not kind.stamped:
+        def read_plain(data: bytes, log_ns: int) -> tuple:
+            got = decode(data)
+            return slow(data, log_ns) if got is None else (int(log_ns), got[1], 0.0)
+        return read_plain
+    if kind.variance is None:
+        def read_no_variance(data: bytes, log_ns: int) -> tuple:
+            got = decode(data)
+            return slow(data, log_ns) if got is None else (got[0], got[1], 0.0)
+        return read_no_variance
+
+    def read(data: bytes, log_ns: int) -> tuple:
+        return decode(data) or slow(data, log_ns)
+    return read
+
+
 class OfflineEstimator:
     """The live node's work on one message at a time, without DDS or a clock."""
 
@@ -178,6 +210,7 @@ class OfflineEstimator:
         self.cls = message_class(msgtype)
         self.input_cls = message_class(INPUT_TYPE)
         self.extract = extractor(msgtype)
+        self.read_sample = sample_reader(msgtype, self.cls, self.extract)
         self.period_ns = int(round(config.diagnostics_period * NS))
         self.next_diag: Optional[int] = None
         self._encoder: Optional[EstimateEncoder] = None
@@ -206,8 +239,8 @@ class OfflineEstimator:
         return [(due, self.interface.diagnostics_message(self.session, self.config, due))]
 
     def process(self, data: bytes, log_ns: int) -> tuple[tuple, object]:
-        """Deserialize one measurement and run it; return ((stamp, value, variance), outcome)."""
-        sample = self.extract(deserialize_message(data, self.cls), log_ns)
+        """Decode one measurement and run it; return ((stamp, value, variance), outcome)."""
+        sample = self.read_sample(data, log_ns)
         return sample, self.session.add(*sample, now_ns=log_ns)
 
     def process_input(self, data: bytes, log_ns: int) -> tuple[tuple, object]:
@@ -227,8 +260,9 @@ class OfflineEstimator:
             enc = self._encoder = EstimateEncoder(self.config.frame_id, names, len(names))
         pairs = []
         for e in out.estimates:
-            pairs.append((_ESTIMATE_TOPICS[e.kind, e.revised], enc.estimate(e.stamp_ns, e.x, e.P)))
-            pairs.append((_STATES_TOPICS[e.kind, e.revised], enc.states(e.stamp_ns, e.x, e.P)))
+            key = e.kind, e.revised
+            twist, states = enc.pair(e.stamp_ns, e.x, e.P)
+            pairs += ((_ESTIMATE_TOPICS[key], twist), (_STATES_TOPICS[key], states))
         pairs += [(_ESTIMATE_TOPICS['mu', j.revised], enc.jump(j.stamp_ns, j.sigma_ns))
                   for j in out.jumps]
         return pairs
@@ -252,8 +286,8 @@ class OfflineAligner(OfflineEstimator):
                 for key, name in aligner.BAG_OUTPUT_TOPICS.items()]
 
     def process(self, data: bytes, log_ns: int) -> tuple[tuple, object]:
-        """Deserialize one intensity sample and run it; return (sample, outcome)."""
-        sample = self.extract(deserialize_message(data, self.cls), log_ns)
+        """Decode one intensity sample and run it; return (sample, outcome)."""
+        sample = self.read_sample(data, log_ns)
         return sample, self.session.add(sample[0], sample[1], now_ns=log_ns)
 
     def messages(self, out: object) -> list:
@@ -321,7 +355,8 @@ def replay(bag: os.PathLike, output: Optional[os.PathLike] = None, *,
         _add_topics(writer, reader, est, diagnostics, log)
         if filter == 'alignment':
             writer.set_custom_data('tskf_ros.open_loop', aligner.OPEN_LOOP_NOTE)
-        result.damage = _run(reader, est, _BagSink(writer, result), result, diagnostics)
+        with _gc_paused(filter == 'estimator'):
+            result.damage = _run(reader, est, _BagSink(writer, result), result, diagnostics)
         if result.damage is not None:
             writer.set_custom_data('tskf_ros.input_damage', str(result.damage))
         writer.close()
@@ -345,8 +380,32 @@ def replay_arrays(bag: os.PathLike, config: object = None, *, topic: Optional[st
     """
     reader, est, result = _prepare(bag, config, topic, 'estimator', input_topic, log)
     sink = ArraySink(est)
-    result.damage = _run(reader, est, sink, result, diagnostics)
-    return sink.arrays(result)
+    with _gc_paused():
+        result.damage = _run(reader, est, sink, result, diagnostics)
+        arrays = sink.arrays(result)
+        del sink            # its rows go now, before the collector would scan them
+    return arrays
+
+
+@contextmanager
+def _gc_paused(pause: bool = True) -> Iterator[None]:
+    """
+    Pause Python's cyclic garbage collector (if it runs) for the estimator's replay loop.
+
+    The loop keeps the tuples it makes (arrays rows) or drops them at once (bag mode), and
+    makes no reference cycles (a few hundred objects in cycles after a whole run of
+    bags/owc_ge_1khz): the collector would only rescan what is kept, a fifth of the
+    arrays mode's time (bench/bench_offline.py).  Reference counting still frees
+    everything else; the collector is restored on the way out, whatever happens.
+    """
+    was = pause and gc.isenabled()
+    if was:
+        gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
 
 
 def _add_topics(writer: BagWriter, reader: BagReader, est: OfflineEstimator,
@@ -435,6 +494,8 @@ class ArraySink:
     - meta.{topic, input_topic, damage, assumptions}: strings.
     """
 
+    copies = False      # copy() does nothing: _run need not call it
+
     def __init__(self, est: OfflineEstimator) -> None:
         self.n = len(est.config.session.model.state_names)
         self.samples: list = []
@@ -450,8 +511,7 @@ class ArraySink:
         if is_input:
             self.inputs.append((log_ns, sample[0], out.status))
         else:
-            self.samples.append((log_ns, sample[0], sample[1], sample[2], out.status,
-                                 out.reason))
+            self.samples.append((log_ns, *sample, out.status, out.reason))
         rows = self.estimates
         for e in out.estimates:
             rows[e.kind, e.revised].append((log_ns, e.stamp_ns, e.x, e.P))
@@ -481,9 +541,10 @@ class ArraySink:
                                            ('sigma_ns', i8)))
                 out[f'{name}.mu'] = (out[f'{name}.sigma_ns'] - out[f'{name}.stamp_ns']) / NS
             elif not key[0].endswith('_states'):
-                _columns(out, name, [r[:2] for r in rows], (('log_ns', i8), ('stamp_ns', i8)))
-                out[f'{name}.x'] = np.array([r[2] for r in rows], dtype=f8).reshape(-1, n)
-                out[f'{name}.P'] = np.array([r[3] for r in rows], dtype=f8).reshape(-1, n, n)
+                cols = list(zip(*rows)) if rows else [(), (), (), ()]
+                _columns(out, name, cols[:2], (('log_ns', i8), ('stamp_ns', i8)), zipped=True)
+                out[f'{name}.x'] = _stacked(cols[2], (-1, n))
+                out[f'{name}.P'] = _stacked(cols[3], (-1, n, n))
         _columns(out, 'diagnostics', self.diag, (('log_ns', i8), ('level', np.int8),
                                                  ('message', str)))
         out['meta.topic'] = np.array(result.topic)
@@ -493,11 +554,21 @@ class ArraySink:
         return out
 
 
-def _columns(out: dict, name: str, rows: list, columns: tuple) -> None:
+def _columns(out: dict, name: str, rows: list, columns: tuple, zipped: bool = False) -> None:
     """Store the columns of `rows` (tuples) as out['name.column'] arrays of their dtypes."""
-    cols = list(zip(*rows)) if rows else [()] * len(columns)
+    if zipped:
+        cols = rows
+    else:
+        cols = list(zip(*rows)) if rows else [()] * len(columns)
     for (column, dtype), values in zip(columns, cols):
         out[f'{name}.{column}'] = np.array(values, dtype=dtype)
+
+
+def _stacked(arrays: tuple, shape: tuple) -> np.ndarray:
+    """Return the arrays (each of the same size) as one float64 array of `shape`."""
+    if not arrays:
+        return np.zeros(0, dtype=np.float64).reshape(shape)
+    return np.concatenate(arrays, dtype=np.float64).reshape(shape)    # along their axis 0
 
 
 def _run(reader: BagReader, est: OfflineEstimator, sink: object, result: ReplayResult,
@@ -505,32 +576,52 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: object, result: ReplayR
     """Read, estimate, hand the outputs to the sink; return the damage that stopped it."""
     topic, input_topic = result.topic, result.input_topic
     process, process_input = est.process, est.process_input
-    for raw in reader.messages():
-        result.read += 1
-        log_ns = raw.log_time_ns
-        if diagnostics:
-            for t, msg in est.diagnostics_due(log_ns):
-                sink.diagnostics(t, msg)
-        sink.copy(raw)
-        is_input = raw.topic == input_topic
-        if not is_input and raw.topic != topic:
-            continue
-        try:
-            sample, out = (process_input if is_input else process)(raw.data, log_ns)
-        except DESERIALIZE_ERRORS as exc:
-            msgtype = INPUT_TYPE if is_input else result.msgtype
-            return Damage(str(reader.path), -1, f'message {result.read} on {raw.topic} '
-                          f'does not deserialize as {msgtype} ({exc})', result.read - 1)
-        if is_input:
-            result.inputs += 1
-            result.input_statuses[out.status] += 1
-        else:
-            result.samples += 1
-            result.statuses[out.status] += 1
-        sink.outcome(est, log_ns, sample, out, is_input)
+    copy = sink.copy if getattr(sink, 'copies', True) else None
+    outcome = sink.outcome
+    statuses = result.statuses
+    # the log time from which est.diagnostics_due may have something (None: never)
+    due_at = -1 if diagnostics else None
+    read = samples = 0          # result.read and result.samples, kept in locals
+    try:
+        for raw in reader.messages():
+            read += 1
+            log_ns = raw.log_time_ns
+            if due_at is not None and log_ns >= due_at:
+                for t, msg in est.diagnostics_due(log_ns):
+                    sink.diagnostics(t, msg)
+                due_at = est.next_diag
+            if copy is not None:
+                copy(raw)
+            name = raw.topic
+            if name == topic:
+                try:
+                    sample, out = process(raw.data, log_ns)
+                except DESERIALIZE_ERRORS as exc:
+                    return _undecodable(reader, read, name, result.msgtype, exc)
+                samples += 1
+                statuses[out.status] += 1
+                outcome(est, log_ns, sample, out, False)
+            elif name == input_topic:
+                try:
+                    sample, out = process_input(raw.data, log_ns)
+                except DESERIALIZE_ERRORS as exc:
+                    return _undecodable(reader, read, name, INPUT_TYPE, exc)
+                result.inputs += 1
+                result.input_statuses[out.status] += 1
+                outcome(est, log_ns, sample, out, True)
+    finally:
+        result.read += read
+        result.samples += samples
     if result.samples == 0 and reader.damage is None:
         raise InputError(f'{reader.path}: no messages on {topic}')
     return reader.damage
+
+
+def _undecodable(reader: BagReader, read: int, topic: str, msgtype: str,
+                 exc: Exception) -> Damage:
+    """Return the Damage of message `read` (1 first), which does not deserialize."""
+    return Damage(str(reader.path), -1, f'message {read} on {topic} '
+                  f'does not deserialize as {msgtype} ({exc})', read - 1)
 
 
 def default_output(bag: Path, filter: str = 'estimator') -> Path:  # noqa: A002
