@@ -39,6 +39,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import Illuminance  # noqa: E402
 
 from tskf_ros.messages import conversions  # noqa: E402
+from tskf_ros.messages.estimator_interface import default_parameters  # noqa: E402
 from tskf_ros.nodes.node_base import make_executor  # noqa: E402
 
 from bench_estimator import OUTPUTS  # noqa: E402, I100 - bench/, next to this script
@@ -97,8 +98,9 @@ def main() -> None:
     parser.add_argument('--outputs', default='all', choices=['all', 'predicted'],
                         help='subscribe to all five outputs per input, or to '
                         'estimate/predicted only')
-    parser.add_argument('--queue-depth', type=int, default=100,
-                        help="the node's queue_depth parameter (default: its default, 100)")
+    depth = default_parameters()['queue_depth']
+    parser.add_argument('--queue-depth', type=int, default=depth,
+                        help=f"the node's queue_depth parameter (default: its default, {depth})")
     args = parser.parse_args()
     namespace = f'/stream{os.getpid()}'
     period_ns = int(round(NS / args.rate))
