@@ -22,7 +22,8 @@ same paths; the parameters travel with the tasks).  `--workers 0` runs in this p
 without Dask.
 
 Exit status: 0 every task ran without error; 1 bad arguments or files (one line, nothing
-started); 5 at least one row has an error (the table is complete otherwise).
+started); 5 at least one row has an error (the table is complete otherwise); 130
+interrupted (Ctrl-C: the rows finished are kept, the same command resumes).
 """
 
 import argparse
@@ -51,6 +52,7 @@ import yaml
 
 PROG = 'sweep'
 EXIT_ROW_ERRORS = 5
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports Ctrl-C
 # a LocalCluster larger than this is a typo, not a plan (use --scheduler for a big cluster)
 MAX_WORKERS = 256
 FIT_COLUMNS = ['fit_Q', 'fit_R', 'fit_Q_stderr', 'fit_R_stderr', 'fit_log_likelihood',
@@ -431,6 +433,15 @@ def main(argv: Optional[list] = None) -> int:
     except (ValueError, ParamsError, OSError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        try:
+            with open(args.out, newline='') as f:
+                kept = max(sum(1 for _ in csv.reader(f)) - 1, 0)
+        except OSError:
+            kept = 0
+        print(f'{PROG}: interrupted: {kept} rows in {args.out} kept; the same command '
+              'resumes', file=sys.stderr)
+        return EXIT_INTERRUPTED
     print(f'{PROG}: {len(bags)} bags x {len(settings_product(sets))} settings: '
           f'{len(res.evaluated)} evaluated, {len(res.skipped)} already in {args.out}, '
           f'{res.errors} with errors')
