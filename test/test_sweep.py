@@ -157,8 +157,8 @@ def test_cli_writes_the_table_and_the_figure(bags, tmp_path, capsys):
     assert rc == 1 and 'no bags' in capsys.readouterr().err
 
 
-def test_ctrl_c_keeps_the_finished_rows_in_one_line_and_resumes(bags, tmp_path, capsys,
-                                                              monkeypatch):
+def test_ctrl_c_keeps_the_finished_rows_in_one_line_and_resumes(
+        bags, tmp_path, capsys, monkeypatch):
     out = tmp_path / 'c.csv'
     argv = ['--bags', str(bags / 'terminal' / '[ab]'), '--params-file', str(PARAMS),
             '--set', 'R=1,100', '--workers', '0', '--out', str(out), '--no-progress']
