@@ -298,6 +298,8 @@ class PowerMeter:
             self.resource = self.opener.open_resource(c.resource, int(round(c.timeout * 1000)))
             self.identity = self.resource.query(c.command('identify')).strip() \
                 if c.commands.identify else ''
+            if c.commands.identify and not self.identity:
+                raise ValueError(f'no answer to {c.command("identify")}: not a meter')
             self.configure()
         except IO_ERRORS as exc:
             self._drop(f'cannot connect to {c.resource}: {describe(exc)}')
