@@ -29,6 +29,7 @@ interrupted (Ctrl-C: the rows finished are kept, the same command resumes).
 import argparse
 import csv
 from dataclasses import dataclass, field
+import fcntl
 import glob
 import hashlib
 import itertools
@@ -44,7 +45,7 @@ import numpy as np
 
 from tskf_ros.experiments.bag_analysis import evaluate_bag, METRICS, read_stream
 from tskf_ros.experiments.fit_noise import fit_events
-from tskf_ros.experiments.output import save_figure, write_text
+from tskf_ros.experiments.output import save_figure
 from tskf_ros.messages.estimator_interface import (default_parameters, load_config,
                                                    NodeConfig, ParamsError)
 
@@ -239,10 +240,31 @@ class Table:
         self.path, self.columns = Path(path), columns
         self.done: set = set()
         self.rows: list = []
-        if resume and self.path.is_file() and self.path.stat().st_size > 0:
-            self._read_existing()
+        # held while the sweep runs: a second sweep on the same table is refused
+        self._lock = open(self.path, 'a')
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.close()
+            raise ValueError(f'{self.path}: another sweep is writing this table') from None
+        if resume and self.path.stat().st_size > 0:
+            try:
+                self._read_existing()
+            except ValueError:
+                self.close()
+                raise
         else:
-            write_text(self.path, ','.join(columns) + '\n')
+            self._lock.truncate(0)
+            self._write_header()
+
+    def _write_header(self) -> None:
+        self._lock.write(','.join(self.columns) + '\n')
+        self._lock.flush()
+        os.fsync(self._lock.fileno())
+
+    def close(self) -> None:
+        """Release the table (its lock)."""
+        self._lock.close()
 
     def _read_existing(self) -> None:
         data = self.path.read_bytes()
@@ -252,7 +274,9 @@ class Table:
         with open(self.path, newline='') as f:
             reader = csv.reader(f)
             header = next(reader, None)
-            if header != self.columns:
+            if header is None:              # a header cut by a kill
+                self._write_header()
+            elif header != self.columns:
                 raise ValueError(f"{self.path}: its columns are not this sweep's (other "
                                  '--set names or --fit); use --no-resume or another --out')
             for r in reader:
@@ -351,7 +375,10 @@ def sweep(bags: list, *, out: Path, params_file: Optional[Path] = None, sets: li
                + (FIT_COLUMNS if fit else []) + ['seconds', 'error'])
     tasks = build_tasks(bags, params_file, sets, topic=topic, fit=fit)
     table = Table(out, columns, resume)
-    result = execute(tasks, table, workers=workers, scheduler=scheduler, progress=progress)
+    try:
+        result = execute(tasks, table, workers=workers, scheduler=scheduler, progress=progress)
+    finally:
+        table.close()
     wanted = {t.key for t in tasks}
     result.rows = [r for r in table.rows if r['key'] in wanted]
     return result
