@@ -266,3 +266,17 @@ def test_a_params_file_reads_as_the_node_reads_it(sim, tmp_path, capsys):
         rc = fit_noise.main([str(d / 'bag'), '--params-file', str(tmp_path / 'bad.yaml')])
         err = capsys.readouterr().err
         assert rc == 1 and 'bad.yaml' in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_ctrl_c_is_one_line_and_writes_nothing(sim, tmp_path, capsys, monkeypatch):
+    d = sim[0]
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(fit_noise, 'fit_events', interrupted)
+    out, js = tmp_path / 'f.yaml', tmp_path / 'f.json'
+    rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                         '--out', str(out), '--json', str(js)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 130 and len(err) == 1 and 'interrupted' in err[0], err
+    assert list(tmp_path.iterdir()) == []

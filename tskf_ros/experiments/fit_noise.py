@@ -44,6 +44,7 @@ import yaml
 
 PROG = 'fit_noise'
 EXIT_NO_FIT = 4
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports Ctrl-C
 # a standard error of a log-parameter above this (a factor e) leaves it undetermined
 POORLY_DETERMINED = 1.0
 
@@ -162,6 +163,9 @@ def main(argv: Optional[list] = None) -> int:
     except ValueError as exc:       # a config the fitted Q, R make unusable (ConfigError)
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return EXIT_NO_FIT
+    except KeyboardInterrupt:
+        print(f'{PROG}: interrupted; nothing written', file=sys.stderr)
+        return EXIT_INTERRUPTED
     try:
         check_usable(sf)
     except NoFitError as exc:

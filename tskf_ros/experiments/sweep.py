@@ -44,7 +44,7 @@ from typing import Iterable, Optional
 import numpy as np
 
 from tskf_ros.experiments.bag_analysis import evaluate_bag, METRICS, read_stream
-from tskf_ros.experiments.fit_noise import fit_events
+from tskf_ros.experiments.fit_noise import EXIT_INTERRUPTED, fit_events
 from tskf_ros.experiments.output import save_figure
 from tskf_ros.messages.estimator_interface import (default_parameters, load_config,
                                                    NodeConfig, ParamsError)
@@ -53,7 +53,6 @@ import yaml
 
 PROG = 'sweep'
 EXIT_ROW_ERRORS = 5
-EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports Ctrl-C
 # a LocalCluster larger than this is a typo, not a plan (use --scheduler for a big cluster)
 MAX_WORKERS = 256
 FIT_COLUMNS = ['fit_Q', 'fit_R', 'fit_Q_stderr', 'fit_R_stderr', 'fit_log_likelihood',
