@@ -242,6 +242,15 @@ def test_the_arrays_file_is_whole_or_absent(tmp_path, monkeypatch, capsys):
         offline_replay.main([str(BAGS / 'owc_cai_td_1hz'), str(tmp_path / 'o'), '--npz',
                              str(out)])
     assert info.value.code == 2 and list(tmp_path.iterdir()) == []
+    # a directory or an empty name is refused in one line (was: a traceback for '', and
+    # DIR.npz written beside the directory)
+    (tmp_path / 'd').mkdir()
+    for npz in ('', str(tmp_path / 'd')):
+        with pytest.raises(SystemExit) as info:
+            offline_replay.main([str(BAGS / 'owc_cai_td_1hz'), '--npz', npz, '-q'])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert info.value.code == 2 and 'a directory' in err[-1], err
+    assert [p.name for p in tmp_path.iterdir()] == ['d'] and not any((tmp_path / 'd').iterdir())
 
 
 def flip_in_third_chunk(src, dst):

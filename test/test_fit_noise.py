@@ -247,3 +247,36 @@ def test_absurd_readings_are_left_to_the_gate(tmp_path):
     for value, truth, se_log in zip(fit['log_parameters'], (Q_TRUE, R_TRUE),
                                     fit['log_stderr']):
         assert abs(value - np.log(truth)) <= 4 * se_log
+
+
+def test_a_params_file_reads_as_the_node_reads_it(sim, tmp_path, capsys):
+    # rcl's parser reads 1e-2 and 1.0e-2 as doubles (PyYAML's YAML 1.1 would make them
+    # strings); a file that is not a mapping is one line, exit 1
+    d = sim[0]
+    text = PARAMS.replace('Q: [1.0]', 'Q: [1.0e-2]').replace('R: [1.0]', 'R: [1e0]')
+    (tmp_path / 'e.yaml').write_text(text)
+    out = tmp_path / 'f.yaml'
+    assert load_config(tmp_path / 'e.yaml').session.model.Q[0, 0] == 0.01
+    assert fit_noise.main([str(d / 'bag'), '--params-file', str(tmp_path / 'e.yaml'),
+                           '--out', str(out), '-q']) == 0
+    fitted = load_config(out).session.model
+    assert 0.0 < fitted.Q[0, 0] < 1.0 and 0.0 < fitted.R[0, 0] < 1.0
+    for bad in ('- 1\n- 2\n', '/**:\n  ros__parameters: 5\n'):
+        (tmp_path / 'bad.yaml').write_text(bad)
+        rc = fit_noise.main([str(d / 'bag'), '--params-file', str(tmp_path / 'bad.yaml')])
+        err = capsys.readouterr().err
+        assert rc == 1 and 'bad.yaml' in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_ctrl_c_is_one_line_and_writes_nothing(sim, tmp_path, capsys, monkeypatch):
+    d = sim[0]
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(fit_noise, 'fit_events', interrupted)
+    out, js = tmp_path / 'f.yaml', tmp_path / 'f.json'
+    rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                         '--out', str(out), '--json', str(js)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 130 and len(err) == 1 and 'interrupted' in err[0], err
+    assert list(tmp_path.iterdir()) == []

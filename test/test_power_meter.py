@@ -118,6 +118,14 @@ def test_connects_configures_and_reads_the_simulated_pm100(tmp_path):
     assert m.diagnostics()[0] == 'OK'
 
 
+def test_a_resource_that_does_not_identify_itself_is_not_connected(tmp_path):
+    # pyvisa-sim opens any resource name and answers '' to everything: not a meter
+    m = meter(bench(tmp_path), resource='USB0::0x1::0x2::NOPE::INSTR')
+    assert m.poll() is None and not m.connected
+    assert m.connect_failures == 1 and 'no answer to *IDN?' in m.last_error
+    assert m.diagnostics()[0] == 'ERROR' and m.published == 0
+
+
 def test_the_stamp_is_the_midpoint_of_the_query():
     class Instant:
         def query(self, message):

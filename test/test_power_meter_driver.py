@@ -330,6 +330,22 @@ def test_a_backend_that_cannot_load_exits_1_with_one_line(tmp_path):
                             timeout=TIMEOUT)
     assert result.returncode == 1
     assert 'power_meter_driver: cannot start: VISA backend' in result.stderr
+    # one short line: not pyvisa-sim's traceback folded into it
+    assert len(result.stderr.strip().splitlines()) == 1 and 'Traceback' not in result.stderr
+    assert len(result.stderr) < 400, result.stderr
+
+
+@pytest.mark.parametrize('override, why', [('rate:=0.0', 'out of range'),
+                                           ('rate:=1e9', 'out of range'),
+                                           ('rate:=5', "expecting type 'DOUBLE'")])
+def test_a_parameter_ros_refuses_at_start_exits_1_with_one_line(override, why):
+    result = subprocess.run([sys.executable, '-m', 'tskf_ros.nodes.power_meter_driver',
+                             '--ros-args', '-p', f'backend:={SIM_YAML}@sim', '-p', override],
+                            cwd=REPO, env=dict(os.environ), capture_output=True, text=True,
+                            timeout=TIMEOUT)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 1 and len(lines) == 1, result.stderr
+    assert lines[0].startswith('power_meter_driver: cannot start: ') and why in lines[0]
 
 
 def test_help_exits_0_without_ros():

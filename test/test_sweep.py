@@ -157,6 +157,49 @@ def test_cli_writes_the_table_and_the_figure(bags, tmp_path, capsys):
     assert rc == 1 and 'no bags' in capsys.readouterr().err
 
 
+def test_ctrl_c_keeps_the_finished_rows_in_one_line_and_resumes(
+        bags, tmp_path, capsys, monkeypatch):
+    out = tmp_path / 'c.csv'
+    argv = ['--bags', str(bags / 'terminal' / '[ab]'), '--params-file', str(PARAMS),
+            '--set', 'R=1,100', '--workers', '0', '--out', str(out), '--no-progress']
+    real, calls = sweep.run_task, []
+
+    def interrupted_third(task):
+        calls.append(task.key)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(task)
+
+    monkeypatch.setattr(sweep, 'run_task', interrupted_third)
+    assert sweep.main(argv) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'interrupted' in err[0] and '2 rows' in err[0], err
+    assert len(list(csv.DictReader(open(out, newline='')))) == 2
+    monkeypatch.setattr(sweep, 'run_task', real)
+    assert sweep.main(argv) == 0
+    assert '2 evaluated, 2 already in' in capsys.readouterr().out
+    assert len(list(csv.DictReader(open(out, newline='')))) == 4
+
+
+def test_a_second_sweep_on_the_same_table_is_refused(bags, tmp_path, capsys):
+    out = tmp_path / 't.csv'
+    argv = ['--bags', str(bags / 'terminal' / 'a'), '--params-file', str(PARAMS),
+            '--workers', '0', '--out', str(out), '--no-progress']
+    assert sweep.main(argv) == 0
+    before = out.read_bytes()
+    running = sweep.Table(out, before.decode().splitlines()[0].split(','), resume=True)
+    try:
+        for extra in ([], ['--no-resume'], ['--set', 'R=5']):
+            assert sweep.main(argv + extra) == 1
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and 'another sweep is writing' in err[0], err
+            assert out.read_bytes() == before
+    finally:
+        running.close()
+    assert sweep.main(argv + ['--no-resume']) == 0
+    assert len(list(csv.DictReader(open(out, newline='')))) == 1
+
+
 def test_an_existing_scheduler_runs_the_same_sweep(bags, tmp_path):
     # --scheduler: the sweep submits to a cluster it did not start, and leaves it running
     from dask.distributed import LocalCluster

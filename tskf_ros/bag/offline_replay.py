@@ -666,6 +666,9 @@ def main(argv: Optional[list] = None) -> int:
                                  or args.compress):
         parser.error('--npz writes no bag: no output bag, --compress or --filter alignment '
                      'with it')
+    if args.npz is not None and (not args.npz.name or args.npz.is_dir()):
+        parser.error(f'--npz {args.npz}: a directory; give a file name, e.g. '
+                     f'{args.npz / "out.npz"}')
     output = args.output or default_output(args.bag, args.filter)
 
     def log(line: str) -> None:

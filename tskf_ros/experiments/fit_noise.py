@@ -36,6 +36,7 @@ from tskf_ros.core.noise_fit import FitError, negative_log_likelihood, nis_summa
 from tskf_ros.experiments.bag_analysis import read_stream
 from tskf_ros.experiments.output import write_json, write_text
 from tskf_ros.messages.estimator_interface import load_config, NODE_NAME, ParamsError
+from tskf_ros.messages.parameters import read_params_yaml
 from tskf_ros.owc.estimator_session import EstimatorConfig
 from tskf_ros.owc.innovation_trace import fit_stream, Measurement, run_stream, StreamFit
 
@@ -43,6 +44,7 @@ import yaml
 
 PROG = 'fit_noise'
 EXIT_NO_FIT = 4
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports Ctrl-C
 # a standard error of a log-parameter above this (a factor e) leaves it undetermined
 POORLY_DETERMINED = 1.0
 
@@ -99,7 +101,7 @@ def fitted_parameters(params_file: Optional[Path], Q: np.ndarray, R: np.ndarray,
     """Return the parameter file's text with Q and R replaced (the node's section)."""
     doc: dict = {}
     if params_file:
-        doc = copy.deepcopy(yaml.safe_load(Path(params_file).read_text()) or {})
+        doc = copy.deepcopy(read_params_yaml(Path(params_file).read_text()) or {})
     key = next((k for k in (NODE_NAME, '/' + NODE_NAME, '/**/' + NODE_NAME, '/**')
                 if isinstance(doc.get(k), dict) and 'ros__parameters' in doc[k]),
                '/**/' + NODE_NAME)
@@ -161,6 +163,9 @@ def main(argv: Optional[list] = None) -> int:
     except ValueError as exc:       # a config the fitted Q, R make unusable (ConfigError)
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return EXIT_NO_FIT
+    except KeyboardInterrupt:
+        print(f'{PROG}: interrupted; nothing written', file=sys.stderr)
+        return EXIT_INTERRUPTED
     try:
         check_usable(sf)
     except NoFitError as exc:

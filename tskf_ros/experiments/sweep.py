@@ -22,12 +22,14 @@ same paths; the parameters travel with the tasks).  `--workers 0` runs in this p
 without Dask.
 
 Exit status: 0 every task ran without error; 1 bad arguments or files (one line, nothing
-started); 5 at least one row has an error (the table is complete otherwise).
+started); 5 at least one row has an error (the table is complete otherwise); 130
+interrupted (Ctrl-C: the rows finished are kept, the same command resumes).
 """
 
 import argparse
 import csv
 from dataclasses import dataclass, field
+import fcntl
 import glob
 import hashlib
 import itertools
@@ -42,8 +44,8 @@ from typing import Iterable, Optional
 import numpy as np
 
 from tskf_ros.experiments.bag_analysis import evaluate_bag, METRICS, read_stream
-from tskf_ros.experiments.fit_noise import fit_events
-from tskf_ros.experiments.output import save_figure, write_text
+from tskf_ros.experiments.fit_noise import EXIT_INTERRUPTED, fit_events
+from tskf_ros.experiments.output import save_figure
 from tskf_ros.messages.estimator_interface import (default_parameters, load_config,
                                                    NodeConfig, ParamsError)
 
@@ -237,10 +239,31 @@ class Table:
         self.path, self.columns = Path(path), columns
         self.done: set = set()
         self.rows: list = []
-        if resume and self.path.is_file() and self.path.stat().st_size > 0:
-            self._read_existing()
+        # held while the sweep runs: a second sweep on the same table is refused
+        self._lock = open(self.path, 'a')
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.close()
+            raise ValueError(f'{self.path}: another sweep is writing this table') from None
+        if resume and self.path.stat().st_size > 0:
+            try:
+                self._read_existing()
+            except ValueError:
+                self.close()
+                raise
         else:
-            write_text(self.path, ','.join(columns) + '\n')
+            self._lock.truncate(0)
+            self._write_header()
+
+    def _write_header(self) -> None:
+        self._lock.write(','.join(self.columns) + '\n')
+        self._lock.flush()
+        os.fsync(self._lock.fileno())
+
+    def close(self) -> None:
+        """Release the table (its lock)."""
+        self._lock.close()
 
     def _read_existing(self) -> None:
         data = self.path.read_bytes()
@@ -250,7 +273,9 @@ class Table:
         with open(self.path, newline='') as f:
             reader = csv.reader(f)
             header = next(reader, None)
-            if header != self.columns:
+            if header is None:              # a header cut by a kill
+                self._write_header()
+            elif header != self.columns:
                 raise ValueError(f"{self.path}: its columns are not this sweep's (other "
                                  '--set names or --fit); use --no-resume or another --out')
             for r in reader:
@@ -349,7 +374,10 @@ def sweep(bags: list, *, out: Path, params_file: Optional[Path] = None, sets: li
                + (FIT_COLUMNS if fit else []) + ['seconds', 'error'])
     tasks = build_tasks(bags, params_file, sets, topic=topic, fit=fit)
     table = Table(out, columns, resume)
-    result = execute(tasks, table, workers=workers, scheduler=scheduler, progress=progress)
+    try:
+        result = execute(tasks, table, workers=workers, scheduler=scheduler, progress=progress)
+    finally:
+        table.close()
     wanted = {t.key for t in tasks}
     result.rows = [r for r in table.rows if r['key'] in wanted]
     return result
@@ -431,6 +459,15 @@ def main(argv: Optional[list] = None) -> int:
     except (ValueError, ParamsError, OSError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        try:
+            with open(args.out, newline='') as f:
+                kept = max(sum(1 for _ in csv.reader(f)) - 1, 0)
+        except OSError:
+            kept = 0
+        print(f'{PROG}: interrupted: {kept} rows in {args.out} kept; the same command '
+              'resumes', file=sys.stderr)
+        return EXIT_INTERRUPTED
     print(f'{PROG}: {len(bags)} bags x {len(settings_product(sets))} settings: '
           f'{len(res.evaluated)} evaluated, {len(res.skipped)} already in {args.out}, '
           f'{res.errors} with errors')

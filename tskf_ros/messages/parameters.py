@@ -7,6 +7,7 @@ Parameters: descriptors, the config every node reads once, and the params-file r
 
 from dataclasses import dataclass
 from pathlib import Path
+import re
 from typing import Any, Optional, Union
 
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
@@ -16,7 +17,23 @@ from tskf_ros.core.dropouts import BLOCKAGES
 import yaml
 
 __all__ = ['BLOCKAGE_HELP', 'descriptor', 'float_range', 'IGNORED', 'NodeConfig',
-           'ParamsError', 'parameter_values']
+           'ParamsError', 'parameter_values', 'read_params_yaml']
+
+
+class _RclLoader(yaml.SafeLoader):
+    """YAML as rcl's parameter parser reads it: 1e-3 and 1.0e3 are floats (YAML 1.1: str)."""
+
+
+_RclLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$'),
+    list('-+0123456789.'))
+
+
+def read_params_yaml(text: str) -> object:
+    """Parse a parameter file's text as the node would read its numbers."""
+    return yaml.load(text, Loader=_RclLoader)  # noqa: S506 - a SafeLoader subclass
+
 
 # descriptions and ranges of the dropout parameters both link simulators share
 BLOCKAGE_HELP = {
@@ -72,15 +89,17 @@ def parameter_values(params_file: Optional[Union[str, Path]], node_name: str,
     values = dict(defaults)
     if params_file:
         try:
-            doc = yaml.safe_load(Path(params_file).read_text()) or {}
+            doc = read_params_yaml(Path(params_file).read_text()) or {}
         except (OSError, yaml.YAMLError) as exc:
             raise ParamsError(f'{params_file}: cannot read parameters ({exc})') from None
+        if not isinstance(doc, dict):
+            raise ParamsError(f'{params_file}: not a parameter file (a YAML mapping)')
         section = None
         for key in (node_name, '/' + node_name, '/**/' + node_name, '/**'):
             if isinstance(doc.get(key), dict) and 'ros__parameters' in doc[key]:
                 section = doc[key]['ros__parameters']
                 break
-        if section is None:
+        if not isinstance(section, dict):
             raise ParamsError(f'{params_file}: no {node_name}: ros__parameters section')
         unknown = sorted(set(section) - set(values) - IGNORED)
         if unknown:

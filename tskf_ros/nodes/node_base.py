@@ -11,6 +11,7 @@ from rcl_interfaces.msg import ParameterType, SetParametersResult
 import rclpy
 from rclpy.clock import ClockChange, JumpThreshold, TimeJump
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
@@ -39,6 +40,8 @@ EXECUTOR_VARIABLE = 'TSKF_EXECUTOR'
 # or SIGTERM, spinning a core; its spin_once with a timeout returns at once, raising
 # KeyboardInterrupt or ExternalShutdownException (test_executors checks both executors).
 SPIN_TIMEOUT = 1.0
+# a parameter override rclpy refuses at declaration (out of its range, wrong type): one line
+ROS_PARAMETER_ERRORS = (InvalidParameterTypeException, InvalidParameterValueException)
 
 
 def executor_kind(kind: Optional[str] = None) -> str:
@@ -117,7 +120,7 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
         spin(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except startup_errors as exc:
+    except startup_errors + ROS_PARAMETER_ERRORS as exc:
         print(f'{name}: cannot start: {exc}', file=sys.stderr)
         sys.exit(1)
     finally:

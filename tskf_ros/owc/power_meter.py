@@ -167,8 +167,12 @@ class VisaOpener:
         try:
             self.manager = pyvisa.ResourceManager(backend)
         except (OSError, ValueError, pyvisa.errors.Error) as exc:
-            raise MeterError(f'VISA backend {backend!r} cannot be loaded: '
-                             f'{str(exc).strip().splitlines()[-1]}') from None
+            # pyvisa-sim folds a whole traceback into its message, its newlines escaped:
+            # keep its last line (the cause)
+            text = str(exc).replace('\\n', '\n').replace("\\'", "'")
+            lines = [line.strip() for line in text.splitlines() if line.strip('\'" ')]
+            cause = lines[-1] if lines else type(exc).__name__
+            raise MeterError(f'VISA backend {backend!r} cannot be loaded: {cause}') from None
 
     def open_resource(self, resource: str, timeout_ms: int) -> Resource:
         """Open a message-based resource with newline termination."""
@@ -294,6 +298,8 @@ class PowerMeter:
             self.resource = self.opener.open_resource(c.resource, int(round(c.timeout * 1000)))
             self.identity = self.resource.query(c.command('identify')).strip() \
                 if c.commands.identify else ''
+            if c.commands.identify and not self.identity:
+                raise ValueError(f'no answer to {c.command("identify")}: not a meter')
             self.configure()
         except IO_ERRORS as exc:
             self._drop(f'cannot connect to {c.resource}: {describe(exc)}')
