@@ -8,9 +8,9 @@ from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import rclpy
 from rclpy.qos import QoSProfile
-from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
+from tskf_ros.bag.cdr import serialize
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import (load_config, outcome_messages,
@@ -63,9 +63,11 @@ def test_the_reused_messages_serialize_as_the_fresh_ones(case):
         fresh = outcome_messages(out, config)
         got = []
         for key, msg in reused.messages(out):
-            # serialized as the node publishes it: before the next message is filled
-            got.append((key, serialize_message(msg)))
-        assert got == [(key, serialize_message(msg)) for key, msg in fresh]
+            # serialized before the next message is filled, as the node publishes it; in
+            # canonical CDR (rosbags): rclpy's Fast-CDR leaves padding bytes uninitialised,
+            # so the same message need not give the same bytes twice through it
+            got.append((key, serialize(msg)))
+        assert got == [(key, serialize(msg)) for key, msg in fresh]
 
 
 def test_each_field_is_what_the_estimate_says():
@@ -96,7 +98,7 @@ def test_a_smaller_state_leaves_nothing_of_a_larger_one():
     msg = TwistWithCovarianceStamped()
     conversions.fill_estimate_msg(msg, NS, np.arange(1.0, 4.0), np.ones((3, 3)))
     conversions.fill_estimate_msg(msg, 2 * NS, [7.0], [[2.0]])
-    assert serialize_message(msg) == serialize_message(
+    assert serialize(msg) == serialize(
         conversions.estimate_to_msg(2 * NS, [7.0], [[2.0]]))
     states = JointState(name=['a', 'b', 'c'], position=[1.0, 2.0, 3.0], velocity=[1.0] * 3)
     conversions.fill_joint_state(states, NS, [7.0], [[4.0]])
