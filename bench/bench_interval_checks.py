@@ -18,7 +18,7 @@ import numpy as np
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-from tskf_ros.core import irregular_sampling as irregular  # noqa: E402
+from tskf_ros.core import irregular  # noqa: E402
 from tskf_ros.core.units import NS  # noqa: E402
 from tskf_ros.owc.estimator_session import (EstimatorConfig, EstimatorSession,  # noqa: E402
                                             model_from_flat)

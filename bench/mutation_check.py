@@ -47,7 +47,7 @@ class Mutation:
 
 
 KF = 'tskf_ros/core/timescale_kalman.py'
-IRR = 'tskf_ros/core/irregular_sampling.py'
+IRR = 'tskf_ros/core/irregular/theorem2.py'
 SESSION = 'tskf_ros/owc/estimator_session.py'
 EKF = 'tskf_ros/led/scanning_ekf.py'
 

@@ -186,7 +186,7 @@ def fang_scalar_fixed_point(a, c, q, r, kappa, iterations=20_000):
     """
     Theorem 2's fixed point of X = f^kappa(g(X)) by plain iteration from X = q.
 
-    Written here independently of irregular_sampling (which solves a quadratic):
+    Written here independently of tskf_ros.core.irregular (which solves a quadratic):
     g(X) = (1/X + c^2/r)^-1 (information form of eq. (23)), f(Y) = a^2 Y + q (eq. (22)).
     """
     X = q

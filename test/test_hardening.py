@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from tskf_ros.core import irregular_sampling as irregular
+from tskf_ros.core import irregular
 from tskf_ros.core.linear_models import owc
 from tskf_ros.core.units import MAX_STAMP_NS, NS
 from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession

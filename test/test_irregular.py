@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from tskf_ros.core import irregular_sampling as ir
+from tskf_ros.core import irregular as ir
 from tskf_ros.core import linear_models as models
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 from tskf_ros.experiments import drogue, jump_covariance as jc_experiment

@@ -15,6 +15,7 @@ KEYS = {
     'mcap_ros2': 'python3-mcap-ros2-support-pip',
     'pyvisa': 'python3-pyvisa-pip', 'pyvisa_sim': 'python3-pyvisa-sim-pip',
     'dask': 'python3-dask-pip', 'distributed': 'python3-distributed-pip', 'tqdm': 'python3-tqdm',
+    'numba': 'python3-numba', 'mypy': 'python3-mypy',
 }
 RUN = ('exec_depend', 'depend')
 TEST = RUN + ('test_depend',)

@@ -5,8 +5,9 @@ import pytest
 import scipy.integrate
 import scipy.linalg
 
-from tskf_ros.core.timescale_kalman import (FilterError, is_invertible, is_psd,
-                                            TimeScaleKalmanFilter, van_loan)
+from tskf_ros.core.matrices import FilterError, is_invertible, is_psd
+from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
+from tskf_ros.core.transitions import van_loan
 
 
 def random_model(rng, n=3, p=2, r=2):

@@ -20,8 +20,9 @@ from typing import Optional
 
 import numpy as np
 
+from tskf_ros.core.matrices import as_matrix
 from tskf_ros.core.time_scales import TimeScale
-from tskf_ros.core.timescale_kalman import as_matrix, TimeScaleKalmanFilter
+from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 
 NOISE_SCALINGS = ('theory', 'unit')
 

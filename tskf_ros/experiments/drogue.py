@@ -30,7 +30,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from tskf_ros.core import irregular_sampling as irregular
+from tskf_ros.core import irregular
 from tskf_ros.experiments.output import save_results
 
 

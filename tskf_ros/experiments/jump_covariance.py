@@ -5,7 +5,7 @@ How bad is a point after a gap of J seconds: the time-scale filter's covariance 
 
 For Cai et al.'s OWC model (3) and the spring-mass system (1) (B&W Example 3.20) on a
 stream of points every second (Cai's T_d) interrupted by one jump of length J, plots
-`tskf_ros.core.irregular_sampling.jump_covariance` against J: the predicted (peak)
+`tskf_ros.core.irregular.jump_covariance` against J: the predicted (peak)
 covariance at the point after the jump and the corrected covariance there, for the
 paper's transition I + mu A and for the exact sampled plant.  Writes jump_covariance.png and
 jump_covariance.json (the values at J = 1..6).
@@ -19,7 +19,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from tskf_ros.core import linear_models as models
-from tskf_ros.core.irregular_sampling import jump_covariance, JumpCovariance, steady_covariance
+from tskf_ros.core.irregular import jump_covariance, JumpCovariance, steady_covariance
 from tskf_ros.core.timescale_kalman import TRANSITIONS
 from tskf_ros.experiments.output import save_results
 
@@ -35,7 +35,7 @@ DEFINITION = '\n'.join((
     'corrected = covariance of the estimate at t* + J after',
     '            its measurement (R / h)',
     '',
-    'tskf_ros.core.irregular_sampling.jump_covariance(model, J, period=h)'))
+    'tskf_ros.core.irregular.jump_covariance(model, J, period=h)'))
 
 
 def table(model: models.LinearModel, jumps: Sequence[float] = J_TABLE, *,
@@ -109,7 +109,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument('--out', type=Path, required=True, help='output directory')
     args = parser.parse_args(argv)
     model_list = [models.owc(), models.spring_mass()]
-    data = {'period': PERIOD, 'definition': 'tskf_ros.core.irregular_sampling.jump_covariance'}
+    data = {'period': PERIOD, 'definition': 'tskf_ros.core.irregular.jump_covariance'}
     for m in model_list:
         data[m.name] = table(m)
         for transition, rows in data[m.name].items():

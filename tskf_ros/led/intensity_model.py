@@ -124,8 +124,3 @@ class IncidenceResponse:
         # d/du a e^{-((u - b)/c)^2} = -2 a (u - b) / c^2 e^{-((u - b)/c)^2}; du/dphi = s
         return s * (-2.0 * a1 * (u - b1) / c1 ** 2 * np.exp(-((u - b1) / c1) ** 2)
                     - 2.0 * a2 * (u - b2) / c2 ** 2 * np.exp(-((u - b2) / c2) ** 2))
-
-    def voltage(self, phi: np.ndarray, *, c_p: float, intensity: float, c: float,
-                d: float) -> np.ndarray:
-        """Eq. (5): V_d = C_p I_theta e^{-cd} g(phi) / d^2."""
-        return c_p * irradiance(intensity, c, d) * self.g(phi)

@@ -26,6 +26,7 @@ from typing import Optional, Protocol, Sequence, Union
 
 import numpy as np
 
+from tskf_ros.core import kalman
 from tskf_ros.led.intensity_model import AlignmentError, IncidenceResponse
 
 Measurement = Union[None, float, Sequence[float], np.ndarray]
@@ -242,7 +243,8 @@ class ScanningEKF:
         C = self.jacobian(x, psi, self.since, self.psi_prev)
         # y_k = [z_k, z_prev] (12); yhat_k = h(x^f) (15)-(16)
         y = np.stack([np.where(have, z, 0.0), np.where(pair, self.z_prev, 0.0)], axis=-1)
-        y = y - self.h(x, psi, self.since, self.psi_prev)
+        hx = self.h(x, psi, self.since, self.psi_prev)
+        y = y - hx
         # the first measurement has no partner: drop row 2 (zero row and residual)
         C[~pair, 1, :] = 0.0
         y[~pair, 1] = 0.0
@@ -256,17 +258,10 @@ class ScanningEKF:
         # successive pairs are correlated, which the paper (and this filter) ignores.
         R = np.broadcast_to(self.R, C.shape).copy()
         R[~pair, 0, 1] = R[~pair, 1, 0] = 0.0
-        Ct = np.swapaxes(C, 1, 2)
-        # S = C P^f C^T + R
-        S = C @ P @ Ct + R
-        # (18): K = P^f C^T S^-1
-        K = P @ Ct @ np.linalg.inv(S)
-        # (19): x = x^f + K (y_k - yhat_k)
-        x_post = x + (K @ y[:, :, None])[:, :, 0]
-        # (20) in Joseph form, P = (I - KC) P^f (I - KC)^T + K R K^T: equal to (I - KC) P^f
-        # for this K, but it stays symmetric and positive semi-definite in floating point.
-        I_KC = np.eye(2) - K @ C
-        P_post = I_KC @ P @ np.swapaxes(I_KC, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
+        # (18)-(20): the update of tskf_ros.core.kalman linearised at x^f: H = C_k and
+        # H x + d = h(x^f), so its y is the residual above (zero in the dropped rows)
+        d = hx - (C @ x[:, :, None])[:, :, 0]
+        x_post, P_post = kalman.update_batch(x, np.ascontiguousarray(P), y + hx, C, R, d)
         self.x = np.where(have[:, None], x_post, x)
         self.P = np.where(have[:, None, None], P_post, P)
         if self.config.x1_floor is not None:
@@ -275,103 +270,6 @@ class ScanningEKF:
         self.z_prev = np.where(have, z, self.z_prev)
         self.psi_prev = np.where(have, psi, self.psi_prev)
         self.since = np.where(have, 0.0, self.since)
-
-    def _g_dg(self, phi: float) -> tuple[float, float]:
-        """Return g(phi) and g'(phi) of eq. (4) on plain floats (IncidenceResponse.g, .dg)."""
-        a1, b1, c1, a2, b2, c2 = self.response.coefficients
-        s = self.response.units_per_degree
-        u = phi * s
-        t1, t2 = (u - b1) / c1, (u - b2) / c2
-        e1, e2 = math.exp(-(t1 * t1)), math.exp(-(t2 * t2))
-        return (a1 * e1 + a2 * e2,
-                s * (-2.0 * a1 * (u - b1) / (c1 * c1) * e1 - 2.0 * a2 * (u - b2) / (c2 * c2) * e2))
-
-    def _step_one(self, stamp: float, z: Measurement) -> np.ndarray:
-        """
-        Make `step` for one run on plain floats: the same equations, a fifth of the time.
-
-        (13)-(21) for a 2-state filter are a few dozen multiplications; numpy's cost per
-        call on arrays of four entries is what the vectorised form spends its time on.
-        The state stays in the (1, ...) arrays, read and written back once per step.
-        """
-        if z is None or z.__class__ is float:
-            zf = math.nan if z is None else z
-        else:
-            zf = as_measurement(z, 1).item()
-        if not math.isfinite(zf):
-            zf = math.nan
-        mu = self.clock.tick(stamp)
-        (x1, x2), ((p00, p01), (p10, p11)) = self.x[0].tolist(), self.P[0].tolist()
-        if mu is not None:
-            # (13): x2^f = x2 + u_{k-1}; (14): P^f = P + mu Q
-            x2 += self.u.item()
-            (q00, q01), (q10, q11) = self.Q.tolist()
-            p00, p01, p10, p11 = p00 + mu * q00, p01 + mu * q01, p10 + mu * q10, p11 + mu * q11
-            self.u = np.zeros(1)
-            self.x_prior = np.array(((x1, x2),))
-            self.P_prior = np.array((((p00, p01), (p10, p11)),))
-            self.x, self.P = self.x_prior.copy(), self.P_prior.copy()
-        # update, eq. (15)-(20)
-        z_prev, since, psi_prev = self.z_prev.item(), self.since.item(), self.psi_prev.item()
-        have = zf == zf
-        pair = have and z_prev == z_prev
-        psi = float(self.scan[self.index])
-        g1, dg1 = self._g_dg(x2 + psi)
-        g2, dg2 = self._g_dg(x2 - since + psi_prev)
-        # (17): C_k; (16): yhat; (12): y_k; row 2 only with a pair
-        c00, c01, c10, c11 = g1, x1 * dg1, g2, x1 * dg2
-        y0 = (zf - x1 * g1) if have else 0.0
-        y1 = (z_prev - x1 * g2) if pair else 0.0
-        if not pair:
-            c10 = c11 = 0.0
-        self.C = np.array((((c00, c01), (c10, c11)),))
-        self.y = np.array(((y0, y1),))
-        det = c00 * c11 - c01 * c10
-        self.det = np.array((det if pair else math.nan,))
-        tolerance = self.det_tolerance * max(abs(x1), 1e-12)
-        self.singular = np.array((pair and abs(det) <= tolerance,))
-        if have:
-            (r00, r01), (r10, r11) = self.R.tolist()
-            if not pair:
-                r01 = r10 = 0.0
-            # C P^f
-            h00, h01 = c00 * p00 + c01 * p10, c00 * p01 + c01 * p11
-            h10, h11 = c10 * p00 + c11 * p10, c10 * p01 + c11 * p11
-            # S = C P^f C^T + R
-            s00, s01 = h00 * c00 + h01 * c01 + r00, h00 * c10 + h01 * c11 + r01
-            s10, s11 = h10 * c00 + h11 * c01 + r10, h10 * c10 + h11 * c11 + r11
-            # (18): K = P^f C^T S^-1, with the 2 x 2 inverse in closed form
-            ds = s00 * s11 - s01 * s10
-            i00, i01, i10, i11 = s11 / ds, -s01 / ds, -s10 / ds, s00 / ds
-            m00, m01 = p00 * c00 + p01 * c01, p00 * c10 + p01 * c11       # P^f C^T
-            m10, m11 = p10 * c00 + p11 * c01, p10 * c10 + p11 * c11
-            k00, k01 = m00 * i00 + m01 * i10, m00 * i01 + m01 * i11
-            k10, k11 = m10 * i00 + m11 * i10, m10 * i01 + m11 * i11
-            # (19): x = x^f + K (y_k - yhat_k)
-            x1, x2 = x1 + (k00 * y0 + k01 * y1), x2 + (k10 * y0 + k11 * y1)
-            # (20) in Joseph form: (I - KC) P^f (I - KC)^T + K R K^T
-            a00, a01 = 1.0 - (k00 * c00 + k01 * c10), -(k00 * c01 + k01 * c11)
-            a10, a11 = -(k10 * c00 + k11 * c10), 1.0 - (k10 * c01 + k11 * c11)
-            t00, t01 = a00 * p00 + a01 * p10, a00 * p01 + a01 * p11
-            t10, t11 = a10 * p00 + a11 * p10, a10 * p01 + a11 * p11
-            v00, v01 = k00 * r00 + k01 * r10, k00 * r01 + k01 * r11
-            v10, v11 = k10 * r00 + k11 * r10, k10 * r01 + k11 * r11
-            p00, p01 = t00 * a00 + t01 * a01 + (v00 * k00 + v01 * k01), \
-                t00 * a10 + t01 * a11 + (v00 * k10 + v01 * k11)
-            p10, p11 = t10 * a00 + t11 * a01 + (v10 * k00 + v11 * k01), \
-                t10 * a10 + t11 * a11 + (v10 * k10 + v11 * k11)
-            self.z_prev, self.psi_prev, since = np.array((zf,)), np.array((psi,)), 0.0
-        if self.config.x1_floor is not None:
-            x1 = max(x1, self.config.x1_floor)
-        self.updated = np.array((have,))
-        # (21): u_k = -G x2hat_k
-        u = -self.gain * x2
-        self.x = np.array(((x1, x2),))
-        self.P = np.array((((p00, p01), (p10, p11)),))
-        self.u, self.since = np.array((u,)), np.array((since + u,))
-        self.index = (self.index + 1) % len(self.scan)
-        # motor command u_k + psi_{k+1} - psi_k
-        return np.array((u + float(self.scan[self.index]) - psi,))
 
     def innovation_distance(self, stamp: float, z: Measurement) -> np.ndarray:
         """
@@ -385,20 +283,6 @@ class ScanningEKF:
         z = as_measurement(z, self.runs)
         last = self.clock.stamp
         mu = 0.0 if last is None else max(float(stamp) - last, 0.0) / self.clock.dt
-        if self.runs == 1 and type(self.response) is IncidenceResponse:
-            # the same on plain floats
-            (x1, x2), ((p00, p01), (p10, p11)) = self.x[0].tolist(), self.P[0].tolist()
-            (q00, q01), (q10, q11) = self.Q.tolist()
-            if last is not None:
-                x2 += self.u.item()
-            g, dg = self._g_dg(x2 + self.scan_offset)
-            c1 = x1 * dg
-            p00, p01, p10, p11 = p00 + mu * q00, p01 + mu * q01, p10 + mu * q10, p11 + mu * q11
-            S = (g * p00 + c1 * p10) * g + (g * p01 + c1 * p11) * c1 + self.R[0, 0].item()
-            d = abs(z.item() - x1 * g)
-            if S > 0:
-                return np.array((d / math.sqrt(S),))
-            return np.array((math.inf if S == 0 and d > 0 else math.nan,))
         x2 = self.x[:, 1] + (self.u if last is not None else 0.0)
         P = self.P + mu * self.Q
         a1 = x2 + self.scan_offset
@@ -415,8 +299,6 @@ class ScanningEKF:
 
     def step(self, stamp: float, z: Measurement) -> np.ndarray:
         """Run one iteration at `stamp` with z_k (NaN/None: missing); return the commands."""
-        if self.runs == 1 and type(self.response) is IncidenceResponse:
-            return self._step_one(stamp, z)
         z = as_measurement(z, self.runs)
         mu = self.clock.tick(stamp)
         if mu is not None:

@@ -68,11 +68,11 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from tskf_ros.core import irregular_sampling as irregular
+from tskf_ros.core import irregular
 from tskf_ros.core.input_rate import InputRate, report_head, worst
 from tskf_ros.core.linear_models import LinearModel
-from tskf_ros.core.timescale_kalman import (FilterError, is_psd, NonRegressiveError,
-                                            TRANSITIONS)
+from tskf_ros.core.matrices import is_psd
+from tskf_ros.core.timescale_kalman import FilterError, NonRegressiveError, TRANSITIONS
 from tskf_ros.core.units import MAX_STAMP_NS, NS
 
 
@@ -391,11 +391,6 @@ class EstimatorSession:
         self.stats.received += 1
         if now_ns is not None:
             self.input_rate.note(now_ns)
-        if (power.__class__ is float and stamp_ns.__class__ is int
-                and variance.__class__ is float and self.kf._small == 1 and self.points):
-            out = self._append_scalar(stamp_ns, power, variance, now_ns)
-            if out is not None:
-                return out
         return self._add(stamp_ns, power, variance, now_ns)
 
     def _add(self, stamp_ns: int, power: float, variance: float,

@@ -1,0 +1,154 @@
+"""
+The Kalman filter's predict and update: the one implementation of both, compiled with numba.
+
+FilterPy's names and equations (Labbe, FilterPy `KalmanFilter.predict` / `update`;
+Simon, Optimal State Estimation, Wiley 2006, eqs. 5.17-5.19):
+
+    predict:   x = F x + B u                  P = F P F^T + Q
+    update:    y = z - (H x + d)              S = H P H^T + R
+               K = P H^T S^-1                 x = x + K y
+               P = (I - K H) P (I - K H)^T + K R K^T                  (Joseph form)
+
+d is an offset of the predicted measurement: Cai et al.'s output offset D for a linear
+model, h(x) - H x for an extended filter linearised at x (so H x + d = h(x)).
+The time-scale filter, the switching and lifted filters and the scanning EKF all call
+these; `update_batch` runs the same update over a leading axis of independent runs.
+"""
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+Vector = NDArray[np.float64]
+Matrix = NDArray[np.float64]
+
+# matrix products up to this many multiply-adds run as loops: BLAS's call costs more there
+_LOOP_FLOPS = 4096
+
+_jit = numba.njit(cache=True, error_model='numpy', nogil=True)
+
+
+@_jit
+def _mm(A: Matrix, B: Matrix) -> Matrix:
+    """Return A B: loops for small matrices, BLAS for large ones."""
+    n, m = A.shape
+    p = B.shape[1]
+    if n * m * p > _LOOP_FLOPS:
+        return np.ascontiguousarray(A) @ np.ascontiguousarray(B)
+    out = np.zeros((n, p))
+    for i in range(n):
+        for k in range(m):
+            a = A[i, k]
+            for j in range(p):
+                out[i, j] += a * B[k, j]
+    return out
+
+
+@_jit
+def _mv(A: Matrix, x: Vector) -> Vector:
+    """Return A x."""
+    n, m = A.shape
+    out = np.zeros(n)
+    for i in range(n):
+        s = 0.0
+        for k in range(m):
+            s += A[i, k] * x[k]
+        out[i] = s
+    return out
+
+
+@_jit
+def _inv(S: Matrix) -> Matrix:
+    """Return S^-1: closed forms for 1 x 1 and 2 x 2 (inf or NaN entries when S is singular)."""
+    p = S.shape[0]
+    if p == 1:
+        return np.full((1, 1), 1.0 / S[0, 0])
+    if p == 2:
+        a, b, c, d = S[0, 0], S[0, 1], S[1, 0], S[1, 1]
+        det = a * d - b * c
+        out = np.empty((2, 2))
+        out[0, 0], out[0, 1], out[1, 0], out[1, 1] = d / det, -b / det, -c / det, a / det
+        return out
+    try:
+        return np.linalg.inv(np.ascontiguousarray(S))
+    except Exception:       # singular: numba raises LinAlgError's message as an Exception
+        return np.full((p, p), np.nan)
+
+
+@_jit
+def _symmetric(P: Matrix) -> Matrix:
+    """Return (P + P^T) / 2, as halves so that entries near 1e308 do not overflow."""
+    return P / 2 + P.T / 2
+
+
+@_jit
+def predict(x: Vector, P: Matrix, F: Matrix, Q: Matrix, Bu: Vector) -> tuple[Vector, Matrix]:
+    """Time update; Bu is B u (zeros without an input)."""
+    # x = F x + B u
+    x = _mv(F, x) + Bu
+    # P = F P F^T + Q
+    P = _mm(_mm(F, P), F.T) + Q
+    return x, _symmetric(P)
+
+
+@_jit
+def update(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
+           ) -> tuple[Vector, Matrix, Vector, Matrix, Matrix]:
+    """Measurement update; returns (x, P, y, S, K)."""
+    # y = z - (H x + d)
+    y = z - (_mv(H, x) + d)
+    # S = H P H^T + R
+    PHt = _mm(P, H.T)
+    S = _mm(H, PHt) + R
+    # K = P H^T S^-1
+    K = _mm(PHt, _inv(S))
+    # x = x + K y
+    x = x + _mv(K, y)
+    # P = (I - K H) P (I - K H)^T + K R K^T: the Joseph form, right for any K, so that an
+    # error in K changes P only to second order (the short form (I - K H) P assumes the
+    # optimal K); expanded with S = H P H^T + R as P - K (H P) - (P H^T) K^T + K S K^T,
+    # which costs O(n^2 p) where the product form costs O(n^3)
+    KS = _mm(K, S)
+    P = P - _mm(K, PHt.T) - _mm(PHt, K.T) + _mm(KS, K.T)
+    return x, _symmetric(P), y, S, K
+
+
+@_jit
+def finite(x: Vector, P: Matrix) -> bool:
+    """Tell whether every entry of x and P is finite."""
+    return bool(np.all(np.isfinite(x)) and np.all(np.isfinite(P)))
+
+
+OK, NOT_POSITIVE, NOT_FINITE = 0, 1, 2     # what update_predict reports
+
+
+@_jit
+def update_predict(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector,
+                   F: Matrix, Q: Matrix, Bu: Vector
+                   ) -> tuple[Vector, Matrix, Vector, Matrix, Vector, Matrix, int]:
+    """
+    Run update then predict in one call: (x(t|t), P(t|t), x(sigma), P(sigma), y, S, status).
+
+    status is OK, NOT_POSITIVE (a diagonal entry of S is not > 0: P or R is not positive
+    semi-definite) or NOT_FINITE (an estimate has an entry that is not finite).
+    """
+    x_c, P_c, y, S, _ = update(x, P, z, H, R, d)
+    x_p, P_p = predict(x_c, P_c, F, Q, Bu)
+    status = OK
+    for i in range(S.shape[0]):
+        if not S[i, i] > 0:
+            status = NOT_POSITIVE
+    if status == OK and not (finite(x_c, P_c) and finite(x_p, P_p)):
+        status = NOT_FINITE
+    return x_c, P_c, x_p, P_p, y, S, status
+
+
+@_jit
+def update_batch(x: NDArray[np.float64], P: NDArray[np.float64], z: NDArray[np.float64],
+                 H: NDArray[np.float64], R: NDArray[np.float64], d: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Run `update` for every run i on (x[i], P[i], z[i], H[i], R[i], d[i]); returns (x, P)."""
+    x_out, P_out = np.empty_like(x), np.empty_like(P)
+    for i in range(x.shape[0]):
+        x_out[i], P_out[i], _, _, _ = update(x[i], P[i], z[i], H[i], R[i], d[i])
+    return x_out, P_out
