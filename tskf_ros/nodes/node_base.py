@@ -21,8 +21,10 @@ from sensor_msgs.msg import Illuminance, JointState
 from std_srvs.srv import Trigger
 
 from tskf_ros.core.units import NS
-from tskf_ros.messages.parameters import descriptor
+from tskf_ros.messages.parameters import descriptor, parameters_for_node
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
+
+import yaml
 
 # a simulator takes at most this many samples per callback when catching up
 MAX_BATCH = 10_000
@@ -77,15 +79,15 @@ def parse_args(prog: str, description: str,
 
 
 def unused_parameter_file(node: Node, argv: Sequence[str]) -> str:
-    """
-    Return a warning if a --params-file was given but set none of this node's parameters.
-
-    (A section keyed with another node's name, or a bare name in another namespace, applies
-    to nothing: the node would silently run on its defaults.)
-    """
+    """Return a warning if a --params-file was given but set none of this node's parameters."""
     files = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == '--params-file']
-    own = set(node._parameter_overrides) - {'use_sim_time'}
-    if files and not own:
+    own = set()
+    for path in files:
+        try:
+            own |= parameters_for_node(path, node.get_fully_qualified_name())
+        except (OSError, yaml.YAMLError):
+            continue        # rcl refused such a file before the node started
+    if files and not own - {'use_sim_time'}:
         return (f'the parameter file(s) {", ".join(files)} set none of the parameters of '
                 f'{node.get_fully_qualified_name()}: it runs on its built-in defaults. Key '
                 f'the section /**/{node.get_name()} (or /**) so that it applies in any '
