@@ -66,7 +66,8 @@ def test_parse_setting_types_values_as_the_parameter():
     assert sweep_tasks.parse_setting('transition=euler,exact', d) == (
         'transition', ['euler', 'exact'])
     assert sweep_tasks.parse_setting('gate_patience=3', d) == ('gate_patience', [3])
-    assert sweep_tasks.parse_setting('nonpositive_is_gap=false', d) == ('nonpositive_is_gap', [False])
+    assert sweep_tasks.parse_setting('nonpositive_is_gap=false', d) == (
+        'nonpositive_is_gap', [False])
     for bad in ('R', 'nothing=1', 'R=x', 'R=1,,2', 'gate=a', 'queue_depth=3'):
         with pytest.raises(ValueError):
             sweep_tasks.parse_setting(bad, d)

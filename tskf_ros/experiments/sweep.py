@@ -1,30 +1,4 @@
-"""
-sweep: run the estimator (and optionally fit_noise) over many bags x many settings on Dask.
-
-    python -m tskf_ros.experiments.sweep --bags bags/ 'fleet/**/run_*' \
-        --params-file config/owc_estimator.yaml --set R=1,10,100 --set transition=euler,exact \
-        --workers 2 --out table.csv --png sweep.png
-
-One CSV row per bag x setting: a `key` (a hash of the bag's path, its files' sizes and
-modification times, the parameter file's content and the setting), the bag, one column per
---set parameter, the metrics of tskf_ros.experiments.bag_analysis.METRICS (RMS against the
-truth where the bag has a JointState topic naming the model's states, the NIS consistency,
-rejections and resets by reason, gaps, samples), `seconds` (the task's own wall time) and
-`error` (empty when the bag was evaluated; else one line).  Rows are appended and flushed
-as tasks finish, so an interrupted sweep keeps what it finished; a re-run with the same
---out skips every key already in the file (--no-resume starts a new file).  A bag that
-cannot be read, or is damaged, gets its error in its row; the others go on.
-
-Dask: by default a LocalCluster of --workers processes (default: one per core), one thread
-each, on 127.0.0.1, no dashboard.  `--scheduler tcp://host:8786` submits the same tasks to
-an existing cluster instead (its workers need this package installed and the bags at the
-same paths; the parameters travel with the tasks).  `--workers 0` runs in this process,
-without Dask.
-
-Exit status: 0 every task ran without error; 1 bad arguments or files (one line, nothing
-started); 5 at least one row has an error (the table is complete otherwise); 130
-interrupted (Ctrl-C: the rows finished are kept, the same command resumes).
-"""
+"""sweep: the estimator (and optionally fit_noise) over many bags x many settings on Dask."""
 
 import argparse
 import csv

@@ -1,11 +1,4 @@
-"""
-power_meter_simulator: the intermittent OWC link of Cai et al. IV-A/B as a sensor driver.
-
-Publishes `received_power` (sensor_msgs/msg/Illuminance, sensor-data QoS, as a power meter
-driver would) and the evaluation truth `true_angle` (sensor_msgs/msg/JointState).  The
-samples come from tskf_ros.owc.vibrating_link.OwcLink; sample k is stamped start + k / rate, and is
-published when the node's clock says (k / rate) / time_factor seconds have passed.
-"""
+"""The power_meter_simulator node: the intermittent OWC link of Cai et al. IV-A/B."""
 
 from dataclasses import dataclass
 from typing import Optional

@@ -1,16 +1,4 @@
-"""
-timescale_estimator: the time-scale Kalman filter on a stream of received-power samples.
-
-Subscribes to `measurement` (sensor_msgs/msg/Illuminance by default, or another stamped
-scalar chosen by `measurement_type`; best effort so that both reliable and best-effort
-publishers match; the OWC launch file remaps it to `received_power`), feeds EstimatorSession
-(tskf_ros.owc.estimator_session) and publishes what it returns.  The parameters, topics,
-QoS and messages are in tskf_ros.messages.estimator_interface, which the offline replay
-uses too.
-The model's input u comes on `input` (geometry_msgs/msg/AccelStamped, slot i = u[i],
-held from its stamp to the next input; best effort too); a model without B counts such
-messages as rejected ('no_input_matrix') and ignores them.
-"""
+"""The timescale_estimator node: the time-scale Kalman filter of Cai et al. on a stream."""
 
 from typing import Optional
 
