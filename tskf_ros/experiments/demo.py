@@ -8,7 +8,7 @@ import shutil
 import signal
 import subprocess
 import sys
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
@@ -124,7 +124,8 @@ def replay_sample_bag(out: Path) -> int:
     return rc
 
 
-def node_command(module: str, params_file: Path, **params: object) -> list:
+def node_command(module: str, params_file: Path,
+                 **params: Union[bool, int, float, str]) -> list:
     """`python -m tskf_ros.nodes.<module> --ros-args --params-file ... -p k:=v`."""
     cmd = [sys.executable, '-m', f'tskf_ros.nodes.{module}', '--ros-args',
            '--params-file', str(params_file)]

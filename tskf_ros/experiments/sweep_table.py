@@ -4,11 +4,12 @@ import csv
 import fcntl
 import os
 from pathlib import Path
+from typing import Optional, Union
 
 import numpy as np
 
 
-def cell(value: object) -> str:
+def cell(value: Optional[Union[bool, int, float, str]]) -> str:
     """Return a CSV cell: floats exact (repr), None and NaN empty."""
     if value is None:
         return ''

@@ -7,7 +7,7 @@ import itertools
 import json
 from pathlib import Path
 import time
-from typing import Iterable, Optional
+from typing import Iterable, Optional, Union
 
 import numpy as np
 
@@ -21,6 +21,8 @@ FIT_COLUMNS = ['fit_Q', 'fit_R', 'fit_Q_stderr', 'fit_R_stderr', 'fit_log_likeli
                'fit_nis_mean', 'fit_error']
 # parameters a --set may not change: they do not affect an offline evaluation
 NOT_SETTABLE = ('queue_depth', 'diagnostics_period', 'frame_id', 'measurement_type')
+# one value of a --set: typed as the parameter's default (a matrix: a list of floats)
+SettingValue = Union[bool, int, float, str, list]
 
 
 @dataclass(frozen=True)
@@ -107,7 +109,7 @@ def settings_product(sets: list) -> list:
     return [dict(zip(names, combo)) for combo in itertools.product(*[v for _, v in sets])]
 
 
-def setting_text(value: object) -> str:
+def setting_text(value: SettingValue) -> str:
     """Return a setting's value as the CSV shows it."""
     if isinstance(value, list):
         return ' '.join(repr(float(v)) for v in value)

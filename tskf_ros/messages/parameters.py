@@ -26,7 +26,7 @@ _RclLoader.add_implicit_resolver(
     list('-+0123456789.'))
 
 
-def read_params_yaml(text: str) -> object:
+def read_params_yaml(text: str) -> Any:
     """Parse a parameter file's text as the node would read its numbers."""
     return yaml.load(text, Loader=_RclLoader)  # noqa: S506 - a SafeLoader subclass
 

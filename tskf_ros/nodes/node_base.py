@@ -4,7 +4,7 @@ import argparse
 from dataclasses import fields
 import os
 import sys
-from typing import Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Protocol, Sequence, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterType, SetParametersResult
@@ -44,6 +44,36 @@ EXECUTOR_VARIABLE = 'TSKF_EXECUTOR'
 SPIN_TIMEOUT = 1.0
 # a parameter override rclpy refuses at declaration (out of its range, wrong type): one line
 ROS_PARAMETER_ERRORS = (InvalidParameterTypeException, InvalidParameterValueException)
+# a link config dataclass of the core (OwcLinkConfig, LedLinkConfig)
+LinkConfig = TypeVar('LinkConfig')
+
+
+class NodeSettings(Protocol):
+    """What ReconfigurableNode reads of a node's config: its session's part, its period."""
+
+    @property
+    def session(self) -> Any:
+        """The config the session is built from and reconfigured with."""
+
+    @property
+    def diagnostics_period(self) -> float:
+        """Seconds between two /diagnostics messages."""
+
+
+class SimulatorSettings(Protocol):
+    """What LinkSimulatorNode reads of a simulator's config."""
+
+    @property
+    def link(self) -> Any:
+        """The link config of the core."""
+
+    @property
+    def start_time(self) -> float:
+        """Stamp (s) of sample 0; 0: the clock at the start."""
+
+    @property
+    def wait_for_subscribers(self) -> int:
+        """Subscribers the sensor topic needs before sample 0 goes."""
 
 
 def executor_kind(kind: Optional[str] = None) -> str:
@@ -149,7 +179,8 @@ class ReconfigurableNode(Node):
 
     PARAMETERS: tuple = ()
     CONFIG_ERRORS: tuple = (KeyError, TypeError, ValueError)
-    SESSION: type = object       # the session class of the core, built from config.session
+    # the session class of the core, built from config.session
+    SESSION: Callable[[Any], Any]
 
     def __init__(self, node_name: str, *, context=None, namespace: Optional[str] = None,
                  parameter_overrides: Optional[list] = None,
@@ -164,7 +195,7 @@ class ReconfigurableNode(Node):
         """Declare the node's parameters (subclasses)."""
         raise NotImplementedError
 
-    def start_watching_parameters(self) -> object:
+    def start_watching_parameters(self) -> NodeSettings:
         """Build the config from the declared parameters and validate every later change."""
         self._pending = None
         config = self.make_config(self.parameter_values())
@@ -178,11 +209,11 @@ class ReconfigurableNode(Node):
         values.update({p.name: p.value for p in changes})
         return values
 
-    def make_config(self, values: dict) -> object:
+    def make_config(self, values: dict) -> NodeSettings:
         """Build the node's config from parameter values (subclasses)."""
         raise NotImplementedError
 
-    def reconfigure(self, config: object) -> str:
+    def reconfigure(self, config: NodeSettings) -> str:
         """Hand a validated config to the session; return what it did (subclasses)."""
         raise NotImplementedError
 
@@ -271,7 +302,8 @@ def declare_config_fields(node: Node, config_cls: type, help_: dict) -> None:
         node.declare_parameter(f.name, value, descriptor(text, rng, type_))
 
 
-def config_from_parameters(node: Node, config_cls: type, error: type) -> object:
+def config_from_parameters(node: Node, config_cls: type[LinkConfig],
+                           error: type[Exception]) -> LinkConfig:
     """Build a link config dataclass from the node's parameters; raise `error` if bad."""
     try:
         return config_cls(**{f.name: node.get_parameter(f.name).value
@@ -306,7 +338,7 @@ class LinkSimulatorNode(Node):
     def _declare(self) -> None:
         raise NotImplementedError
 
-    def _read(self) -> object:
+    def _read(self) -> SimulatorSettings:
         raise NotImplementedError
 
     def ready(self) -> bool:

@@ -1,6 +1,6 @@
 """The power_meter_simulator node: the intermittent OWC link of Cai et al. IV-A/B."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Optional
 
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
@@ -109,8 +109,7 @@ class PowerMeterSimulator(LinkSimulatorNode):
                 if not isinstance(p.value, bool):
                     return SetParametersResult(successful=False,
                                                reason='publish_invalid must be a bool')
-                self.config = SimulatorConfig(**{**self.config.__dict__,
-                                                 'publish_invalid': p.value})
+                self.config = replace(self.config, publish_invalid=p.value)
         return SetParametersResult(successful=True)
 
     def _tick(self) -> None:

@@ -1,6 +1,6 @@
 """The timescale_estimator node: the time-scale Kalman filter of Cai et al. on a stream."""
 
-from typing import Optional
+from typing import Any, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
@@ -141,7 +141,7 @@ class TimescaleEstimator(ReconfigurableNode):
 
     # -- data -----------------------------------------------------------------------------
 
-    def _on_measurement(self, msg: object) -> None:
+    def _on_measurement(self, msg: Any) -> None:
         now_ns = self.get_clock().now().nanoseconds
         # an unstamped type (std_msgs Float64, Float32) is stamped with its time of arrival
         stamp_ns, value, variance = self.extract(msg, now_ns)
