@@ -40,7 +40,8 @@ EXECUTOR_VARIABLE = 'TSKF_EXECUTOR'
 # s: the longest spin_once between two checks of the context.  rclpy 7.1's
 # EventsExecutor.spin() (and its spin_once without a timeout) never returns after SIGINT
 # or SIGTERM, spinning a core; its spin_once with a timeout returns at once, raising
-# KeyboardInterrupt or ExternalShutdownException (test_executors checks both executors).
+# KeyboardInterrupt or ExternalShutdownException (test/nodes/test_node_base.py checks
+# both executors).
 SPIN_TIMEOUT = 1.0
 # a parameter override rclpy refuses at declaration (out of its range, wrong type): one line
 ROS_PARAMETER_ERRORS = (InvalidParameterTypeException, InvalidParameterValueException)

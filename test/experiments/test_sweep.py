@@ -11,7 +11,7 @@ from tskf_ros.experiments import sweep, sweep_table, sweep_tasks
 from tskf_ros.experiments.bag_analysis import METRICS
 from tskf_ros.messages.estimator_interface import default_parameters
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 SAMPLE = REPO / 'bags' / 'owc_cai_td_1hz'
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'
 SETS = [('R', [[1.0], [100.0]]), ('transition', ['euler', 'exact'])]
