@@ -61,6 +61,19 @@ def test_without_parameters_the_node_says_it_runs_the_built_in_model(ros_context
         node.destroy_node()
 
 
+def test_the_matrices_given_are_named_and_the_others_hold_their_defaults(ros_context):
+    node = TimescaleEstimator(context=ros_context, parameter_overrides=[
+        Parameter('C', value=[-600.0]), Parameter('R', value=[100.0])])   # R: as the default
+    try:
+        assert node.model_source == 'parameters (C, R given)'
+        # the matrices not given read back as Cai's model (3), as `ros2 param get` shows them
+        assert node.get_parameter('A').value == [1.0]
+        assert node.get_parameter('D').value == [511.97]
+        assert node.config.session.model.C[0, 0] == -600.0
+    finally:
+        node.destroy_node()
+
+
 def test_reset_service_restarts_the_estimator(loop, ros_context):
     executor, client, nodes = loop
     node = TimescaleEstimator(context=ros_context)
