@@ -54,11 +54,11 @@ class NodeSettings(Protocol):
 
     @property
     def session(self) -> Any:
-        """The config the session is built from and reconfigured with."""
+        """Return the config the session is built from and reconfigured with."""
 
     @property
     def diagnostics_period(self) -> float:
-        """Seconds between two /diagnostics messages."""
+        """Return the seconds between two /diagnostics messages."""
 
 
 class SimulatorSettings(Protocol):
@@ -66,15 +66,15 @@ class SimulatorSettings(Protocol):
 
     @property
     def link(self) -> Any:
-        """The link config of the core."""
+        """Return the link config of the core."""
 
     @property
     def start_time(self) -> float:
-        """Stamp (s) of sample 0; 0: the clock at the start."""
+        """Return the stamp (s) of sample 0; 0: the clock at the start."""
 
     @property
     def wait_for_subscribers(self) -> int:
-        """Subscribers the sensor topic needs before sample 0 goes."""
+        """Return how many subscribers the sensor topic needs before sample 0 goes."""
 
 
 def executor_kind(kind: Optional[str] = None) -> str:
