@@ -176,7 +176,7 @@ def test_node_survives_a_huge_a_after_a_45_s_gap(estimator):
 
 
 @pytest.mark.parametrize('name, value, why', [
-    ('Q', [1e308], 'a step of mu = 1 s'),
+    ('Q', [1e308], 'a step of mu ='),
     ('Q', [1e20], 'state_limit'),
     ('x0', [1e308], 'absurd'),
 ])
