@@ -64,6 +64,7 @@ setup(
             'power_meter_driver = tskf_ros.nodes.power_meter_driver:main',
             'fit_noise = tskf_ros.experiments.fit_noise:console_main',
             'sweep = tskf_ros.experiments.sweep:console_main',
+            'foxglove_bridge = tskf_ros.tools.foxglove_bridge:main',
         ],
     },
 )
