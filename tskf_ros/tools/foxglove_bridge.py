@@ -81,8 +81,8 @@ class FoxgloveBridge(Node):
                               f"{values['port']}, depth {values['depth']}")
         self.patterns = list(values['topics'])
         self.depth = values['depth']
-        self.bridged: dict = {}        # topic -> Bridged
-        self.skipped: set = set()      # (topic, type) that cannot be served, warned once
+        self.bridged: dict[str, Bridged] = {}
+        self.skipped: set[tuple[str, str]] = set()   # (topic, type) not served, warned once
         self.foxglove_context = foxglove.Context()
         try:
             self.server = foxglove.start_server(
