@@ -41,6 +41,8 @@ HELP_MUST_NAME = {
                            'pm100_sim.yaml@sim'),
     'fit_noise': ('--params-file', '--topic', '--out', '--json', 'bag'),
     'sweep': ('--bags', '--set', '--workers', '--scheduler', '--out', '--png'),
+    'foxglove_bridge': ('--ros-args', 'ws://localhost:8765', 'port (8765)',
+                        "topics (['*'])"),
 }
 
 
