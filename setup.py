@@ -36,7 +36,7 @@ setup(
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='tskf_ros maintainers',
-    maintainer_email='tskf@example.com',
+    maintainer_email='tskf-ros@example.org',
     keywords=['ROS'],
     classifiers=[
         'Intended Audience :: Developers',
