@@ -15,7 +15,7 @@ KEYS = {
     'mcap_ros2': 'python3-mcap-ros2-support-pip',
     'pyvisa': 'python3-pyvisa-pip', 'pyvisa_sim': 'python3-pyvisa-sim-pip',
     'dask': 'python3-dask-pip', 'distributed': 'python3-distributed-pip', 'tqdm': 'python3-tqdm',
-    'numba': 'python3-numba', 'mypy': 'python3-mypy',
+    'numba': 'python3-numba', 'mypy': 'python3-mypy', 'filterpy': 'python3-filterpy-pip',
 }
 RUN = ('exec_depend', 'depend')
 TEST = RUN + ('test_depend',)
@@ -37,7 +37,7 @@ def top_level_imports(paths):
                 names = [node.module]
             for name in names:
                 top = name.split('.')[0]
-                local = (REPO / 'test' / f'{top}.py').is_file()
+                local = any((REPO / 'test').rglob(f'{top}.py'))
                 if top not in sys.stdlib_module_names and top != 'tskf_ros' and not local:
                     found.setdefault(top, path.name)
     return found
@@ -56,7 +56,7 @@ def test_every_runtime_import_is_an_exec_depend():
 
 
 def test_every_test_import_is_declared():
-    imports = top_level_imports(sorted((REPO / 'test').glob('*.py')))
+    imports = top_level_imports(sorted((REPO / 'test').rglob('*.py')))
     assert missing(imports, TEST) == {}
 
 
