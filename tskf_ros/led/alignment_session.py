@@ -3,8 +3,8 @@ A streaming alignment session: stamped intensity samples in, base position comma
 
 Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018): each sample is one iteration k of an
 aligner of tskf_ros.led, the scanning EKF of Section IV (eq. (13)-(21), predicted over
-mu = elapsed / dt) or a baseline of Section V; its turn u_k + psi_{k+1} - psi_k is added to
-the base angle.  What happens to bad input: doc/design/alignment.md.
+mu = elapsed / dt; its turn is u_k + psi_{k+1} - psi_k) or a baseline of Section V; the
+turn is added to the base angle.  What happens to bad input: doc/design/alignment.md.
 """
 
 from collections import Counter
