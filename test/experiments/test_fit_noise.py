@@ -184,16 +184,6 @@ def test_errors_are_one_line_and_write_nothing(sim, tmp_path, capsys, monkeypatc
     assert not out.exists() and not js.exists()
 
 
-def test_nis_band_is_the_chi_square_band_of_the_mean():
-    rng = np.random.default_rng(3)
-    s = noise_fit.nis_summary(rng.chisquare(2, 4000), 2)
-    # the mean of N chi2(p) is chi2(N p) / N: mean p, variance 2 p / N
-    half = 1.959964 * np.sqrt(2 * 2 / 4000)
-    assert s['band'][0] == pytest.approx(2 - half, abs=2e-3)
-    assert s['band'][1] == pytest.approx(2 + half, abs=2e-3)
-    assert s['consistent'] and s['fraction_in_band'] == pytest.approx(0.95, abs=0.01)
-
-
 @pytest.mark.slow
 def test_standard_errors_match_the_spread_over_seeds(tmp_path):
     # Monte Carlo: the Hessian standard error against the spread of the estimates

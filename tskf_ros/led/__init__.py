@@ -3,12 +3,12 @@ LED active alignment of Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018).
 
 intensity_model (eq. 1-5), scanning_ekf (eq. 7-24), baselines (Section V, eq. 26) and
 tracking_simulation (eq. 25, Table I) are re-exported here, as filterpy.kalman does;
-led_link (the live plant) and alignment_session (behind the alignment node) are imported
-from their modules.
+led_link (the live plant), alignment_config and alignment_session (behind the alignment
+node) are imported from their modules.
 """
 
-from tskf_ros.led.baselines import (ALGORITHMS, HILL_STEP, HillClimbing, make_aligner,
-                                    ThreePointAveraging)
+from tskf_ros.led.baselines import (ALGORITHMS, AnyAligner, HILL_STEP, HillClimbing,
+                                    make_aligner, ThreePointAveraging)
 from tskf_ros.led.intensity_model import (AlignmentError, attenuation, IncidenceResponse,
                                           irradiance, LITERAL_UNITS_PER_DEGREE, MAX_INTENSITY,
                                           PAPER_G_COEFFICIENTS, TRACKING_ANGLE, TRACKING_LEVEL,
@@ -21,7 +21,7 @@ from tskf_ros.led.tracking_simulation import (simulate_tracking, tracking, Track
                                               Trajectory)
 
 __all__ = [
-    'ALGORITHMS', 'Aligner', 'AlignmentError', 'as_measurement', 'attenuation',
+    'ALGORITHMS', 'Aligner', 'AlignmentError', 'AnyAligner', 'as_measurement', 'attenuation',
     'check_observability', 'EKFConfig', 'HILL_STEP', 'HillClimbing', 'IncidenceResponse',
     'irradiance', 'LITERAL_UNITS_PER_DEGREE', 'make_aligner', 'MAX_INTENSITY', 'Measurement',
     'min_gain', 'ObservabilityError', 'PAPER_DT', 'PAPER_G_COEFFICIENTS', 'PAPER_GAIN',

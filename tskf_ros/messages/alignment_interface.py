@@ -9,7 +9,8 @@ from rcl_interfaces.msg import ParameterType
 from rclpy.qos import QoSProfile
 
 from tskf_ros import led
-from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession, AlignOutcome
+from tskf_ros.led.alignment_config import AlignmentConfig
+from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError

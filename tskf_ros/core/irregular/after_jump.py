@@ -40,13 +40,13 @@ class JumpCovariance:
 def _correct(P: Matrix, C: Matrix, Rd: Matrix) -> Matrix:
     """Measurement update of the covariance with R_d (kalman.update, Joseph form)."""
     n, p = P.shape[0], C.shape[0]
-    return kalman.update(np.zeros(n), P, np.zeros(p), C, Rd, np.zeros(p))[1]  # type: ignore
+    return kalman.update(np.zeros(n), P, np.zeros(p), C, Rd, np.zeros(p))[1]
 
 
 def _predict(P: Matrix, F: Matrix, Qd: Matrix) -> Matrix:
     """P(sigma) = F P(t|t) F^T + Q_d (kalman.predict)."""
     n = P.shape[0]
-    return kalman.predict(np.zeros(n), P, F, Qd, np.zeros(n))[1]  # type: ignore
+    return kalman.predict(np.zeros(n), P, F, Qd, np.zeros(n))[1]
 
 
 def _transition(kf: TimeScaleKalmanFilter, mu: float) -> tuple[Matrix, Matrix]:
