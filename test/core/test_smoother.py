@@ -91,11 +91,11 @@ def reference(m, mu, y, u, kind):
                         m['C'], m['D'], m['x0'], m['P0'])
 
 
-def assert_psd_below(Ps, Pf):
-    """Assert P(t|T) <= P(t|t) in the PSD sense at every point."""
+def assert_psd_below(Ps, Pf, tol=1e-12):
+    """Assert P(t|T) <= P(t|t) in the PSD sense at every point, to tol times P(t|t)."""
     for P_s, P_f in zip(Ps, Pf):
         eig = np.linalg.eigvalsh(P_f - P_s)
-        assert eig[0] >= -1e-12 * max(1.0, float(np.max(np.abs(P_f)))), eig
+        assert eig[0] >= -tol * max(1.0, float(np.max(np.abs(P_f)))), eig
 
 
 @pytest.mark.parametrize('kind', ['euler', 'exact'])
@@ -288,10 +288,14 @@ def test_smoothed_covariance_is_never_above_the_filters(n, p, seed, kind, mu):
     except NonRegressiveError:
         assume(False)
     kf = TimeScaleKalmanFilter(**model)
-    Pf = [kf.step(h, None if np.isnan(row).all() else row).P_corrected
-          for h, row in zip(mu, y)]
+    steps = [kf.step(h, None if np.isnan(row).all() else row) for h, row in zip(mu, y)]
     assert np.all(np.isfinite(xs)) and np.all(np.isfinite(Ps))
-    assert_psd_below(Ps, Pf)
+    # 1e-12, or rounding where the gain's solve is ill-conditioned: an unstable A over
+    # mu = 3 makes cond(P(t_{k+1}|t_k)) ~ 1e6, and even exact arithmetic on the filter's
+    # float outputs then gives an eigenvalue of -1.5e-12 (seed 0, n = 3, p = 1, exact)
+    cond = max(np.linalg.cond(s.P_predicted) for s in steps[:-1])
+    assert_psd_below(Ps, [s.P_corrected for s in steps],
+                     max(1e-12, 100 * np.finfo(float).eps * cond))
 
 
 SIMPLE = {'A': [[0.0, 1.0], [-1.0, -0.2]], 'C': [[1.0, 0.0]], 'Q': np.eye(2), 'R': 1.0,

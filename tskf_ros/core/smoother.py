@@ -11,17 +11,19 @@ from x(t_{K-1}|T) = x(t_{K-1}|t_{K-1}):
     x(t_k|T) = x(t_k|t_k) + G_k (x(t_{k+1}|T) - x(t_{k+1}|t_k))
     P(t_k|T) = P(t_k|t_k) + G_k (P(t_{k+1}|T) - P(t_{k+1}|t_k)) G_k^T
 
-Between points (`smooth_at`), s = t_k + mu' is a point with no measurement on the jumps
-mu' and mu_k - mu': the filter's predict to s and on to t_{k+1}, then the same step from s.
+G_k is solved for (G_k^T = P(t_{k+1}|t_k)^-1 F_k P(t_k|t_k)), not inverted; the backward
+step is compiled with numba and shared with the fixed-lag smoother.  Between points
+(`smooth_at`), s = t_k + mu' is a point with no measurement on the jumps mu' and
+mu_k - mu': the filter's predict to s and on to t_{k+1}, then the same step from s.
 Derivation and conventions: doc/design/smoother.md.
 """
 
 import math
 from typing import NamedTuple, Optional
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-import scipy.linalg
 
 from tskf_ros.core import kalman
 from tskf_ros.core.matrices import FilterError
@@ -30,7 +32,8 @@ from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
 
-__all__ = ['Smoothed', 'rts_smooth', 'smooth_at', 'smoother_gain', 'smoothed_step']
+__all__ = ['backward_pass', 'Smoothed', 'rts_smooth', 'smooth_at', 'smoother_gain',
+           'smoothed_step']
 
 
 class Smoothed(NamedTuple):
@@ -52,28 +55,55 @@ class Forward(NamedTuple):
     kf: TimeScaleKalmanFilter       # the filter that made them (for the partial jumps)
 
 
+_jit = numba.njit(cache=True, error_model='numpy', nogil=True)
+
+
+@_jit
 def smoother_gain(P_f: Matrix, F: Matrix, P_p: Matrix) -> Matrix:
     """Return the RTS gain G = P(t_k|t_k) F^T P(t_{k+1}|t_k)^-1, by a solve (not an inverse)."""
     # G^T = P(t_{k+1}|t_k)^-1 F P(t_k|t_k), as P(t_{k+1}|t_k) and P(t_k|t_k) are symmetric
-    FP = F @ P_f
+    FP = np.ascontiguousarray(F) @ np.ascontiguousarray(P_f)
     try:
-        Gt = scipy.linalg.solve(P_p, FP, assume_a='pos', check_finite=False)
-    except np.linalg.LinAlgError:
-        # P(t_{k+1}|t_k) singular (no process noise, singular prior): the least-squares
-        # solution, pykalman's pseudo-inverse gain
-        Gt = np.linalg.lstsq(P_p, FP, rcond=None)[0]
+        Gt = np.linalg.solve(P_p, FP)
+    except Exception:       # singular P(t_{k+1}|t_k): the least-squares (pseudo-inverse) gain
+        Gt = np.linalg.lstsq(P_p, FP)[0]
     return np.ascontiguousarray(Gt.T)
 
 
+@_jit
 def smoothed_step(x_f: Vector, P_f: Matrix, x_p: Vector, P_p: Matrix, G: Matrix,
                   x_next: Vector, P_next: Matrix) -> tuple[Vector, Matrix]:
     """One backward step: x(t_k|T), P(t_k|T) from the smoothed estimate at t_{k+1}."""
     # x(t_k|T) = x(t_k|t_k) + G_k (x(t_{k+1}|T) - x(t_{k+1}|t_k))      (RTS 1965; Sarkka 8.2)
     x = x_f + G @ (x_next - x_p)
     # P(t_k|T) = P(t_k|t_k) + G_k (P(t_{k+1}|T) - P(t_{k+1}|t_k)) G_k^T  (RTS 1965; Sarkka 8.2)
-    P = P_f + G @ (P_next - P_p) @ G.T
-    # symmetrised, as halves (kalman.predict does the same)
+    P = P_f + G @ (P_next - P_p) @ np.ascontiguousarray(G.T)
+    # symmetrised, as halves (as kalman.predict)
     return x, P / 2 + P.T / 2
+
+
+@_jit
+def backward_pass(x_f: NDArray[np.float64], P_f: NDArray[np.float64],
+                  x_p: NDArray[np.float64], P_p: NDArray[np.float64],
+                  G: NDArray[np.float64], start: int, count: int,
+                  xs: NDArray[np.float64], Ps: NDArray[np.float64]) -> None:
+    """
+    Smooth `count` points kept in ring arrays from row `start` on, oldest first.
+
+    Row j of x_f, P_f, x_p, P_p, G holds point j's x(t|t), P(t|t), its prediction at
+    the next point and its gain; rows wrap around (a window).  Writes x(t|T), P(t|T)
+    into xs[:count], Ps[:count], oldest first; T is the newest point.
+    """
+    cap = x_f.shape[0]
+    last = (start + count - 1) % cap
+    # the newest point: nothing after it, x(T|T) is its corrected estimate
+    xs[count - 1] = x_f[last]
+    Ps[count - 1] = P_f[last]
+    for i in range(count - 2, -1, -1):
+        j = (start + i) % cap
+        x, P = smoothed_step(x_f[j], P_f[j], x_p[j], P_p[j], G[j], xs[i + 1], Ps[i + 1])
+        xs[i] = x
+        Ps[i] = P
 
 
 def _graininess(mu: ArrayLike) -> Vector:
@@ -156,12 +186,12 @@ def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], 
 
 def _backward(fw: Forward) -> Smoothed:
     """Run the RTS recursion from the last point's corrected estimate back to t_0."""
-    xs, Ps = fw.x_f.copy(), fw.P_f.copy()
-    # the last point: nothing after it, x(t_{K-1}|T) = x(t_{K-1}|t_{K-1})
-    for k in range(len(xs) - 2, -1, -1):
-        G = smoother_gain(fw.P_f[k], fw.F[k], fw.P_p[k])
-        xs[k], Ps[k] = smoothed_step(fw.x_f[k], fw.P_f[k], fw.x_p[k], fw.P_p[k], G,
-                                     xs[k + 1], Ps[k + 1])
+    K, n = fw.x_f.shape
+    G = np.empty((K, n, n))
+    for k in range(K - 1):
+        G[k] = smoother_gain(fw.P_f[k], fw.F[k], fw.P_p[k])
+    xs, Ps = np.empty((K, n)), np.empty((K, n, n))
+    backward_pass(fw.x_f, fw.P_f, fw.x_p, fw.P_p, G, 0, K, xs, Ps)
     return Smoothed(xs, Ps)
 
 
