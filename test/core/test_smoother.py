@@ -176,9 +176,8 @@ def test_mu_one_equals_pykalman_smooth_on_the_robot_data_set():
     # rows, u[K-1] is not used), D = d, G = I; its initial_state_mean/covariance are the
     # prior at t_0, as our x0, P0; masked rows (the first) are missing measurements.
     u = np.vstack([data.transition_offsets, np.zeros(n)])
-    y = data.observations.astype(float).filled(np.nan)
     xs, Ps = rts_smooth(data.transition_matrix - np.eye(n), data.observation_matrix,
-                        np.ones(K), y, Q=data.transition_covariance,
+                        np.ones(K), data.observations, Q=data.transition_covariance,
                         R=data.observation_covariance, B=np.eye(n), u=u,
                         D=data.observation_offset, x0=data.initial_state_mean,
                         P0=data.initial_state_covariance)
@@ -266,6 +265,8 @@ def test_interpolation_meets_the_points_and_returns_them_there(kind):
     close(got.xs[10:19], xs[:-1], 1e-6)
     close(got.xs[19:], xs[1:], 1e-6)
     close(got.Ps[19:], Ps[1:], 1e-6)
+    with pytest.raises(FilterError, match="t0 must be a number, got 'a'"):
+        smooth_at([0.0], m['A'], m['C'], mu, y, t0='a', **{key: m[key] for key in keys})
     with pytest.raises(FilterError, match='outside the points'):
         smooth_at([t[-1] + 0.1], m['A'], m['C'], mu, y, t0=2.5, u=u,
                   **{key: m[key] for key in keys})
@@ -315,6 +316,7 @@ SIMPLE = {'A': [[0.0, 1.0], [-1.0, -0.2]], 'C': [[1.0, 0.0]], 'Q': np.eye(2), 'R
     ({'y': [[1.0], [1.0, 2.0], None]}, r'y\[1\] must have 1 entries, got 2'),
     ({'y': [[1.0], [np.inf], [1.0]]}, r'y\[1\] = \[inf\]: a row is either all NaN'),
     ({'u': np.ones((4, 1))}, r'u must have shape \(3, 1\)'),
+    ({'u': [[0.0], [np.nan], [0.0]]}, r'u\[1\] = \[nan\] has non-finite entries'),
     ({'A': [[0.0, 1.0]]}, r'A must be square'),
     ({'P0': np.eye(3)}, r'P0 must have shape \(2, 2\)'),
 ])

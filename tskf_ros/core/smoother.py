@@ -121,16 +121,24 @@ def _graininess(mu: ArrayLike) -> Vector:
     return m
 
 
-def _rows(values: Optional[ArrayLike], K: int, size: int, name: str
-          ) -> list[Optional[Vector]]:
-    """Split y or u into K rows of `size` entries; None or an all-NaN row means missing."""
+def _rows(values: Optional[ArrayLike], K: int, size: int, name: str, *,
+          missing: bool = True) -> list[Optional[Vector]]:
+    """
+    Split y or u into K rows of `size` entries (None: no value at that point).
+
+    With missing=True (y), an all-NaN row, or a masked row of a numpy masked array, is
+    a missing measurement too.
+    """
     if values is None:
         return [None] * K
     if isinstance(values, (list, tuple)):
         if len(values) != K:
             raise FilterError(f'{name} must have {K} rows (one per point), got {len(values)}')
-        return [None if v is None else _row(v, size, name, k) for k, v in enumerate(values)]
+        return [None if v is None else _row(v, size, name, k, missing)
+                for k, v in enumerate(values)]
     try:
+        if isinstance(values, np.ma.MaskedArray):
+            values = np.ma.filled(np.ma.asarray(values, dtype=float), np.nan)
         a = np.array(values, dtype=float)
     except (TypeError, ValueError) as exc:
         raise FilterError(f'{name} is not numeric: {exc}') from None
@@ -139,23 +147,24 @@ def _rows(values: Optional[ArrayLike], K: int, size: int, name: str
     if a.shape != (K, size):
         raise FilterError(f'{name} must have shape {(K, size)} (one row per point), '
                           f'got {a.shape}')
-    return [_row(a[k], size, name, k) for k in range(K)]
+    return [_row(a[k], size, name, k, missing) for k in range(K)]
 
 
-def _row(value: ArrayLike, size: int, name: str, k: int) -> Optional[Vector]:
-    """Return one row of y or u, None when it is all NaN (missing)."""
+def _row(value: ArrayLike, size: int, name: str, k: int, missing: bool) -> Optional[Vector]:
+    """Return one row of y or u, None when it is all NaN and missing values are allowed."""
     try:
         v = np.array(value, dtype=float).reshape(-1)
     except (TypeError, ValueError) as exc:
         raise FilterError(f'{name}[{k}] is not numeric: {exc}') from None
     if v.shape != (size,):
         raise FilterError(f'{name}[{k}] must have {size} entries, got {v.size}')
-    nan = np.isnan(v)
-    if nan.all():
+    if np.isfinite(v).all():
+        return v
+    if missing and np.isnan(v).all():
         return None
-    if nan.any() or not np.isfinite(v).all():
+    if missing:
         raise FilterError(f'{name}[{k}] = {v}: a row is either all NaN (missing) or finite')
-    return v
+    raise FilterError(f'{name}[{k}] = {v} has non-finite entries')
 
 
 def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], *,
@@ -169,7 +178,7 @@ def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], 
                                transition=transition)
     n = kf.n
     ys = _rows(y, K, kf.p, 'y')
-    us = _rows(u, K, kf.B.shape[1], 'u')
+    us = _rows(u, K, kf.B.shape[1], 'u', missing=False)
     x_f, x_p = np.empty((K, n)), np.empty((K, n))
     P_f, P_p, F = np.empty((K, n, n)), np.empty((K, n, n)), np.empty((K, n, n))
     for k in range(K):
@@ -249,9 +258,13 @@ def smooth_at(times: ArrayLike, A: ArrayLike, C: ArrayLike, mu: ArrayLike,
     except (TypeError, ValueError) as exc:
         raise FilterError(f'times is not numeric: {exc}') from None
     m = _graininess(mu)
-    if not math.isfinite(t0):
-        raise FilterError(f't0 must be finite, got {t0}')
-    points = t0 + np.concatenate(([0.0], np.cumsum(m[:-1])))
+    try:
+        start = float(t0)
+    except (TypeError, ValueError):
+        raise FilterError(f't0 must be a number, got {t0!r}') from None
+    if not math.isfinite(start):
+        raise FilterError(f't0 must be finite, got {start}')
+    points = start + np.concatenate(([0.0], np.cumsum(m[:-1])))
     outside = ~((ts >= points[0]) & (ts <= points[-1]))
     if outside.any():
         s = ts[np.flatnonzero(outside)[0]]
