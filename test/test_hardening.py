@@ -181,7 +181,7 @@ def test_scalar_fixed_point_for_a_huge_interval_is_inf_not_an_overflow():
 
 def test_config_is_validated_by_what_it_does():
     # before: accepted, then almost every sample was refused
-    with pytest.raises(ConfigError, match='a step of mu = 1 s from x0, P0'):
+    with pytest.raises(ConfigError, match='a step of mu = (period = )?1 s from x0, P0'):
         EstimatorConfig(model_from_flat(A=[1.0], C=[-637.35], D=[511.97], Q=[1e308],
                                         R=[100.0], x0=[0.5], P0=[0.01]))
     with pytest.raises(ConfigError, match='initial state is absurd'):
@@ -214,7 +214,7 @@ def test_node_survives_a_huge_a_after_a_45_s_gap(estimator):
 
 
 @pytest.mark.parametrize('name, value, why', [
-    ('Q', [1e308], 'a step of mu = 1 s'),
+    ('Q', [1e308], 'a step of mu ='),
     ('Q', [1e20], 'state_limit'),
     ('x0', [1e308], 'absurd'),
 ])
@@ -237,7 +237,7 @@ def test_interval_checks_cost_does_not_grow_with_the_interval(monkeypatch):
         calls.append(args)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(irregular, 'resonate', counting)
+    monkeypatch.setattr(irregular.intervals, 'resonate', counting)
     # a drogue-like model with two unit eigenvalues on the circle (a rotation): 1 pair
     model = model_from_flat(A=[0.0, -1.0, 1.0, 0.0], C=[1.0, 0.0], Q=[1e-3, 0, 0, 1e-3],
                             R=[1.0], x0=[0.0, 0.0], P0=[1.0, 0.0, 0.0, 1.0])

@@ -152,3 +152,13 @@ def update_batch(x: NDArray[np.float64], P: NDArray[np.float64], z: NDArray[np.f
     for i in range(x.shape[0]):
         x_out[i], P_out[i], _, _, _ = update(x[i], P[i], z[i], H[i], R[i], d[i])
     return x_out, P_out
+
+
+def warm_up() -> None:
+    """Compile every kernel for float64 arrays, or load them from numba's on-disk cache."""
+    x, P, F, z = np.zeros(2), np.eye(2), np.eye(2), np.zeros(1)
+    H, R = np.ones((1, 2)), np.eye(1)
+    update_predict(x, P, z, H, R, z, F, P, x)
+    predict(x, P, F, P, x)
+    update(x, P, z, H, R, z)
+    update_batch(x[None], P[None], x[None], F[None], P[None], x[None])
