@@ -77,7 +77,8 @@ class FixedLagSmoother:
         n = result.x_corrected.shape[0]
         if self._n and n != self._n:
             raise FilterError(f'the step has {n} states, the window {self._n}')
-        F_ = as_matrix(F, 'F')
+        # C order, the layout the kernels are compiled for (e^{A mu} may come transposed)
+        F_ = np.ascontiguousarray(as_matrix(F, 'F'))
         if F_.shape != (n, n):
             raise FilterError(f'F must have shape {(n, n)} to match the step, got {F_.shape}')
         mu = float(result.mu)

@@ -33,7 +33,7 @@ Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
 
 __all__ = ['backward_pass', 'Smoothed', 'rts_smooth', 'smooth_at', 'smoother_gain',
-           'smoothed_step']
+           'smoothed_step', 'warm_up']
 
 
 class Smoothed(NamedTuple):
@@ -229,6 +229,8 @@ def _interpolate(fw: Forward, smooth: Smoothed, k: int, mu_k: float, mu1: float
     kf, u = fw.kf, fw.inputs[k]
     F1, Q1, B1 = kf.transition_matrices(mu1)
     F2, Q2, B2 = kf.transition_matrices(mu_k - mu1)
+    # C order, the layout the kernels are compiled for (e^{A mu} may come transposed)
+    F1, F2 = np.ascontiguousarray(F1), np.ascontiguousarray(F2)
     zero = np.zeros(kf.n)
     Bu1 = zero if u is None else B1 @ u
     Bu2 = zero if u is None else B2 @ u
@@ -285,3 +287,11 @@ def smooth_at(times: ArrayLike, A: ArrayLike, C: ArrayLike, mu: ArrayLike,
         else:
             xs[i], Ps[i] = _interpolate(fw, smooth, k, float(m[k]), mu1)
     return Smoothed(xs, Ps)
+
+
+def warm_up() -> None:
+    """Compile the backward kernels for float64 arrays, or load them from numba's cache."""
+    x, P = np.zeros(2), np.eye(2)
+    G = smoother_gain(P, P, P)
+    smoothed_step(x, P, x, P, G, x, P)
+    backward_pass(x[None], P[None], x[None], P[None], G[None], 0, 1, x[None], P[None])
