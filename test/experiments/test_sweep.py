@@ -7,11 +7,11 @@ import shutil
 
 import pytest
 
-from tskf_ros.experiments import sweep
+from tskf_ros.experiments import sweep, sweep_table, sweep_tasks
 from tskf_ros.experiments.bag_analysis import METRICS
 from tskf_ros.messages.estimator_interface import default_parameters
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 SAMPLE = REPO / 'bags' / 'owc_cai_td_1hz'
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'
 SETS = [('R', [[1.0], [100.0]]), ('transition', ['euler', 'exact'])]
@@ -53,27 +53,28 @@ def assert_same(a, b, rel=1e-12):
 
 
 def test_find_bags_takes_directories_globs_and_bags(bags):
-    found = sweep.find_bags([str(bags)])
+    found = sweep_tasks.find_bags([str(bags)])
     assert [Path(b).name for b in found] == ['a', 'b', 'damaged', 'drogue']
-    assert sweep.find_bags([str(bags / 'terminal' / '[ab]')]) == found[:2]
-    assert sweep.find_bags([str(bags / 'terminal' / 'a')]) == found[:1]
+    assert sweep_tasks.find_bags([str(bags / 'terminal' / '[ab]')]) == found[:2]
+    assert sweep_tasks.find_bags([str(bags / 'terminal' / 'a')]) == found[:1]
 
 
 def test_parse_setting_types_values_as_the_parameter():
     d = default_parameters()
-    assert sweep.parse_setting('R=1,10', d) == ('R', [[1.0], [10.0]])
-    assert sweep.parse_setting('R=1 0 0 1', d) == ('R', [[1.0, 0.0, 0.0, 1.0]])
-    assert sweep.parse_setting('transition=euler,exact', d) == (
+    assert sweep_tasks.parse_setting('R=1,10', d) == ('R', [[1.0], [10.0]])
+    assert sweep_tasks.parse_setting('R=1 0 0 1', d) == ('R', [[1.0, 0.0, 0.0, 1.0]])
+    assert sweep_tasks.parse_setting('transition=euler,exact', d) == (
         'transition', ['euler', 'exact'])
-    assert sweep.parse_setting('gate_patience=3', d) == ('gate_patience', [3])
-    assert sweep.parse_setting('nonpositive_is_gap=false', d) == ('nonpositive_is_gap', [False])
+    assert sweep_tasks.parse_setting('gate_patience=3', d) == ('gate_patience', [3])
+    assert sweep_tasks.parse_setting('nonpositive_is_gap=false', d) == (
+        'nonpositive_is_gap', [False])
     for bad in ('R', 'nothing=1', 'R=x', 'R=1,,2', 'gate=a', 'queue_depth=3'):
         with pytest.raises(ValueError):
-            sweep.parse_setting(bad, d)
+            sweep_tasks.parse_setting(bad, d)
 
 
 def test_two_workers_give_the_sequential_rows_and_a_damaged_bag_is_reported(bags, tmp_path):
-    found = sweep.find_bags([str(bags)])
+    found = sweep_tasks.find_bags([str(bags)])
     seq = sweep.sweep(found, out=tmp_path / 'seq.csv', params_file=PARAMS, sets=SETS,
                       workers=0)
     par = sweep.sweep(found, out=tmp_path / 'par.csv', params_file=PARAMS, sets=SETS,
@@ -108,7 +109,7 @@ def test_two_workers_give_the_sequential_rows_and_a_damaged_bag_is_reported(bags
 
 
 def test_resume_skips_finished_rows(bags, tmp_path):
-    found = sweep.find_bags([str(bags / 'terminal' / '[ab]')])
+    found = sweep_tasks.find_bags([str(bags / 'terminal' / '[ab]')])
     out = tmp_path / 'table.csv'
     full = sweep.sweep(found, out=out, params_file=PARAMS, sets=SETS, workers=0)
     assert len(full.evaluated) == 8 and not full.skipped
@@ -187,7 +188,7 @@ def test_a_second_sweep_on_the_same_table_is_refused(bags, tmp_path, capsys):
             '--workers', '0', '--out', str(out), '--no-progress']
     assert sweep.main(argv) == 0
     before = out.read_bytes()
-    running = sweep.Table(out, before.decode().splitlines()[0].split(','), resume=True)
+    running = sweep_table.Table(out, before.decode().splitlines()[0].split(','), resume=True)
     try:
         for extra in ([], ['--no-resume'], ['--set', 'R=5']):
             assert sweep.main(argv + extra) == 1
@@ -203,7 +204,7 @@ def test_a_second_sweep_on_the_same_table_is_refused(bags, tmp_path, capsys):
 def test_an_existing_scheduler_runs_the_same_sweep(bags, tmp_path):
     # --scheduler: the sweep submits to a cluster it did not start, and leaves it running
     from dask.distributed import LocalCluster
-    found = sweep.find_bags([str(bags / 'terminal' / 'a')])
+    found = sweep_tasks.find_bags([str(bags / 'terminal' / 'a')])
     seq = sweep.sweep(found, out=tmp_path / 'seq.csv', params_file=PARAMS, sets=SETS[:1],
                       workers=0)
     with LocalCluster(n_workers=1, threads_per_worker=1, host='127.0.0.1',

@@ -24,7 +24,7 @@ from tskf_ros.messages.estimator_interface import load_config
 from tskf_ros.owc.estimator_session import EstimatorSession
 from tskf_ros.owc.innovation_trace import Measurement, run_stream
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 A_TRUE, Q_TRUE, R_TRUE = -0.1, 0.04, 0.25
 PARAMS = """/**/timescale_estimator:
   ros__parameters:

@@ -17,7 +17,7 @@ import pytest
 from tskf_ros.experiments import drogue
 from tskf_ros.messages.estimator_interface import load_config
 
-PARAMS = Path(__file__).resolve().parent.parent / 'config' / 'drogue_estimator.yaml'
+PARAMS = Path(__file__).resolve().parents[2] / 'config' / 'drogue_estimator.yaml'
 
 
 def rms(e):

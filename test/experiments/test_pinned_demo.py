@@ -23,7 +23,7 @@ from tskf_ros.owc.vibrating_link import OwcLinkConfig, simulate_link
 
 import yaml
 
-CONFIG = Path(__file__).resolve().parent.parent / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 
 
 def yaml_fields(name, cls, **extra):

@@ -19,7 +19,8 @@ from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.owc.estimator_session import Estimate, EstimatorSession, Jump, Outcome
 
-CONFIG = Path(__file__).resolve().parent.parent / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
+T0 = 1_700_000_000 * NS
 TIMEOUT = 60.0      # s: only a bound on waiting for DDS; no assertion depends on timing
 finite = st.floats(allow_nan=False, allow_infinity=False)
 # a stamp the session passes on: [0, 2^31) s in integer nanoseconds
@@ -151,3 +152,23 @@ def test_the_node_publishes_only_what_somebody_subscribes_to(ros_context, execut
         client.destroy_node()
     assert published == {key: 3 if key == ('predicted', False) else 0 for key in node.pubs}
     assert [conversions.stamp_to_ns(m.header.stamp) for m in predicted] == [NS, 2 * NS, 3 * NS]
+
+
+def test_the_joint_state_mirror_names_each_state_and_its_standard_deviation():
+    config = load_config(CONFIG / 'reference_estimator.yaml')
+    x, P = np.array([0.5, -1.25]), np.array([[4.0, 0.3], [0.3, 0.25]])
+    out = Outcome('accepted', estimates=[Estimate('corrected', T0, x, P)])
+    msgs = dict(outcome_messages(out, config))
+    states = msgs[('corrected_states', False)]
+    assert list(states.name) == ['position', 'velocity']
+    np.testing.assert_allclose(states.position, [0.5, -1.25], rtol=1e-12)
+    np.testing.assert_allclose(states.velocity, [2.0, 0.5], rtol=1e-12)      # sqrt(diag P)
+    assert conversions.stamp_to_ns(states.header.stamp) == T0
+    twist = msgs[('corrected', False)]
+    assert states.header.frame_id == twist.header.frame_id == ''
+
+
+def test_load_config_has_the_new_defaults():
+    cfg = load_config()
+    assert cfg.session.gate == 10.0 and cfg.session.state_limit == 1e9
+    assert cfg.session.measurement_range == ()

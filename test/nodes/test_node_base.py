@@ -1,10 +1,10 @@
 """
-The nodes on each executor (`--executor single|events`): timers, parameter services, stop.
+What the nodes share: the executors (`--executor single|events`), --help, parameter files.
 
 The other node tests run on both executors through the `executor_kind` fixture (conftest):
-the clock-jump reset (use_sim_time and /clock) in test_estimator_node and
-test_alignment_node, ~/reset and ~/enable in test_ros_citizen.  Here: what only a running
-process or a service client shows.
+the clock-jump reset (use_sim_time and /clock) in test_timescale_estimator and
+test_alignment, ~/reset and ~/enable in test_timescale_estimator_parameters and
+test_alignment.  Here: what only a running process or a service client shows.
 """
 
 import os
@@ -15,18 +15,19 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
+from node_helpers import run_node, stop
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile
-from test_pipeline_nodes import stop
 
 from tskf_ros.nodes import node_base
 from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
+CONFIG = REPO / 'config'
 TIMEOUT = 60.0      # s: only a bound on waiting for DDS or a process; no timed assertion
 
 
@@ -130,3 +131,30 @@ def test_the_default_executor_and_the_environment(monkeypatch):
     monkeypatch.setenv(node_base.EXECUTOR_VARIABLE, 'single')
     assert node_base.executor_kind() == 'single'
     assert node_base.executor_kind('events') == 'events'     # the flag wins
+
+
+@pytest.mark.parametrize('module', ['timescale_estimator', 'power_meter_simulator'])
+def test_help_exits_0_without_ros(module):
+    code, out = run_node(module, '--help')
+    assert code == 0 and 'usage' in out
+
+
+def test_a_parameter_file_that_sets_nothing_is_said_loudly(tmp_path):
+    from tskf_ros.nodes.node_base import unused_parameter_file
+    wrong = tmp_path / 'wrong.yaml'
+    wrong.write_text('some_other_node:\n  ros__parameters:\n    period: 2.0\n')
+    for path, expect_warning in ((wrong, True), (CONFIG / 'owc_estimator.yaml', False)):
+        argv = ['--ros-args', '--params-file', str(path)]
+        context = rclpy.context.Context()
+        rclpy.init(context=context, args=argv)
+        try:
+            node = TimescaleEstimator(context=context)
+            try:
+                warning = unused_parameter_file(node, argv)
+                assert bool(warning) == expect_warning, warning
+                if expect_warning:
+                    assert 'set none of the parameters of /timescale_estimator' in warning
+            finally:
+                node.destroy_node()
+        finally:
+            context.try_shutdown()

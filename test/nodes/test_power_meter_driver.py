@@ -36,7 +36,7 @@ from tskf_ros.tools.demo_collector import wait_for
 from visa_faults import bench, FaultyOpener, SIM_YAML
 import yaml
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 TIMEOUT = 60.0
 
 

@@ -7,6 +7,7 @@ import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistWithCovarianceStamped
+from node_helpers import call
 import numpy as np
 import pytest
 import rclpy
@@ -15,6 +16,7 @@ from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
 
 from tskf_ros import led
 from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession, NS
@@ -28,12 +30,13 @@ from tskf_ros.tools.demo_collector import wait_for
 
 import yaml
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / 'config'
 # s: only a bound on waiting for DDS (generous: a loaded machine); no assertion depends on
 # timing
 TIMEOUT = 60.0
 DT = 0.05
+T0 = 1_700_000_000 * NS
 CONVERGED = 40      # samples (2 s) after which |phi| must stay in the tracking zone
 
 
@@ -350,3 +353,20 @@ def test_bad_parameters_exit_1():
                            '-p', 'gain:=0.001'], cwd=REPO, env=dict(os.environ),
                           capture_output=True, text=True, timeout=TIMEOUT)
     assert proc.returncode == 1 and 'observability' in proc.stderr
+
+
+def test_enable_service_pauses_and_resumes_the_alignment_commands(loop, ros_context):
+    executor, client, nodes = loop
+    node = Alignment(context=ros_context)
+    nodes.append(node)
+    executor.add_node(node)
+    enable = client.create_client(SetBool, '/alignment/enable')
+    assert call(executor, enable, SetBool.Request(data=False)).message == 'paused'
+    node._on_intensity(conversions.intensity_to_msg(T0, 2.0))
+    assert node.paused == 1 and node.session.stats.received == 0
+    assert call(executor, enable, SetBool.Request(data=True)).message == 'enabled'
+    node._on_intensity(conversions.intensity_to_msg(T0 + NS, 2.0))
+    assert node.session.stats.commands == 1
+    reset = client.create_client(Trigger, '/alignment/reset')
+    assert call(executor, reset, Trigger.Request()).success
+    assert node.session.stats.resets['service'] == 1

@@ -22,7 +22,7 @@ from tskf_ros.owc.estimator_session import NS
 
 import yaml
 
-CONFIG = Path(__file__).resolve().parent.parent / 'config'
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
 OUTPUTS = {'predicted': TwistWithCovarianceStamped, 'corrected': TwistWithCovarianceStamped,
            'mu': TimeReference, 'revised/predicted': TwistWithCovarianceStamped,
            'revised/corrected': TwistWithCovarianceStamped, 'revised/mu': TimeReference}
