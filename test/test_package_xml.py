@@ -34,6 +34,7 @@ KEYS = {
     'pyvisa': 'python3-pyvisa-pip', 'pyvisa_sim': 'python3-pyvisa-sim-pip',
     'dask': 'python3-dask-pip', 'distributed': 'python3-distributed-pip', 'tqdm': 'python3-tqdm',
     'numba': 'python3-numba', 'mypy': 'python3-mypy', 'filterpy': 'python3-filterpy-pip',
+    'pykalman': 'python3-pykalman-pip',
     'foxglove': 'python3-foxglove-sdk-pip', 'websockets': 'python3-websockets',
 }
 RUN = ('exec_depend', 'depend')
