@@ -18,7 +18,7 @@ from recording import stop, wait_until_recording
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Illuminance
 
-from tskf_ros.bag import offline_replay, reindex, writer as writer_module
+from tskf_ros.bag import offline_replay, reindex, mcap_file
 from tskf_ros.bag.reader import BagReader, EXIT_DAMAGED
 from tskf_ros.bag.writer import BagWriter, DiskFullError
 from tskf_ros.messages import conversions
@@ -62,14 +62,14 @@ def values(bag):
 
 def install_quota(monkeypatch, limit):
     """Make the MCAP file writes fail with ENOSPC beyond `limit` bytes (a disk that fills)."""
-    real = writer_module._File._write_some
+    real = mcap_file.OutputFile.write_some
 
     def write_some(self, view):
         room = limit - self.pos
         if room <= 0:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         return real(self, view[:room])
-    monkeypatch.setattr(writer_module._File, '_write_some', write_some)
+    monkeypatch.setattr(mcap_file.OutputFile, 'write_some', write_some)
 
 
 # -- full disk ----------------------------------------------------------------------------
@@ -128,13 +128,13 @@ def test_record_command_says_the_disk_filled_and_keeps_the_bag(tmp_path):
     bag = tmp_path / 'rec'
     code = (
         'import errno, os, sys\n'
-        'from tskf_ros.bag import writer\n'
-        'real = writer._File._write_some\n'
+        'from tskf_ros.bag import mcap_file\n'
+        'real = mcap_file.OutputFile.write_some\n'
         'def write_some(self, view):\n'
         '    if self.pos + len(view) > 20000:\n'
         '        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))\n'
         '    return real(self, view)\n'
-        'writer._File._write_some = write_some\n'
+        'mcap_file.OutputFile.write_some = write_some\n'
         'from tskf_ros.bag.recorder import main\n'
         f"sys.exit(main(['record', '-o', {str(bag)!r}, '/full_power', "
         "'--flush-interval', '0.05']))\n")

@@ -71,7 +71,7 @@ def _store_class(msg: Any) -> tuple:
 
 
 def _convert(value: Any) -> Any:
-    if hasattr(value, '_fields_and_field_types'):
+    if hasattr(value, 'get_fields_and_field_types'):
         return to_store(value)
     if isinstance(value, array.array):
         return np.array(value, dtype=_NUMPY[value.typecode])
@@ -92,7 +92,7 @@ def to_store(msg: Any) -> Any:
 
 def serialize(msg: Any) -> bytes:
     """Return the canonical CDR bytes of an rclpy message (rosbags' serializer)."""
-    return bytes(typestore().serialize_cdr(to_store(msg), _store_class(msg)[0].__msgtype__))
+    return bytes(typestore().serialize_cdr(to_store(msg), type_name(msg)))
 
 
 class _Layout:

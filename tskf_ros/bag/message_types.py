@@ -7,8 +7,10 @@ import re
 from typing import Any
 
 from rclpy.duration import Duration
+from rclpy.exceptions import NoTypeSupportImportedException
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
                        ReliabilityPolicy)
+from rclpy.type_support import check_is_valid_msg_type
 from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
                                 QosTime)
 from rosbags.typesys import get_typestore, Stores
@@ -75,8 +77,10 @@ def message_class(msgtype: str) -> Any:
         cls = getattr(module, name)
     except (ImportError, AttributeError):
         raise BagTypeError(f'message type {msgtype} is not installed here') from None
-    if not hasattr(cls, '_TYPE_SUPPORT') and not hasattr(type(cls), '_TYPE_SUPPORT'):
-        raise BagTypeError(f'{msgtype} is not a ROS message class')
+    try:
+        check_is_valid_msg_type(cls)
+    except (AttributeError, RuntimeError, NoTypeSupportImportedException):
+        raise BagTypeError(f'{msgtype} is not a ROS message class') from None
     return cls
 
 

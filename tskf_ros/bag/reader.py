@@ -139,25 +139,6 @@ def parse_qos(value: object) -> list:
         return []
 
 
-class _Records(StreamReader):
-    """
-    The mcap package's StreamReader, reading MessageIndex records as bytes, unparsed.
-
-    A sequential read has no use for the indexes, and parsing their entries one by one
-    costs a fifth of reading a bag; their bytes are still read (and in the data-section
-    CRC), and the record is yielded as SKIPPED so that the caller knows where the next one
-    starts.  Overrides StreamReader._read_record (mcap pinned in requirements.txt).
-    """
-
-    SKIPPED = b'MessageIndex'
-
-    def _read_record(self, opcode: int, length: int) -> object:
-        if opcode == Opcode.MESSAGE_INDEX:
-            self._stream.read(length)
-            return self.SKIPPED
-        return super()._read_record(opcode, length)
-
-
 class BagReader:
     """
     A rosbag2 bag opened for reading: `topics`, `storage`, then `messages()` once or more.
@@ -173,7 +154,6 @@ class BagReader:
         self.metadata: dict = {}
         self.message_count: Optional[int] = None
         self.start_ns: Optional[int] = None
-        self.duration_ns: Optional[int] = None
         if not self.path.exists():
             raise BagNotFoundError(f'{self.path}: no such bag (file or directory)')
         if self.path.is_file():
@@ -213,7 +193,6 @@ class BagReader:
             self.message_count = _int_or_none(info.get('message_count'))
             self.start_ns = _int_or_none(
                 (info.get('starting_time') or {}).get('nanoseconds_since_epoch'))
-            self.duration_ns = _int_or_none((info.get('duration') or {}).get('nanoseconds'))
             for entry in info.get('topics_with_message_count') or []:
                 md = entry.get('topic_metadata', {})
                 name = md.get('name')
@@ -316,8 +295,8 @@ class BagReader:
             offset = len(MCAP_MAGIC)
             try:
                 # a record longer than the file is truncation, not a reason to allocate it
-                for record in _Records(f, emit_chunks=True, validate_crcs=True,
-                                       record_size_limit=size).records:
+                for record in StreamReader(f, emit_chunks=True, validate_crcs=True,
+                                           record_size_limit=size).records:
                     if isinstance(record, Chunk):
                         for msg in self._chunk(record, schemas, channels, wanted):
                             count += 1

@@ -29,8 +29,9 @@ import re
 import sys
 from typing import Optional
 
+from tskf_ros.bag.bag_metadata import write_metadata
+from tskf_ros.bag.mcap_file import scan_mcap, seal_mcap
 from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED, MCAP_MAGIC
-from tskf_ros.bag.writer import scan_mcap, seal_mcap, write_metadata
 
 import yaml
 
@@ -111,7 +112,7 @@ def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optio
         note = (f'sealed after {kept} bytes' + (f' (cut {size - kept} bytes of a record cut '
                                                 'short)' if cut else ''))
     stats = scan_mcap(mcap)
-    damage = stats[4]
+    damage = stats.damage
     custom['tskf_ros.reindexed'] = note
     if damage is not None:
         custom['tskf_ros.reindex_damage'] = str(damage)
@@ -125,7 +126,7 @@ def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optio
                 partial.rmdir()     # only if empty: nothing else is ever deleted
             except OSError:
                 pass
-    return target, sum(stats[1].values()), damage
+    return target, sum(stats.counts.values()), damage
 
 
 def main(argv: Optional[list] = None) -> int:

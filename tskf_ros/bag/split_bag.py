@@ -30,9 +30,9 @@ from typing import Optional, Sequence, Union
 
 from rosbags.interfaces import Qos
 
+from tskf_ros.bag.bag_metadata import METADATA_MARKER, write_yaml
 from tskf_ros.bag.reader import BagError
-from tskf_ros.bag.writer import (BagWriteError, BagWriter, check_replaceable, CHUNK_SIZE,
-                                 METADATA_MARKER)
+from tskf_ros.bag.writer import BagWriteError, BagWriter, check_replaceable, CHUNK_SIZE
 
 import yaml
 
@@ -72,16 +72,6 @@ def merge_metadata(infos: Sequence[dict], custom_data: Optional[dict] = None) ->
     data[METADATA_MARKER[0]] = METADATA_MARKER[1]
     info['custom_data'] = data
     return info
-
-
-def write_yaml(path: Path, doc: dict) -> None:
-    """Write a YAML document durably: a temporary file, fsync, rename."""
-    tmp = path.parent / f'.{path.name}.tmp'
-    with tmp.open('w') as f:
-        yaml.safe_dump(doc, f, default_flow_style=False, sort_keys=False)
-        f.flush()
-        os.fsync(f.fileno())
-    tmp.replace(path)
 
 
 class SplitBagWriter:
