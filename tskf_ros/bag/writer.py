@@ -116,7 +116,6 @@ class BagWriter:
         self._lo: Optional[int] = None
         self._hi: Optional[int] = None
         self.error: Optional[BagWriteError] = None
-        self.dropped = 0
 
     def __enter__(self) -> 'BagWriter':
         """Open the temporary bag."""
@@ -240,20 +239,27 @@ class BagWriter:
 
     def write(self, topic: str, log_time_ns: int, data: bytes) -> None:
         """Write one serialized message with its log time (raises BagWriteError if failed)."""
-        count = self.counts[topic]
+        self.write_many(log_time_ns, ((topic, data),))
+
+    def write_many(self, log_time_ns: int, messages: Sequence[tuple[str, bytes]]) -> None:
+        """Write serialized messages (topic, bytes), all with one log time, in order."""
         t = int(log_time_ns)
+        counts = self.counts
         if self._writer is not None:
-            self._writer.write(self._conns[topic], t, data)
-            self.counts[topic] = count + 1
+            for topic, data in messages:
+                self._writer.write(self._conns[topic], t, data)
+                counts[topic] += 1
             return
         if self.error is not None:
-            self.dropped += 1
             raise self.error
-        try:         # the hot path of replay_offline: _guard inlined
-            self._mcap.add_message(self._conns[topic], t, data, t, count & 0xFFFFFFFF)
+        add, conns = self._mcap.add_message, self._conns
+        try:         # the hot path of replay_offline
+            for topic, data in messages:
+                count = counts[topic]
+                add(conns[topic], t, data, t, count & 0xFFFFFFFF)
+                counts[topic] = count + 1
         except OSError as exc:
             raise self._failed(exc) from None
-        self.counts[topic] = count + 1
         if self._lo is None:
             self._lo = self._hi = t
         elif t < self._lo:

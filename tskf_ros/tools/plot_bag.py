@@ -36,8 +36,8 @@ import numpy as np
 from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.message_types import BagTypeError, message_class
-from tskf_ros.bag.offline_replay import replay
 from tskf_ros.bag.reader import BagError, BagReader, error_exit, exit_status
+from tskf_ros.bag.replay.loop import replay
 from tskf_ros.core.units import NS
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages import conversions
