@@ -16,10 +16,12 @@ from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, Q
 from rosbags.typesys import get_typestore, Stores
 from rosbags.typesys.store import Typestore
 
-__all__ = ['BagTypeError', 'interface_package', 'message_class', 'qos_from_rclpy',
-           'qos_to_rclpy', 'typestore']
+__all__ = ['BagTypeError', 'DESERIALIZE_ERRORS', 'interface_package', 'message_class',
+           'qos_from_rclpy', 'qos_to_rclpy', 'typestore']
 
 _STORE = None
+# exceptions rclpy's deserialize_message raises on bytes that are not the type
+DESERIALIZE_ERRORS = (RuntimeError, ValueError, TypeError)
 # package/msg/Name: the ROS 2 interface name grammar (rosidl_adapter, REP 144)
 TYPE_NAME = re.compile(r'[a-z][a-z0-9_]*/msg/[A-Z][A-Za-z0-9]*')
 

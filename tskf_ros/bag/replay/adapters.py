@@ -3,10 +3,10 @@
 from typing import Any, Callable, Optional, Union
 
 from rclpy.qos import QoSProfile
-from rclpy.serialization import deserialize_message
+from rosbags.serde import SerdeError
 
 from tskf_ros.bag.cdr import EstimateEncoder, fixed_decoder, serialize
-from tskf_ros.bag.message_types import message_class
+from tskf_ros.bag.message_types import typestore
 from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.messages import alignment_interface as aligner
@@ -16,11 +16,11 @@ from tskf_ros.messages.estimator_interface import (bag_outcome_messages, BAG_OUT
                                                    INPUT_TYPES, NodeConfig, output_qos)
 from tskf_ros.owc.estimator_session import EstimatorSession, Outcome
 
-__all__ = ['DESERIALIZE_ERRORS', 'ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimator',
-           'sample_reader', 'Sample']
+__all__ = ['ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimator', 'sample_reader', 'Sample',
+           'UNDECODABLE']
 
-# exceptions rclpy's deserializer raises on bytes that are not the type
-DESERIALIZE_ERRORS = (RuntimeError, ValueError, TypeError)
+# what deserializing a message that is not of its type raises (rosbags' deserializer)
+UNDECODABLE = (SerdeError,)
 # (kind, revised) -> bag topic of the estimates and of mu (TwistWithCovarianceStamped,
 # TimeReference), and of the JointState mirror of each estimate topic
 ESTIMATE_TOPICS = BAG_OUTPUT_TOPICS
@@ -33,20 +33,20 @@ AnyOutcome = Union[Outcome, AlignOutcome]
 AnyConfig = Union[NodeConfig, aligner.NodeConfig]
 
 
-def sample_reader(msgtype: str, cls: type,
+def sample_reader(msgtype: str,
                   extract: Callable[[Any, int], Sample]) -> Callable[[bytes, int], Sample]:
     """
     Return read(cdr bytes, log ns) -> (stamp ns, value, variance) for a type of INPUT_TYPES.
 
-    What extract(deserialize_message(data, cls), log_ns) returns, read from the bytes by
-    cdr.fixed_decoder; bytes it does not take (big-endian, too short) go through rclpy,
-    whose values or error stand.
+    What extract(rosbags' deserialize_cdr(data), log_ns) returns (or the SerdeError it
+    raises), read from the bytes by cdr.fixed_decoder, or by rosbags where that leaves it.
     """
     kind = INPUT_TYPES[msgtype]
     decode = fixed_decoder(msgtype, [kind.value] + ([kind.variance] if kind.variance else []))
+    deserialize = typestore().deserialize_cdr
 
     def slow(data: bytes, log_ns: int) -> Sample:
-        return extract(deserialize_message(data, cls), log_ns)
+        return extract(deserialize(data, msgtype), log_ns)
     if not kind.stamped:
         def read_plain(data: bytes, log_ns: int) -> Sample:
             got = decode(data)
@@ -72,10 +72,9 @@ class OfflineEstimator:
     def __init__(self, config: AnyConfig, msgtype: str) -> None:
         self.config = config
         self.session = self.session_class(config.session)
-        self.cls = message_class(msgtype)
-        self.input_cls = message_class(INPUT_TYPE)
         self.extract = extractor(msgtype)
-        self.read_sample = sample_reader(msgtype, self.cls, self.extract)
+        self.read_sample = sample_reader(msgtype, self.extract)
+        self._deserialize = typestore().deserialize_cdr
         self.period_ns = int(round(config.diagnostics_period * NS))
         self.next_diag: Optional[int] = None
         self._encoder: Optional[EstimateEncoder] = None
@@ -109,8 +108,8 @@ class OfflineEstimator:
         return sample, self.session.add(*sample, now_ns=log_ns)
 
     def process_input(self, data: bytes, log_ns: int) -> tuple[tuple, Outcome]:
-        """Deserialize one input u and run it; return ((stamp, u), outcome)."""
-        sample = input_from_msg(deserialize_message(data, self.input_cls), self.session)
+        """Deserialize one input u (rosbags) and run it; return ((stamp, u), outcome)."""
+        sample = input_from_msg(self._deserialize(data, INPUT_TYPE), self.session)
         return sample, self.session.add_input(*sample)
 
     def messages(self, out: AnyOutcome) -> list[tuple[str, Any]]:

@@ -11,8 +11,8 @@ from numpy.typing import NDArray
 
 from tskf_ros.bag.message_types import qos_from_rclpy, typestore
 from tskf_ros.bag.reader import BagReader, Damage
-from tskf_ros.bag.replay.adapters import (AnyConfig, DESERIALIZE_ERRORS, OfflineAligner,
-                                          OfflineEstimator)
+from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
+                                          UNDECODABLE)
 from tskf_ros.bag.replay.sinks import ArraySink, BagSink, Collector, ReplayResult, Sink
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic, InputError
 from tskf_ros.bag.writer import BagExistsError, BagWriter
@@ -193,7 +193,7 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
             if name == topic:
                 try:
                     sample, out = process(raw.data, log_ns)
-                except DESERIALIZE_ERRORS as exc:
+                except UNDECODABLE as exc:
                     return _undecodable(reader, read, name, result.msgtype, exc)
                 samples += 1
                 statuses[out.status] += 1
@@ -201,7 +201,7 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
             elif name == input_topic:
                 try:
                     sample, out = process_input(raw.data, log_ns)
-                except DESERIALIZE_ERRORS as exc:
+                except UNDECODABLE as exc:
                     return _undecodable(reader, read, name, INPUT_TYPE, exc)
                 result.inputs += 1
                 result.input_statuses[out.status] += 1
