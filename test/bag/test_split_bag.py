@@ -8,7 +8,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Illuminance
 
-from tskf_ros.bag import reindex, mcap_file
+from tskf_ros.bag import mcap_file, reindex
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.split_bag import SplitBagWriter
 from tskf_ros.bag.writer import BagExistsError, DiskFullError
@@ -16,8 +16,8 @@ from tskf_ros.messages import conversions
 
 import yaml
 
-NS = 1_000_000_000
-T0 = 1_700_000_000 * NS
+from .helpers import NS, T0
+
 TOPIC = '/received_power'
 
 
