@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 from rclpy.serialization import serialize_message
+from sensor_msgs.msg import FluidPressure, Range, Temperature
+from std_msgs.msg import Float64, String
 
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.messages import conversions
@@ -34,6 +36,45 @@ def make_bag(path, times_s, *, start_ns=T0, chunk_size=None):
             stamp = start_ns + int(round(t * NS))
             w.write('/received_power', stamp, serialize_message(
                 conversions.power_to_msg(stamp, 300.0 + k % 7, 4.0)))
+    return path
+
+
+def scalar_power(k):
+    """Return a plausible received power in mW, exact in float32 (Range is float32)."""
+    return float(np.float32(300.0 + 20.0 * np.sin(k / 7.0)))
+
+
+def scalar_bag(path, n=60, msgtype='sensor_msgs/msg/Illuminance', topic='/received_power',
+               filler=0, storage='mcap', compress=False):
+    """Write n samples at 1 Hz (a gap at 20-22) and `filler` bytes of String per sample."""
+    rng = np.random.default_rng(0)
+    with BagWriter(path, storage=storage, compress=compress) as w:
+        w.add_topic(topic, msgtype)
+        if filler:
+            w.add_topic('/filler', 'std_msgs/msg/String')
+        for k in range(n):
+            if 20 <= k < 23:
+                continue
+            stamp = T0 + k * NS
+            if msgtype == 'sensor_msgs/msg/Illuminance':
+                msg = conversions.power_to_msg(stamp, scalar_power(k), 100.0)
+            elif msgtype == 'sensor_msgs/msg/Temperature':
+                msg = Temperature(temperature=scalar_power(k), variance=1.0)
+            elif msgtype == 'sensor_msgs/msg/FluidPressure':
+                msg = FluidPressure(fluid_pressure=scalar_power(k), variance=1.0)
+            elif msgtype == 'sensor_msgs/msg/Range':
+                msg = Range(range=float(scalar_power(k)))
+            elif msgtype == 'std_msgs/msg/Float64':
+                msg = Float64(data=scalar_power(k))
+            else:
+                msg = String(data='not a number')
+            if hasattr(msg, 'header'):
+                msg.header.stamp = conversions.ns_to_stamp(stamp)
+            w.write(topic, stamp, serialize_message(msg))
+            if filler:
+                text = rng.integers(0, 16, filler).astype(np.uint8)
+                w.write('/filler', stamp, serialize_message(
+                    String(data=''.join('0123456789abcdef'[i] for i in text))))
     return path
 
 

@@ -1,6 +1,6 @@
-"""Bad bags and bags from elsewhere: one-line errors, damage reported, assumptions said."""
+"""replay_offline's command line: one-line errors, exit statuses, safe outputs, --npz."""
 
-from pathlib import Path
+import shutil
 import subprocess
 import sys
 
@@ -8,59 +8,19 @@ import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader
-from sensor_msgs.msg import FluidPressure, Range, Temperature
-from std_msgs.msg import Float64, String
 
-from tskf_ros.bag.offline_replay import main, replay
+from tskf_ros.bag.message_types import message_class
 from tskf_ros.bag.reader import BagReader, EXIT_DAMAGED
+from tskf_ros.bag.replay import cli
+from tskf_ros.bag.replay.cli import main
+from tskf_ros.bag.replay.loop import replay_arrays
 from tskf_ros.bag.writer import BagWriter
-from tskf_ros.messages import conversions
 
 import yaml
 
-NS = 1_000_000_000
-T0 = 1_700_000_000 * NS
-REPO = Path(__file__).resolve().parent.parent
-SAMPLE = REPO / 'bags' / 'owc_cai_td_1hz'
-
-
-def power(k):
-    """Return a plausible received power in mW, exact in float32 (Range is float32)."""
-    return float(np.float32(300.0 + 20.0 * np.sin(k / 7.0)))
-
-
-def make_bag(path, n=60, msgtype='sensor_msgs/msg/Illuminance', topic='/received_power',
-             filler=0, storage='mcap', compress=False):
-    """Write n samples at 1 Hz (a gap at 20-22) and `filler` bytes of String per sample."""
-    rng = np.random.default_rng(0)
-    with BagWriter(path, storage=storage, compress=compress) as w:
-        w.add_topic(topic, msgtype)
-        if filler:
-            w.add_topic('/filler', 'std_msgs/msg/String')
-        for k in range(n):
-            if 20 <= k < 23:
-                continue
-            stamp = T0 + k * NS
-            if msgtype == 'sensor_msgs/msg/Illuminance':
-                msg = conversions.power_to_msg(stamp, power(k), 100.0)
-            elif msgtype == 'sensor_msgs/msg/Temperature':
-                msg = Temperature(temperature=power(k), variance=1.0)
-            elif msgtype == 'sensor_msgs/msg/FluidPressure':
-                msg = FluidPressure(fluid_pressure=power(k), variance=1.0)
-            elif msgtype == 'sensor_msgs/msg/Range':
-                msg = Range(range=float(power(k)))
-            elif msgtype == 'std_msgs/msg/Float64':
-                msg = Float64(data=power(k))
-            else:
-                msg = String(data='not a number')
-            if hasattr(msg, 'header'):
-                msg.header.stamp = conversions.ns_to_stamp(stamp)
-            w.write(topic, stamp, serialize_message(msg))
-            if filler:
-                text = rng.integers(0, 16, filler).astype(np.uint8)
-                w.write('/filler', stamp, serialize_message(
-                    String(data=''.join('0123456789abcdef'[i] for i in text))))
-    return path
+from ..helpers import (BAGS, chunk_offsets, make_bag, mcap_file, NS, one_line, scalar_bag, T0,
+                       TIMEOUT)
+from ..test_reader import flip_in_third_chunk
 
 
 def run(capsys, *args):
@@ -87,7 +47,7 @@ def test_nonexistent_bag(capsys, tmp_path):
 
 
 def test_missing_metadata(capsys, tmp_path):
-    bag = make_bag(tmp_path / 'bag')
+    bag = scalar_bag(tmp_path / 'bag')
     (bag / 'metadata.yaml').unlink()
     code, _, err = run(capsys, bag, tmp_path / 'out')
     assert code == 1
@@ -97,7 +57,7 @@ def test_missing_metadata(capsys, tmp_path):
 
 
 def test_empty_file_and_empty_bag(capsys, tmp_path):
-    bag = make_bag(tmp_path / 'bag')
+    bag = scalar_bag(tmp_path / 'bag')
     (bag / 'bag.mcap').write_bytes(b'')
     code, _, err = run(capsys, bag, tmp_path / 'out')
     assert code == 1
@@ -111,7 +71,7 @@ def test_empty_file_and_empty_bag(capsys, tmp_path):
 
 
 def test_unknown_type(capsys, tmp_path):
-    bag = make_bag(tmp_path / 'bag', msgtype='std_msgs/msg/String')
+    bag = scalar_bag(tmp_path / 'bag', msgtype='std_msgs/msg/String')
     code, _, err = run(capsys, bag, tmp_path / 'out')
     assert code == 1
     one_line_error(err, 'topic /received_power has type std_msgs/msg/String')
@@ -123,23 +83,9 @@ def test_unknown_type(capsys, tmp_path):
     one_line_error(err, 'acme_msgs/msg/Power')
 
 
-def chunk_offsets(mcap):
-    """Return the byte offsets of the chunk records of an MCAP file (opcode 0x06)."""
-    data = mcap.read_bytes()
-    pos, out = 8, []
-    while pos < len(data):
-        op, length = data[pos], int.from_bytes(data[pos + 1:pos + 9], 'little')
-        if op == 0x06:
-            out.append((pos, length))
-        if op == 0x0F:
-            break
-        pos += 9 + length
-    return out
-
-
 @pytest.mark.parametrize('damage', ['truncated', 'corrupt'])
 def test_damaged_chunk_processes_what_came_before(capsys, tmp_path, damage):
-    bag = make_bag(tmp_path / 'bag', n=300, filler=12_000, compress=True)
+    bag = scalar_bag(tmp_path / 'bag', n=300, filler=12_000, compress=True)
     mcap = bag / 'bag.mcap'
     chunks = chunk_offsets(mcap)
     assert len(chunks) >= 3
@@ -168,20 +114,8 @@ def test_damaged_chunk_processes_what_came_before(capsys, tmp_path, damage):
     assert words in meta['rosbag2_bagfile_information']['custom_data']['tskf_ros.input_damage']
 
 
-def test_output_is_never_half_written(tmp_path, monkeypatch):
-    bag = make_bag(tmp_path / 'bag')
-
-    def explode(*args, **kwargs):
-        raise KeyboardInterrupt
-    from tskf_ros.bag import offline_replay
-    monkeypatch.setattr(offline_replay.OfflineEstimator, 'process', explode)
-    with pytest.raises(KeyboardInterrupt):
-        replay(bag, tmp_path / 'out')
-    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag']
-
-
 def test_refuses_to_overwrite(capsys, tmp_path):
-    bag = make_bag(tmp_path / 'bag')
+    bag = scalar_bag(tmp_path / 'bag')
     (tmp_path / 'out').mkdir()
     code, _, err = run(capsys, bag, tmp_path / 'out')
     assert code == 1
@@ -189,40 +123,8 @@ def test_refuses_to_overwrite(capsys, tmp_path):
     assert run(capsys, bag, tmp_path / 'out', '--overwrite')[0] == 0
 
 
-@pytest.mark.parametrize('msgtype,field', [
-    ('sensor_msgs/msg/Temperature', 'temperature'),
-    ('sensor_msgs/msg/FluidPressure', 'fluid_pressure'),
-    ('sensor_msgs/msg/Range', 'range'),
-])
-def test_other_stamped_scalars_with_topic_flag(capsys, tmp_path, msgtype, field):
-    bag = make_bag(tmp_path / 'bag', msgtype=msgtype, topic='/meter/value')
-    code, out, err = run(capsys, bag, tmp_path / 'out', '--topic', '/meter/value')
-    assert code == 0, err
-    assert f'{msgtype}.{field}' in out
-    if field == 'range':
-        assert 'no variance field' in out
-    reference = replay(make_bag(tmp_path / 'ref'), None, diagnostics=False)
-    other = replay(bag, None, topic='/meter/value', diagnostics=False)
-    est = [(t, m) for t, _, m in other.outputs if t.startswith('/estimate')]
-    ref = [(t, m) for t, _, m in reference.outputs if t.startswith('/estimate')]
-    assert [t for t, _ in est] == [t for t, _ in ref]
-    assert all(a == b for (_, a), (_, b) in zip(est, ref))
-
-
-def test_float64_uses_log_time_and_says_so_loudly(capsys, tmp_path):
-    bag = make_bag(tmp_path / 'bag', msgtype='std_msgs/msg/Float64', topic='/power')
-    code, out, err = run(capsys, bag, tmp_path / 'out')       # the only scalar topic
-    assert code == 0, err
-    assert 'WARNING' in err and 'log (receive) time' in err
-    assert 'using /power' in out
-    reference = replay(make_bag(tmp_path / 'ref'), None, diagnostics=False)
-    other = replay(bag, None, diagnostics=False)
-    assert [m.header.stamp for t, _, m in other.outputs if t == '/estimate/corrected'] == \
-        [m.header.stamp for t, _, m in reference.outputs if t == '/estimate/corrected']
-
-
 def test_sqlite3_storage(capsys, tmp_path):
-    bag = make_bag(tmp_path / 'bag', storage='sqlite3')
+    bag = scalar_bag(tmp_path / 'bag', storage='sqlite3')
     assert (bag / 'bag.db3').is_file()
     code, out, err = run(capsys, bag, tmp_path / 'out')
     assert code == 0, err
@@ -232,7 +134,110 @@ def test_sqlite3_storage(capsys, tmp_path):
 
 
 def test_command_line_error_is_one_line_without_traceback(tmp_path):
-    proc = subprocess.run([sys.executable, '-m', 'tskf_ros.bag.offline_replay',
-                           str(tmp_path / 'x')], capture_output=True, text=True, timeout=60)
+    proc = subprocess.run([sys.executable, '-m', 'tskf_ros.bag.replay.cli',
+                           str(tmp_path / 'x')], capture_output=True, text=True,
+                          timeout=TIMEOUT)
     assert proc.returncode == 1
     one_line_error(proc.stderr, 'no such bag')
+
+
+def test_replay_offline_to_the_current_directory_leaves_nothing(tmp_path, capsys,
+                                                                monkeypatch):
+    bag = make_bag(tmp_path / 'bag', range(5))
+    work = tmp_path / 'work'
+    work.mkdir()
+    monkeypatch.chdir(work)
+    assert main([str(bag), '.']) == 1
+    one_line(capsys.readouterr().err, 'replay_offline: error: .: ', 'not a usable bag name')
+    assert list(work.iterdir()) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag', 'work']
+
+
+def test_replay_offline_refuses_to_write_into_its_input(tmp_path, capsys):
+    bag = make_bag(tmp_path / 'bag', range(5))
+    assert main([str(bag), str(bag), '--overwrite']) == 1
+    one_line(capsys.readouterr().err, 'replay_offline: error: ', 'the input bag')
+    assert sorted(p.name for p in bag.iterdir()) == ['bag.mcap', 'metadata.yaml']
+
+
+def test_overwrite_refuses_a_directory_that_is_not_our_bag(tmp_path, capsys):
+    bag = make_bag(tmp_path / 'bag', range(5))
+    victim = tmp_path / 'victim'
+    (victim / 'sub').mkdir(parents=True)
+    (victim / 'sub' / 'notes.txt').write_text('keep me')
+    assert main([str(bag), str(victim), '--overwrite']) == 1
+    one_line(capsys.readouterr().err, 'replay_offline: error: ',
+             'not a bag written by tskf_ros')
+    assert (victim / 'sub' / 'notes.txt').read_text() == 'keep me'
+    out = tmp_path / 'out'
+    assert main([str(bag), str(out), '-q']) == 0
+    assert main([str(bag), str(out), '-q', '--overwrite']) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag', 'out', 'victim']
+
+
+def test_an_undecodable_measurement_is_damage_with_one_line(tmp_path, capsys):
+    """A cut message stops the replay: what came before is written, exit 3, one line."""
+    good = serialize_message(message_class('sensor_msgs/msg/Illuminance')(illuminance=1.0))
+    with BagWriter(tmp_path / 'bag') as w:
+        w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
+        for k in range(5):
+            w.write('/received_power', (k + 1) * NS, good if k != 3 else good[:20])
+    code = main([str(tmp_path / 'bag'), str(tmp_path / 'est'), '-q'])
+    err = capsys.readouterr().err
+    assert code == EXIT_DAMAGED
+    assert err.count('\n') == 1 and 'message 4 on /received_power does not deserialize' in err
+    counts = {}
+    for m in BagReader(tmp_path / 'est').messages():
+        counts[m.topic] = counts.get(m.topic, 0) + 1
+    assert counts['/received_power'] == 4      # copied as read, the cut one included
+    arrays = replay_arrays(tmp_path / 'bag')
+    assert len(arrays['sample.log_ns']) == 3
+    assert 'does not deserialize' in str(arrays['meta.damage'])
+
+
+def test_the_arrays_file_is_whole_or_absent(tmp_path, monkeypatch, capsys):
+    out = tmp_path / 'a.npz'
+
+    def fail(*args, **kwargs):
+        raise OSError(28, 'No space left on device')
+    monkeypatch.setattr(cli.np, 'savez', fail)
+    assert main([str(BAGS / 'owc_cai_td_1hz'), '--npz', str(out), '-q']) == 1
+    assert 'No space left on device' in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(SystemExit) as info:       # --npz writes no bag: no output with it
+        main([str(BAGS / 'owc_cai_td_1hz'), str(tmp_path / 'o'), '--npz', str(out)])
+    assert info.value.code == 2 and list(tmp_path.iterdir()) == []
+    # a directory or an empty name is refused in one line (was: a traceback for '', and
+    # DIR.npz written beside the directory)
+    (tmp_path / 'd').mkdir()
+    for npz in ('', str(tmp_path / 'd')):
+        with pytest.raises(SystemExit) as info:
+            main([str(BAGS / 'owc_cai_td_1hz'), '--npz', npz, '-q'])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert info.value.code == 2 and 'a directory' in err[-1], err
+    assert [p.name for p in tmp_path.iterdir()] == ['d'] and not any((tmp_path / 'd').iterdir())
+
+
+def test_arrays_of_a_damaged_bag_hold_what_came_before_and_exit_3(tmp_path, capsys):
+    bag = flip_in_third_chunk(BAGS / 'owc_ge_1khz', tmp_path / 'bag')
+    reader = BagReader(bag)
+    got = list(reader.messages())
+    assert main([str(bag), '--npz', str(tmp_path / 'a.npz'), '-q']) == EXIT_DAMAGED
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'CRC mismatch' in err
+    with np.load(tmp_path / 'a.npz') as f:
+        assert len(f['sample.log_ns']) == sum(m.topic == '/received_power' for m in got)
+        assert 'CRC mismatch' in str(f['meta.damage'])
+
+
+def test_arrays_refuse_a_bag_whose_storage_is_outside_it(tmp_path):
+    shutil.copytree(BAGS / 'owc_cai_td_1hz', tmp_path / 'outside')
+    bag = tmp_path / 'bag'
+    shutil.copytree(BAGS / 'owc_cai_td_1hz', bag)
+    name = mcap_file(bag).name
+    meta = bag / 'metadata.yaml'
+    doc = yaml.safe_load(meta.read_text())
+    doc['rosbag2_bagfile_information']['relative_file_paths'] = ['../outside/' + name]
+    meta.write_text(yaml.safe_dump(doc))
+    assert main([str(bag), '--npz', str(tmp_path / 'a.npz'), '-q']) == 1
+    assert not (tmp_path / 'a.npz').exists()
