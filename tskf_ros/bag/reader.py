@@ -1,17 +1,4 @@
-"""
-Read rosbag2 bags (MCAP or sqlite3 storage) message by message, surviving damage.
-
-A bag is a directory with metadata.yaml and its storage files, as `ros2 bag record` writes,
-or a bare .mcap file.  MCAP files are read by the `mcap` package (its StreamReader, record
-by record, with validate_crcs, and its chunk decompression and CRC check); the metadata's
-QoS profiles by rosbags' metadata parser; sqlite3 bags (older rosbag2) by rosbags' reader.
-What is ours is the salvage: a file truncated in the middle of a chunk, or whose chunk or
-data-section CRC fails, still yields every message before the damaged record; the damage
-is then kept in `BagReader.damage` and the iteration stops (see _mcap and _chunk).
-
-Problems that make a bag unreadable raise a BagError subclass whose message is one line
-naming the file and the problem.
-"""
+"""Read rosbag2 bags (MCAP, sqlite3) message by message, keeping what precedes any damage."""
 
 from dataclasses import dataclass, field
 from io import BytesIO
@@ -281,11 +268,9 @@ class BagReader:
         """
         Yield the messages of one MCAP file up to DataEnd, or up to the first damaged record.
 
-        The mcap package reads the records (StreamReader: magic, record framing, the
-        data-section CRC) and each chunk (get_chunk_data_stream: decompression, chunk CRC);
-        what is ours is the salvage (stop at the library's error, keep what came before,
-        say where and why) and the walk over the records of a decompressed chunk (see
-        _chunk).
+        The mcap package reads the records and checks the CRCs (its StreamReader, and
+        get_chunk_data_stream for each chunk); at its first error the damage is kept in
+        self.damage (doc/design/bags.md).
         """
         channels: dict[int, tuple] = {}
         schemas: dict[int, Schema] = {}
@@ -365,10 +350,8 @@ class BagReader:
         """
         Yield the messages of a chunk (decompressed and CRC-checked by the mcap package).
 
-        The records inside are walked here, not by the package's breakup_chunk, which
-        reads every field through a stream object: reading costs 3.4 us per message with it,
-        0.75 us with this walk (bench/bench_offline.py prints both); schemas and channels
-        still go through the package's record classes.  A record that does not fit the
+        The records inside are walked here (MCAP record framing: opcode, length), schemas
+        and channels read by the package's record classes; a record that does not fit the
         chunk is damage.
         """
         stream, end = get_chunk_data_stream(chunk, validate_crc=True)
