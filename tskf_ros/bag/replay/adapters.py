@@ -27,7 +27,7 @@ ESTIMATE_TOPICS = BAG_OUTPUT_TOPICS
 STATES_TOPICS = {(kind, revised): BAG_OUTPUT_TOPICS[kind + '_states', revised]
                  for kind, revised in BAG_OUTPUT_TOPICS if not kind.endswith('_states')
                  and kind != 'mu'}
-# (stamp ns, value, variance) of a measurement, or (stamp ns, u) of an input
+# (stamp ns, value, variance) of a measurement
 Sample = tuple[int, float, float]
 AnyOutcome = Union[Outcome, AlignOutcome]
 AnyConfig = Union[NodeConfig, aligner.NodeConfig]
