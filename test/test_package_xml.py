@@ -36,7 +36,8 @@ def top_level_imports(paths):
                 names = [node.module]
             for name in names:
                 top = name.split('.')[0]
-                local = (REPO / 'test' / f'{top}.py').is_file()
+                local = ((REPO / 'test' / f'{top}.py').is_file()
+                         or (REPO / 'test' / top / '__init__.py').is_file())
                 if top not in sys.stdlib_module_names and top != 'tskf_ros' and not local:
                     found.setdefault(top, path.name)
     return found
@@ -55,7 +56,7 @@ def test_every_runtime_import_is_an_exec_depend():
 
 
 def test_every_test_import_is_declared():
-    imports = top_level_imports(sorted((REPO / 'test').glob('*.py')))
+    imports = top_level_imports(sorted((REPO / 'test').rglob('*.py')))
     assert missing(imports, TEST) == {}
 
 
