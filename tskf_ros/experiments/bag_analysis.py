@@ -9,9 +9,9 @@ from typing import Optional
 import numpy as np
 from rclpy.serialization import deserialize_message
 
-from tskf_ros.bag.message_types import message_class
-from tskf_ros.bag.offline_replay import choose_input_topic, choose_topic, DESERIALIZE_ERRORS
+from tskf_ros.bag.message_types import DESERIALIZE_ERRORS, message_class
 from tskf_ros.bag.reader import BagReader, Damage
+from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic
 from tskf_ros.core.noise_fit import nis_summary
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATES_TYPE
