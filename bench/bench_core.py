@@ -38,7 +38,7 @@ from tskf_ros.core.linear_models import owc  # noqa: E402
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter  # noqa: E402
 from tskf_ros.core.units import NS  # noqa: E402
 from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession  # noqa: E402
-from tskf_ros.owc.estimator_session import EstimatorConfig, EstimatorSession  # noqa: E402
+from tskf_ros.owc.session import EstimatorConfig, EstimatorSession  # noqa: E402
 
 try:
     from filterpy.kalman import KalmanFilter

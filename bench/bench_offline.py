@@ -64,7 +64,7 @@ from tskf_ros.bag.reader import BagReader, RawMessage  # noqa: E402
 from tskf_ros.bag.writer import BagWriter  # noqa: E402
 from tskf_ros.messages import conversions  # noqa: E402
 from tskf_ros.messages.estimator_interface import input_from_msg, INPUT_TYPE  # noqa: E402
-from tskf_ros.owc.estimator_session import EstimatorSession  # noqa: E402
+from tskf_ros.owc.session import EstimatorSession  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'

@@ -70,7 +70,7 @@ from tskf_ros.messages.estimator_interface import (BAG_INPUT_TOPIC, bag_outcome_
                                                    extractor, input_from_msg, INPUT_TYPE,
                                                    INPUT_TYPES, load_config,
                                                    NodeConfig, output_qos, ParamsError)
-from tskf_ros.owc.estimator_session import EstimatorSession
+from tskf_ros.owc.session import EstimatorSession
 
 PROG = 'replay_offline'
 # exceptions rclpy's deserializer raises on bytes that are not the type
