@@ -274,7 +274,7 @@ def profile(ctx: dict) -> None:
     stats = pstats.Stats(prof)
     total = stats.total_tt
     print(f'\nprofile of replay -> bag ({total:.1f} s under cProfile): cumulative share')
-    wanted = [('estimator_session.py', 'add', 'session.add (the filter)'),
+    wanted = [('owc/session/session.py', 'add', 'session.add (the filter)'),
               ('offline_replay.py', 'encoded', 'encoding the outputs (fixed layout)'),
               ('offline_replay.py', 'diagnostics_due', '/diagnostics (build + serialize)'),
               ('writer.py', 'write', 'BagWriter.write (chunk writer)'),

@@ -62,7 +62,6 @@ class StreamRun:
 
     segments: list[list[StepRecord]]
     innovations: Innovations
-    innovation_stamps: list[Key]
     corrected: dict[Key, FloatArray]        # x(t|t)
     predicted: dict[Key, FloatArray]        # xhat(t)
     stats: Stats
@@ -188,7 +187,7 @@ def run_stream(config: EstimatorConfig, events: Iterable[Union[Measurement, Inpu
     else:
         innovations = Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0),
                                   np.zeros(0))
-    return StreamRun(col.segments(), innovations, keys, col.corr,
+    return StreamRun(col.segments(), innovations, col.corr,
                      {k: v[0] for k, v in col.pred.items()}, session.stats, measurements,
                      inputs, gated)
 

@@ -76,7 +76,7 @@ class EstimatorSession:
         if now_ns is not None:
             self.input_rate.note(now_ns)
         stamp_ns = int(stamp_ns)
-        y = power if power.__class__ is float else reading(power)
+        y = power if type(power) is float else reading(power)
         refused = self.admission.check(stamp_ns, y, variance, now_ns)
         if refused is not None:
             if refused.status == 'gap':     # Cai et al. IV-C: an interruption, not a point
