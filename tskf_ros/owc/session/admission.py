@@ -52,7 +52,6 @@ class Admission:
 
     def __init__(self, config: EstimatorConfig, p: int) -> None:
         self.p = p
-        self.use_variance = config.use_message_variance
         # a reading is a point when it is above low (Cai IV-C: <= 0 is an interruption)
         self.low = 0.0 if config.nonpositive_is_gap else -_INF
         self.range = tuple(config.measurement_range)

@@ -60,6 +60,7 @@ class EstimatorSession:
         self.intervals.configure(config)
         self._max_jump_ns = config.max_jump * NS
         self._state_limit = config.state_limit
+        self._use_variance = config.use_message_variance
         self._uses_input = config.model.B is not None     # no B: u is 0
 
     @property
@@ -75,7 +76,8 @@ class EstimatorSession:
         self.stats.received += 1
         if now_ns is not None:
             self.input_rate.note(now_ns)
-        stamp_ns = int(stamp_ns)
+        if type(stamp_ns) is not int:
+            stamp_ns = int(stamp_ns)
         y = power if type(power) is float else reading(power)
         refused = self.admission.check(stamp_ns, y, variance, now_ns)
         if refused is not None:
@@ -83,14 +85,14 @@ class EstimatorSession:
                 self.stats.rejected[refused.reason] += 1
                 return Outcome('gap', refused.reason, refused.message)
             return self._reject(refused.reason, refused.message)
-        self._variance = float(variance) if self.admission.use_variance else 0.0
+        self._variance = float(variance) if self._use_variance else 0.0
         points = self.history.points
-        if not points:
-            return self._start(stamp_ns, y)
-        dt = stamp_ns - points[-1].stamp_ns
-        if 0 < dt <= self._max_jump_ns:
-            return self._append(stamp_ns, y)
-        return self._place(stamp_ns, y, dt)
+        if points:
+            dt = stamp_ns - points[-1].stamp_ns
+            if 0 < dt <= self._max_jump_ns:
+                return self._append(stamp_ns, y)
+            return self._place(stamp_ns, y, dt)
+        return self._start(stamp_ns, y)
 
     def add_input(self, stamp_ns: int, u: ArrayLike) -> Outcome:
         """
@@ -303,7 +305,7 @@ class EstimatorSession:
         """Step the newest point to a new one: a measurement (y) or an input (u)."""
         kf, points = self.kf, self.history.points
         saved = kf.x, kf.P          # a step replaces them, never writes into them
-        out = Outcome('accepted')
+        out = Outcome('accepted', '', '', [], [])
         try:
             trace = self._step(points[-1], stamp_ns, False, out)
         except FilterError as exc:
