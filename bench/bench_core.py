@@ -171,14 +171,13 @@ def goal_session(repeats: int, quick: bool) -> None:
     session = owc_session()
     kf = model.make_filter()
     stamp = [T0]
-    yv = np.array([y])
 
     def add() -> None:
         stamp[0] += 1_000_000
         session.add(stamp[0], y)
 
     def step() -> None:
-        kf.step(0.001, yv)
+        kf.step(0.001, y)       # a plain-float reading, as the node passes it to add
 
     # what the session adds: the same add with kf.step answering one stored result (and
     # moving x, P to it, as a step does)

@@ -48,14 +48,14 @@ class Mutation:
 
 KF = 'tskf_ros/core/timescale_kalman.py'
 IRR = 'tskf_ros/core/irregular/theorem2.py'
-INTERVALS = 'tskf_ros/owc/session/intervals.py'
+INTERVALS = 'tskf_ros/owc/session/sampling_intervals.py'
 ADMISSION = 'tskf_ros/owc/session/admission.py'
 EKF = 'tskf_ros/led/scanning_ekf.py'
 
 MUTATIONS = (
     Mutation('M6', 'Theorem 2 diagnostics with R instead of R / period', INTERVALS,
              'float(kf.R[0, 0]) / self.period,', 'float(kf.R[0, 0]),',
-             ('test/owc/session/test_intervals.py',), 'sampling_intervals'),
+             ('test/owc/session/test_sampling_intervals.py',), 'sampling_intervals'),
     Mutation('M10', "Cai's T_d measurement noise not scaled by 1 / mu",
              'tskf_ros/experiments/reproduce.py',
              "vscale = 1.0 / np.sqrt(mu_meas) if noise_scaling == 'theory' else "
@@ -104,7 +104,7 @@ MUTATIONS = (
              ('test/core/irregular/test_jump_covariance.py',), 'jump_covariance'),
     Mutation('S1', 'session: sampling interval in periods off by one', INTERVALS,
              'return int(round(dt / self.period))', 'return int(round(dt / self.period)) + 1',
-             ('test/owc/session/test_intervals.py',), 'sampling_intervals'),
+             ('test/owc/session/test_sampling_intervals.py',), 'sampling_intervals'),
     Mutation('S2', 'session: readings <= 0 no longer rejected as interruptions', ADMISSION,
              'if not lowest > self.low:', 'if False:',
              ('test/owc/session/test_admission.py',), 'bad_samples'),

@@ -2,16 +2,16 @@
 Health of a filter state and of a step: finite, bounded and positive semi-definite.
 
     healthy (x, P):  x, P finite,  max_i |x_i| <= state_limit,  trace P <= state_limit^2
-    sound step:      x(t|t), P(t|t) finite,  P(t|t) and P(sigma(t)) PSD, and the
-                     predictor healthy; the filter itself refuses a non-finite
-                     x(sigma(t)), P(sigma(t))
+    sound step:      P(t|t) and P(sigma(t)) PSD, and the predictor healthy (the filter
+                     itself refuses a step with a non-finite estimate and symmetrises P)
 """
 
 import math
 
 import numpy as np
 
-from tskf_ros.core.timescale_kalman import FilterError, is_psd, StepResult
+from tskf_ros.core.matrices import FilterError, is_psd
+from tskf_ros.core.timescale_kalman import StepResult
 from tskf_ros.owc.session.outcome import FloatArray
 
 
@@ -62,25 +62,18 @@ def checked(res: StepResult, limit: float) -> float:
     Return trace P(sigma(t)) of a sound step; raise FilterError if it is not sound.
 
     Checked here is what the filter does not check itself (see the module docstring); a
-    predictor beyond the limit raises StateLimitError.  P(t|t) of n > 1 is symmetrised
-    in res.  One state entry is tested on plain floats.
+    predictor beyond the limit raises StateLimitError.  One state entry is tested on
+    plain floats.
     """
-    x_c, P_c, x_p, P_p = res.x_corrected, res.P_corrected, res.x_predicted, res.P_predicted
-    if x_p.size == 1:
-        ok = math.isfinite(x_c.item()) and math.isfinite(P_c.item())
-        largest, trace = abs(x_p.item()), P_p.item()
-    else:
-        P_c = P_c + P_c.T
-        P_c *= 0.5
-        res.P_corrected = P_c
-        ok = finite(x_c, P_c)
-        largest, trace = _largest(x_p), _trace(P_p)
-    if not ok:
-        raise FilterError(f'non-finite estimate at mu = {res.mu}')
-    if not is_psd(P_c):
+    x_p, P_p = res.x_predicted, res.P_predicted
+    if not is_psd(res.P_corrected):
         raise FilterError(f'P(t|t) lost positive semi-definiteness at mu = {res.mu}')
     if not is_psd(P_p):
         raise FilterError(f'P(sigma(t)) lost positive semi-definiteness at mu = {res.mu}')
+    if x_p.size == 1:
+        largest, trace = abs(x_p.item()), P_p.item()
+    else:
+        largest, trace = _largest(x_p), _trace(P_p)
     why = beyond(largest, trace, limit)
     if why:
         raise StateLimitError(why)

@@ -24,8 +24,8 @@ from tskf_ros.owc.session.config import EstimatorConfig
 from tskf_ros.owc.session.diagnostics import Diagnostics, report, SessionState
 from tskf_ros.owc.session.health import checked, finite, StateLimitError
 from tskf_ros.owc.session.history import History, Point
-from tskf_ros.owc.session.intervals import Intervals
 from tskf_ros.owc.session.outcome import Estimate, FloatArray, Jump, Outcome, Reading, Stats
+from tskf_ros.owc.session.sampling_intervals import Intervals
 
 
 def reading(value: ArrayLike) -> Reading:

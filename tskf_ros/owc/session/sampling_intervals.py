@@ -12,7 +12,7 @@ the measurement variance R / period at every sample.
 
 from typing import Optional
 
-from tskf_ros.core import irregular_sampling as irregular
+from tskf_ros.core import irregular
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session.config import EstimatorConfig
