@@ -48,18 +48,22 @@ class Rewind(NamedTuple):
 
 
 class History:
-    """The newest points, at most `size` and those within `window_ns` of the newest."""
+    """The newest points: at most `size`, and those within `window_ns` of the newest."""
 
     def __init__(self, size: int, window_ns: float) -> None:
-        self.points: deque[Point] = deque()
-        self.size, self.window_ns = size, window_ns
+        self.points: deque[Point] = deque(maxlen=size)     # the oldest drop out
+        self.window_ns = window_ns
+
+    def resize(self, size: int, window_ns: float) -> None:
+        """Keep at most `size` points (the newest) and the newest window_ns from now on."""
+        if size != self.points.maxlen:
+            self.points = deque(self.points, maxlen=size)
+        self.window_ns = window_ns
 
     def trim(self) -> None:
-        """Keep `size` points, and the newest window_ns plus the one before."""
-        points, size, window_ns = self.points, self.size, self.window_ns
-        newest = points[-1].stamp_ns
-        while len(points) > 2 and (len(points) > size
-                                   or newest - points[1].stamp_ns > window_ns):
+        """Keep the newest window_ns of points plus the one before."""
+        points, window_ns = self.points, self.window_ns
+        while len(points) > 2 and points[-1].stamp_ns - points[1].stamp_ns > window_ns:
             points.popleft()
 
     def index(self, stamp_ns: int) -> int:
@@ -119,13 +123,10 @@ class History:
         self.points.extend(rewind.rerun)
 
     def measured_around(self, rewind: Rewind) -> tuple[Optional[int], Optional[int]]:
-        """Return the stamps of the measurement points around the late one (after commit)."""
+        """Return the stamps of the measurement points around the late one (before commit)."""
         rerun, new = rewind.rerun, rewind.new
         after = next((p.stamp_ns for p in rerun[new + 1:] if p.y is not None), None)
         before = next((p.stamp_ns for p in reversed(rerun[:new]) if p.y is not None), None)
-        if before is None:
-            points = self.points
-            head = len(points) - len(rerun)
-            before = next((points[k].stamp_ns for k in range(head - 1, -1, -1)
-                           if points[k].y is not None), None)
+        if before is None:      # the points left on the history come before the re-run
+            before = next((p.stamp_ns for p in reversed(self.points) if p.y is not None), None)
         return before, after

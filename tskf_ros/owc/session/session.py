@@ -55,8 +55,7 @@ class EstimatorSession:
         self.config = config
         self.admission = Admission(config, self.kf.p)
         self.gate = Gate(config, self.kf)
-        self.history.size = config.history_size
-        self.history.window_ns = config.history_window * NS
+        self.history.resize(config.history_size, config.history_window * NS)
         self.intervals.configure(config)
         self._max_jump_ns = config.max_jump * NS
         self._state_limit = config.state_limit
@@ -367,9 +366,9 @@ class EstimatorSession:
             history.put_back(rewind)
             kf.x, kf.P = saved
             return self._reject('gated', gated)
-        history.commit(rewind)
         # the interval between the measurement points around it is now two intervals
         before, after = history.measured_around(rewind)
+        history.commit(rewind)
         if after is not None:
             self.intervals.forget(after)
             self.intervals.record(stamp_ns, after)
