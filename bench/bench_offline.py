@@ -62,7 +62,7 @@ from tskf_ros.bag.reader import BagReader, RawMessage  # noqa: E402
 from tskf_ros.bag.replay import adapters, loop  # noqa: E402
 from tskf_ros.bag.writer import BagWriter  # noqa: E402
 from tskf_ros.messages.estimator_interface import input_from_msg, INPUT_TYPE  # noqa: E402
-from tskf_ros.owc.estimator_session import EstimatorSession  # noqa: E402
+from tskf_ros.owc.session import EstimatorSession  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'
@@ -306,7 +306,7 @@ def profile(ctx: dict) -> None:
     stats = pstats.Stats(prof)
     total = stats.total_tt
     print(f'\nprofile of replay -> bag ({total:.1f} s under cProfile): cumulative share')
-    wanted = [('estimator_session.py', 'add', 'session.add (the filter)'),
+    wanted = [('session.py', 'add', 'session.add (the filter)'),
               ('adapters.py', 'encoded', 'encoding the outputs (EstimateEncoder)'),
               ('adapters.py', 'diagnostics_due', '/diagnostics (build + serialize)'),
               ('writer.py', 'write', 'BagWriter.write (mcap Writer.add_message)'),

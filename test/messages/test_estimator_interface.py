@@ -17,7 +17,7 @@ from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import load_config, OutcomeMessages
 from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
-from tskf_ros.owc.estimator_session import Estimate, EstimatorSession, Jump, Outcome
+from tskf_ros.owc.session import Estimate, EstimatorSession, Jump, Outcome
 
 CONFIG = Path(__file__).resolve().parents[2] / 'config'
 T0 = 1_700_000_000 * NS

@@ -16,8 +16,8 @@ from tskf_ros.core.noise_fit import nis_summary
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATES_TYPE
 from tskf_ros.messages.estimator_interface import extractor, INPUT_TYPE, NodeConfig
-from tskf_ros.owc.estimator_session import EstimatorConfig, REJECT_REASONS, RESET_REASONS
 from tskf_ros.owc.innovation_trace import Input, Measurement, run_stream, StreamRun
+from tskf_ros.owc.session import EstimatorConfig, REJECT_REASONS, RESET_REASONS
 
 # metrics of evaluate_bag, in this order (the sweep's CSV columns after the key and settings)
 METRICS = (['n_messages', 'accepted', 'inputs', 'steps', 'gaps', 'resets',

@@ -14,7 +14,7 @@ from tskf_ros.messages import estimator_interface as estimator
 from tskf_ros.messages.estimator_interface import (bag_outcome_messages, BAG_OUTPUT_TOPICS,
                                                    extractor, input_from_msg, INPUT_TYPE,
                                                    INPUT_TYPES, NodeConfig, output_qos)
-from tskf_ros.owc.estimator_session import EstimatorSession, Outcome
+from tskf_ros.owc.session import EstimatorSession, Outcome
 
 __all__ = ['ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimator', 'sample_reader', 'Sample',
            'UNDECODABLE']
