@@ -1,25 +1,22 @@
 """
-Cost of the ROS-free core against its goals (issue 13, goals 1, 2 and 5), in one run.
+Cost of the ROS-free core against its performance goals, in one run.
 
-    OPENBLAS_NUM_THREADS=1 python bench/bench_core.py [--repeats 7] [--quick]
+    OPENBLAS_NUM_THREADS=1 python bench/bench_core.py [--repeats 7] [--quick] [--only ...]
 
 Thread CPU time (time.thread_time_ns) per call, min / median over the repeats; the cases
-of a goal alternate within each repeat, so a load that comes and goes hits them alike.
+of a part alternate within each repeat, so a load that comes and goes hits them alike.
 
-1. `TimeScaleKalmanFilter.step` (Euler, one output, a measurement every step) against
-   FilterPy's `KalmanFilter.predict()` + `update(z)` on the same model (F = I + mu A,
-   Q_d = mu GQG^T, R_d = R / mu), n = 1, 2, 3, 6, 20, 50.  FilterPy is pinned in
-   requirements.txt for this script only; without it the reference is `TextbookKF`
-   below, the same numpy calls as FilterPy 2.0.0's predict and update.  Goals: n = 1
-   <= 0.25x, n = 2 <= 0.5x, n <= 6 <= 1.0x, n = 20, 50 <= 1.0x.
-2. `EstimatorSession.add` (the OWC model, 1 kHz, in order) against the step of the same
-   filter: <= 1.5x.  The add makes that step (`kf.step`, the session's one path); the add
-   with kf.step answering a stored result is printed too (the session's own work: checks,
-   gate, history, statistics, outcome).  A late sample (one point late) against
-   history_size 10 .. 10 000: flat (the largest / the smallest <= 2).
-3. One scanning-EKF step (runs = 1, as the live alignment node runs it) and the alignment
-   session's whole `add` (gate, step, checks): <= 50 us.  The vectorised form, which the
-   Monte-Carlo experiments use, is printed beside it.
+1. `TimeScaleKalmanFilter.step` with a plain-float reading (Euler, one output) against
+   FilterPy 2.0.0's `KalmanFilter.predict()` + `update(z)` on the same model (F = I + mu A,
+   Q_d = mu GQG^T, R_d = R / mu), n = 1, 2, 3, 6, 20, 50.  Without FilterPy the reference
+   is `TextbookKF` below, the same numpy calls.  Goals: n = 1, 2 <= 0.5x; n = 3 .. 50
+   <= 1.0x.
+2. `EstimatorSession.add` (the OWC model, 1 kHz, in order) beside the step it makes, and
+   the add with kf.step answering a stored result (the session's own work); no goal.  A
+   late sample (one point late) against history_size 10 .. 10 000: flat (the largest /
+   the smallest <= 2).
+3. One scanning-EKF step (runs = 1, as the live alignment node runs it), the alignment
+   session's whole `add`, and a step of 1000 runs (the Monte-Carlo form); no goal.
 
 Figures only; nothing is asserted.
 """
@@ -204,7 +201,7 @@ def goal_session(repeats: int, quick: bool) -> None:
     ratio = min(got['add']) / min(got['step'])
     print('\n2. EstimatorSession.add (OWC, n = 1, in order) vs the step of the same filter')
     print(f'   session.add {mm(got["add"])} us   step {mm(got["step"])} us   '
-          f'ratio {ratio:.2f}   <= 1.50x {verdict(ratio <= 1.5)}')
+          f'ratio {ratio:.2f}')
     print('   session.add with kf.step answering a stored result (the work of the session '
           f'alone: checks, gate, history, statistics, outcome): {mm(got["rest"])} us')
 
@@ -261,10 +258,8 @@ def goal_alignment(repeats: int, quick: bool) -> None:
     got = alternate({'one': step_one, 'batch': step_batch, 'add': add},
                     {'one': calls, 'batch': max(1, calls // 100), 'add': calls}, repeats)
     print('\n3. Scanning EKF (Solanki et al.)')
-    print(f'   ScanningEKF.step, runs = 1 (the live node)  {mm(got["one"])} us   '
-          f'<= 50 us {verdict(min(got["one"]) <= 50)}')
-    print(f'   AlignmentSession.add (gate + step + checks) {mm(got["add"])} us   '
-          f'<= 50 us {verdict(min(got["add"]) <= 50)}')
+    print(f'   ScanningEKF.step, runs = 1 (the live node)  {mm(got["one"])} us')
+    print(f'   AlignmentSession.add (gate + step + checks) {mm(got["add"])} us')
     print(f'   ScanningEKF.step, runs = 1000 (Monte Carlo)  {mm(got["batch"])} us   '
           f'{min(got["batch"]) / 1000:.2f} us per run')
 
