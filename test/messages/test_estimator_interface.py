@@ -14,7 +14,7 @@ from sensor_msgs.msg import JointState
 from tskf_ros.bag.cdr import serialize
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
-from tskf_ros.messages.estimator_interface import load_config, OutcomeMessages
+from tskf_ros.messages.estimator_interface import load_config, outcome_messages, OutcomeMessages
 from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.owc.session import Estimate, EstimatorSession, Jump, Outcome
