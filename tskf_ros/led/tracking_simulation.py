@@ -13,6 +13,7 @@ import numpy as np
 
 from tskf_ros.led.intensity_model import (AlignmentError, IncidenceResponse, MAX_INTENSITY,
                                           TRACKING_ANGLE, TRACKING_LEVEL, wrap_degrees)
+from tskf_ros.led.lqg_alignment import LQGAligner
 from tskf_ros.led.scanning_ekf import Aligner, PAPER_DT, PAPER_Q_SYS, ScanningEKF
 
 
@@ -49,7 +50,7 @@ class Trajectory:
     clean: np.ndarray      # x1 g(phi), the clean measurement (V)
     z: np.ndarray          # the measurement given to the aligner, NaN when missing
     command: np.ndarray    # motor command returned by the aligner
-    estimate: Optional[np.ndarray] = None   # (steps, runs, 2) posterior, EKF only
+    estimate: Optional[np.ndarray] = None   # (steps, runs, 2) posterior [x1, x2], EKFs only
 
 
 def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random.Generator,
@@ -76,9 +77,9 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
     shape = (steps, n)
     out = Trajectory(t=t, phi=np.empty(shape), x2=np.empty(shape), x1=np.empty(shape),
                      clean=np.empty(shape), z=np.empty(shape), command=np.empty(shape))
-    record_estimate = isinstance(aligner, ScanningEKF)
-    if record_estimate:
-        out.estimate = np.empty((steps, n, 2))
+    estimator = aligner if isinstance(aligner, (ScanningEKF, LQGAligner)) else None
+    estimate = np.empty((steps, n, 2)) if estimator is not None else None
+    out.estimate = estimate
     x1 = np.full(n, link.max_intensity / response.peak)
     phi = np.full(n, link.x2_0 + aligner.scan_offset)
     drift = link.beta * link.dt
@@ -90,8 +91,8 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
         out.clean[k], out.z[k] = clean, z
         cmd = aligner.step(t[k], z)
         out.command[k] = cmd
-        if record_estimate:
-            out.estimate[k] = aligner.x
+        if estimator is not None and estimate is not None:
+            estimate[k] = estimator.x[:, :2]
         # (25): x2_k = x2_{k-1} + beta + u_{k-1} + w2 (here on phi = x2 + psi, with the scan)
         phi = phi + drift + cmd + w2[k]
         x1 = np.abs(x1 + w1[k])
