@@ -11,10 +11,12 @@ experiments, Fig. 14), compares mean |phi| and actuation.  Per controller and po
 tracking % (by angle |phi| <= 15 deg and by clean measurement >= 20% of 3 V; mean, std),
 mean |phi| over steps and runs (deg), runs lost (angular tracking < 50%), actuation
 (sum of |motor command| per run, mean over runs, deg) and its control part (the command
-less the scan step psi_{k+1} - psi_k).  Outputs are written atomically.
+less the scan step psi_{k+1} - psi_k).  --ablation also runs the LQG with one of its
+parts changed at a time (ABLATIONS) at both points.  Outputs are written atomically.
 """
 
 import argparse
+import dataclasses
 import math
 from pathlib import Path
 import sys
@@ -30,13 +32,25 @@ from tskf_ros.experiments.alignment_mc import floats, save_figure, write_json
 DEFAULT_BETAS = (0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0)
 LABELS = {'p': 'EKF + P controller (paper, eq. (21))', 'lqg': 'EKF + drift + time-scale LQR'}
 COLORS = {'p': 'tab:blue', 'lqg': 'tab:red'}
+_LQG = led.LQGConfig()
+# the LQG with one part changed: what each part is worth
+ABLATIONS = {
+    'paper_scan': dataclasses.replace(_LQG, scan=led.SCAN_ANGLES, acquisition=()),
+    'no_acquisition': dataclasses.replace(_LQG, acquisition=()),
+    'no_bank': dataclasses.replace(_LQG, x2_starts=()),
+    'no_drift': dataclasses.replace(_LQG, P0=(1.0, 4.0, 1e-12), Q=(0.0025, 0.01, 0.0)),
+    'paper_Q': dataclasses.replace(_LQG, Q=(0.25, 1.0, 1e-5)),
+    'gain_of_p': dataclasses.replace(_LQG, state_weight=0.5, input_weight=1.0),
+}
 
 
 def run_point(controller: str, *, beta: float, noise: float, runs: int, steps: int, dt: float,
-              seed: int) -> dict:
+              seed: int, lqg: Optional[led.LQGConfig] = None) -> dict:
     """Run one controller at one (beta, noise); return its metrics (see the docstring)."""
     link = led.TrackingLinkConfig(beta=beta, noise=noise, steps=steps, dt=dt)
-    aligner = led.make_aligner('ekf', runs=runs, dt=dt, controller=controller)
+    if lqg is not None:
+        lqg = dataclasses.replace(lqg, dt=dt)
+    aligner = led.make_aligner('ekf', runs=runs, dt=dt, controller=controller, lqg=lqg)
     traj = led.simulate_tracking(aligner, link, np.random.default_rng(seed))
     angular, measure = led.tracking(traj)
     psi = traj.phi - traj.x2
@@ -73,11 +87,11 @@ def plot(betas: Sequence[float], results: dict, *, title: str) -> Figure:
 
 def table(results: dict) -> str:
     """Format the points as a plain-text table."""
-    lines = [f'{"ctrl":>4} {"beta":>5} {"noise":>5} | {"track ang":>9} {"meas":>6} | '
+    lines = [f'{"controller":>14} {"beta":>5} {"noise":>5} | {"track ang":>9} {"meas":>6} | '
              f'{"mean|phi|":>9} {"lost":>4} | {"actuation":>9} {"control":>8}']
     for name, points in results.items():
         for p in points:
-            lines.append(f'{name:>4} {p["beta_deg_per_s"]:5.1f} {p["noise_v"]:5.2f} | '
+            lines.append(f'{name:>14} {p["beta_deg_per_s"]:5.1f} {p["noise_v"]:5.2f} | '
                          f'{p["angular"]["mean"]:8.1f}% {p["measure"]["mean"]:5.1f}% | '
                          f'{p["mean_abs_phi_deg"]:9.2f} {p["lost_runs"]:4d} | '
                          f'{p["actuation_deg"]:9.1f} {p["control_actuation_deg"]:8.1f}')
@@ -99,6 +113,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--steps', type=int, default=400, help='steps per run (400 = 20 s)')
     p.add_argument('--dt', type=float, default=led.PAPER_DT, help='time step, s (0.05)')
     p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--ablation', action='store_true',
+                   help='also run the LQG variants of ABLATIONS at --ablation-beta (noise '
+                        '--noise) and at the effort point')
+    p.add_argument('--ablation-beta', type=float, default=14.0,
+                   help='drift rate of the ablation at --noise, deg/s (14)')
     p.add_argument('--json', type=Path, help='write the results as JSON')
     p.add_argument('--png', type=Path, help='write tracking % against beta')
     return p
@@ -121,14 +140,22 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             print(f'[lqg_comparison] {name} beta {beta:g}: '
                   f'{sweep[name][-1]["angular"]["mean"]:.1f}%', file=sys.stderr, flush=True)
         effort[name] = run_point(name, beta=args.effort_beta, noise=args.effort_noise, **common)
+    ablation: dict = {}
+    if args.ablation:
+        points = ((args.noise, args.ablation_beta), (args.effort_noise, args.effort_beta))
+        for name, config in ABLATIONS.items():
+            ablation[name] = [run_point('lqg', beta=beta, noise=noise, lqg=config, **common)
+                              for noise, beta in points]
     elapsed = time.perf_counter() - start
     print(table(sweep))
     print(table({name: [point] for name, point in effort.items()}))
+    if ablation:
+        print(table(ablation))
     data = {'config': {**common, 'noise_v': args.noise, 'effort_noise_v': args.effort_noise,
                        'effort_beta_deg_per_s': args.effort_beta,
                        'controllers': list(led.CONTROLLERS)},
             'betas_deg_per_s': list(args.betas), 'sweep': sweep, 'effort': effort,
-            'elapsed_s': elapsed}
+            'ablation': ablation, 'elapsed_s': elapsed}
     if args.json:
         write_json(args.json, data)
     if args.png:
