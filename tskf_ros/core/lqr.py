@@ -36,7 +36,7 @@ Matrix = NDArray[np.float64]
 __all__ = ['LQRError', 'LQRGains', 'NotInvertibleError', 'Stationary', 'TimeScaleLQR']
 
 # stationary solutions kept per regulator, keyed by mu
-CACHE_SIZE = 64
+STATIONARY_CACHE_SIZE = 64
 
 
 class LQRError(FilterError):
@@ -236,7 +236,7 @@ class TimeScaleLQR:
                            f'or a mode on the stability boundary unweighted): {reason}') from None
         S = _symmetric(S)
         result = Stationary(S, self.gain(S, mu))
-        if len(cache) >= CACHE_SIZE:
+        if len(cache) >= STATIONARY_CACHE_SIZE:
             del cache[next(iter(cache))]
         cache[mu] = result
         return result
