@@ -303,3 +303,10 @@ def test_no_stationary_solution_is_refused():
     with pytest.raises(LQRError, match='finite and >= 0') as excinfo:
         lqr.stationary(-1.0)
     one_line(excinfo)
+
+
+def test_one_step_needs_a_right_scattered_point():
+    for mu in (0.0, -1.0, np.inf):
+        with pytest.raises(LQRError, match='finite mu > 0') as excinfo:
+            regulator().step(F, mu)
+        one_line(excinfo)

@@ -66,7 +66,7 @@ class TimeScaleLQG:
 
     @property
     def steps(self) -> int:
-        """Number of steps K of the horizon."""
+        """Return the number of steps K of the horizon."""
         return int(self.mu.size)
 
     def step(self, y: ArrayLike) -> Vector:

@@ -138,6 +138,9 @@ class TimeScaleLQR:
 
     def step(self, S_sigma: Matrix, mu: float) -> tuple[Matrix, Matrix]:
         """Return (S(t), L(t)) at a right-scattered t of graininess mu > 0 from S(sigma(t))."""
+        if not (mu > 0 and math.isfinite(mu)):
+            raise LQRError(f'step needs a finite mu > 0 (a right-scattered point), got {mu}; '
+                           'a dense stretch is integrated (gains with dense=...)')
         A, B, Q = self.A, self.B, self.Q
         L = self.gain(S_sigma, mu)
         Phi_t = np.eye(self.n) + mu * A.T

@@ -140,17 +140,17 @@ class LQGAligner:
 
     @property
     def members(self) -> int:
-        """Members of the EKF bank per run (1 after the acquisition)."""
+        """Return the number of members of the EKF bank per run (1 after the acquisition)."""
         return int(self._x.shape[1])
 
     @property
     def x(self) -> Array:
-        """The most likely member's posterior [x1, x2, b] per run."""
+        """Return the most likely member's posterior [x1, x2, b] per run."""
         return self._x[np.arange(self.runs), np.argmax(self.log_weight, axis=1)]
 
     @property
     def P(self) -> Array:
-        """The most likely member's posterior covariance per run."""
+        """Return the most likely member's posterior covariance per run."""
         return self._P[np.arange(self.runs), np.argmax(self.log_weight, axis=1)]
 
     @property
