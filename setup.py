@@ -29,13 +29,14 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', _files('config/*.yaml') + _files('config/*.json')),
+        ('share/' + package_name + '/config/rosdep', _files('config/rosdep/*.yaml')),
         ('share/' + package_name + '/launch', _files('launch/*.launch.py')),
         ('share/' + package_name + '/urdf', _files('urdf/*.urdf')),
     ] + _tree('bags'),
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='tskf_ros maintainers',
-    maintainer_email='tskf@example.com',
+    maintainer_email='tskf-ros@example.org',
     keywords=['ROS'],
     classifiers=[
         'Intended Audience :: Developers',
@@ -63,6 +64,7 @@ setup(
             'power_meter_driver = tskf_ros.nodes.power_meter_driver:main',
             'fit_noise = tskf_ros.experiments.fit_noise:console_main',
             'sweep = tskf_ros.experiments.sweep:console_main',
+            'foxglove_bridge = tskf_ros.tools.foxglove_bridge:main',
         ],
     },
 )

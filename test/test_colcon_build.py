@@ -41,6 +41,8 @@ HELP_MUST_NAME = {
                            'pm100_sim.yaml@sim'),
     'fit_noise': ('--params-file', '--topic', '--out', '--json', 'bag'),
     'sweep': ('--bags', '--set', '--workers', '--scheduler', '--out', '--png'),
+    'foxglove_bridge': ('--ros-args', 'ws://localhost:8765', 'port (8765)',
+                        "topics (['*'])"),
 }
 
 
@@ -141,15 +143,17 @@ def test_launch_files_are_installed_and_name_installed_executables(install):
 
 
 def test_readme_ros2_run_names_are_found_through_ament_index(install):
-    # the README's `ros2 run tskf_ros NAME` commands (test_command_names checks the venv's)
-    from test_command_names import named, README, readme_commands
-    _, ros2_run, _ = named(readme_commands(README.read_text()))
+    # the `ros2 run tskf_ros NAME` commands of the README and doc/ (test_command_names
+    # checks the venv's)
+    from test_command_names import documentation, named, placeholder, readme_commands
+    ros2_run = {name for text in documentation().values()
+                for name in named(readme_commands(text))[1] if not placeholder(name)}
     assert {'record', 'play'} <= ros2_run
     result = in_sourced_workspace(install, sys.executable, '-c', LIB_DIR, PACKAGE)
     assert result.returncode == 0, result.stdout + result.stderr
     lib = Path(result.stdout.strip())
     missing = sorted(name for name in ros2_run if not (lib / name).is_file())
-    assert not missing, f'the README runs {missing} with ros2 run, not in {lib}'
+    assert not missing, f'the documentation runs {missing} with ros2 run, not in {lib}'
 
 
 def test_installed_driver_publishes_from_the_installed_simulated_meter(install):

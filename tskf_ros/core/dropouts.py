@@ -4,13 +4,13 @@ Measurement dropouts shared by both simulated links: Bernoulli and Gilbert-Ellio
 A Gilbert-Elliott channel is a two-state Markov chain (good/bad) with P(good -> bad) =
 p_gb and P(bad -> good) = p_bg per sample, and a loss probability in each state; its
 stationary loss rate is (1 - pi_bad) loss_good + pi_bad loss_bad with pi_bad =
-p_gb / (p_gb + p_bg).  Cai et al. attribute their gaps to vibration only; the blockages
-(fish, bubbles, a hand in the beam) are this package's addition.
+p_gb / (p_gb + p_bg).  Not from the papers (doc/design/core.md).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 BLOCKAGES = ('none', 'bernoulli', 'gilbert_elliott')
 PROBABILITIES = ('drop_probability', 'ge_p_gb', 'ge_p_bg', 'ge_loss_good', 'ge_loss_bad')
@@ -27,7 +27,7 @@ class Dropouts:
     ge_loss_good: float = 0.0         # loss probability in the good state
     ge_loss_bad: float = 1.0          # loss probability in the bad state
 
-    def check_dropouts(self, error: type) -> None:
+    def check_dropouts(self, error: type[Exception]) -> None:
         """Raise `error` with the reason unless the blockage fields describe a channel."""
         if self.blockage not in BLOCKAGES:
             raise error(f'blockage must be one of {BLOCKAGES}, got {self.blockage!r}')
@@ -48,8 +48,8 @@ class Dropouts:
         return 0.0
 
 
-def gilbert_elliott_states(u: np.ndarray, p_gb: float, p_bg: float,
-                           bad: bool) -> tuple[np.ndarray, bool]:
+def gilbert_elliott_states(u: NDArray[np.float64], p_gb: float, p_bg: float,
+                           bad: bool) -> tuple[NDArray[np.bool_], bool]:
     """
     Return the channel states (True: bad) of the next u.size samples, and the state after.
 

@@ -1,21 +1,34 @@
 """
 Input rate and staleness of a sample stream, as diagnostic_updater's FrequencyStatus does.
 
-Not from the papers: a monitor for the diagnostics of the two sessions.  Receipts are
-counted on the receiver's clock (the node clock live, the log time offline) over a
-sliding window; `level(now)` is ERROR when nothing has arrived for `stale_after` seconds
-(counted from the first report if nothing ever arrived), WARN when the rate over the
-window is below `min_fraction` of the nominal rate, else OK.  The memory is bounded:
-at most MAX_RECEIPTS receipt times are kept (beyond that the oldest are dropped, which
-can only under-count a rate that is then far above any nominal one anyway).
+Not from the papers: OK, WARN (rate below min_fraction of the nominal rate over a sliding
+window) or ERROR (silent for stale_after seconds); the rules are in doc/design/core.md.
 """
 
 from collections import deque
-from typing import Optional
+from typing import Optional, Protocol, Union
 
 from tskf_ros.core.units import NS
 
 MAX_RECEIPTS = 100_000
+# a diagnostics key value: a count, a measurement or a text
+DiagnosticValue = Union[int, float, str]
+
+
+class RateSettings(Protocol):
+    """The fields of a session config that set its input monitor (seconds, fraction)."""
+
+    @property
+    def rate_window(self) -> float:
+        """Return the window over which the input rate is measured (s)."""
+
+    @property
+    def min_rate_fraction(self) -> float:
+        """Return the fraction of the nominal rate below which the rate is a WARN (0: off)."""
+
+    @property
+    def stale_timeout(self) -> float:
+        """Return the silence after which the input is an ERROR (s, 0: off)."""
 
 
 class InputRate:
@@ -27,11 +40,11 @@ class InputRate:
         self.window_ns = int(window * NS)
         self.min_fraction = float(min_fraction)      # 0: no rate check
         self.stale_ns = int(stale_after * NS)        # 0: no staleness check
-        self.receipts: deque = deque(maxlen=MAX_RECEIPTS)
+        self.receipts: deque[int] = deque(maxlen=MAX_RECEIPTS)
         self.first_report_ns: Optional[int] = None
 
     @classmethod
-    def for_config(cls, period: float, config: object) -> 'InputRate':
+    def for_config(cls, period: float, config: RateSettings) -> 'InputRate':
         """Build the monitor of a session config (its rate_window, min_rate_fraction, ...)."""
         return cls(1.0 / period, window=config.rate_window,
                    min_fraction=config.min_rate_fraction, stale_after=config.stale_timeout)
@@ -47,7 +60,7 @@ class InputRate:
             self.receipts.popleft()
         return len(self.receipts) / (self.window_ns / NS) if self.window_ns > 0 else 0.0
 
-    def level(self, now_ns: int) -> tuple[str, str, dict]:
+    def level(self, now_ns: int) -> tuple[str, str, dict[str, DiagnosticValue]]:
         """Return (level, message or '', values) of the stream at now_ns."""
         now_ns = int(now_ns)
         if self.first_report_ns is None:
@@ -55,7 +68,7 @@ class InputRate:
         last = self.receipts[-1] if self.receipts else None
         silent = (now_ns - (last if last is not None else self.first_report_ns)) / NS
         rate = self.rate(now_ns)
-        values = {'input_rate_hz': rate, 'input_silent_s': silent}
+        values: dict[str, DiagnosticValue] = {'input_rate_hz': rate, 'input_silent_s': silent}
         if self.stale_ns and silent * NS >= self.stale_ns:
             what = 'no input yet' if last is None else 'no input'
             return 'ERROR', f'{what} for {silent:.3g} s (stale_timeout)', values
@@ -76,8 +89,8 @@ def worst(level: str, other: str) -> str:
     return max(level, other, key=LEVELS.index)
 
 
-def report_head(rate: InputRate, now_ns: Optional[int],
-                self_restart: str) -> tuple[str, list, dict]:
+def report_head(rate: InputRate, now_ns: Optional[int], self_restart: str
+                ) -> tuple[str, list[str], dict[str, DiagnosticValue]]:
     """
     Begin a session's diagnostics: (level, messages, values) from the input and a restart.
 
@@ -85,7 +98,9 @@ def report_head(rate: InputRate, now_ns: Optional[int],
     non-empty self_restart (why the session restarted itself since the last report) is
     an ERROR.
     """
-    level, msgs, values = 'OK', [], {}
+    level = 'OK'
+    msgs: list[str] = []
+    values: dict[str, DiagnosticValue] = {}
     if now_ns is not None:
         rate_level, why, values = rate.level(now_ns)
         if why:

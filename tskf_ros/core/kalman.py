@@ -162,3 +162,14 @@ def predict_batch(x: NDArray[np.float64], P: NDArray[np.float64], F: Matrix, Q: 
     for i in range(x.shape[0]):
         x_out[i], P_out[i] = predict(x[i], P[i], F, Q, Bu[i])
     return x_out, P_out
+
+
+def warm_up() -> None:
+    """Compile every kernel for float64 arrays, or load them from numba's on-disk cache."""
+    x, P, F, z = np.zeros(2), np.eye(2), np.eye(2), np.zeros(1)
+    H, R = np.ones((1, 2)), np.eye(1)
+    update_predict(x, P, z, H, R, z, F, P, x)
+    predict(x, P, F, P, x)
+    update(x, P, z, H, R, z)
+    update_batch(x[None], P[None], x[None], F[None], P[None], x[None])
+    predict_batch(x[None], P[None], F, P, x[None])

@@ -7,24 +7,22 @@ Models:
 - Cai et al. system (3), the intermittent OWC link: x = theta (rad), x^Delta = x + w,
   y = -637.35 x + 511.97 + v (the linear part (2) of Fig. 5), w ~ N(0, 1), v ~ N(0, 100).
 
-Noise on a time scale.  White noise w ~ (0, Q delta(t, s)) seen over one point of measure
-mu has covariance Q / mu, so x(sigma) = (I + mu A) x + mu G w adds mu G Q G^T, and a
-measurement at t carries R / mu(t) ('theory' scaling, which Table 3 assumes).  The papers
-do not say how they drew their noise; 'unit' scaling draws w ~ N(0, Q) and v ~ N(0, R)
-at every point whatever mu is (adding mu^2 G Q G^T), which is the literal reading of
-"w ~ N(0, 1), v ~ N(0, 100)".
+Truth: x(sigma) = (I + mu A) x + mu G w, y = C x + D + v, with 'theory' noise scaling
+(Var(mu G w) = mu G Q G^T, Var(v) = R / mu) or 'unit' (doc/design/core.md).
 """
 
 from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from tskf_ros.core.matrices import as_matrix
 from tskf_ros.core.time_scales import TimeScale
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 
 NOISE_SCALINGS = ('theory', 'unit')
+FloatArray = NDArray[np.float64]
 
 
 @dataclass
@@ -32,16 +30,16 @@ class LinearModel:
     """x^Delta = A x + B u + G w, y = C x + D + v on a time scale, with the filter's prior."""
 
     name: str
-    A: np.ndarray
-    C: np.ndarray
-    Q: np.ndarray
-    R: np.ndarray
-    x0: np.ndarray
-    P0: np.ndarray
-    G: Optional[np.ndarray] = None
-    B: Optional[np.ndarray] = None
-    D: Optional[np.ndarray] = None
-    state_names: tuple = field(default_factory=tuple)
+    A: FloatArray
+    C: FloatArray
+    Q: FloatArray
+    R: FloatArray
+    x0: FloatArray
+    P0: FloatArray
+    G: Optional[FloatArray] = None
+    B: Optional[FloatArray] = None
+    D: Optional[FloatArray] = None
+    state_names: tuple[str, ...] = field(default_factory=tuple)
 
     def make_filter(self, transition: str = 'euler',
                     allow_nonregressive: bool = False) -> TimeScaleKalmanFilter:
@@ -73,8 +71,8 @@ def owc(a: float = 1.0, theta0: float = 0.5435, p0: float = 0.01) -> LinearModel
 
 
 def simulate_truth(model: LinearModel, ts: TimeScale, rng: np.random.Generator, *,
-                   noise_scaling: str = 'theory', x_true0: Optional[np.ndarray] = None
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   noise_scaling: str = 'theory', x_true0: Optional[ArrayLike] = None
+                   ) -> tuple[FloatArray, FloatArray]:
     """
     Simulate the model on ts: x(sigma) = (I + mu A) x + mu B u + noise; y = C x + D + v.
 
@@ -109,8 +107,8 @@ def simulate_truth(model: LinearModel, ts: TimeScale, rng: np.random.Generator, 
     return x, y
 
 
-def ou_angle(points: np.ndarray, rng: np.random.Generator, *, mean: float = 0.5435,
-             std: float = 0.04, tau: float = 2.0) -> np.ndarray:
+def ou_angle(points: ArrayLike, rng: np.random.Generator, *, mean: float = 0.5435,
+             std: float = 0.04, tau: float = 2.0) -> FloatArray:
     """
     Simulate a bounded vibration angle: an Ornstein-Uhlenbeck process sampled exactly at points.
 
@@ -130,15 +128,15 @@ def ou_angle(points: np.ndarray, rng: np.random.Generator, *, mean: float = 0.54
 class FilterRun:
     """Estimates along a time scale: the paper's predictor and the corrected estimate."""
 
-    t: np.ndarray
-    mu: np.ndarray
-    x_pred: np.ndarray      # (N, n): xhat(t_k) from data up to t_{k-1} (Table 3)
-    P_pred: np.ndarray      # (N, n, n)
-    x_corr: np.ndarray      # (N, n): xhat(t_k | t_k), NaN at the last point (no mu yet)
-    P_corr: np.ndarray
+    t: FloatArray
+    mu: FloatArray
+    x_pred: FloatArray      # (N, n): xhat(t_k) from data up to t_{k-1} (Table 3)
+    P_pred: FloatArray      # (N, n, n)
+    x_corr: FloatArray      # (N, n): xhat(t_k | t_k), NaN at the last point (no mu yet)
+    P_corr: FloatArray
 
 
-def run_filter(model: LinearModel, ts: TimeScale, y: np.ndarray, *,
+def run_filter(model: LinearModel, ts: TimeScale, y: FloatArray, *,
                transition: str = 'euler', allow_nonregressive: bool = False) -> FilterRun:
     """Run the time-scale filter over ts with measurements y (NaN rows = missing)."""
     kf = model.make_filter(transition, allow_nonregressive)

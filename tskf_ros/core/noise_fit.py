@@ -1,32 +1,21 @@
 """
 Maximum likelihood of the noise intensities Q and R from the time-scale filter's innovations.
 
-The time-scale filter (Bohner & Wintz Table 3) is, step by step, a predictive Kalman filter
-with F = I + mu A (or e^{A mu}), Q_d = mu G Q G^T and R_d = R / mu (see timescale_kalman).
-For Gaussian noise its innovations e_k = y_k - C xhat_k - D are independent with
-covariances S_k = C P_k C^T + R / mu_k (StepResult.S), so the log-likelihood of the
-measurements given Q and R is the prediction-error decomposition
+The prediction-error decomposition over the steps with a measurement, with the innovations
+e_k = y_k - C xhat_k - D and S_k = C P_k C^T + R / mu_k of Bohner & Wintz Table 3:
 
     log L(Q, R) = -1/2 sum_k [ log det S_k + e_k^T S_k^-1 e_k + p log 2 pi ]
 
-over every step that used a measurement.  `negative_log_likelihood` runs the core
-filter's own `step` over a fixed trace of steps (the mu, y and u the estimator session
-used, segment by segment: a segment starts from x0, P0 at a (re)start), so the filter is
-not written twice; only Q and R change between evaluations.
-
-The parameters are the logarithms of the diagonal entries of Q and of R (positive by
-construction; the off-diagonal entries are held at zero).  `fit` minimises the negative
-log-likelihood with scipy's L-BFGS-B (falling back to Nelder-Mead), and takes standard
-errors from the inverse of a central-difference Hessian of the negative log-likelihood in
-the log-parameters, carried to Q and R by the delta method: se(q) = q se(log q).
-`nis_summary` checks the normalised innovation squared e^T S^-1 e against its chi-square
-distribution.  No I/O, no ROS.
+maximised over log diag(Q) and log diag(R); standard errors se(q) = q se(log q) (delta
+method) from the Hessian in the log-parameters; NIS e^T S^-1 e against chi2(p).  How:
+doc/design/core.md.
 """
 
 from dataclasses import dataclass, field, replace
-from typing import Callable, Optional, Sequence
+from typing import Callable, NotRequired, Optional, Sequence, TypedDict
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 import scipy.optimize
 import scipy.stats
 
@@ -43,14 +32,18 @@ AT_BOUND = 1e-3
 # the coarse search before the optimiser: these offsets of each log-parameter (e^-12..e^6)
 COARSE_OFFSETS = (-12.0, -9.0, -6.0, -3.0, 0.0, 3.0, 6.0)
 
+FloatArray = NDArray[np.float64]
+# the log-likelihood as a function of the log-parameters theta
+Objective = Callable[[FloatArray], float]
+
 
 @dataclass(frozen=True)
 class StepRecord:
     """One step of the filter: mu (s), y (None: an input-only point) and the input u."""
 
     mu: float
-    y: Optional[np.ndarray]
-    u: Optional[np.ndarray] = None
+    y: Optional[FloatArray]
+    u: Optional[FloatArray] = None
     variance: float = 0.0       # the sample's own R_d (use_message_variance), 0: R / mu
 
 
@@ -58,10 +51,10 @@ class StepRecord:
 class Innovations:
     """Innovations e_k (N x p), their covariances S_k (N x p x p) and NIS_k (N)."""
 
-    e: np.ndarray
-    S: np.ndarray
-    nis: np.ndarray
-    log_det_S: np.ndarray
+    e: FloatArray
+    S: FloatArray
+    nis: FloatArray
+    log_det_S: FloatArray
 
     @property
     def count(self) -> int:
@@ -74,7 +67,7 @@ class Innovations:
         return -0.5 * float(np.sum(self.log_det_S) + np.sum(self.nis) + self.count * p * LOG_2PI)
 
 
-def innovation_terms(e: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def innovation_terms(e: FloatArray, S: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Return (NIS_k = e^T S^-1 e, log det S_k) through a Cholesky factor of each S_k."""
     e = np.asarray(e, dtype=float).reshape(len(S), -1)
     L = np.linalg.cholesky(np.asarray(S, dtype=float))
@@ -82,7 +75,7 @@ def innovation_terms(e: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return np.sum(z * z, axis=1), 2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2)), axis=1)
 
 
-def with_noise(model: LinearModel, Q: np.ndarray, R: np.ndarray) -> LinearModel:
+def with_noise(model: LinearModel, Q: ArrayLike, R: ArrayLike) -> LinearModel:
     """Return the model with Q and R replaced."""
     return replace(model, Q=np.asarray(Q, dtype=float), R=np.asarray(R, dtype=float))
 
@@ -96,7 +89,8 @@ def run_trace(model: LinearModel, transition: str, segments: Sequence[Sequence[S
     (use_message_variance) is run with R = variance * mu, so that R / mu is that variance,
     as the estimator session does.  Raises FilterError if a step fails.
     """
-    es, Ss = [], []
+    es: list[FloatArray] = []
+    Ss: list[FloatArray] = []
     for segment in segments:
         kf = model.make_filter(transition, allow_nonregressive=True)
         R_model = kf.R
@@ -130,22 +124,22 @@ class NoiseParameters:
     fit_R: bool = True
 
     @property
-    def names(self) -> list:
+    def names(self) -> list[str]:
         """Return the parameter names, e.g. ['Q[0,0]', 'R[0,0]']."""
         out = [f'Q[{i},{i}]' for i in range(self.r)] if self.fit_Q else []
         return out + ([f'R[{i},{i}]' for i in range(self.p)] if self.fit_R else [])
 
-    def start(self, Q: np.ndarray, R: np.ndarray) -> np.ndarray:
+    def start(self, Q: FloatArray, R: FloatArray) -> FloatArray:
         """Return the log-parameters of Q and R (a non-positive diagonal entry starts at 1)."""
-        diag = []
+        diag: list[float] = []
         if self.fit_Q:
             diag += list(np.diag(Q))
         if self.fit_R:
             diag += list(np.diag(R))
         return np.log(np.where(np.asarray(diag) > 0, diag, 1.0))
 
-    def matrices(self, theta: np.ndarray, Q: np.ndarray, R: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray]:
+    def matrices(self, theta: ArrayLike, Q: ArrayLike, R: ArrayLike
+                 ) -> tuple[FloatArray, FloatArray]:
         """Return (Q, R) for the log-parameters theta (entries not fitted: from Q, R)."""
         theta = np.asarray(theta, dtype=float)
         k = 0
@@ -156,8 +150,8 @@ class NoiseParameters:
             R = np.diag(np.exp(theta[k:k + self.p]))
         return np.asarray(Q, dtype=float), np.asarray(R, dtype=float)
 
-    def stderr_matrices(self, theta: np.ndarray, se_log: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray]:
+    def stderr_matrices(self, theta: ArrayLike, se_log: ArrayLike
+                        ) -> tuple[FloatArray, FloatArray]:
         """Delta method: se(q) = q se(log q) on the fitted diagonals, 0 elsewhere."""
         se = np.exp(np.asarray(theta, dtype=float)) * np.asarray(se_log, dtype=float)
         Qs, Rs = np.zeros((self.r, self.r)), np.zeros((self.p, self.p))
@@ -182,8 +176,7 @@ def negative_log_likelihood(model: LinearModel, transition: str,
     return value if np.isfinite(value) else float('inf')
 
 
-def numerical_hessian(f: Callable[[np.ndarray], float], x: np.ndarray,
-                      h: float = HESSIAN_STEP) -> np.ndarray:
+def numerical_hessian(f: Objective, x: ArrayLike, h: float = HESSIAN_STEP) -> FloatArray:
     """Central-difference Hessian of f at x with step h in every coordinate."""
     x = np.asarray(x, dtype=float)
     n = x.size
@@ -199,7 +192,20 @@ def numerical_hessian(f: Callable[[np.ndarray], float], x: np.ndarray,
     return H
 
 
-def nis_summary(nis: np.ndarray, p: int, level: float = 0.95) -> dict:
+class NisSummary(TypedDict):
+    """The NIS check of `nis_summary` (None entries: no innovations to judge)."""
+
+    n: int
+    mean: Optional[float]
+    expected: NotRequired[float]
+    band: list[Optional[float]]
+    consistent: Optional[bool]
+    fraction_in_band: Optional[float]
+    single_band: NotRequired[list[float]]
+    level: float
+
+
+def nis_summary(nis: ArrayLike, p: int, level: float = 0.95) -> NisSummary:
     """
     Return the NIS consistency check of N innovations of dimension p.
 
@@ -226,19 +232,19 @@ def nis_summary(nis: np.ndarray, p: int, level: float = 0.95) -> dict:
 class FitResult:
     """The maximum-likelihood Q and R, their standard errors and the optimiser's report."""
 
-    Q: np.ndarray
-    R: np.ndarray
-    Q_stderr: np.ndarray
-    R_stderr: np.ndarray
+    Q: FloatArray
+    R: FloatArray
+    Q_stderr: FloatArray
+    R_stderr: FloatArray
     log_likelihood: float
-    theta: np.ndarray
-    theta_stderr: np.ndarray
-    covariance_log: np.ndarray
-    names: list
+    theta: FloatArray
+    theta_stderr: FloatArray
+    covariance_log: FloatArray
+    names: list[str]
     success: bool
     message: str
     evaluations: int
-    at_bound: list = field(default_factory=list)
+    at_bound: list[str] = field(default_factory=list)
     hessian_ok: bool = True
 
 
@@ -246,7 +252,7 @@ class FitError(ValueError):
     """The likelihood could not be maximised (the message says why)."""
 
 
-def coarse_start(f: Callable[[np.ndarray], float], theta0: np.ndarray) -> np.ndarray:
+def coarse_start(f: Objective, theta0: ArrayLike) -> FloatArray:
     """
     Return the best point of a coarse search around theta0, to start the optimiser from.
 
@@ -272,7 +278,7 @@ def coarse_start(f: Callable[[np.ndarray], float], theta0: np.ndarray) -> np.nda
     return best
 
 
-def _product(offsets: np.ndarray, k: int) -> list:
+def _product(offsets: FloatArray, k: int) -> list[list[float]]:
     """Return every k-tuple of offsets."""
     grids = np.meshgrid(*([offsets] * k), indexing='ij')
     return np.stack([g.ravel() for g in grids], axis=1).tolist()
@@ -295,7 +301,7 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
     theta0 = par.start(model.Q, model.R)
     calls = [0]
 
-    def nll(theta: np.ndarray) -> float:
+    def nll(theta: FloatArray) -> float:
         calls[0] += 1
         Q, R = par.matrices(theta, model.Q, model.R)
         return negative_log_likelihood(with_noise(model, Q, R), transition, segments)
@@ -304,7 +310,7 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
         raise FitError("the likelihood is not finite at the parameter file's Q and R")
     big = 1e300
 
-    def bounded(theta: np.ndarray) -> float:
+    def bounded(theta: FloatArray) -> float:
         value = nll(theta)
         return value if np.isfinite(value) else big
 
@@ -332,7 +338,7 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
     if hessian_ok:
         try:
             np.linalg.cholesky(H)
-            cov = np.linalg.inv(H)
+            cov = np.asarray(np.linalg.inv(H), dtype=float)
         except np.linalg.LinAlgError:
             hessian_ok = False
     se_log = np.sqrt(np.clip(np.diag(cov), 0.0, None)) if hessian_ok else np.full(

@@ -5,20 +5,22 @@ Definitions (Bohner & Wintz Definition 2.3; Cai et al. Definition 2):
     sigma(t) = inf{s in T : s > t},   mu(t) = sigma(t) - t,
     rho(t) = sup{s in T : s < t},     nu(t) = t - rho(t)   (backward graininess).
 
-A time scale here is a finite sorted array of points.  A dense stretch [a, b] (mu = 0
-in theory) is realised by points a, a + h, ..., b with a small configurable step h and
-flagged as dense, so a filter can either step through it with mu = h (which tends to
-the Kalman-Bucy filter as h -> 0) or integrate it continuously.
-
-Builders follow Bohner & Wintz Table 4 and Example 2.2 (hZ, q^Z, N_0^2, {H_n}, P_{a,b}),
-Example 3.20 / Cai Section III-B (T_3 = 2Z for t <= 8, then {H_n}), and Cai Section IV-C
-(T_d, read from a 300 s power record).
+Builders: Bohner & Wintz Table 4 and Example 2.2 (hZ, q^Z, N_0^2, {H_n}, P_{a,b}), Example
+3.20 / Cai Section III-B (T_3), Cai Section IV-C (T_d).  How a dense stretch is realised:
+doc/design/core.md.
 """
 
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import Iterable, Literal, Sequence, Union
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Points = NDArray[np.float64]
+# a piece of a time scale to build: ('dense', a, b) is [a, b]; ('discrete', points) isolated
+DenseStretch = tuple[Literal['dense'], float, float]
+IsolatedPoints = tuple[Literal['discrete'], ArrayLike]
+Piece = Union[DenseStretch, IsolatedPoints]
 
 
 class TimeScaleError(ValueError):
@@ -29,8 +31,8 @@ class TimeScaleError(ValueError):
 class TimeScale:
     """Sorted points of a time scale; dense[i] says [t_i, t_i+1] realises a dense stretch."""
 
-    points: np.ndarray
-    dense: np.ndarray
+    points: Points
+    dense: NDArray[np.bool_]
 
     def __post_init__(self) -> None:
         """Check the points are finite and strictly increasing."""
@@ -54,19 +56,19 @@ class TimeScale:
         """Return the number of points."""
         return self.points.size
 
-    def sigma(self) -> np.ndarray:
+    def sigma(self) -> Points:
         """Return the forward jump at each point (the last point jumps to itself)."""
         return forward_jump(self.points)
 
-    def mu(self) -> np.ndarray:
+    def mu(self) -> Points:
         """Graininess of the realised points (the step a filter takes; 0 at max T)."""
         return graininess(self.points)
 
-    def nu(self) -> np.ndarray:
+    def nu(self) -> Points:
         """Backward graininess (0 at min T)."""
         return backward_graininess(self.points)
 
-    def mu_theory(self) -> np.ndarray:
+    def mu_theory(self) -> Points:
         """Graininess of the time scale itself: 0 on dense stretches, the jump elsewhere."""
         m = self.mu()
         m[:-1][self.dense] = 0.0
@@ -82,19 +84,19 @@ class TimeScale:
         return TimeScale(self.points[:count], self.dense[:max(count - 1, 0)])
 
 
-def forward_jump(points: Sequence[float]) -> np.ndarray:
+def forward_jump(points: ArrayLike) -> Points:
     """sigma(t_i) = t_{i+1}; sigma(max T) = max T."""
     t = np.asarray(points, dtype=float)
     return np.append(t[1:], t[-1])
 
 
-def graininess(points: Sequence[float]) -> np.ndarray:
+def graininess(points: ArrayLike) -> Points:
     """mu(t_i) = t_{i+1} - t_i; mu(max T) = 0."""
     t = np.asarray(points, dtype=float)
     return forward_jump(t) - t
 
 
-def backward_graininess(points: Sequence[float]) -> np.ndarray:
+def backward_graininess(points: ArrayLike) -> Points:
     """nu(t_i) = t_i - t_{i-1}; nu(min T) = 0."""
     t = np.asarray(points, dtype=float)
     return t - np.insert(t[:-1], 0, t[0])
@@ -132,7 +134,7 @@ def squares(count: int) -> TimeScale:
     return discrete(np.arange(count, dtype=float) ** 2)
 
 
-def from_segments(segments: Sequence[tuple], dense_step: float) -> TimeScale:
+def from_segments(segments: Sequence[Piece], dense_step: float) -> TimeScale:
     """
     Build a time scale from ('dense', a, b) and ('discrete', [points]) segments.
 
@@ -142,20 +144,20 @@ def from_segments(segments: Sequence[tuple], dense_step: float) -> TimeScale:
     """
     if not dense_step > 0:
         raise TimeScaleError(f'dense_step must be > 0, got {dense_step}')
-    pts: list[np.ndarray] = []
+    pts: list[Points] = []
     dense_spans: list[tuple[float, float]] = []
     for seg in segments:
-        kind = seg[0]
-        if kind == 'dense':
+        if seg[0] == 'dense':
             a, b = float(seg[1]), float(seg[2])
             k = max(1, int(np.ceil((b - a) / dense_step - 1e-9)))
             pts.append(np.linspace(a, b, k + 1))
             dense_spans.append((a, b))
-        elif kind == 'discrete':
+        elif seg[0] == 'discrete':
             pts.append(np.asarray(seg[1], dtype=float))
         else:
-            raise TimeScaleError(f'unknown segment kind {kind!r}')
-    t = np.unique(np.round(np.concatenate(pts), 9))
+            raise TimeScaleError(f'unknown segment kind {seg[0]!r}')
+    joined = np.concatenate(pts)
+    t = np.unique(np.round(joined, 9))
     left, right = t[:-1], t[1:]
     dense = np.zeros(left.size, dtype=bool)
     for a, b in dense_spans:
@@ -192,7 +194,7 @@ def cai_t3(count: int) -> TimeScale:
 # Cai et al. Section IV-C: T_d = [1,15) u {15..21} u (21,30] u [32,62) u {62..67} u (67,75)
 # u {75..81} u (81,83) u {83..86} u (86,126] u [128,131] u {135..154} u (154,173)
 # u {173..204} u (204,209] u [212,218] u {224..238} u (238,273) u {273..285} u (285,300]
-CAI_TD_SEGMENTS = (
+CAI_TD_SEGMENTS: tuple[Piece, ...] = (
     ('dense', 1, 15), ('discrete', range(15, 22)), ('dense', 21, 30),
     ('dense', 32, 62), ('discrete', range(62, 68)), ('dense', 67, 75),
     ('discrete', range(75, 82)), ('dense', 81, 83), ('discrete', range(83, 87)),
@@ -225,7 +227,7 @@ class Segment:
         return self.end - self.start
 
 
-def classify(stamps: Sequence[float], *, period: float, dense_fraction: float = 0.5,
+def classify(stamps: ArrayLike, *, period: float, dense_fraction: float = 0.5,
              jump_factor: float = 1.5) -> list[Segment]:
     """
     Split sorted stamps into dense runs, discrete runs and jumps (gaps), from data.
@@ -257,7 +259,7 @@ def classify(stamps: Sequence[float], *, period: float, dense_fraction: float = 
     return out
 
 
-def jumps(stamps: Sequence[float], *, period: float,
+def jumps(stamps: ArrayLike, *, period: float,
           jump_factor: float = 1.5) -> list[tuple[float, float]]:
     """(point after the jump, J) for every gap longer than jump_factor * period."""
     return [(s.end, s.length) for s in classify(stamps, period=period, jump_factor=jump_factor)

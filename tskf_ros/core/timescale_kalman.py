@@ -40,7 +40,7 @@ can discretise a jump as a continuous plant sampled at irregular instants
 
 from dataclasses import dataclass
 import math
-from typing import Any, Callable, Optional
+from typing import Callable, Optional, overload, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -80,11 +80,11 @@ class StepResult:
 def as_vector(value: ArrayLike, size: int, name: str) -> Vector:
     """Return value as a finite float vector of `size` entries; a float64 vector is not copied."""
     if value.__class__ is float:
-        if size != 1 or not math.isfinite(value):     # type: ignore[arg-type]
+        if size != 1 or not math.isfinite(value):
             return as_vector(np.array((value,)), size, name)
         return np.array((value,))
-    elif value.__class__ is np.ndarray and value.dtype is _FLOAT:     # type: ignore[union-attr]
-        v = value.reshape(-1)                                           # type: ignore[union-attr]
+    elif value.__class__ is np.ndarray and value.dtype is _FLOAT:
+        v = value.reshape(-1)
     else:
         try:
             v = np.array(value, dtype=float).reshape(-1)
@@ -98,15 +98,32 @@ def as_vector(value: ArrayLike, size: int, name: str) -> Vector:
     return v
 
 
-def _model_matrix(name: str) -> Any:
-    """Make a model-matrix property: assigning it is checked and re-derives the caches."""
-    private = '_' + name
+class _ModelMatrix:
+    """A model-matrix attribute: assigning it is checked and re-derives the caches."""
 
-    def get(self: 'TimeScaleKalmanFilter') -> Matrix:
-        return getattr(self, private)       # type: ignore[no-any-return]
+    def __init__(self, name: str) -> None:
+        self.name, self.private = name, '_' + name
+        self.__doc__ = f'The model matrix {name} (assigning it is checked).'
 
-    def put(self: 'TimeScaleKalmanFilter', value: ArrayLike) -> None:
-        old = getattr(self, private)
+    @overload
+    def __get__(self, obj: None, owner: type['TimeScaleKalmanFilter']) -> '_ModelMatrix':
+        ...
+
+    @overload
+    def __get__(self, obj: 'TimeScaleKalmanFilter', owner: type['TimeScaleKalmanFilter']
+                ) -> Matrix:
+        ...
+
+    def __get__(self, obj: Optional['TimeScaleKalmanFilter'], owner: type['TimeScaleKalmanFilter']
+                ) -> Union['_ModelMatrix', Matrix]:
+        if obj is None:
+            return self
+        matrix: Matrix = getattr(obj, self.private)
+        return matrix
+
+    def __set__(self, obj: 'TimeScaleKalmanFilter', value: ArrayLike) -> None:
+        name = self.name
+        old = getattr(obj, self.private)
         new = as_matrix(value, name, column=name in ('G', 'B'))
         if name == 'D':
             new = new.reshape(-1)
@@ -114,10 +131,8 @@ def _model_matrix(name: str) -> Any:
             raise FilterError(f'{name} must keep its shape {old.shape}, got {new.shape}')
         if name in ('Q', 'R'):
             new = check_covariance(new, name, definite=name == 'R')
-        setattr(self, private, new)
-        self._prepare()
-
-    return property(get, put, doc=f'The model matrix {name} (assigning it is checked).')
+        setattr(obj, self.private, new)
+        obj._prepare()
 
 
 class TimeScaleKalmanFilter:
@@ -131,13 +146,13 @@ class TimeScaleKalmanFilter:
     the model matrices can be assigned later (checked, same shape).
     """
 
-    A = _model_matrix('A')
-    C = _model_matrix('C')
-    G = _model_matrix('G')
-    Q = _model_matrix('Q')
-    R = _model_matrix('R')
-    B = _model_matrix('B')
-    D = _model_matrix('D')
+    A = _ModelMatrix('A')
+    C = _ModelMatrix('C')
+    G = _ModelMatrix('G')
+    Q = _ModelMatrix('Q')
+    R = _ModelMatrix('R')
+    B = _ModelMatrix('B')
+    D = _ModelMatrix('D')
 
     def __init__(self, A: ArrayLike, C: ArrayLike, *, Q: ArrayLike, R: ArrayLike,
                  G: Optional[ArrayLike] = None, B: Optional[ArrayLike] = None,
@@ -330,7 +345,7 @@ class TimeScaleKalmanFilter:
         Rinv = np.linalg.inv(self.R)
         B, GQGt = self.B, self.GQGt
 
-        def rhs(s: float, z: np.ndarray) -> np.ndarray:
+        def rhs(s: float, z: Vector) -> Vector:
             xh = z[:n]
             P = z[n:].reshape(n, n)
             # K = P C^T R^-1
@@ -350,7 +365,7 @@ class TimeScaleKalmanFilter:
         P = zf[n:].reshape(n, n)
         self.x, self.P = zf[:n], (P + P.T) / 2
 
-    def state(self) -> tuple[np.ndarray, np.ndarray]:
+    def state(self) -> tuple[Vector, Matrix]:
         """Return a copy of (x, P), for history and rewinding."""
         return self.x.copy(), self.P.copy()
 

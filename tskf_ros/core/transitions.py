@@ -47,7 +47,7 @@ def van_loan(A: Matrix, GQGt: Matrix, mu: float) -> tuple[Matrix, Matrix]:
             # Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T, F(2h) = F(h)^2
             Qd = Qd + F @ Qd @ F.T
             F = F @ F
-    return F, (Qd + Qd.T) / 2
+    return np.ascontiguousarray(F), (Qd + Qd.T) / 2
 
 
 def exact_input_matrix(A: Matrix, B: Matrix, mu: float) -> Matrix:

@@ -1,26 +1,4 @@
-"""
-Monte Carlo comparison of LED alignment algorithms (Solanki et al. 2018, Fig. 8-10).
-
-    python -m tskf_ros.experiments.alignment_mc --runs 1000 --json a.json --png fig10.png
-
-For each noise level (standard deviation of v in volts; peak intensity 3 V) it runs the
-scanning EKF, hill-climbing and three-point averaging in closed loop with eq. (25), all
-runs of one algorithm at once (numpy arrays with a runs axis), and reports the tracking
-percentage by angle (|phi| <= 15 deg) and by clean measurement (>= 20% of 3 V): mean
-and standard deviation over runs.  Every algorithm at every point of a sweep starts
-from the same seed, so all see the same standard-normal draws for w and v (scaled by the
-noise level) and the same uniform draws behind the dropouts (nested as the probability
-grows): common random numbers, which make the differences between curves and between
-points smoother than independent draws would.
-
-Also: --fig8 PATH (one EKF run at beta = 1.2 deg/s, Fig. 8), --fig9 PATH (one run at a
-beta where the EKF fails, Fig. 9), and --dropout-png/--dropout-json PATH (tracking
-percentage against the probability of a missing measurement, 0 to 50%, which no paper
-shows; with the EKF also fed a held last value, the naive way to keep a regular-sample
-filter going).  --controller lqg runs the EKF with the LQG controller of
-tskf_ros.led.lqg_alignment instead of the paper's P controller (21) (the default, p); the
-JSON records which.  Outputs are written atomically (temporary file, then os.replace).
-"""
+"""Monte Carlo comparison of LED alignment algorithms (Solanki et al. 2018, Fig. 8-10)."""
 
 import argparse
 import dataclasses
@@ -116,7 +94,7 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
         cfg = dataclasses.replace(link, **{parameter: float(value)})
         parts = []
         for name in algorithms:
-            rng = np.random.default_rng(seed)     # common random numbers, see the docstring
+            rng = np.random.default_rng(seed)     # common random numbers: the same draws
             angular, measure = evaluate(name, runs, cfg, rng, response, ekf, clip, controller)
             _record(results, name, angular, measure)
             parts.append(f'{name} {np.mean(angular):5.1f}%')

@@ -1,14 +1,4 @@
-"""
-Read a bag into a measurement and input stream, and evaluate the estimator on it.
-
-This is the one place where fit_noise and sweep touch bags.
-`evaluate_bag(bag, config)` is the per-bag evaluation of the sweep: it reads the bag
-(tskf_ros.bag.reader.BagReader, rclpy deserialization, the node's extractor), runs the
-estimator session over it through tskf_ros.owc.innovation_trace (the node's code path,
-estimates kept in memory: no bag is written) and returns a flat dict of metrics.  A faster
-replay that returns arrays can replace `read_stream` + `run_stream` here without touching
-the sweep.
-"""
+"""Read a bag into a measurement and input stream, and evaluate the estimator on it."""
 
 from collections import defaultdict
 from dataclasses import dataclass, field

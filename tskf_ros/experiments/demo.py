@@ -1,21 +1,4 @@
-"""
-The live demo: simulator and estimator as separate processes over DDS, then a summary.
-
-    python -m tskf_ros.experiments.demo --duration-scale 0.05
-
-runs Cai et al.'s 300 s, 1 Hz experiment (Section IV-C) with the simulated link, played
-20 times faster (300 s of stamps in 15 s of wall time), and prints: messages, the gaps
-found with their J (Section IV-C), the RMS error of the predictor (Table I / B&W Table 3)
-and of the corrected estimate against the true angle, and the five worst points.
-
-Beside it, the LED active alignment loop of Solanki et al. runs live (led_link_simulator
-and alignment as two more processes, in the namespace /led) and the demo prints its
-tracking percentage: the share of samples with the angle of incidence within +-15 deg.
-
-This module stays ROS-free at import; the collecting client (tskf_ros.tools.demo_collector)
-is imported when the demo runs.  `run_in_process` there runs the same pipeline in one
-process on one executor, for tests.
-"""
+"""The live demo: the OWC (Cai et al. IV-C) and LED pipelines as processes over DDS."""
 
 import argparse
 from dataclasses import dataclass
@@ -25,7 +8,7 @@ import shutil
 import signal
 import subprocess
 import sys
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
@@ -141,7 +124,8 @@ def replay_sample_bag(out: Path) -> int:
     return rc
 
 
-def node_command(module: str, params_file: Path, **params: object) -> list:
+def node_command(module: str, params_file: Path,
+                 **params: Union[bool, int, float, str]) -> list:
     """`python -m tskf_ros.nodes.<module> --ros-args --params-file ... -p k:=v`."""
     cmd = [sys.executable, '-m', f'tskf_ros.nodes.{module}', '--ros-args',
            '--params-file', str(params_file)]

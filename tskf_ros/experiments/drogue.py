@@ -1,22 +1,11 @@
 """
 One drogue of Fang & de Callafon Section IV: flow velocity from irregular position fixes.
 
-    python -m tskf_ros.experiments.drogue --out results/drogue
+    m d'' = c (v_d(z) - d') |v_d(z) - d'|                                       eq. (26)
+    x_{k+1} = [[1, T], [0, 1]] x_k + [T^2 / 2, T]^T u_k + w_k,  y_{t_l} = [1, 0] x_{t_l} + v
+    v_d = x_2 + sign(u) sqrt(|u| m / c)                                  inverse of eq. (27)
 
-The drogue obeys eq. (26), m d'' = c (v_d(z) - d') |v_d(z) - d'|, in an along-front
-flow v_d(z) that depends on depth only.  It dives and surfaces irregularly; its
-acceleration u = d'' (eq. (27)) and depth are sampled every T seconds, its position d
-only at the surface.  The filter is the switching Kalman filter, eqs. (13)-(17), on the
-double integrator with the acceleration as input (zero-order hold):
-
-    x_{k+1} = [[1, T], [0, 1]] x_k + [T^2 / 2, T]^T u_k + w_k,   y_{t_l} = [1, 0] x_{t_l} + v
-
-and the flow follows from the inverse of eq. (27): v_d = x_2 + sign(u) sqrt(|u| m / c).
-
-The paper gives no numbers for the drogue, the flow or the sensors; ours are in
-DrogueConfig (a jet of 0.45 m/s at the surface decaying with depth, with small
-ripples; a drag c / m = 10 1/m; a 1e-4 m/s^2 accelerometer and a 3 m position fix).
-Writes drogue.png (like Fig. 3 and Fig. 4) and drogue.json; prints the RMS errors.
+with the switching Kalman filter of eqs. (13)-(17) on the double integrator above.
 """
 
 import argparse

@@ -1,23 +1,9 @@
 """
-fit_noise: estimate the noise intensities Q and R of the estimator's model from a bag.
+fit_noise: maximum-likelihood Q and R of the estimator's model from a bag.
 
-    python -m tskf_ros.experiments.fit_noise BAG --params-file config/owc_estimator.yaml \
-        --topic /received_power --out fitted.yaml --json fit.json
+    (Q, R) = argmin over log diag(Q), log diag(R) of  sum_k [log det S_k + e_k^T S_k^-1 e_k]
 
-Maximum likelihood over the time-scale filter's innovations (tskf_ros.core.noise_fit):
-minimise sum_k [log det S_k + e_k^T S_k^-1 e_k] over log diag(Q) and log diag(R), with mu
-from the stamps exactly as the timescale_estimator node computes it (its EstimatorSession:
-same transition, gap handling and rejections; tskf_ros.owc.innovation_trace).  Standard
-errors from the numerical Hessian in the log-parameters, carried to Q and R by the delta
-method; the log-likelihood; the normalised innovation squared against its chi-square band.
-
-Writes `--out` (a parameter file the node takes as it is: the input file with Q and R
-replaced) and `--json` (the fit), each through a temporary file renamed into place.
-
-Exit status: 0 done; 1 the bag, topic or parameters cannot be used, or too few samples
-(one-line error, nothing written); 3 the bag is damaged (the fit uses the messages before
-the damage; outputs written); 4 the likelihood has no usable maximum (no convergence, a
-parameter that runs to its bound, a singular Hessian; nothing written).
+over the time-scale filter's innovations e_k and their covariances S_k (mu from the stamps).
 """
 
 import argparse

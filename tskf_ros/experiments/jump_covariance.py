@@ -1,15 +1,4 @@
-"""
-How bad is a point after a gap of J seconds: the time-scale filter's covariance around a jump.
-
-    python -m tskf_ros.experiments.jump_covariance --out results/jump_covariance
-
-For Cai et al.'s OWC model (3) and the spring-mass system (1) (B&W Example 3.20) on a
-stream of points every second (Cai's T_d) interrupted by one jump of length J, plots
-`tskf_ros.core.irregular.jump_covariance` against J: the predicted (peak)
-covariance at the point after the jump and the corrected covariance there, for the
-paper's transition I + mu A and for the exact sampled plant.  Writes jump_covariance.png and
-jump_covariance.json (the values at J = 1..6).
-"""
+"""The time-scale filter's covariance around a jump of J s (Cai et al. (3), B&W Ex. 3.20)."""
 
 import argparse
 from pathlib import Path

@@ -1,19 +1,4 @@
-"""
-LQG against the paper's P controller on the scanning EKF: tracking % against beta, and effort.
-
-    python -m tskf_ros.experiments.lqg_comparison --runs 1000 --png lqg_vs_p.png
-
-For each drift rate beta (deg/s) both controllers of the EKF (`p`: Solanki et al. 2018,
-eq. (21); `lqg`: tskf_ros.led.lqg_alignment) run in closed loop with eq. (25) at the
-noise --noise (V), from the same seed (common random numbers, as alignment_mc).  Then
-one more point, --effort-noise and --effort-beta (1.0 V, 2.8 deg/s: the paper's
-experiments, Fig. 14), compares mean |phi| and actuation.  Per controller and point:
-tracking % (by angle |phi| <= 15 deg and by clean measurement >= 20% of 3 V; mean, std),
-mean |phi| over steps and runs (deg), runs lost (angular tracking < 50%), actuation
-(sum of |motor command| per run, mean over runs, deg) and its control part (the command
-less the scan step psi_{k+1} - psi_k).  --ablation also runs the LQG with one of its
-parts changed at a time (ABLATIONS) at both points.  Outputs are written atomically.
-"""
+"""LQG against the paper's P controller on the scanning EKF: tracking % against beta, effort."""
 
 import argparse
 import dataclasses

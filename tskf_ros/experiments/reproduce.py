@@ -1,20 +1,4 @@
-"""
-Reproduce the papers' numerical examples: B&W Example 3.20 and Cai et al. Section V.
-
-    python -m tskf_ros.experiments.reproduce --out results/
-
-Writes, into --out, one PNG per run ("plot in iteration" and "plot in time scale", as
-Cai Fig. 2) and a JSON summary per run plus summary.json.  Everything is seeded.
-
-Experiments:
-- Bohner & Wintz Example 3.20 (= Cai Section III-B, system (1)): spring-mass on 2Z,
-  {H_n}, P_{1,2} and 2Z-then-{H_n} (Cai's T_3), 15 points as in the paper and a
-  longer run.
-- Cai Section V: the OWC model (3) and the reference system (1) on T_d; the five points
-  after the jumps (t = 32, 128, 135, 212, 224 with J = 2, 2, 4, 3, 6), where the largest
-  errors fall, the corrected estimate against the paper's predictor, and the paper's
-  I + mu A transition against the exact sampled-plant transition.
-"""
+"""Reproduce the papers' numerical examples: B&W Example 3.20 and Cai et al. Section V."""
 
 import argparse
 from dataclasses import dataclass

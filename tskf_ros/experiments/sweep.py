@@ -1,76 +1,29 @@
-"""
-sweep: run the estimator (and optionally fit_noise) over many bags x many settings on Dask.
-
-    python -m tskf_ros.experiments.sweep --bags bags/ 'fleet/**/run_*' \
-        --params-file config/owc_estimator.yaml --set R=1,10,100 --set transition=euler,exact \
-        --workers 2 --out table.csv --png sweep.png
-
-One CSV row per bag x setting: a `key` (a hash of the bag's path, its files' sizes and
-modification times, the parameter file's content and the setting), the bag, one column per
---set parameter, the metrics of tskf_ros.experiments.bag_analysis.METRICS (RMS against the
-truth where the bag has a JointState topic naming the model's states, the NIS consistency,
-rejections and resets by reason, gaps, samples), `seconds` (the task's own wall time) and
-`error` (empty when the bag was evaluated; else one line).  Rows are appended and flushed
-as tasks finish, so an interrupted sweep keeps what it finished; a re-run with the same
---out skips every key already in the file (--no-resume starts a new file).  A bag that
-cannot be read, or is damaged, gets its error in its row; the others go on.
-
-Dask: by default a LocalCluster of --workers processes (default: one per core), one thread
-each, on 127.0.0.1, no dashboard.  `--scheduler tcp://host:8786` submits the same tasks to
-an existing cluster instead (its workers need this package installed and the bags at the
-same paths; the parameters travel with the tasks).  `--workers 0` runs in this process,
-without Dask.
-
-Exit status: 0 every task ran without error; 1 bad arguments or files (one line, nothing
-started); 5 at least one row has an error (the table is complete otherwise); 130
-interrupted (Ctrl-C: the rows finished are kept, the same command resumes).
-"""
+"""sweep: the estimator (and optionally fit_noise) over many bags x many settings on Dask."""
 
 import argparse
 import csv
 from dataclasses import dataclass, field
-import fcntl
-import glob
-import hashlib
-import itertools
-import json
 import logging
 import os
 from pathlib import Path
 import sys
-import time
-from typing import Iterable, Optional
+from typing import Optional
 
 import numpy as np
 
-from tskf_ros.experiments.bag_analysis import evaluate_bag, METRICS, read_stream
-from tskf_ros.experiments.fit_noise import EXIT_INTERRUPTED, fit_events
+from tskf_ros.experiments.bag_analysis import METRICS
+from tskf_ros.experiments.fit_noise import EXIT_INTERRUPTED
 from tskf_ros.experiments.output import save_figure
-from tskf_ros.messages.estimator_interface import (default_parameters, load_config,
-                                                   NodeConfig, ParamsError)
-
-import yaml
+from tskf_ros.experiments.sweep_table import Table
+from tskf_ros.experiments.sweep_tasks import (build_tasks, find_bags, FIT_COLUMNS, one_line,
+                                              parse_setting, run_task, setting_text,
+                                              settings_product)
+from tskf_ros.messages.estimator_interface import default_parameters, ParamsError
 
 PROG = 'sweep'
 EXIT_ROW_ERRORS = 5
 # a LocalCluster larger than this is a typo, not a plan (use --scheduler for a big cluster)
 MAX_WORKERS = 256
-FIT_COLUMNS = ['fit_Q', 'fit_R', 'fit_Q_stderr', 'fit_R_stderr', 'fit_log_likelihood',
-               'fit_nis_mean', 'fit_error']
-# parameters a --set may not change: they do not affect an offline evaluation
-NOT_SETTABLE = ('queue_depth', 'diagnostics_period', 'frame_id', 'measurement_type')
-
-
-@dataclass(frozen=True)
-class Task:
-    """One bag x one setting, with the config built from it."""
-
-    key: str
-    bag: str
-    setting: dict
-    config: NodeConfig
-    topic: Optional[str] = None
-    fit: bool = False
 
 
 @dataclass
@@ -81,217 +34,6 @@ class SweepResult:
     skipped: list = field(default_factory=list)
     errors: int = 0
     rows: list = field(default_factory=list)
-
-
-def find_bags(patterns: Iterable[str]) -> list:
-    """
-    Resolve bag arguments into a sorted list of bags.
-
-    An argument is a bag (a directory with metadata.yaml, or a .mcap file), a directory
-    holding bags (searched recursively), or a glob pattern ('**' recursive).
-    """
-    found = set()
-
-    def is_bag(p: Path) -> bool:
-        return (p.is_dir() and (p / 'metadata.yaml').is_file()) or (
-            p.is_file() and p.suffix == '.mcap' and not (p.parent / 'metadata.yaml').is_file())
-
-    for pattern in patterns:
-        matches = [Path(p) for p in sorted(glob.glob(pattern, recursive=True))] or [
-            Path(pattern)]
-        for p in matches:
-            if is_bag(p):
-                found.add(str(p))
-            elif p.is_dir():
-                found.update(str(m.parent) for m in p.rglob('metadata.yaml'))
-                found.update(str(m) for m in p.rglob('*.mcap')
-                             if not (m.parent / 'metadata.yaml').is_file())
-    return sorted(found)
-
-
-def parse_setting(text: str, defaults: dict) -> tuple[str, list]:
-    """
-    Parse NAME=v1,v2,...: each value typed as the parameter's default.
-
-    A matrix parameter takes each value as space-separated numbers (R=100 or 'R=1 0 0 1').
-    """
-    if '=' not in text:
-        raise ValueError(f'--set {text!r}: expected NAME=value1,value2,...')
-    name, _, values = text.partition('=')
-    name = name.strip()
-    if name not in defaults or name in NOT_SETTABLE:
-        raise ValueError(f'--set {name}: not a parameter of the estimator a sweep can set')
-    default = defaults[name]
-    out = []
-    for raw in values.split(','):
-        raw = raw.strip()
-        if not raw:
-            raise ValueError(f'--set {text!r}: an empty value')
-        if isinstance(default, (list, tuple)):
-            try:
-                value = [float(v) for v in raw.split()]
-            except ValueError:
-                raise ValueError(f'--set {name}: {raw!r} is not a list of numbers') from None
-        elif isinstance(default, bool):
-            value = yaml.safe_load(raw)
-            if not isinstance(value, bool):
-                raise ValueError(f'--set {name}: {raw!r} is not true or false')
-        elif isinstance(default, (int, float)):
-            try:
-                value = type(default)(float(raw)) if isinstance(default, float) else int(raw)
-            except ValueError:
-                raise ValueError(f'--set {name}: {raw!r} is not a number') from None
-        else:
-            value = raw
-        out.append(value)
-    return name, out
-
-
-def settings_product(sets: list) -> list:
-    """Return every combination of the --set values as a list of {name: value} dicts."""
-    names = [n for n, _ in sets]
-    if len(set(names)) != len(names):
-        raise ValueError('a parameter is given to --set twice')
-    return [dict(zip(names, combo)) for combo in itertools.product(*[v for _, v in sets])]
-
-
-def setting_text(value: object) -> str:
-    """Return a setting's value as the CSV shows it."""
-    if isinstance(value, list):
-        return ' '.join(repr(float(v)) for v in value)
-    return str(value)
-
-
-def bag_signature(bag: str) -> list:
-    """Return (name, size, mtime_ns) of every file of a bag: what the resume key covers."""
-    p = Path(bag)
-    files = sorted(p.rglob('*')) if p.is_dir() else [p]
-    out = []
-    for f in files:
-        if f.is_file():
-            st = f.stat()
-            out.append([str(f.relative_to(p) if p.is_dir() else f.name), st.st_size,
-                        st.st_mtime_ns])
-    return out
-
-
-def task_key(bag: str, params_text: str, setting: dict, topic: Optional[str],
-             fit: bool) -> str:
-    """Return the row key: a hash of the bag's path and files, the parameters and setting."""
-    blob = json.dumps([str(Path(bag).resolve()), bag_signature(bag), params_text,
-                       {k: setting_text(v) for k, v in setting.items()}, topic, fit],
-                      sort_keys=True)
-    return hashlib.sha256(blob.encode()).hexdigest()[:20]
-
-
-def one_line(exc: BaseException) -> str:
-    """Return an exception as one line: its type and message."""
-    text = ' '.join(str(exc).split()) or repr(exc)
-    return f'{type(exc).__name__}: {text}'
-
-
-def run_task(task: Task) -> dict:
-    """Evaluate one bag x setting (on a worker); never raises: errors go into the row."""
-    t0 = time.perf_counter()
-    row = {'key': task.key, 'bag': task.bag, 'error': ''}
-    row.update({name: setting_text(v) for name, v in task.setting.items()})
-    try:
-        row.update(evaluate_bag(task.bag, task.config, topic=task.topic))
-        if row.get('damage'):
-            row['error'] = f'damaged: {row["damage"]}'
-    except Exception as exc:  # noqa: B902 - a bad bag must not stop the sweep
-        row['error'] = one_line(exc)
-    if task.fit and not row['error']:
-        row.update(fit_columns(task))
-    row['seconds'] = time.perf_counter() - t0
-    return row
-
-
-def fit_columns(task: Task) -> dict:
-    """Run fit_noise's fit on the bag with the task's config; return the fit_* columns."""
-    out = {c: '' for c in FIT_COLUMNS}
-    try:
-        cfg = task.config.session
-        stream = read_stream(task.bag, cfg, topic=task.topic, truth=False)
-        sf, report = fit_events(cfg, stream.events)
-        for name in ('Q', 'R', 'Q_stderr', 'R_stderr'):
-            out[f'fit_{name}'] = json.dumps(np.asarray(report[name]).tolist())
-        out['fit_log_likelihood'] = report['log_likelihood']
-        out['fit_nis_mean'] = report['nis']['mean']
-    except Exception as exc:  # noqa: B902 - a failed fit is reported in its row
-        out['fit_error'] = one_line(exc)
-    return out
-
-
-def cell(value: object) -> str:
-    """Return a CSV cell: floats exact (repr), None and NaN empty."""
-    if value is None:
-        return ''
-    if isinstance(value, float):
-        return '' if not np.isfinite(value) else repr(value)
-    return str(value)
-
-
-class Table:
-    """The CSV being written: header once, then one flushed row per finished task."""
-
-    def __init__(self, path: Path, columns: list, resume: bool) -> None:
-        self.path, self.columns = Path(path), columns
-        self.done: set = set()
-        self.rows: list = []
-        # held while the sweep runs: a second sweep on the same table is refused
-        self._lock = open(self.path, 'a')
-        try:
-            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            self.close()
-            raise ValueError(f'{self.path}: another sweep is writing this table') from None
-        if resume and self.path.stat().st_size > 0:
-            try:
-                self._read_existing()
-            except ValueError:
-                self.close()
-                raise
-        else:
-            self._lock.truncate(0)
-            self._write_header()
-
-    def _write_header(self) -> None:
-        self._lock.write(','.join(self.columns) + '\n')
-        self._lock.flush()
-        os.fsync(self._lock.fileno())
-
-    def close(self) -> None:
-        """Release the table (its lock)."""
-        self._lock.close()
-
-    def _read_existing(self) -> None:
-        data = self.path.read_bytes()
-        if not data.endswith(b'\n'):        # a row cut by a kill: drop the partial line
-            with open(self.path, 'r+b') as f:
-                f.truncate(data.rfind(b'\n') + 1)
-        with open(self.path, newline='') as f:
-            reader = csv.reader(f)
-            header = next(reader, None)
-            if header is None:              # a header cut by a kill
-                self._write_header()
-            elif header != self.columns:
-                raise ValueError(f"{self.path}: its columns are not this sweep's (other "
-                                 '--set names or --fit); use --no-resume or another --out')
-            for r in reader:
-                if len(r) == len(self.columns):
-                    self.rows.append(dict(zip(self.columns, r)))
-                    self.done.add(r[0])
-
-    def append(self, row: dict) -> None:
-        """Append one row and flush it to disk."""
-        values = [cell(row.get(c)) for c in self.columns]
-        with open(self.path, 'a', newline='') as f:
-            csv.writer(f).writerow(values)
-            f.flush()
-            os.fsync(f.fileno())
-        self.rows.append(dict(zip(self.columns, values)))
-        self.done.add(row['key'])
 
 
 def progress_bar(total: int, enabled: bool):
@@ -350,19 +92,6 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
     finally:
         bar.close()
     return result
-
-
-def build_tasks(bags: list, params_file: Optional[Path], sets: list, *,
-                topic: Optional[str] = None, fit: bool = False) -> list:
-    """Return one Task per bag x setting; raise ParamsError for a setting the node refuses."""
-    params_text = Path(params_file).read_text() if params_file else ''
-    tasks = []
-    for setting in settings_product(sets):
-        config = load_config(params_file, setting)
-        for bag in bags:
-            tasks.append(Task(task_key(bag, params_text, setting, topic, fit), bag, setting,
-                              config, topic, fit))
-    return tasks
 
 
 def sweep(bags: list, *, out: Path, params_file: Optional[Path] = None, sets: list = (),

@@ -2,13 +2,13 @@
 LED active alignment of Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018).
 
 intensity_model (eq. 1-5), scanning_ekf (eq. 7-24), baselines (Section V, eq. 26),
-lqg_alignment (the LQG controller, not in the paper) and tracking_simulation (eq. 25,
-Table I) are re-exported here, as filterpy.kalman does;
-led_link (the live plant) and alignment_session (behind the alignment node) are imported
-from their modules.
+lqg_alignment (an LQG controller, not in the paper) and tracking_simulation (eq. 25,
+Table I) are re-exported here, as filterpy.kalman does; led_link (the live plant),
+alignment_config and alignment_session (behind the alignment node) are imported from
+their modules.
 """
 
-from tskf_ros.led.baselines import (ALGORITHMS, CONTROLLERS, HILL_STEP, HillClimbing,
+from tskf_ros.led.baselines import (ALGORITHMS, AnyAligner, CONTROLLERS, HILL_STEP, HillClimbing,
                                     make_aligner, ThreePointAveraging)
 from tskf_ros.led.intensity_model import (AlignmentError, attenuation, IncidenceResponse,
                                           irradiance, LITERAL_UNITS_PER_DEGREE, MAX_INTENSITY,
@@ -23,7 +23,7 @@ from tskf_ros.led.tracking_simulation import (simulate_tracking, tracking, Track
                                               Trajectory)
 
 __all__ = [
-    'ALGORITHMS', 'Aligner', 'AlignmentError', 'as_measurement', 'attenuation',
+    'ALGORITHMS', 'Aligner', 'AlignmentError', 'AnyAligner', 'as_measurement', 'attenuation',
     'check_observability', 'CONTROLLERS', 'EKFConfig', 'HILL_STEP', 'HillClimbing',
     'IncidenceResponse', 'irradiance', 'LITERAL_UNITS_PER_DEGREE', 'LQGAligner', 'LQGConfig',
     'make_aligner', 'MAX_INTENSITY', 'Measurement', 'min_gain', 'ObservabilityError',

@@ -1,176 +1,37 @@
 """
 A streaming alignment session: stamped intensity samples in, base position commands out.
 
-Wraps one aligner of tskf_ros.led (the scanning EKF of Solanki et al. Section IV, or the
-hill-climbing and three-point baselines of Section V) for a node that gets one message
-per sample.  Each sample is one iteration: `ScanningEKF.step(stamp, z)` predicts over the
-time since the last sample (mu = elapsed / dt, so a gap of missing samples grows P by
-mu Q), updates, and returns the turn; the session adds it to the base angle and returns
-the absolute position command a ros2_control position controller takes.
-
-Bad input never reaches the aligner as a number it would misuse, and never stops it:
-
-- a NaN or infinite intensity, and a negative one (a photodiode voltage cannot be
-  negative; `negative_is_missing`), is a missing measurement at a known stamp: the EKF
-  predicts over it and the loop goes on (the scan advances, a command is returned);
-- a zero stamp, a stamp equal to the last (duplicate) or older than it (stale) is
-  dropped: no step, no command;
-- a stamp more than `max_backward` seconds older than the last (a clock reset, a looped
-  bag) restarts the aligner from its initial state, as does a clock jump (`reset`);
-- a step that would give a non-finite command or estimate restarts the aligner and
-  returns no command;
-- an intensity outside the optional physical `intensity_range`, or one whose innovation
-  is more than `gate` standard deviations from the EKF's prediction (row 1 of (12)
-  against the prior of its stamp; robot_localization's per-sensor rejection threshold),
-  is a missing measurement too ('out_of_range', 'gated'): a rejected sample widens the
-  next prior, so the aligner cannot lock itself out;
-- an EKF state or covariance beyond `state_limit` (|x_i| or sqrt(trace P)) restarts the
-  aligner ('state_health') and the next diagnostics report is an ERROR;
-- a command is clamped to `max_step` degrees from the base and to the joint limits
-  `base_limits`; the EKF is told the turn the base really made (its u_k), the baselines
-  keep no angle and need not be told.
-
-Every case is counted for diagnostics, with the input rate and staleness (InputRate)
-when the receiver clock is given.  The module never imports rclpy.
+Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018): each sample is one iteration k of an
+aligner of tskf_ros.led, the scanning EKF of Section IV (eq. (13)-(21), predicted over
+mu = elapsed / dt; its turn is u_k + psi_{k+1} - psi_k) or a baseline of Section V; the
+turn is added to the base angle.  What happens to bad input: doc/design/alignment.md.
 """
 
 from collections import Counter
 from dataclasses import dataclass, field, fields
 import math
-from typing import Optional, Sequence
+from typing import NamedTuple, Optional
 
 import numpy as np
 
 from tskf_ros import led
-from tskf_ros.core.input_rate import InputRate, report_head, worst
+from tskf_ros.core.input_rate import DiagnosticValue, InputRate, report_head, worst
 from tskf_ros.core.units import MAX_STAMP_NS, NS
+from tskf_ros.led.alignment_config import AlignmentConfig, TUNABLE
+from tskf_ros.led.intensity_model import FloatArray
 
 GAP_FACTOR = 1.5        # an interval longer than this many dt is a gap (samples missing)
 MISSING_REASONS = ('non_finite', 'negative', 'out_of_range', 'gated')
 REJECT_REASONS = ('zero_stamp', 'stamp_range', 'duplicate', 'stale', 'filter_error')
 RESET_REASONS = ('backward_jump', 'clock_jump', 'reconfigured', 'filter_error',
                  'state_health')
-# parameters that change in place; any other change restarts the aligner
-TUNABLE = ('gain', 'Q', 'R', 'x1_floor', 'gamma', 'clip', 'negative_is_missing', 'max_gap',
-           'max_backward', 'gate', 'intensity_range', 'state_limit', 'max_step',
-           'base_limits', 'stale_timeout', 'min_rate_fraction', 'rate_window')
 
 
-def _matrix(values: Sequence[float], name: str, *, definite: bool) -> np.ndarray:
-    """Return a flat 4-entry list as a symmetric 2 x 2 matrix; raise AlignmentError if bad."""
-    v = np.asarray(list(values), dtype=float)
-    if v.size != 4:
-        raise led.AlignmentError(f'{name} must have 4 entries (2 x 2 row-major), got {v.size}')
-    if not np.all(np.isfinite(v)):
-        raise led.AlignmentError(f'{name} has non-finite entries')
-    m = v.reshape(2, 2)
-    if not np.allclose(m, m.T, rtol=0, atol=1e-12 * max(1.0, float(np.max(np.abs(m))))):
-        raise led.AlignmentError(f'{name} must be symmetric, got {m.tolist()}')
-    eig = np.linalg.eigvalsh(m)
-    if (definite and not eig[0] > 0) or eig[0] < 0:
-        kind = 'positive definite' if definite else 'positive semi-definite'
-        raise led.AlignmentError(f'{name} must be {kind}; eigenvalues {eig.tolist()}')
-    return m
+class Estimate(NamedTuple):
+    """An EKF estimate of one run: x = [x1 (V), x2 (deg)] and its 2 x 2 covariance P."""
 
-
-@dataclass(frozen=True)
-class AlignmentConfig:
-    """The session's settings (Table I defaults); angles in degrees, intensities in volts."""
-
-    algorithm: str = 'ekf'                       # one of led.ALGORITHMS
-    dt: float = led.PAPER_DT                     # s: the nominal sample period (mu = dt / dt)
-    gain: float = led.PAPER_GAIN                 # G of the P controller (21)
-    x0: tuple = led.PAPER_X0                     # xhat_0 = [x1 (V), x2 (deg)]
-    P0: tuple = tuple(np.ravel(led.PAPER_P0))    # 2 x 2 row-major
-    Q: tuple = tuple(np.ravel(led.PAPER_Q))
-    R: tuple = tuple(np.ravel(led.PAPER_R))
-    scan: tuple = led.SCAN_ANGLES                # Psi (deg), visited cyclically
-    x1_floor: float = 0.0                        # keep x1hat >= this; 0: off (the paper)
-    gamma: float = led.HILL_STEP                 # deg: step of the two baselines
-    clip: bool = False                           # three-point: guard eq. (26)
-    units_per_degree: float = 0.0                # fit units of g per degree; 0: zone unit
-    base_initial: float = 0.0                    # deg: base angle when the session starts
-    negative_is_missing: bool = True             # a negative intensity is a missing sample
-    max_gap: float = 1.0                         # s: a longer gap sets diagnostics to WARN
-    max_backward: float = 5.0                    # s: a stamp further back restarts
-    gate: float = 10.0                           # innovation gate (std devs); 0: off
-    intensity_range: tuple = ()                  # (lo, hi) V of a physical reading; (): any
-    state_limit: float = 1e6                     # |x_i| or sqrt(trace P) beyond: restart
-    max_step: float = 45.0                       # deg a command may turn the base; 0: any
-    base_limits: tuple = (-360.0, 360.0)         # deg: the joint limits of the base
-    stale_timeout: float = 5.0                   # s without input: diagnostics ERROR; 0 off
-    min_rate_fraction: float = 0.5               # rate below this * 1 / dt: WARN; 0 off
-    rate_window: float = 5.0                     # s over which the input rate is measured
-
-    def __post_init__(self) -> None:
-        """Check that the settings make a working aligner; raise AlignmentError if not."""
-        if self.algorithm not in led.ALGORITHMS:
-            raise led.AlignmentError(f'algorithm must be one of {led.ALGORITHMS}, '
-                                     f'got {self.algorithm!r}')
-        for name in ('dt', 'gain', 'x1_floor', 'gamma', 'units_per_degree', 'base_initial',
-                     'max_gap', 'max_backward', 'gate', 'state_limit', 'max_step',
-                     'stale_timeout', 'min_rate_fraction', 'rate_window'):
-            value = getattr(self, name)
-            if not math.isfinite(value):
-                raise led.AlignmentError(f'{name} must be finite, got {value}')
-        for name in ('dt', 'gamma'):
-            if not getattr(self, name) > 0:
-                raise led.AlignmentError(f'{name} must be > 0, got {getattr(self, name)}')
-        for name in ('x1_floor', 'units_per_degree', 'max_gap', 'max_backward', 'gate',
-                     'max_step', 'stale_timeout', 'min_rate_fraction', 'rate_window'):
-            if getattr(self, name) < 0:
-                raise led.AlignmentError(f'{name} must be >= 0, got {getattr(self, name)}')
-        if not self.state_limit > 0 or not self.rate_window > 0:
-            raise led.AlignmentError('state_limit and rate_window must be > 0')
-        for name in ('intensity_range', 'base_limits'):
-            r = tuple(getattr(self, name))
-            if r and (len(r) != 2 or not all(math.isfinite(v) for v in r) or not r[0] < r[1]):
-                raise led.AlignmentError(f'{name} must be [lo, hi] with finite lo < hi'
-                                         f'{" (or empty)" if name == "intensity_range" else ""}'
-                                         f', got {list(r)}')
-        if len(tuple(self.base_limits)) != 2:
-            raise led.AlignmentError(f'base_limits must be [lo, hi], got {list(self.base_limits)}')
-        lo, hi = self.base_limits
-        if not lo <= self.base_initial <= hi:
-            raise led.AlignmentError(f'base_initial {self.base_initial} deg is outside '
-                                     f'base_limits {list(self.base_limits)}')
-        x0 = np.asarray(list(self.x0), dtype=float)
-        if x0.size != 2 or not np.all(np.isfinite(x0)):
-            raise led.AlignmentError(f'x0 must be 2 finite numbers [x1, x2], got {list(x0)}')
-        if float(np.max(np.abs(x0))) > self.state_limit:
-            raise led.AlignmentError(f'x0 {list(x0)} is beyond state_limit {self.state_limit:g}')
-        P0 = _matrix(self.P0, 'P0', definite=False)
-        Q = _matrix(self.Q, 'Q', definite=False)
-        # by what they do: one nominal step from P0 must stay within state_limit
-        if not float(np.trace(P0 + Q)) <= self.state_limit ** 2:
-            raise led.AlignmentError(f'P0 + Q (one step) has sqrt(trace) '
-                                     f'{math.sqrt(float(np.trace(P0 + Q))):.3g} beyond '
-                                     f'state_limit {self.state_limit:g}')
-        _matrix(self.R, 'R', definite=True)
-        scan = np.asarray(list(self.scan), dtype=float)
-        if not np.all(np.isfinite(scan)):
-            raise led.AlignmentError('scan has non-finite angles')
-        # Section IV: det C_k != 0 needs G > 1/91 for 2 degree scan steps (eq. (24))
-        led.check_observability(self.gain, tuple(scan))
-
-    def ekf(self) -> led.EKFConfig:
-        """Return the scanning EKF's configuration."""
-        return led.EKFConfig(
-            x0=tuple(float(v) for v in self.x0),
-            P0=tuple(map(tuple, _matrix(self.P0, 'P0', definite=False))),
-            Q=tuple(map(tuple, _matrix(self.Q, 'Q', definite=False))),
-            R=tuple(map(tuple, _matrix(self.R, 'R', definite=True))),
-            gain=float(self.gain), scan=tuple(float(v) for v in self.scan), dt=float(self.dt),
-            x1_floor=float(self.x1_floor) if self.x1_floor > 0 else None)
-
-    def response(self) -> led.IncidenceResponse:
-        """Return g of eq. (4) in the configured unit (0: the tracking-zone unit)."""
-        return led.IncidenceResponse(units_per_degree=self.units_per_degree or None)
-
-    def make_aligner(self) -> led.Aligner:
-        """Build the configured aligner for one run."""
-        return led.make_aligner(self.algorithm, runs=1, dt=self.dt, response=self.response(),
-                                ekf=self.ekf(), gamma=self.gamma, clip=self.clip)
+    x: FloatArray
+    P: FloatArray
 
 
 @dataclass
@@ -183,8 +44,8 @@ class AlignOutcome:
     stamp_ns: int = 0
     command: Optional[float] = None      # absolute base position command (deg)
     turn: Optional[float] = None         # the aligner's motor command (deg)
-    prior: Optional[tuple] = None        # EKF (x, P) before the update, x2 in deg
-    posterior: Optional[tuple] = None    # EKF (x, P) after the update
+    prior: Optional[Estimate] = None     # EKF (x, P) before the update, x2 in deg
+    posterior: Optional[Estimate] = None     # EKF (x, P) after the update
 
 
 @dataclass
@@ -195,9 +56,9 @@ class AlignStats:
     received: int = 0
     used: int = 0
     commands: int = 0
-    missing: Counter = field(default_factory=Counter)
-    rejected: Counter = field(default_factory=Counter)
-    resets: Counter = field(default_factory=Counter)
+    missing: Counter[str] = field(default_factory=Counter)
+    rejected: Counter[str] = field(default_factory=Counter)
+    resets: Counter[str] = field(default_factory=Counter)
     gaps: int = 0
     gap_max: float = 0.0
     mu_current: float = 0.0
@@ -225,6 +86,11 @@ class AlignmentSession:
         self.aligner = self.config.make_aligner()
         self.origin_ns: Optional[int] = None
         self.last_ns: Optional[int] = None
+
+    @property
+    def ekf(self) -> Optional[led.ScanningEKF]:
+        """Return the aligner if it is the scanning EKF (the one with an estimate), else None."""
+        return self.aligner if isinstance(self.aligner, led.ScanningEKF) else None
 
     @property
     def is_ekf(self) -> bool:
@@ -260,6 +126,7 @@ class AlignmentSession:
             message = f'stamp jumped {back:.3f} s backward (> max_backward); restarted'
             last = None
         z = float(z)
+        ekf = self.ekf
         if not math.isfinite(z):
             status, reason, message = 'missing', 'non_finite', f'intensity {z} is not finite'
         elif z < 0 and cfg.negative_is_missing:
@@ -268,9 +135,8 @@ class AlignmentSession:
                 cfg.intensity_range[0] <= z <= cfg.intensity_range[1]):
             status, reason = 'missing', 'out_of_range'
             message = f'intensity {z:g} V outside intensity_range {list(cfg.intensity_range)}'
-        elif cfg.gate > 0 and self.is_ekf and last is not None:
-            d = float(self.aligner.innovation_distance(
-                (stamp_ns - self.origin_ns) / NS, z)[0])
+        elif cfg.gate > 0 and ekf is not None and last is not None and self.origin_ns is not None:
+            d = float(ekf.innovation_distance((stamp_ns - self.origin_ns) / NS, z)[0])
             if not d <= cfg.gate:
                 status, reason = 'missing', 'gated'
                 message = (f'intensity {z:g} V is {d:.3g} standard deviations from the '
@@ -290,16 +156,15 @@ class AlignmentSession:
         except (led.AlignmentError, np.linalg.LinAlgError) as exc:
             return self._fail(stamp_ns, str(exc))
         prior = posterior = None
-        if self.is_ekf:
-            ekf = self.aligner
-            prior = (ekf.x_prior[0].copy(), _sym(ekf.P_prior[0]))
-            posterior = (ekf.x[0].copy(), _sym(ekf.P[0]))
+        if ekf is not None:
+            prior = Estimate(ekf.x_prior[0].copy(), _sym(ekf.P_prior[0]))
+            posterior = Estimate(ekf.x[0].copy(), _sym(ekf.P[0]))
             # on plain floats: numpy's reductions cost more than these eight entries
             if not all(math.isfinite(v) for a in (*prior, *posterior)
                        for v in a.ravel().tolist()):
                 return self._fail(stamp_ns, 'the EKF estimate is not finite')
-            big = max(max(map(abs, posterior[0].tolist())),
-                      math.sqrt(max(posterior[1].trace().item(), 0.0)))
+            big = max(max(map(abs, posterior.x.tolist())),
+                      math.sqrt(max(posterior.P.trace().item(), 0.0)))
             if big > cfg.state_limit:
                 self.health_error = (f'EKF state or covariance {big:.3g} beyond state_limit '
                                      f'{cfg.state_limit:g}')
@@ -353,8 +218,8 @@ class AlignmentSession:
                 a.clip = bool(config.clip)
         return 'new parameters in use'
 
-    def diagnostics(self, *, consume: bool = True,
-                    now_ns: Optional[int] = None) -> tuple[str, str, dict]:
+    def diagnostics(self, *, consume: bool = True, now_ns: Optional[int] = None
+                    ) -> tuple[str, str, dict[str, DiagnosticValue]]:
         """
         Return (level 'OK', 'WARN' or 'ERROR', message, values) for a diagnostics status.
 
@@ -384,8 +249,9 @@ class AlignmentSession:
             values[f'rejected_{reason}'] = st.rejected[reason]
         for reason in RESET_REASONS:
             values[f'resets_{reason}'] = st.resets[reason]
-        if self.is_ekf:
-            x, P = self.aligner.x[0], self.aligner.P[0]
+        ekf = self.ekf
+        if ekf is not None:
+            x, P = ekf.x[0], ekf.P[0]
             values.update({'x1_hat_V': float(x[0]), 'x2_hat_deg': float(x[1]),
                            'covariance_trace': float(np.trace(P)),
                            'singular_updates': st.singular})
@@ -422,5 +288,5 @@ class AlignmentSession:
                 st.gaps_over_bound += 1
 
 
-def _sym(P: np.ndarray) -> np.ndarray:
+def _sym(P: FloatArray) -> FloatArray:
     return (P + P.T) / 2

@@ -6,13 +6,13 @@ gamma_p = gamma (V1 - V2) / (V1 + V2 + V3); `make_aligner` builds any of ALGORIT
 """
 
 import math
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
-from tskf_ros.led.intensity_model import AlignmentError, IncidenceResponse
+from tskf_ros.led.intensity_model import AlignmentError, FloatArray, IncidenceResponse
 from tskf_ros.led.lqg_alignment import LQGAligner, LQGConfig
-from tskf_ros.led.scanning_ekf import (Aligner, as_measurement, EKFConfig, Measurement, PAPER_DT,
+from tskf_ros.led.scanning_ekf import (as_measurement, EKFConfig, Measurement, PAPER_DT,
                                        ScanningEKF, StampClock)
 
 HILL_STEP = 2.0                 # degrees, gamma of Section V
@@ -33,7 +33,7 @@ class _SteppingAligner:
         """Return 0: the baselines' turns are commands, not a scan."""
         return 0.0
 
-    def correct_last_turn(self, delta: np.ndarray) -> None:
+    def correct_last_turn(self, delta: FloatArray) -> None:
         """Ignore a clamped turn: the baselines compare intensities, they keep no angle."""
 
 
@@ -49,7 +49,7 @@ class HillClimbing(_SteppingAligner):
         self.direction = np.ones(self.runs)
         self.reference = np.full(self.runs, np.nan)
 
-    def step(self, stamp: float, z: Measurement) -> np.ndarray:
+    def step(self, stamp: float, z: Measurement) -> FloatArray:
         """Compare z with the last measurement, reverse if it did not rise, return the turn."""
         z = as_measurement(z, self.runs)
         self.clock.tick(stamp)
@@ -80,7 +80,7 @@ class ThreePointAveraging(_SteppingAligner):
         self.v = np.zeros((self.runs, 3))             # V1, V2, V3 of the current cycle
         self.offset = np.zeros(self.runs)
 
-    def step(self, stamp: float, z: Measurement) -> np.ndarray:
+    def step(self, stamp: float, z: Measurement) -> FloatArray:
         """Record V for this phase, return the turn to the next phase's orientation."""
         z = as_measurement(z, self.runs)
         self.clock.tick(stamp)
@@ -109,13 +109,15 @@ class ThreePointAveraging(_SteppingAligner):
 ALGORITHMS = ('ekf', 'hill_climbing', 'three_point')
 # the EKF's controller: the paper's P controller (21), or the LQG of lqg_alignment
 CONTROLLERS = ('p', 'lqg')
+# the aligner of each of ALGORITHMS (the EKF with either controller)
+AnyAligner = Union[ScanningEKF, LQGAligner, HillClimbing, ThreePointAveraging]
 
 
 def make_aligner(name: str, *, runs: int = 1, dt: float = PAPER_DT,
                  response: Optional[IncidenceResponse] = None,
                  ekf: Optional[EKFConfig] = None, gamma: float = HILL_STEP,
                  clip: bool = False, controller: str = 'p',
-                 lqg: Optional[LQGConfig] = None) -> Aligner:
+                 lqg: Optional[LQGConfig] = None) -> AnyAligner:
     """Build the aligner called `name` (one of ALGORITHMS); clip is for three_point."""
     if controller not in CONTROLLERS:
         raise AlignmentError(f'unknown controller {controller!r}; expected one of {CONTROLLERS}')

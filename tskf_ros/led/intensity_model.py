@@ -8,21 +8,21 @@ The light-intensity model of Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018), e
     V_d = C_p I_theta e^{-cd} g(phi) / d^2                 (5)
 
 with the printed fit a1 = 0.6682, b1 = 7.752, c1 = 148.8, a2 = 0.3340, b2 = -13.57,
-c2 = 325.8.  Read with phi in degrees, that g is above 98% of its peak over +-15 degrees
-and still 40% of it at +-180, whereas Section V says +-15 degrees is about 20% of the
-peak (the tracking zone).  So the fit's argument is phi times `units_per_degree`; the
-default is the unit for which g(+-15 deg) averages 20% of the peak (17.70 units per
-degree, close to a 1.8 degree stepper at 1/32 microstep, 17.78 microsteps per degree),
-and `LITERAL_UNITS_PER_DEGREE` (1.0) keeps the printed reading selectable.
+c2 = 325.8, evaluated at phi times `units_per_degree` (why: doc/design/alignment.md).
 """
 
 from dataclasses import dataclass, field
 import functools
 import math
-from typing import Optional, Sequence
+from typing import Optional, overload, Sequence, Union
 
 import numpy as np
+from numpy.typing import NDArray
 import scipy.optimize
+
+FloatArray = NDArray[np.float64]
+# an angle or an array of angles: the functions of eq. (4) keep the kind they are given
+Angles = Union[float, FloatArray]
 
 # Eq. (4), the printed Gaussian fit of the photodiode's angular response (Fig. 5).
 PAPER_G_COEFFICIENTS = (0.6682, 7.752, 148.8, 0.3340, -13.57, 325.8)
@@ -36,7 +36,17 @@ class AlignmentError(ValueError):
     """Bad configuration or bad call given to an aligner."""
 
 
-def wrap_degrees(angle: np.ndarray) -> np.ndarray:
+@overload
+def wrap_degrees(angle: float) -> float:
+    ...
+
+
+@overload
+def wrap_degrees(angle: FloatArray) -> FloatArray:
+    ...
+
+
+def wrap_degrees(angle: Angles) -> Angles:
     """Wrap angles in degrees to [-180, 180)."""
     return (np.asarray(angle, dtype=float) + 180.0) % 360.0 - 180.0
 
@@ -51,7 +61,17 @@ def irradiance(intensity: float, c: float, d: float) -> float:
     return intensity * attenuation(c, d) / d ** 2
 
 
-def _fit(u: np.ndarray, coefficients: Sequence[float]) -> np.ndarray:
+@overload
+def _fit(u: float, coefficients: Sequence[float]) -> float:
+    ...
+
+
+@overload
+def _fit(u: FloatArray, coefficients: Sequence[float]) -> FloatArray:
+    ...
+
+
+def _fit(u: Angles, coefficients: Sequence[float]) -> Angles:
     """Eq. (4) in fit units: a1 e^{-((u - b1)/c1)^2} + a2 e^{-((u - b2)/c2)^2}."""
     a1, b1, c1, a2, b2, c2 = coefficients
     return a1 * np.exp(-((u - b1) / c1) ** 2) + a2 * np.exp(-((u - b2) / c2) ** 2)
@@ -68,7 +88,7 @@ def _fit_peak(coefficients: Sequence[float]) -> tuple[float, float]:
 
 
 @functools.lru_cache(maxsize=None)
-def zone_units_per_degree(coefficients: tuple = PAPER_G_COEFFICIENTS, *,
+def zone_units_per_degree(coefficients: tuple[float, ...] = PAPER_G_COEFFICIENTS, *,
                           angle: float = TRACKING_ANGLE, level: float = TRACKING_LEVEL) -> float:
     """
     Fit units per degree for which g(+-angle) averages `level` of g's peak.
@@ -93,7 +113,7 @@ class IncidenceResponse:
     pass LITERAL_UNITS_PER_DEGREE for the printed reading (phi in degrees).
     """
 
-    coefficients: tuple = PAPER_G_COEFFICIENTS
+    coefficients: tuple[float, ...] = PAPER_G_COEFFICIENTS
     units_per_degree: Optional[float] = None
     peak_angle: float = field(init=False)
     peak: float = field(init=False)
@@ -112,11 +132,27 @@ class IncidenceResponse:
         object.__setattr__(self, 'peak_angle', u_peak / scale)
         object.__setattr__(self, 'peak', peak)
 
-    def g(self, phi: np.ndarray) -> np.ndarray:
+    @overload
+    def g(self, phi: float) -> float:
+        ...
+
+    @overload
+    def g(self, phi: FloatArray) -> FloatArray:
+        ...
+
+    def g(self, phi: Angles) -> Angles:
         """Eq. (4) at phi degrees."""
         return _fit(np.asarray(phi, dtype=float) * self.units_per_degree, self.coefficients)
 
-    def dg(self, phi: np.ndarray) -> np.ndarray:
+    @overload
+    def dg(self, phi: float) -> float:
+        ...
+
+    @overload
+    def dg(self, phi: FloatArray) -> FloatArray:
+        ...
+
+    def dg(self, phi: Angles) -> Angles:
         """g'(phi), the derivative of eq. (4) with respect to phi in degrees."""
         a1, b1, c1, a2, b2, c2 = self.coefficients
         s = self.units_per_degree

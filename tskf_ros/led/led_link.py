@@ -1,25 +1,10 @@
 """
 The LED link of Solanki et al. Section V as a plant for live alignment: a seeded sample stream.
 
-What is simulated (the model of tskf_ros.led, driven one sample at a time):
-
-- A transmitter revolves around the receiver at beta degrees per second.  Its bearing is
-  measured so that, with the base at rest, the angle of incidence phi grows at beta deg/s,
-  as eq. (25) adds beta: phi = base - bearing, bearing_k = bearing_0 - beta t_k + wobble,
-  where the wobble is the random walk w2 of eq. (25) (std `angle_noise` per sample).
-- The receiver sits on a rotating base that obeys position commands, as a ros2_control
-  joint behind a forward_command_controller does: `command(angle)` sets the target and
-  the base reaches it before the next sample (or moves toward it at most `max_speed`
-  deg/s).  A positive turn increases phi, the sign of eq. (25).
-- The intensity factor follows eq. (25), x1_{k+1} = |x1_k + w1| (std `intensity_walk`),
-  from x1_0 = max_intensity / peak of g, and the photodiode reads eq. (5)/(8):
-  z_k = x1_k g(phi_k) + v_k with v_k ~ N(0, noise^2) volts.
-- Optional dropouts: Bernoulli with probability `drop_probability`, or a Gilbert-Elliott
-  channel (tskf_ros.core.dropouts) with the issue-3 parameters.
-
-Every random stream is a spawned child of `np.random.default_rng(seed)` with one draw per
-sample, so the same parameters, seed and commands give the same samples.  `closed_loop`
-runs the plant against an AlignmentSession the way the two nodes do, without ROS.
+Eq. (25) one sample at a time: phi = base - bearing with bearing_{k+1} = bearing_k - beta dt
+- w2, x1_{k+1} = |x1_k + w1|, and the photodiode of eq. (5)/(8), z_k = x1_k g(phi_k) + v_k;
+the base follows position commands; optional dropouts (tskf_ros.core.dropouts).  What is
+simulated and why: doc/design/alignment.md.
 """
 
 from dataclasses import dataclass
@@ -30,6 +15,8 @@ import numpy as np
 
 from tskf_ros import led
 from tskf_ros.core.dropouts import Dropouts, gilbert_elliott_states
+from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
+from tskf_ros.led.intensity_model import FloatArray
 
 
 class LedLinkError(ValueError):
@@ -168,10 +155,10 @@ def sample_offset_ns(k: int, dt: float) -> int:
 class LoopResult:
     """A closed-loop run: the link's samples and the session's outcomes (None: dropped)."""
 
-    samples: list
-    outcomes: list
+    samples: list[LedSample]
+    outcomes: list[Optional[AlignOutcome]]
 
-    def phi(self) -> np.ndarray:
+    def phi(self) -> FloatArray:
         """Return the true angle of incidence per sample (deg)."""
         return np.array([s.phi for s in self.samples])
 
@@ -181,7 +168,7 @@ class LoopResult:
         return 100.0 * float(np.mean(np.abs(phi) <= angle)) if phi.size else float('nan')
 
 
-def closed_loop(link: LedLinkConfig, session: 'object', steps: int, *,
+def closed_loop(link: LedLinkConfig, session: AlignmentSession, steps: int, *,
                 start_ns: int = 1_000_000_000, base: Optional[float] = None) -> LoopResult:
     """
     Run `steps` samples of the link against an AlignmentSession, as the two nodes do.
@@ -193,7 +180,8 @@ def closed_loop(link: LedLinkConfig, session: 'object', steps: int, *,
     plant = LedLink(link)
     if base is not None:
         plant.base = plant.target = float(base)
-    samples, outcomes = [], []
+    samples: list[LedSample] = []
+    outcomes: list[Optional[AlignOutcome]] = []
     for k in range(int(steps)):
         s = plant.sample()
         samples.append(s)

@@ -9,15 +9,9 @@ The P controller (21) u_k = -G x2hat_k drives the scan mean to zero and the moto
 u_k + psi_{k+1} - psi_k.  Observability (Section IV): det C_k != 0, which the paper
 guarantees with G > 1/91 for 2 degree scan steps (eq. (24)).
 
-Not in the paper: when measurements are missing, `ScanningEKF` predicts over the gap
-with the time since its last call (mu = elapsed / dt, the time-scale graininess), adds
-mu Q, and pairs the next measurement with the last one that arrived, shifted by the
-control applied since (a generalisation of the second row of (17)).
-
-Every aligner (this one and the baselines) is vectorised over independent runs: arrays
-carry a leading runs axis, `step(stamp, z)` takes one measurement per run (NaN or None
-when missing) and returns one motor command per run, so a node calls it with runs=1 once
-per message.
+Not in the paper: a gap of missing measurements is predicted over with mu = elapsed / dt
+(P^f = P + mu Q), and every aligner is vectorised over independent runs
+(doc/design/alignment.md).
 """
 
 from dataclasses import dataclass
@@ -25,11 +19,15 @@ import math
 from typing import Optional, Protocol, Sequence, Union
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tskf_ros.core import kalman
-from tskf_ros.led.intensity_model import AlignmentError, IncidenceResponse
+from tskf_ros.led.intensity_model import AlignmentError, FloatArray, IncidenceResponse
 
-Measurement = Union[None, float, Sequence[float], np.ndarray]
+# one measurement per run (a float for every run, NaN or None: missing)
+Measurement = Union[None, float, Sequence[float], FloatArray]
+# a matrix written as rows, as in Table I
+Rows = tuple[tuple[float, ...], ...]
 
 # Section IV, Fig. 7: the scan set Psi (degrees), visited cyclically.
 SCAN_ANGLES = (-2.0, -4.0, -6.0, -8.0, -10.0, -8.0, -6.0, -4.0, -2.0, 0.0,
@@ -88,7 +86,7 @@ def check_observability(gain: float, scan: Sequence[float] = SCAN_ANGLES) -> Non
 
 
 class Aligner(Protocol):
-    """What the simulator (or a node) needs from an alignment algorithm."""
+    """What the tracking simulation needs from an alignment algorithm."""
 
     runs: int
 
@@ -96,11 +94,11 @@ class Aligner(Protocol):
     def scan_offset(self) -> float:
         """Offset of the receiver from its mean angle at the next step (degrees)."""
 
-    def step(self, stamp: float, z: Measurement) -> np.ndarray:
+    def step(self, stamp: float, z: Measurement) -> FloatArray:
         """Take the measurement at `stamp` (NaN/None: missing); return the motor commands."""
 
 
-def as_measurement(z: Measurement, runs: int) -> np.ndarray:
+def as_measurement(z: Measurement, runs: int) -> FloatArray:
     """Return one float per run; None and non-finite entries become NaN (missing)."""
     if z is None:
         return np.full(runs, np.nan)
@@ -142,12 +140,12 @@ class StampClock:
 class EKFConfig:
     """The scanning EKF's parameters (Table I defaults)."""
 
-    x0: tuple = PAPER_X0
-    P0: tuple = PAPER_P0
-    Q: tuple = PAPER_Q
-    R: tuple = PAPER_R
+    x0: tuple[float, ...] = PAPER_X0
+    P0: Rows = PAPER_P0
+    Q: Rows = PAPER_Q
+    R: Rows = PAPER_R
     gain: float = PAPER_GAIN
-    scan: tuple = SCAN_ANGLES
+    scan: tuple[float, ...] = SCAN_ANGLES
     dt: float = PAPER_DT
     # Not in the paper: project x1hat onto [x1_floor, inf) after each update, enforcing
     # Section IV's assumption x1hat > 0 (None: the paper's unconstrained EKF).
@@ -193,8 +191,8 @@ class ScanningEKF:
         self.y = np.zeros((n, 2))                # residual y_k - yhat_k
         self.C = np.zeros((n, 2, 2))             # C_k of (17)
         self.det = np.full(n, np.nan)            # |C_k|, NaN without a pair
-        self.singular = np.zeros(n, dtype=bool)
-        self.updated = np.zeros(n, dtype=bool)
+        self.singular: NDArray[np.bool_] = np.zeros(n, dtype=bool)
+        self.updated: NDArray[np.bool_] = np.zeros(n, dtype=bool)
         self.det_tolerance = 1e-9
 
     @property
@@ -212,8 +210,8 @@ class ScanningEKF:
         self.x_prior = self.x.copy()
         self.P_prior = self.P.copy()
 
-    def h(self, x: np.ndarray, psi: float, shift: np.ndarray,
-          psi_prev: np.ndarray) -> np.ndarray:
+    def h(self, x: FloatArray, psi: float, shift: FloatArray,
+          psi_prev: FloatArray) -> FloatArray:
         """Eq. (16): [x1 g(x2 + psi_k), x1 g(x2 - shift + psi_{k-1})], shift = u since z_prev."""
         # (15) prints x1hat_{k-1}^f in row 2 but (17) differentiates it with respect to
         # x1hat_k^f; under (7) x1 has no input, so both rows use the current x1.
@@ -221,8 +219,8 @@ class ScanningEKF:
         return np.stack([x[:, 0] * g(x[:, 1] + psi),
                          x[:, 0] * g(x[:, 1] - shift + psi_prev)], axis=-1)
 
-    def jacobian(self, x: np.ndarray, psi: float, shift: np.ndarray,
-                 psi_prev: np.ndarray) -> np.ndarray:
+    def jacobian(self, x: FloatArray, psi: float, shift: FloatArray,
+                 psi_prev: FloatArray) -> FloatArray:
         """Eq. (17): C_k = dh/dx at x, one 2x2 matrix per run."""
         g, dg = self.response.g, self.response.dg
         a1 = x[:, 1] + psi
@@ -234,7 +232,7 @@ class ScanningEKF:
         C[:, 1, 1] = x[:, 0] * dg(a2)      # C_k,2,2 = x1^f g'(x2^f - u_{k-1} + psi_{k-1})
         return C
 
-    def update(self, z: np.ndarray) -> None:
+    def update(self, z: FloatArray) -> None:
         """Eq. (18)-(20) for the runs whose z is finite; a run without z_prev uses row 1 only."""
         have = np.isfinite(z)
         pair = have & np.isfinite(self.z_prev)
@@ -271,7 +269,7 @@ class ScanningEKF:
         self.psi_prev = np.where(have, psi, self.psi_prev)
         self.since = np.where(have, 0.0, self.since)
 
-    def innovation_distance(self, stamp: float, z: Measurement) -> np.ndarray:
+    def innovation_distance(self, stamp: float, z: Measurement) -> FloatArray:
         """
         Return |z - yhat| / sqrt(S) of row 1 of (12) at the prior of `stamp`, per run.
 
@@ -292,12 +290,12 @@ class ScanningEKF:
         with np.errstate(all='ignore'):
             return np.abs(z - self.x[:, 0] * g) / np.sqrt(S)
 
-    def correct_last_turn(self, delta: np.ndarray) -> None:
+    def correct_last_turn(self, delta: FloatArray) -> None:
         """Account for a base that turned delta more than commanded (clamped): u_k += delta."""
         self.u = self.u + delta
         self.since = self.since + delta
 
-    def step(self, stamp: float, z: Measurement) -> np.ndarray:
+    def step(self, stamp: float, z: Measurement) -> FloatArray:
         """Run one iteration at `stamp` with z_k (NaN/None: missing); return the commands."""
         z = as_measurement(z, self.runs)
         mu = self.clock.tick(stamp)

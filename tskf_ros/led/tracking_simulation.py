@@ -11,8 +11,9 @@ from typing import Optional
 
 import numpy as np
 
-from tskf_ros.led.intensity_model import (AlignmentError, IncidenceResponse, MAX_INTENSITY,
-                                          TRACKING_ANGLE, TRACKING_LEVEL, wrap_degrees)
+from tskf_ros.led.intensity_model import (AlignmentError, FloatArray, IncidenceResponse,
+                                          MAX_INTENSITY, TRACKING_ANGLE, TRACKING_LEVEL,
+                                          wrap_degrees)
 from tskf_ros.led.lqg_alignment import LQGAligner
 from tskf_ros.led.scanning_ekf import Aligner, PAPER_DT, PAPER_Q_SYS, ScanningEKF
 
@@ -33,7 +34,7 @@ class TrackingLinkConfig:
     dt: float = PAPER_DT
     steps: int = 400
     noise: float = 0.2
-    q_sys: tuple = (PAPER_Q_SYS[0][0], PAPER_Q_SYS[1][1])
+    q_sys: tuple[float, float] = (PAPER_Q_SYS[0][0], PAPER_Q_SYS[1][1])
     max_intensity: float = MAX_INTENSITY
     x2_0: float = 5.0
     dropout: float = 0.0
@@ -43,14 +44,14 @@ class TrackingLinkConfig:
 class Trajectory:
     """One simulation: time (steps,) and per-step, per-run arrays (steps, runs)."""
 
-    t: np.ndarray
-    phi: np.ndarray        # true angle of incidence, unwrapped (degrees)
-    x2: np.ndarray         # true scan mean phi - psi_k (the baselines: phi)
-    x1: np.ndarray         # true intensity factor
-    clean: np.ndarray      # x1 g(phi), the clean measurement (V)
-    z: np.ndarray          # the measurement given to the aligner, NaN when missing
-    command: np.ndarray    # motor command returned by the aligner
-    estimate: Optional[np.ndarray] = None   # (steps, runs, 2) posterior [x1, x2], EKFs only
+    t: FloatArray
+    phi: FloatArray        # true angle of incidence, unwrapped (degrees)
+    x2: FloatArray         # true scan mean phi - psi_k (the baselines: phi)
+    x1: FloatArray         # true intensity factor
+    clean: FloatArray      # x1 g(phi), the clean measurement (V)
+    z: FloatArray          # the measurement given to the aligner, NaN when missing
+    command: FloatArray    # motor command returned by the aligner
+    estimate: Optional[FloatArray] = None   # (steps, runs, 2) posterior [x1, x2], EKFs
 
 
 def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random.Generator,
@@ -73,13 +74,13 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
     w2 = rng.standard_normal((steps, n)) * math.sqrt(link.q_sys[1])
     v = rng.standard_normal((steps, n)) * link.noise
     missing = rng.random((steps, n)) < link.dropout
-    t = np.arange(steps) * link.dt
+    t = np.arange(steps, dtype=float) * link.dt
     shape = (steps, n)
+    ekf = aligner if isinstance(aligner, (ScanningEKF, LQGAligner)) else None
+    estimate = None if ekf is None else np.empty((steps, n, 2))
     out = Trajectory(t=t, phi=np.empty(shape), x2=np.empty(shape), x1=np.empty(shape),
-                     clean=np.empty(shape), z=np.empty(shape), command=np.empty(shape))
-    estimator = aligner if isinstance(aligner, (ScanningEKF, LQGAligner)) else None
-    estimate = np.empty((steps, n, 2)) if estimator is not None else None
-    out.estimate = estimate
+                     clean=np.empty(shape), z=np.empty(shape), command=np.empty(shape),
+                     estimate=estimate)
     x1 = np.full(n, link.max_intensity / response.peak)
     phi = np.full(n, link.x2_0 + aligner.scan_offset)
     drift = link.beta * link.dt
@@ -91,8 +92,8 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
         out.clean[k], out.z[k] = clean, z
         cmd = aligner.step(t[k], z)
         out.command[k] = cmd
-        if estimator is not None and estimate is not None:
-            estimate[k] = estimator.x[:, :2]
+        if ekf is not None and estimate is not None:
+            estimate[k] = ekf.x[:, :2]
         # (25): x2_k = x2_{k-1} + beta + u_{k-1} + w2 (here on phi = x2 + psi, with the scan)
         phi = phi + drift + cmd + w2[k]
         x1 = np.abs(x1 + w1[k])
@@ -100,7 +101,7 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
 
 
 def tracking(traj: Trajectory, *, angle: float = TRACKING_ANGLE,
-             threshold: float = TRACKING_LEVEL * MAX_INTENSITY) -> tuple[np.ndarray, np.ndarray]:
+             threshold: float = TRACKING_LEVEL * MAX_INTENSITY) -> tuple[FloatArray, FloatArray]:
     """Tracking percentage per run (Section V): by angle |phi| <= 15 deg, by clean >= 0.6 V."""
     angular = 100.0 * np.mean(np.abs(wrap_degrees(traj.phi)) <= angle, axis=0)
     measure = 100.0 * np.mean(traj.clean >= threshold, axis=0)

@@ -1,17 +1,4 @@
-"""
-The alignment node's interface: parameters, topics, QoS and outcome-to-message mapping.
-
-The live node (tskf_ros.nodes.alignment) and the offline replay (tskf_ros.bag.
-offline_replay --filter alignment) both turn an intensity message into
-`AlignmentSession.add(stamp, volts)` and the resulting AlignOutcome into messages through
-this module, so live and offline cannot drift apart; test_bag_replay checks one against
-the other.  Topic names here are relative, as the node creates them; the BAG_ names are
-the same topics resolved in '/'.
-
-Open loop offline: replaying recorded intensities, the commands do not move the recorded
-receiver (the intensities were recorded under whatever the base did then), so the
-estimates show how the filter reads the recorded data, not a closed alignment run.
-"""
+"""The alignment node's interface: parameters, topics, QoS, outcome-to-message mapping."""
 
 from dataclasses import fields
 from pathlib import Path
@@ -22,7 +9,8 @@ from rcl_interfaces.msg import ParameterType
 from rclpy.qos import QoSProfile
 
 from tskf_ros import led
-from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession, AlignOutcome
+from tskf_ros.led.alignment_config import AlignmentConfig
+from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError

@@ -1,30 +1,4 @@
-"""
-Messages to and from the core: the only place where ROS messages meet numpy arrays.
-
-Types (all from common_interfaces, no custom messages):
-
-- received power, input: sensor_msgs/msg/Illuminance.  A stamped scalar with a variance is
-  what that type is, whatever its name: header.stamp = sample time, illuminance = power
-  in mW, variance = its variance in mW^2 (0 if unknown).
-- true angle, simulator output: sensor_msgs/msg/JointState with one joint named after
-  the state (position in rad): a stamped, named angle is what JointState carries.
-- estimates: geometry_msgs/msg/TwistWithCovarianceStamped used as a stamped state vector
-  with its covariance.  No common_interfaces type is "a stamped n-vector with an n x n
-  covariance"; the six unconstrained slots (linear.x, .y, .z, angular.x, .y, .z) with a
-  full 6 x 6 row-major covariance are the closest, and lossless for n <= 6 (the paper's
-  models have n = 1 and 2).  State i goes to slot i (for model (3): theta in linear.x,
-  its variance in covariance[0]); unused slots and their covariance are 0.  Pose types
-  would force the state through a unit quaternion; JointState has no covariance;
-  std_msgs arrays have no stamp.
-- the same estimates by name, for plotting tools (Foxglove, PlotJuggler):
-  sensor_msgs/msg/JointState with name = the state names, position = x and velocity =
-  the standard deviations sqrt(diag P) (not velocities: JointState has no covariance
-  field, and the slot's name says what it holds in the README).
-- graininess: sensor_msgs/msg/TimeReference with header.stamp = t and time_ref =
-  sigma(t), source = 'sigma': mu(t) = time_ref - stamp exactly, in integer nanoseconds.
-- diagnostics: diagnostic_msgs/msg/DiagnosticArray (the ROS convention).
-- input u of the estimator: geometry_msgs/msg/AccelStamped (see input_to_msg below).
-"""
+"""Messages to and from the core: the only place where ROS messages meet numpy arrays."""
 
 import math
 from typing import Mapping, Sequence

@@ -1,13 +1,4 @@
-"""
-The timescale_estimator's interface: parameters, topics, QoS and outcome-to-message mapping.
-
-The live node (tskf_ros.nodes.timescale_estimator) and the offline replay
-(tskf_ros.bag.offline_replay) both turn a received-power message into
-`EstimatorSession.add(...)` and the resulting Outcome into messages through this module,
-so live and offline cannot drift apart; test_bag_replay checks one against the other.
-Topic names here are relative, as the node creates them; the BAG_ names are the same
-topics resolved in '/', as the offline replay writes them.
-"""
+"""The timescale_estimator's interface: parameters, topics, QoS, outcome-to-message mapping."""
 
 from dataclasses import dataclass
 from pathlib import Path

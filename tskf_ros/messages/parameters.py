@@ -1,9 +1,4 @@
-"""
-Parameters: descriptors, the config every node reads once, and the params-file reader.
-
-`parameter_values` reads a node's parameters from a ROS 2 parameter YAML file as
-`--params-file` would, for the offline adapters that run a node's session without ROS.
-"""
+"""Parameters: descriptors, the config every node reads once, and the params-file reader."""
 
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +12,8 @@ from tskf_ros.core.dropouts import BLOCKAGES
 import yaml
 
 __all__ = ['BLOCKAGE_HELP', 'descriptor', 'float_range', 'IGNORED', 'NodeConfig',
-           'ParamsError', 'parameter_values', 'read_params_yaml']
+           'parameters_for_node', 'ParamsError', 'parameter_values', 'read_params_yaml',
+           'section_applies']
 
 
 class _RclLoader(yaml.SafeLoader):
@@ -30,7 +26,7 @@ _RclLoader.add_implicit_resolver(
     list('-+0123456789.'))
 
 
-def read_params_yaml(text: str) -> object:
+def read_params_yaml(text: str) -> Any:
     """Parse a parameter file's text as the node would read its numbers."""
     return yaml.load(text, Loader=_RclLoader)  # noqa: S506 - a SafeLoader subclass
 
@@ -107,3 +103,54 @@ def parameter_values(params_file: Optional[Union[str, Path]], node_name: str,
         values.update({k: v for k, v in section.items() if k not in IGNORED})
     values.update(overrides or {})
     return values
+
+
+def section_applies(key: str, node_fqn: str) -> bool:
+    """
+    Return whether a parameter file's section `key` applies to the node node_fqn, as in rcl.
+
+    A key without a leading '/' gets one; a '**' token stands for any number of namespace
+    tokens (none too), a '*' token for exactly one; other tokens match themselves.
+    """
+    tokens = ('/' + key.strip('/')).split('/')[1:]
+    wild = {'**': r'(?:/\w+)*', '*': r'/\w+'}
+    pattern = ''.join(wild.get(t, '/' + re.escape(t)) for t in tokens)
+    return re.fullmatch(pattern, node_fqn, re.ASCII) is not None
+
+
+def _sections(doc: dict, path: tuple = ()) -> list:
+    """Return (node key, ros__parameters) of every section, namespaces nested or not."""
+    out = []
+    for key, value in doc.items():
+        if not isinstance(value, dict):
+            continue
+        here = path + (str(key).strip('/'),)
+        if 'ros__parameters' in value:
+            out.append(('/'.join(here), value['ros__parameters']))
+        else:
+            out.extend(_sections(value, here))
+    return out
+
+
+def _names(parameters: Any, prefix: str = '') -> set:
+    """Return the dotted names of a ros__parameters mapping (nested: parameter namespaces)."""
+    if not isinstance(parameters, dict):
+        return set()
+    names = set()
+    for key, value in parameters.items():
+        name = prefix + str(key)
+        names |= _names(value, name + '.') if isinstance(value, dict) else {name}
+    return names
+
+
+def parameters_for_node(params_file: Union[str, Path], node_fqn: str) -> set:
+    """
+    Return the names of the parameters params_file sets for the node node_fqn (rcl's rules).
+
+    Raises OSError or yaml.YAMLError if the file cannot be read.
+    """
+    doc = read_params_yaml(Path(params_file).read_text())
+    if not isinstance(doc, dict):
+        return set()
+    return set().union(*(_names(params) for key, params in _sections(doc)
+                         if section_applies(key, node_fqn)))

@@ -1,10 +1,4 @@
-"""
-The power_meter_driver's interface: parameters, its config, the reading and diagnostics messages.
-
-The driver publishes as tskf_ros.nodes.power_meter_simulator does, so that the estimator
-cannot tell them apart: sensor_msgs/msg/Illuminance on POWER_TOPIC with SENSOR_OUTPUT_QOS,
-header.frame_id = frame_id, illuminance = power in mW, variance in mW^2 (0: unknown).
-"""
+"""The power_meter_driver's interface: parameters, config, reading and diagnostics messages."""
 
 from dataclasses import dataclass, fields
 

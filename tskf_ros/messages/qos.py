@@ -1,9 +1,12 @@
 """The QoS profiles of every topic this package publishes or subscribes to, in one place."""
 
-from rclpy.qos import HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from typing import Sequence
 
-__all__ = ['DEFAULT_DEPTH', 'DIAGNOSTICS_TOPIC', 'reliable_qos', 'SENSOR_OUTPUT_QOS',
-           'sensor_input_qos', 'TRUTH_QOS']
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
+                       ReliabilityPolicy)
+
+__all__ = ['DEFAULT_DEPTH', 'DIAGNOSTICS_TOPIC', 'matching_qos', 'reliable_qos',
+           'SENSOR_OUTPUT_QOS', 'sensor_input_qos', 'TRUTH_QOS']
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
 # rclpy's system default depth: what /diagnostics and forward_command_controller use
@@ -31,3 +34,21 @@ def reliable_qos(depth: int) -> QoSProfile:
 
 # the evaluation truth of both simulators: reliable, so that a plot has every point
 TRUTH_QOS = reliable_qos(100)
+
+
+def matching_qos(offered: Sequence[QoSProfile], *, history: HistoryPolicy,
+                 depth: int) -> QoSProfile:
+    """
+    Return a subscription QoS that matches every publisher of a topic (their `offered` QoS).
+
+    Reliable if every publisher is, else best effort (which matches both); transient local
+    if every publisher is (a late subscriber then gets what they keep), else volatile.
+    """
+    reliable = bool(offered) and all(
+        p.reliability == ReliabilityPolicy.RELIABLE for p in offered)
+    latched = bool(offered) and all(
+        p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in offered)
+    return QoSProfile(
+        history=history, depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)

@@ -1,16 +1,4 @@
-"""
-alignment: LED active alignment (Solanki et al.) on a stream of stamped intensity samples.
-
-Subscribes to `intensity` (sensor_msgs/msg/Illuminance, volts, best effort so that both
-reliable and best-effort publishers match), feeds AlignmentSession
-(tskf_ros.led.alignment_session), and publishes for every sample it uses: the base
-position command on `base_position_controller/commands` (std_msgs/msg/Float64MultiArray,
-one entry in rad, as a ros2_control forward_command_controller takes it) and, with the
-EKF, the estimate [x1, x2] before and after the update on `estimate/predicted` and
-`estimate/corrected` (geometry_msgs/msg/TwistWithCovarianceStamped).  Counters go to
-/diagnostics.  The parameters, topics, QoS and messages are in
-tskf_ros.messages.alignment_interface, which the offline replay uses too.
-"""
+"""The alignment node: LED active alignment (Solanki et al. 2018) on stamped intensities."""
 
 from typing import Optional
 

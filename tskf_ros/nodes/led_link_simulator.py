@@ -1,19 +1,4 @@
-"""
-led_link_simulator: the LED link of Solanki et al. Section V, with a commanded rotating base.
-
-Publishes `intensity` (sensor_msgs/msg/Illuminance, sensor-data QoS: the photodiode
-voltage in volts) and the evaluation truth `true_angle` (sensor_msgs/msg/JointState:
-incidence, base and transmitter angles in rad), and takes the base's position command on
-`base_position_controller/commands` (std_msgs/msg/Float64MultiArray, one entry in rad,
-system-default QoS), as a ros2_control forward_command_controller would.  The samples
-come from tskf_ros.led.led_link.LedLink; sample k is stamped start + k dt.
-
-Pacing: sample k is due when the node's clock says k dt / time_factor seconds have passed
-(time_factor 0: no pacing).  With `lockstep` (the default) a delivered sample is also
-held until the command answering the previous one has arrived (or `command_timeout` has
-passed), so that the same parameters and seed give the same stream however fast the
-loop runs.
-"""
+"""The led_link_simulator node: the LED link of Solanki et al. 2018 Section V, base commanded."""
 
 from dataclasses import dataclass
 from typing import Optional

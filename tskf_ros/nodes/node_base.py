@@ -4,7 +4,7 @@ import argparse
 from dataclasses import fields
 import os
 import sys
-from typing import Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Protocol, Sequence, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterType, SetParametersResult
@@ -21,8 +21,10 @@ from sensor_msgs.msg import Illuminance, JointState
 from std_srvs.srv import Trigger
 
 from tskf_ros.core.units import NS
-from tskf_ros.messages.parameters import descriptor
+from tskf_ros.messages.parameters import descriptor, parameters_for_node
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
+
+import yaml
 
 # a simulator takes at most this many samples per callback when catching up
 MAX_BATCH = 10_000
@@ -38,10 +40,41 @@ EXECUTOR_VARIABLE = 'TSKF_EXECUTOR'
 # s: the longest spin_once between two checks of the context.  rclpy 7.1's
 # EventsExecutor.spin() (and its spin_once without a timeout) never returns after SIGINT
 # or SIGTERM, spinning a core; its spin_once with a timeout returns at once, raising
-# KeyboardInterrupt or ExternalShutdownException (test_executors checks both executors).
+# KeyboardInterrupt or ExternalShutdownException (test/nodes/test_node_base.py checks
+# both executors).
 SPIN_TIMEOUT = 1.0
 # a parameter override rclpy refuses at declaration (out of its range, wrong type): one line
 ROS_PARAMETER_ERRORS = (InvalidParameterTypeException, InvalidParameterValueException)
+# a link config dataclass of the core (OwcLinkConfig, LedLinkConfig)
+LinkConfig = TypeVar('LinkConfig')
+
+
+class NodeSettings(Protocol):
+    """What ReconfigurableNode reads of a node's config: its session's part, its period."""
+
+    @property
+    def session(self) -> Any:
+        """Return the config the session is built from and reconfigured with."""
+
+    @property
+    def diagnostics_period(self) -> float:
+        """Return the seconds between two /diagnostics messages."""
+
+
+class SimulatorSettings(Protocol):
+    """What LinkSimulatorNode reads of a simulator's config."""
+
+    @property
+    def link(self) -> Any:
+        """Return the link config of the core."""
+
+    @property
+    def start_time(self) -> float:
+        """Return the stamp (s) of sample 0; 0: the clock at the start."""
+
+    @property
+    def wait_for_subscribers(self) -> int:
+        """Return how many subscribers the sensor topic needs before sample 0 goes."""
 
 
 def executor_kind(kind: Optional[str] = None) -> str:
@@ -77,15 +110,15 @@ def parse_args(prog: str, description: str,
 
 
 def unused_parameter_file(node: Node, argv: Sequence[str]) -> str:
-    """
-    Return a warning if a --params-file was given but set none of this node's parameters.
-
-    (A section keyed with another node's name, or a bare name in another namespace, applies
-    to nothing: the node would silently run on its defaults.)
-    """
+    """Return a warning if a --params-file was given but set none of this node's parameters."""
     files = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == '--params-file']
-    own = set(node._parameter_overrides) - {'use_sim_time'}
-    if files and not own:
+    own = set()
+    for path in files:
+        try:
+            own |= parameters_for_node(path, node.get_fully_qualified_name())
+        except (OSError, yaml.YAMLError):
+            continue        # rcl refused such a file before the node started
+    if files and not own - {'use_sim_time'}:
         return (f'the parameter file(s) {", ".join(files)} set none of the parameters of '
                 f'{node.get_fully_qualified_name()}: it runs on its built-in defaults. Key '
                 f'the section /**/{node.get_name()} (or /**) so that it applies in any '
@@ -147,7 +180,8 @@ class ReconfigurableNode(Node):
 
     PARAMETERS: tuple = ()
     CONFIG_ERRORS: tuple = (KeyError, TypeError, ValueError)
-    SESSION: type = object       # the session class of the core, built from config.session
+    # the session class of the core, built from config.session
+    SESSION: Callable[[Any], Any]
 
     def __init__(self, node_name: str, *, context=None, namespace: Optional[str] = None,
                  parameter_overrides: Optional[list] = None,
@@ -162,7 +196,7 @@ class ReconfigurableNode(Node):
         """Declare the node's parameters (subclasses)."""
         raise NotImplementedError
 
-    def start_watching_parameters(self) -> object:
+    def start_watching_parameters(self) -> NodeSettings:
         """Build the config from the declared parameters and validate every later change."""
         self._pending = None
         config = self.make_config(self.parameter_values())
@@ -176,11 +210,11 @@ class ReconfigurableNode(Node):
         values.update({p.name: p.value for p in changes})
         return values
 
-    def make_config(self, values: dict) -> object:
+    def make_config(self, values: dict) -> NodeSettings:
         """Build the node's config from parameter values (subclasses)."""
         raise NotImplementedError
 
-    def reconfigure(self, config: object) -> str:
+    def reconfigure(self, config: NodeSettings) -> str:
         """Hand a validated config to the session; return what it did (subclasses)."""
         raise NotImplementedError
 
@@ -269,7 +303,8 @@ def declare_config_fields(node: Node, config_cls: type, help_: dict) -> None:
         node.declare_parameter(f.name, value, descriptor(text, rng, type_))
 
 
-def config_from_parameters(node: Node, config_cls: type, error: type) -> object:
+def config_from_parameters(node: Node, config_cls: type[LinkConfig],
+                           error: type[Exception]) -> LinkConfig:
     """Build a link config dataclass from the node's parameters; raise `error` if bad."""
     try:
         return config_cls(**{f.name: node.get_parameter(f.name).value
@@ -304,7 +339,7 @@ class LinkSimulatorNode(Node):
     def _declare(self) -> None:
         raise NotImplementedError
 
-    def _read(self) -> object:
+    def _read(self) -> SimulatorSettings:
         raise NotImplementedError
 
     def ready(self) -> bool:

@@ -1,14 +1,4 @@
-"""
-power_meter_driver: a real optical power meter (Thorlabs PM100, any SCPI meter) over VISA.
-
-Publishes `received_power` exactly as power_meter_simulator does (sensor_msgs/msg/Illuminance
-in mW, sensor-data QoS), so the time-scale estimator takes either.  The meter is polled at
-`rate` on a steady-clock timer (the device runs in real time, also under use_sim_time);
-each reading is stamped with the node's clock at the midpoint of its query (see
-tskf_ros.owc.power_meter).  /diagnostics: ERROR while the meter is disconnected (it
-retries with exponential backoff), WARN when readings were skipped or converted.
-~/reset (std_srvs/srv/Trigger) closes the connection and reconnects at once.
-"""
+"""The power_meter_driver node: an SCPI optical power meter (Thorlabs PM100) over VISA."""
 
 from functools import partial
 from typing import Optional

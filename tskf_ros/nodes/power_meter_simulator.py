@@ -1,13 +1,6 @@
-"""
-power_meter_simulator: the intermittent OWC link of Cai et al. IV-A/B as a sensor driver.
+"""The power_meter_simulator node: the intermittent OWC link of Cai et al. IV-A/B."""
 
-Publishes `received_power` (sensor_msgs/msg/Illuminance, sensor-data QoS, as a power meter
-driver would) and the evaluation truth `true_angle` (sensor_msgs/msg/JointState).  The
-samples come from tskf_ros.owc.vibrating_link.OwcLink; sample k is stamped start + k / rate, and is
-published when the node's clock says (k / rate) / time_factor seconds have passed.
-"""
-
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Optional
 
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
@@ -116,8 +109,7 @@ class PowerMeterSimulator(LinkSimulatorNode):
                 if not isinstance(p.value, bool):
                     return SetParametersResult(successful=False,
                                                reason='publish_invalid must be a bool')
-                self.config = SimulatorConfig(**{**self.config.__dict__,
-                                                 'publish_invalid': p.value})
+                self.config = replace(self.config, publish_invalid=p.value)
         return SetParametersResult(successful=True)
 
     def _tick(self) -> None:

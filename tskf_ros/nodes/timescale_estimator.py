@@ -1,22 +1,11 @@
-"""
-timescale_estimator: the time-scale Kalman filter on a stream of received-power samples.
+"""The timescale_estimator node: the time-scale Kalman filter of Cai et al. on a stream."""
 
-Subscribes to `measurement` (sensor_msgs/msg/Illuminance by default, or another stamped
-scalar chosen by `measurement_type`; best effort so that both reliable and best-effort
-publishers match; the OWC launch file remaps it to `received_power`), feeds EstimatorSession
-(tskf_ros.owc.estimator_session) and publishes what it returns.  The parameters, topics,
-QoS and messages are in tskf_ros.messages.estimator_interface, which the offline replay
-uses too.
-The model's input u comes on `input` (geometry_msgs/msg/AccelStamped, slot i = u[i],
-held from its stamp to the next input; best effort too); a model without B counts such
-messages as rejected ('no_input_matrix') and ignores them.
-"""
-
-from typing import Optional
+from typing import Any, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, TimeReference
 
 from tskf_ros.core.timescale_kalman import FilterError, TRANSITIONS
@@ -65,9 +54,8 @@ class TimescaleEstimator(ReconfigurableNode):
         self.watch_clock_jumps()
         self.start_services()
         m = self.config.session.model
-        given = sorted(k for k in MATRICES if k in self._parameter_overrides)
         self.model_source = (
-            f'parameters ({", ".join(given)} given)' if given else
+            f'parameters ({", ".join(self.matrices_given)} given)' if self.matrices_given else
             "the built-in default, Cai et al.'s model (3): no A, C, ... given; pass "
             '--params-file config/<model>_estimator.yaml to choose a model')
         self.get_logger().info(
@@ -79,9 +67,15 @@ class TimescaleEstimator(ReconfigurableNode):
 
     def _declare(self) -> None:
         defaults = default_parameters()
+        # declared without a value, a matrix takes the one given at start (a parameter
+        # file, -p, parameter_overrides) if any: that is how the node tells which were given
         for key in MATRICES:
-            self.declare_parameter(key, defaults[key], ParameterDescriptor(
+            self.declare_parameter(key, None, ParameterDescriptor(
                 description=MATRIX_HELP[key], dynamic_typing=True))
+        self.matrices_given = tuple(
+            key for key in MATRICES if self.get_parameter(key).type_ != Parameter.Type.NOT_SET)
+        self.set_parameters([Parameter(key, value=defaults[key]) for key in MATRICES
+                             if key not in self.matrices_given])
         self.declare_parameter('model_name', defaults['model_name'], ParameterDescriptor(
             description="name of the model, used as the estimates' frame_id if that is empty",
             type=ParameterType.PARAMETER_STRING))
@@ -147,7 +141,7 @@ class TimescaleEstimator(ReconfigurableNode):
 
     # -- data -----------------------------------------------------------------------------
 
-    def _on_measurement(self, msg: object) -> None:
+    def _on_measurement(self, msg: Any) -> None:
         now_ns = self.get_clock().now().nanoseconds
         # an unstamped type (std_msgs Float64, Float32) is stamped with its time of arrival
         stamp_ns, value, variance = self.extract(msg, now_ns)

@@ -1,1 +1,1 @@
-"""Command-line tools: bag plots, the sample bags and the demo's clients."""
+"""Command-line tools: bag plots, the sample bags, the demo's clients, the Foxglove bridge."""

@@ -1,29 +1,4 @@
-"""
-plot_bag: turn a bag into PNGs.
-
-    plot_bag /tmp/owc_estimated --out results/plots        # a replay_offline output
-    plot_bag bags/owc_cai_td_1hz --out results/plots       # raw: estimated in memory first
-    plot_bag bags/led_alignment --out results/plots
-    plot_bag /tmp/led_aligned --out results/plots          # replay_offline --filter alignment
-
-Estimator bags (estimate/* topics, or a measurement topic that is then run through the
-estimator offline, in memory): estimator.png, with Cai Fig. 2's two styles side by side,
-"plot in iteration" (left) and "plot in time scale" (right); rows: the true angle (when
-/true_angle is present), the angle each measurement implies (y - D) / C, the predictor and
-the corrected estimate with +-2 sigma bands; their errors against the truth; mu.
-Alignment bags (/alignment/*): alignment.png as Solanki et al. Fig. 8: x1hat and x1,
-x2hat and the true scan mean, the true angle of incidence, and the measured intensity.
-The bag is in the node's units (/alignment/estimate as the node publishes it, x2 in rad;
-/alignment/truth's `incidence` and `scan_mean` in rad, `intensity_factor` in V); the plot
-shows the angles in degrees, as the paper does.  An offline alignment replay
-(base_position_controller/commands present) is drawn the same way from the node's
-estimate/corrected, with the recorded run's /alignment/estimate, if any, dashed for
-comparison (open loop).
-
-Exit status: 0 plotted; 1 the bag or an option cannot be used (one-line error, nothing
-written); 2 usage; 3 the bag is damaged: what came before the damage is plotted (if
-anything could be read) and the damage is reported in one line.
-"""
+"""plot_bag: a bag as PNGs, as Cai et al. Fig. 2 (estimator) and Solanki et al. Fig. 8."""
 
 import argparse
 import os

@@ -1,42 +1,4 @@
-"""
-make_sample_bags: generate the sample bags of bags/ deterministically from a seed.
-
-    make_sample_bags --out bags --seed 2013            # all four
-    make_sample_bags --out /tmp/b --only owc_cai_td_1hz
-
-The bags hold what the drivers would publish (no estimates; `replay_offline` adds them):
-
-- owc_cai_td_1hz: Cai et al.'s 300 s experiment at 1 Hz.  The power meter samples at
-  every whole second; the received-power messages are exactly the whole seconds of Cai's
-  T_d (tskf_ros.core.time_scales.CAI_TD_SEGMENTS realised at 1 s), i.e. t = 1..300 without the
-  five interruptions 31, 127, 132-134, 210-211 and 219-223 (the jumps J = 2, 2, 4, 3, 6 of
-  Fig. 6(b)).  The vibration amplitude is kept below 0.5 rad so that the power never
-  drops to zero by itself: the only gaps are T_d's.  /true_angle has all 301 samples.
-- owc_ge_1khz: one minute at 1 kHz through a Gilbert-Elliott channel (good -> bad 0.002,
-  bad -> good 0.05 per sample: bursts of 20 ms on average, 3.8 % of the time blocked) on
-  top of the vibration's own dropouts (readings at or below zero are not published).
-- led_alignment: the scanning-EKF alignment of Solanki et al. (tskf_ros.led.simulate_tracking,
-  Table I parameters, 400 steps of 50 ms, 5 % missing measurements), in the live alignment
-  node's units (REP 103: angles in rad): the photodiode V_d on /photodiode, the truth on
-  /alignment/truth (JointState LED_TRUTH: the angle of incidence phi and the scan mean x2
-  in rad, and the intensity factor x1 in volts, not an angle), the EKF's estimate on
-  /alignment/estimate as the node publishes it (conversions.alignment_estimate_to_msg: x1 in
-  V, x2 in rad) and its command on /alignment/command as the node would send it
-  (std_msgs/Float64MultiArray, one entry: the absolute base position in rad, i.e. the sum
-  of the motor turns so far from base 0; not the node's base_position_controller/commands,
-  which plot_bag takes for an alignment replay's output).
-- drogue: Fang & de Callafon's drogue (tskf_ros.experiments.drogue.run with the seed, 4 h
-  at T = 5 s): the position fixes at the surface on /received_power as the estimator's
-  measurement (Illuminance used as a stamped scalar: displacement in m, variance
-  gps_sd^2), the measured acceleration u on /input (geometry_msgs/AccelStamped, linear x:
-  the estimator's input topic, held until the next sample) and the truth on
-  /drogue/truth, every T.  At a stamp with a fix, the input is written first.
-
-Stamps start at START_S (2023-11-14T22:13:20Z) plus the sample time; log time = stamp.
-Messages are canonical CDR (tskf_ros.bag.cdr.serialize, rosbags' serializer): the same
-message always gives the same bytes, and rosbags, mcap_ros2 and rclpy all read them.
-Topics and types are listed in bags/README.md.
-"""
+"""make_sample_bags: the sample bags of bags/, generated deterministically from a seed."""
 
 import argparse
 from pathlib import Path
@@ -99,7 +61,7 @@ def _owc(writer: BagWriter, link: OwcLinkConfig, n: int,
 
 
 def owc_cai_td_1hz(writer: BagWriter, seed: int) -> None:
-    """Cai's 300 s experiment at 1 Hz with the interruptions of T_d (see the module doc)."""
+    """Cai's 300 s experiment at 1 Hz with the interruptions of T_d (doc/design/nodes.md)."""
     link = OwcLinkConfig(rate=1.0, seed=seed, knob_max=0.5, knob_initial=0.3)
     td = set(td_seconds().tolist())
     _owc(writer, link, 301, lambda k: np.isin(k, list(td)))

@@ -7,14 +7,14 @@ Corollaries 1-2; theorem2: the scalar peak-covariance bounds (22)-(25); jump_cov
 the time-scale filter around one jump (not in the paper).
 """
 
+from tskf_ros.core.irregular.after_jump import (jump_covariance, JumpCovariance,
+                                                steady_covariance)
 from tskf_ros.core.irregular.common import (CLUSTER_TOL, CRITERIA, interval, IrregularError,
                                             LOG_OVERFLOW, MODULUS_RTOL, NULL_TOL, RANK_TOL)
 from tskf_ros.core.irregular.intervals import (degenerate_intervals, distinct_eigenvalues,
                                                eigenspace, Eigenvalue, IntervalChecker,
                                                is_detectable, is_unstable, pathological_intervals,
                                                resonate, same_modulus, sees_fully)
-from tskf_ros.core.irregular.jump_covariance import (jump_covariance, JumpCovariance,
-                                                     steady_covariance)
 from tskf_ros.core.irregular.switching import (FilterHistory, lifted_matrices, run_lifted,
                                                run_switching, SwitchingKalmanFilter)
 from tskf_ros.core.irregular.theorem1 import (corollary1, corollary2, interval_warnings, theorem1,

@@ -1,6 +1,7 @@
 """Errors and tolerances shared by the irregular-sampling modules (Fang & de Callafon 2011)."""
 
 import math
+from typing import SupportsInt
 
 import numpy as np
 
@@ -19,10 +20,10 @@ class IrregularError(ValueError):
     """A model, interval set or sequence the irregular-sampling checks cannot use."""
 
 
-def interval(kappa: object) -> int:
+def interval(kappa: SupportsInt) -> int:
     """Return kappa as a positive int, or raise."""
     try:
-        k = int(kappa)  # type: ignore[call-overload]
+        k = int(kappa)
     except (TypeError, ValueError):
         raise IrregularError(f'a sampling interval must be an integer, got {kappa!r}') from None
     if k != kappa or k < 1:

@@ -7,10 +7,10 @@ C restricted to the eigenvalues that kappa merges is not of full column rank.
 """
 
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Optional, Sequence, TypedDict
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 import scipy.linalg
 
 from tskf_ros.core.irregular.common import (CLUSTER_TOL, CRITERIA, interval, IrregularError,
@@ -113,7 +113,8 @@ def pathological_intervals(A: ArrayLike, max_interval: int, *, marginal: bool = 
     return out
 
 
-def _null_basis(M: np.ndarray, *, dim: Optional[int] = None, tol: float) -> np.ndarray:
+def _null_basis(M: NDArray[np.complex128], *, dim: Optional[int] = None, tol: float
+                ) -> NDArray[np.complex128]:
     """Orthonormal basis of ker M: the right singular vectors with sigma <= tol (or dim)."""
     _, s, Vh = np.linalg.svd(M)
     if dim is None:
@@ -121,8 +122,8 @@ def _null_basis(M: np.ndarray, *, dim: Optional[int] = None, tol: float) -> np.n
     return Vh[M.shape[1] - dim:].conj().T
 
 
-def eigenspace(A: np.ndarray, mu: Eigenvalue, *, chains: bool,
-               null_tol: float = NULL_TOL) -> np.ndarray:
+def eigenspace(A: NDArray[np.float64], mu: Eigenvalue, *, chains: bool,
+               null_tol: float = NULL_TOL) -> NDArray[np.complex128]:
     """
     Orthonormal basis of ker(A - mu I) or, with chains, of ker(A - mu I)^h.
 
@@ -141,7 +142,8 @@ def eigenspace(A: np.ndarray, mu: Eigenvalue, *, chains: bool,
     return _null_basis(M, tol=null_tol * max(1.0, float(np.linalg.norm(A, 2))))
 
 
-def sees_fully(C: np.ndarray, bases: Sequence[np.ndarray], rank_tol: float = RANK_TOL) -> bool:
+def sees_fully(C: NDArray[np.float64], bases: Sequence[NDArray[np.complex128]],
+               rank_tol: float = RANK_TOL) -> bool:
     """
     Test whether C on span(bases) has full column rank (the C_J block of eq. (20)).
 
@@ -234,6 +236,16 @@ def is_detectable(A: ArrayLike, C: ArrayLike, *, rank_tol: float = RANK_TOL,
     return all(sees_fully(C, [eigenspace(A, e, chains=False, null_tol=null_tol)], rank_tol)
                for e in distinct_eigenvalues(A, cluster_tol=cluster_tol)
                if is_unstable(e, True, rtol))
+
+
+class CheckOptions(TypedDict, total=False):
+    """The keyword options of IntervalChecker besides the criterion (see its arguments)."""
+
+    marginal: bool
+    rtol: float
+    rank_tol: float
+    cluster_tol: float
+    null_tol: float
 
 
 class IntervalChecker:

@@ -90,7 +90,8 @@ class SwitchingKalmanFilter:
         self.x_post, self.P_post = self.x.copy(), self.P.copy()
 
 
-def _rows(values: ArrayLike, count: int, width: int, name: str) -> NDArray[np.float64]:
+def _rows(values: Optional[ArrayLike], count: int, width: int, name: str
+          ) -> NDArray[np.float64]:
     """Return values as a (count, width) float array (None: zeros)."""
     if values is None:
         return np.zeros((count, width))

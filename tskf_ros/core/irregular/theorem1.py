@@ -1,13 +1,13 @@
 """Theorem 1 and Corollaries 1-2 of Fang & de Callafon 2011, and interval warnings for a node."""
 
 from dataclasses import dataclass
-from typing import Iterable
+from typing import Iterable, Unpack
 
 from numpy.typing import ArrayLike
 
 from tskf_ros.core.irregular.common import (CLUSTER_TOL, interval, IrregularError,
                                             MODULUS_RTOL, RANK_TOL)
-from tskf_ros.core.irregular.intervals import (distinct_eigenvalues, eigenspace,
+from tskf_ros.core.irregular.intervals import (CheckOptions, distinct_eigenvalues, eigenspace,
                                                IntervalChecker, is_unstable, same_modulus,
                                                sees_fully)
 from tskf_ros.core.matrices import as_matrix
@@ -31,7 +31,7 @@ class Theorem1Check:
 
 
 def theorem1(A: ArrayLike, C: ArrayLike, intervals: Iterable[int], *,
-             criterion: str = 'paper', **tolerances: float) -> Theorem1Check:
+             criterion: str = 'paper', **tolerances: Unpack[CheckOptions]) -> Theorem1Check:
     """
     Theorem 1: if T n D = {} (and (A1)-(A3)) the peak covariance is stable.
 

@@ -1,0 +1,104 @@
+"""
+Cost per sample of the fixed-lag smoother (tskf_ros.core.FixedLagSmoother) at L = 10, 100, 1000.
+
+    OPENBLAS_NUM_THREADS=1 python bench/bench_fixed_lag.py [--repeats 7] [--samples 200]
+
+Thread CPU time (time.thread_time_ns) per sample, min / median over the repeats, for:
+the filter's `step` alone (Euler, a measurement every point, irregular mu); that step's
+jump F (`transition_matrices`, cached by mu); and `FixedLagSmoother.add` with a full
+window (the step results made beforehand, so the add is timed alone).  The model is a
+position-velocity pair (n = 2) and a 6-state chain (n = 6), one output.  Figures only;
+nothing is asserted.
+"""
+
+import argparse
+import os
+import platform
+import statistics
+import time
+from typing import Callable
+
+import numpy as np
+
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+from tskf_ros.core import FixedLagSmoother, TimeScaleKalmanFilter  # noqa: E402
+
+LAGS = (10, 100, 1000)
+SIZES = (2, 6)
+MUS = (0.01, 0.012, 0.008, 0.011)       # a few graininesses, as a jittery 100 Hz stream
+
+
+def model(n: int) -> dict:
+    """Return a chain of integrators with damping: x_i' = x_{i+1} - 0.1 x_i, y = x_0."""
+    A = np.diag(np.ones(n - 1), 1) - 0.1 * np.eye(n)
+    C = np.zeros((1, n))
+    C[0, 0] = 1.0
+    return {'A': A, 'C': C, 'Q': 0.5 * np.eye(n), 'R': 0.01, 'x0': np.zeros(n),
+            'P0': np.eye(n)}
+
+
+def per_sample(run: Callable[[int], None], count: int, repeats: int) -> tuple[float, float]:
+    """Return (min, median) thread CPU microseconds per sample of run(count) over repeats."""
+    times = []
+    for _ in range(repeats):
+        start = time.thread_time_ns()
+        run(count)
+        times.append((time.thread_time_ns() - start) / count / 1e3)
+    return min(times), statistics.median(times)
+
+
+def bench(n: int, lag: int, samples: int, repeats: int) -> dict:
+    """Time step, transition_matrices and add for one model size and lag."""
+    rng = np.random.default_rng(0)
+    kf = TimeScaleKalmanFilter(**model(n))
+    total = lag + 1 + samples * repeats
+    mus = [MUS[k % len(MUS)] for k in range(total)]
+    ys = rng.normal(size=(total, 1))
+    results = [kf.step(mu, y) for mu, y in zip(mus, ys)]
+    Fs = [kf.transition_matrices(mu)[0] for mu in mus]
+    smoother = FixedLagSmoother(lag)
+    for k in range(lag + 1):
+        smoother.add(results[k], Fs[k])
+    cursor = [lag + 1]
+
+    def add(count: int) -> None:
+        k = cursor[0]
+        for i in range(k, k + count):
+            smoother.add(results[i], Fs[i])
+        cursor[0] = k + count
+
+    timed = TimeScaleKalmanFilter(**model(n))
+
+    def step(count: int) -> None:
+        for i in range(count):
+            timed.step(mus[i], ys[i])
+
+    def jump(count: int) -> None:
+        for i in range(count):
+            timed.transition_matrices(mus[i])
+
+    return {'step': per_sample(step, samples, repeats), 'F': per_sample(jump, samples, repeats),
+            'add': per_sample(add, samples, repeats)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--repeats', type=int, default=7)
+    parser.add_argument('--samples', type=int, default=200)
+    args = parser.parse_args()
+    print(f'{platform.python_implementation()} {platform.python_version()}, '
+          f'numpy {np.__version__}, {platform.machine()}; thread CPU time per sample, '
+          f'us (min / median of {args.repeats} x {args.samples} samples)')
+    print(f'{"n":>3} {"L":>5} {"filter step":>15} {"F (cached)":>15} '
+          f'{"fixed-lag add":>17} {"add / step":>11}')
+    for n in SIZES:
+        for lag in LAGS:
+            r = bench(n, lag, max(10, args.samples * 10 // lag), args.repeats)
+            (s, sm), (f, fm), (a, am) = r['step'], r['F'], r['add']
+            print(f'{n:>3} {lag:>5} {s:7.1f} / {sm:5.1f} {f:7.2f} / {fm:5.2f} '
+                  f'{a:8.1f} / {am:6.1f} {a / s:11.1f}')
+
+
+if __name__ == '__main__':
+    main()

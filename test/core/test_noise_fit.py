@@ -1,0 +1,69 @@
+"""
+Maximum likelihood of Q and R (tskf_ros.core.noise_fit): the likelihood and the NIS check.
+
+The likelihood of a trace is checked against a scalar Kalman filter written out here, the
+NIS band against the chi-square distribution of the mean.
+"""
+
+import numpy as np
+import pytest
+
+from tskf_ros.core.linear_models import LinearModel
+from tskf_ros.core.noise_fit import negative_log_likelihood, nis_summary, run_trace, StepRecord
+
+
+def scalar_log_likelihood(mu, y, variance, a, q, r, x0, p0):
+    """
+    Return log L of a predictive scalar KF written out: F = 1 + mu a, Q_d = mu q.
+
+    R_d = r / mu, or the sample's own variance where it is > 0 (use_message_variance).
+    """
+    x, P, ll = x0, p0, 0.0
+    for m, yk, v in zip(mu, y, variance):
+        Rd = v if v > 0 else r / m
+        S = P + Rd
+        e = yk - x
+        ll += -0.5 * (np.log(2 * np.pi * S) + e * e / S)
+        K = P / S
+        x, P = x + K * e, P - K * P
+        F = 1.0 + m * a
+        x, P = F * x, F * P * F + m * q
+    return ll
+
+
+def test_log_likelihood_is_a_scalar_filter_written_out():
+    # x(t_{k+1}) = (1 + mu_k a) x(t_k) + sqrt(mu_k q) w_k, y(t_k) = x(t_k) + sqrt(r / mu_k) v_k
+    rng = np.random.default_rng(5)
+    a, q, r = -0.1, 0.04, 0.25
+    mu = np.where(rng.random(400) < 0.1, rng.integers(2, 7, 400), 1).astype(float)
+    x, y = 0.0, np.empty(mu.size)
+    for k in range(mu.size):
+        y[k] = x + np.sqrt(r / mu[k]) * rng.standard_normal()
+        x = (1.0 + mu[k] * a) * x + np.sqrt(mu[k] * q) * rng.standard_normal()
+    variance = np.where(rng.random(mu.size) < 0.2, rng.uniform(0.1, 0.5, mu.size), 0.0)
+    trace = [[StepRecord(m, np.array([yk]), variance=v) for m, yk, v in zip(mu, y, variance)]]
+    for q_try, r_try in ((q, r), (1.0, 1.0), (0.01, 2.0)):
+        model = LinearModel('sim', A=np.array([[a]]), C=np.array([[1.0]]),
+                            Q=np.array([[q_try]]), R=np.array([[r_try]]), x0=np.array([0.0]),
+                            P0=np.array([[1.0]]))
+        want = scalar_log_likelihood(mu, y, variance, a, q_try, r_try, 0.0, 1.0)
+        assert -negative_log_likelihood(model, 'euler', trace) == pytest.approx(want, rel=1e-10)
+        inn = run_trace(model, 'euler', trace)
+        assert inn.count == mu.size and inn.log_likelihood() == pytest.approx(want, rel=1e-10)
+    # two segments: each starts again from x0, P0
+    half = [trace[0][:200], trace[0][200:]]
+    want = (scalar_log_likelihood(mu[:200], y[:200], variance[:200], a, q, r, 0.0, 1.0)
+            + scalar_log_likelihood(mu[200:], y[200:], variance[200:], a, q, r, 0.0, 1.0))
+    model = LinearModel('sim', A=np.array([[a]]), C=np.array([[1.0]]), Q=np.array([[q]]),
+                        R=np.array([[r]]), x0=np.array([0.0]), P0=np.array([[1.0]]))
+    assert -negative_log_likelihood(model, 'euler', half) == pytest.approx(want, rel=1e-10)
+
+
+def test_nis_band_is_the_chi_square_band_of_the_mean():
+    rng = np.random.default_rng(3)
+    s = nis_summary(rng.chisquare(2, 4000), 2)
+    # the mean of N chi2(p) is chi2(N p) / N: mean p, variance 2 p / N
+    half = 1.959964 * np.sqrt(2 * 2 / 4000)
+    assert s['band'][0] == pytest.approx(2 - half, abs=2e-3)
+    assert s['band'][1] == pytest.approx(2 + half, abs=2e-3)
+    assert s['consistent'] and s['fraction_in_band'] == pytest.approx(0.95, abs=0.01)

@@ -1,0 +1,272 @@
+"""
+fit_noise: maximum likelihood of Q and R over the time-scale filter's innovations.
+
+Bags are simulated here from the filter's own model with known Q and R, with gaps:
+x(t_{k+1}) = (1 + mu_k a) x(t_k) + sqrt(mu_k q) w_k,  y(t_k) = x(t_k) + sqrt(r / mu_k) v_k,
+mu_k = t_{k+1} - t_k (Bohner & Wintz's white noise over one point of measure mu).  The
+likelihood is checked against a scalar Kalman filter written out in this file.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.serialization import serialize_message
+
+from tskf_ros.bag.writer import BagWriter
+from tskf_ros.core import noise_fit
+from tskf_ros.core.noise_fit import run_trace
+from tskf_ros.experiments import fit_noise
+from tskf_ros.experiments.bag_analysis import read_stream
+from tskf_ros.messages import conversions
+from tskf_ros.messages.estimator_interface import load_config
+from tskf_ros.owc.estimator_session import EstimatorSession
+from tskf_ros.owc.innovation_trace import Measurement, run_stream
+
+REPO = Path(__file__).resolve().parents[2]
+A_TRUE, Q_TRUE, R_TRUE = -0.1, 0.04, 0.25
+PARAMS = """/**/timescale_estimator:
+  ros__parameters:
+    model_name: sim
+    state_names: [x]
+    A: [-0.1]
+    C: [1.0]
+    D: [0.0]
+    Q: [1.0]
+    R: [1.0]
+    x0: [0.0]
+    P0: [1.0]
+    nonpositive_is_gap: false
+    max_gap: 10.0
+"""
+
+
+def simulate(path: Path, n: int, seed: int, q: float = Q_TRUE, r: float = R_TRUE,
+             spikes: tuple = ()) -> tuple:
+    """Write n samples at 1 s with 10% gaps of 2-6 s (y[k] = 1e300 for k in spikes)."""
+    rng = np.random.default_rng(seed)
+    dt = np.where(rng.random(n) < 0.1, rng.integers(2, 7, n), 1).astype(float)
+    t = 1000.0 + np.concatenate([[0.0], np.cumsum(dt[:-1])])
+    x = rng.normal(0.0, 1.0)
+    ys = np.empty(n)
+    for k in range(n):
+        ys[k] = x + np.sqrt(r / dt[k]) * rng.standard_normal()
+        x = (1.0 + dt[k] * A_TRUE) * x + np.sqrt(dt[k] * q) * rng.standard_normal()
+    ys[list(spikes)] = 1e300
+    write_samples(path, t, ys)
+    return t, ys
+
+
+def write_samples(path: Path, t: np.ndarray, ys: np.ndarray, tail: bytes = b'') -> None:
+    """Write (t s, y) as Illuminance on /received_power, then the raw bytes `tail`."""
+    with BagWriter(path) as w:
+        w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
+        for tk, yk in zip(t, ys):
+            ns = int(round(tk * 1e9))
+            w.write('/received_power', ns,
+                    serialize_message(conversions.power_to_msg(ns, yk, 0.0)))
+        if tail:
+            w.write('/received_power', int(round(t[-1] * 1e9)) + 10**9, tail)
+
+
+def scalar_log_likelihood(t: np.ndarray, y: np.ndarray, a: float, c: float, q: float,
+                          r: float, x0: float, p0: float) -> float:
+    """Return log L of a predictive scalar KF: F = 1 + mu a, Q_d = mu q, R_d = r / mu."""
+    x, P, ll = x0, p0, 0.0
+    for k in range(len(t) - 1):
+        mu = t[k + 1] - t[k]
+        S = c * P * c + r / mu
+        e = y[k] - c * x
+        ll += -0.5 * (np.log(2 * np.pi * S) + e * e / S)
+        K = P * c / S
+        x, P = x + K * e, P - K * c * P
+        F = 1.0 + mu * a
+        x, P = F * x, F * P * F + mu * q
+    return ll
+
+
+@pytest.fixture(scope='module')
+def sim(tmp_path_factory):
+    d = tmp_path_factory.mktemp('fit')
+    (d / 'params.yaml').write_text(PARAMS)
+    t, y = simulate(d / 'bag', 2000, seed=7)
+    rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                         '--out', str(d / 'out' / 'fitted.yaml'),
+                         '--json', str(d / 'out' / 'fit.json'), '-q'])
+    assert rc == 0
+    return d, t, y, json.loads((d / 'out' / 'fit.json').read_text())
+
+
+def test_recovers_known_q_and_r_within_four_standard_errors(sim):
+    # the MLE is asymptotically normal: 4 standard errors is a two-sided 6e-5 tail
+    _, _, _, fit = sim
+    assert fit['parameters'] == ['Q[0,0]', 'R[0,0]']
+    for value, truth, se_log in zip(fit['log_parameters'], (Q_TRUE, R_TRUE),
+                                    fit['log_stderr']):
+        assert 0.01 < se_log < 0.3
+        assert abs(value - np.log(truth)) <= 4 * se_log
+    assert fit['Q'][0][0] == pytest.approx(np.exp(fit['log_parameters'][0]), rel=1e-12)
+    # delta method: se(q) = q se(log q)
+    assert fit['Q_stderr'][0][0] == pytest.approx(fit['Q'][0][0] * fit['log_stderr'][0])
+    assert fit['R_stderr'][0][0] == pytest.approx(fit['R'][0][0] * fit['log_stderr'][1])
+    assert fit['n'] == 1999 and fit['samples'] == 2000 and fit['gaps'] > 150
+    assert fit['optimizer']['success'] and fit['optimizer']['gate_stable']
+    assert fit['nis']['consistent']
+    assert fit['nis']['band'][0] < 1.0 < fit['nis']['band'][1]
+
+
+def test_log_likelihood_equals_a_scalar_filter_written_out(sim):
+    _, t, y, fit = sim
+    q, r = fit['Q'][0][0], fit['R'][0][0]
+    ll = scalar_log_likelihood(t, y, A_TRUE, 1.0, q, r, 0.0, 1.0)
+    assert fit['log_likelihood'] == pytest.approx(ll, rel=1e-10)
+    assert fit['log_likelihood_trace'] == pytest.approx(ll, rel=1e-10)
+    # the maximum: a 5% change of q or r lowers the independent likelihood
+    for dq, dr in ((1.05, 1), (1 / 1.05, 1), (1, 1.05), (1, 1 / 1.05)):
+        assert scalar_log_likelihood(t, y, A_TRUE, 1.0, q * dq, r * dr, 0.0, 1.0) < ll
+    ll0 = scalar_log_likelihood(t, y, A_TRUE, 1.0, 1.0, 1.0, 0.0, 1.0)
+    assert fit['params_file']['log_likelihood'] == pytest.approx(ll0, rel=1e-10)
+
+
+def test_the_fitted_file_runs_the_node_session(sim):
+    d, t, y, fit = sim
+    config = load_config(d / 'out' / 'fitted.yaml').session
+    assert config.model.Q[0, 0] == pytest.approx(fit['Q'][0][0], rel=1e-12)
+    assert config.model.R[0, 0] == pytest.approx(fit['R'][0][0], rel=1e-12)
+    assert config.model.A[0, 0] == A_TRUE and config.gate == 10.0
+    session = EstimatorSession(config)
+    statuses = {session.add(int(round(tk * 1e9)), yk).status for tk, yk in zip(t, y)}
+    assert statuses == {'accepted'}
+    assert not list((d / 'out').glob('*.part'))
+
+
+def test_session_innovations_equal_the_core_trace(sim, tmp_path):
+    # the session path (outcomes) against the core re-run of its trace, with a late sample,
+    # and on the drogue bag (inputs, measurements merged into input points, exact transition)
+    d, t, y, _ = sim
+    config = load_config(d / 'params.yaml').session
+    events = [Measurement(int(round(tk * 1e9)), yk) for tk, yk in zip(t[:300], y[:300])]
+    events[100], events[101] = events[101], events[100]
+    drogue = load_config(REPO / 'config' / 'drogue_estimator.yaml').session
+    drogue_events = read_stream(REPO / 'bags' / 'drogue', drogue).events
+    for cfg, evs in ((config, events), (drogue, drogue_events)):
+        run = run_stream(cfg, evs)
+        assert run.stats.inserted == (1 if cfg is config else 0)
+        trace = run_trace(cfg.model, cfg.transition, run.segments)
+        assert run.innovations.count == trace.count > 10
+        np.testing.assert_allclose(run.innovations.e, trace.e, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(run.innovations.S, trace.S, rtol=1e-12)
+
+
+def test_errors_are_one_line_and_write_nothing(sim, tmp_path, capsys, monkeypatch):
+    d = sim[0]
+    out, js = tmp_path / 'f.yaml', tmp_path / 'f.json'
+    few = tmp_path / 'few'
+    simulate(few, 8, seed=1)
+    cases = [([str(d / 'bag'), '--topic', '/nothing'], 1, 'no topic /nothing'),
+             ([str(few)], 1, 'too few samples'),
+             ([str(tmp_path / 'absent')], 1, 'no such bag')]
+    for argv, code, text in cases:
+        rc = fit_noise.main(argv + ['--params-file', str(d / 'params.yaml'), '--out', str(out),
+                                    '--json', str(js)])
+        err = capsys.readouterr().err
+        assert rc == code and text in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists() and not js.exists()
+
+    def no_convergence(*args, **kwargs):
+        raise noise_fit.FitError('the optimiser did not converge (test)')
+    monkeypatch.setattr('tskf_ros.owc.innovation_trace.fit', no_convergence)
+    rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                         '--out', str(out), '--json', str(js)])
+    err = capsys.readouterr().err
+    assert rc == fit_noise.EXIT_NO_FIT and 'did not converge' in err
+    assert not out.exists() and not js.exists()
+
+
+@pytest.mark.slow
+def test_standard_errors_match_the_spread_over_seeds(tmp_path):
+    # Monte Carlo: the Hessian standard error against the spread of the estimates
+    (tmp_path / 'params.yaml').write_text(PARAMS)
+    est, se = [], []
+    for seed in range(6):
+        simulate(tmp_path / f'b{seed}', 2000, seed=100 + seed)
+        assert fit_noise.main([str(tmp_path / f'b{seed}'), '--params-file',
+                               str(tmp_path / 'params.yaml'), '--json',
+                               str(tmp_path / f'f{seed}.json'), '-q']) == 0
+        fit = json.loads((tmp_path / f'f{seed}.json').read_text())
+        est.append(fit['log_parameters'])
+        se.append(fit['log_stderr'])
+    spread = np.std(est, axis=0, ddof=1)
+    ratio = spread / np.mean(se, axis=0)
+    print(f'log q, log r: mean estimate {np.mean(est, axis=0)} (truth '
+          f'{np.log([Q_TRUE, R_TRUE])}), spread over seeds {spread}, mean Hessian '
+          f'standard error {np.mean(se, axis=0)}, ratio {ratio}')
+    # with 6 seeds the sample sd is within a factor of about 2 of the truth (chi2(5))
+    assert np.all((ratio > 0.35) & (ratio < 2.0)), ratio
+    assert np.all(np.abs(np.mean(est, axis=0) - np.log([Q_TRUE, R_TRUE]))
+                  < 3 * np.mean(se, axis=0) / np.sqrt(6) + 0.05)
+
+
+def test_a_message_that_does_not_deserialize_is_damage(sim, tmp_path, capsys):
+    # 30 good samples, then bytes that are not an Illuminance: fitted on what came before
+    d = sim[0]
+    bag = tmp_path / 'bad'
+    t, y = simulate(tmp_path / 'good', 30, seed=2)
+    write_samples(bag, t, y, tail=b'\x00\x01\x00\x00garbage')
+    out = tmp_path / 'f.json'
+    rc = fit_noise.main([str(bag), '--params-file', str(d / 'params.yaml'), '--json',
+                         str(out), '--fix', 'Q', '-q'])
+    err = capsys.readouterr().err
+    assert rc == 3 and 'does not deserialize' in err and len(err.strip().splitlines()) == 1
+    fit = json.loads(out.read_text())
+    assert fit['samples'] == 30 and 'does not deserialize' in fit['damage']
+
+
+def test_absurd_readings_are_left_to_the_gate(tmp_path):
+    # 1e300 is finite: with the gate off it would make the likelihood infinite; the node's
+    # gate rejects it, and so the fit leaves it out and still recovers Q and R
+    (tmp_path / 'params.yaml').write_text(PARAMS)
+    simulate(tmp_path / 'bag', 2000, seed=7, spikes=(500, 1500))
+    assert fit_noise.main([str(tmp_path / 'bag'), '--params-file',
+                           str(tmp_path / 'params.yaml'), '--json', str(tmp_path / 'f.json'),
+                           '-q']) == 0
+    fit = json.loads((tmp_path / 'f.json').read_text())
+    assert fit['excluded_by_gate'] == 2 and fit['rejected'] == {'gated': 2}
+    assert fit['n'] == 1997 and fit['optimizer']['gate_stable']
+    for value, truth, se_log in zip(fit['log_parameters'], (Q_TRUE, R_TRUE),
+                                    fit['log_stderr']):
+        assert abs(value - np.log(truth)) <= 4 * se_log
+
+
+def test_a_params_file_reads_as_the_node_reads_it(sim, tmp_path, capsys):
+    # rcl's parser reads 1e-2 and 1.0e-2 as doubles (PyYAML's YAML 1.1 would make them
+    # strings); a file that is not a mapping is one line, exit 1
+    d = sim[0]
+    text = PARAMS.replace('Q: [1.0]', 'Q: [1.0e-2]').replace('R: [1.0]', 'R: [1e0]')
+    (tmp_path / 'e.yaml').write_text(text)
+    out = tmp_path / 'f.yaml'
+    assert load_config(tmp_path / 'e.yaml').session.model.Q[0, 0] == 0.01
+    assert fit_noise.main([str(d / 'bag'), '--params-file', str(tmp_path / 'e.yaml'),
+                           '--out', str(out), '-q']) == 0
+    fitted = load_config(out).session.model
+    assert 0.0 < fitted.Q[0, 0] < 1.0 and 0.0 < fitted.R[0, 0] < 1.0
+    for bad in ('- 1\n- 2\n', '/**:\n  ros__parameters: 5\n'):
+        (tmp_path / 'bad.yaml').write_text(bad)
+        rc = fit_noise.main([str(d / 'bag'), '--params-file', str(tmp_path / 'bad.yaml')])
+        err = capsys.readouterr().err
+        assert rc == 1 and 'bad.yaml' in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_ctrl_c_is_one_line_and_writes_nothing(sim, tmp_path, capsys, monkeypatch):
+    d = sim[0]
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(fit_noise, 'fit_events', interrupted)
+    out, js = tmp_path / 'f.yaml', tmp_path / 'f.json'
+    rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                         '--out', str(out), '--json', str(js)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 130 and len(err) == 1 and 'interrupted' in err[0], err
+    assert list(tmp_path.iterdir()) == []

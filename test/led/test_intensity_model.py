@@ -1,0 +1,58 @@
+"""The light-intensity model (Solanki et al. 2018, eq. (1)-(5)): g, g' and the unit of phi."""
+
+import numpy as np
+import pytest
+from solanki_paper import dg_paper, g_paper
+
+from tskf_ros import led
+
+
+RESPONSE = led.IncidenceResponse()
+
+
+def paper_peak():
+    """Maximum of eq. (4) on a dense grid (1e-4 fit units), refined once."""
+    u = np.arange(-20.0, 20.0, 1e-3)
+    k = int(np.argmax(g_paper(u)))
+    fine = np.arange(u[k] - 2e-3, u[k] + 2e-3, 1e-6)
+    return float(np.max(g_paper(fine)))
+
+
+def test_zone_unit_puts_20_percent_at_15_degrees():
+    r = RESPONSE
+    assert r.units_per_degree == pytest.approx(17.697, abs=5e-4)      # README: 17.697
+    # independent: scan the unit s on a 1e-6 grid for where mean g(+-15 s) / peak = 0.2
+    peak = paper_peak()
+    assert r.peak == pytest.approx(peak, rel=1e-10)
+    s = np.arange(17.69, 17.71, 1e-6)
+    level = 0.5 * (g_paper(15.0 * s) + g_paper(-15.0 * s)) / peak
+    k = int(np.flatnonzero(np.diff(np.sign(level - 0.2)))[0])
+    assert s[k] <= r.units_per_degree + 1e-9 and r.units_per_degree <= s[k + 1] + 1e-9
+    # and g in degrees is eq. (4) at phi * s
+    phi = np.linspace(-40.0, 40.0, 17)
+    np.testing.assert_allclose(r.g(phi), g_paper(phi * r.units_per_degree), rtol=1e-13)
+
+
+def test_literal_unit_is_nearly_flat():
+    r = led.IncidenceResponse(units_per_degree=led.LITERAL_UNITS_PER_DEGREE)
+    peak = paper_peak()
+    # README: above 98% of the peak over +-15 deg, still 39-41% of it at +-180 deg
+    phi = np.linspace(-15.0, 15.0, 301)
+    assert np.all(r.g(phi) / peak > 0.98) and np.all(g_paper(phi) / peak > 0.98)
+    at_180 = r.g(np.array([-180.0, 180.0])) / peak
+    assert np.all((at_180 >= 0.39) & (at_180 <= 0.41))
+    np.testing.assert_allclose(at_180, g_paper([-180.0, 180.0]) / peak, rtol=1e-12)
+
+
+def test_bad_unit_is_rejected():
+    with pytest.raises(led.AlignmentError, match='units_per_degree'):
+        led.IncidenceResponse(units_per_degree=0.0)
+
+
+def test_dg_matches_the_hand_derivative_and_finite_differences():
+    s = RESPONSE.units_per_degree
+    phi = np.linspace(-40.0, 40.0, 81)
+    np.testing.assert_allclose(RESPONSE.dg(phi), s * dg_paper(s * phi), rtol=1e-12, atol=1e-15)
+    h = 1e-5
+    numeric = (g_paper(s * (phi + h)) - g_paper(s * (phi - h))) / (2 * h)
+    np.testing.assert_allclose(RESPONSE.dg(phi), numeric, rtol=1e-6, atol=1e-9)

@@ -1,0 +1,19 @@
+"""Fixtures of the node tests (the ROS environment and ros_context: test/conftest.py)."""
+
+import pytest
+import rclpy
+
+from tskf_ros.nodes.node_base import make_executor
+
+
+@pytest.fixture
+def loop(ros_context, executor_kind):
+    """Yield an executor (each kind) with a client node; the nodes listed are destroyed after."""
+    executor = make_executor(executor_kind, context=ros_context)
+    client = rclpy.create_node('citizen_client', context=ros_context)
+    executor.add_node(client)
+    nodes = [client]
+    yield executor, client, nodes
+    executor.shutdown()
+    for n in nodes:
+        n.destroy_node()

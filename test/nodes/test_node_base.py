@@ -1,0 +1,160 @@
+"""
+What the nodes share: the executors (`--executor single|events`), --help, parameter files.
+
+The other node tests run on both executors through the `executor_kind` fixture (conftest):
+the clock-jump reset (use_sim_time and /clock) in test_timescale_estimator and
+test_alignment, ~/reset and ~/enable in test_timescale_estimator_parameters and
+test_alignment.  Here: what only a running process or a service client shows.
+"""
+
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from node_helpers import run_node, stop
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import QoSProfile
+
+from tskf_ros.nodes import node_base
+from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
+
+REPO = Path(__file__).resolve().parents[2]
+CONFIG = REPO / 'config'
+TIMEOUT = 60.0      # s: only a bound on waiting for DDS or a process; no timed assertion
+
+
+def spin_until(executor, condition, what):
+    """Spin until condition(); fail, saying what never happened, after TIMEOUT."""
+    deadline = time.monotonic() + TIMEOUT
+    while not condition():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        executor.spin_once(timeout_sec=0.05)
+
+
+def from_estimator(diagnostics):
+    """Return whether a /diagnostics message of the estimator came."""
+    return any(s.name.startswith('timescale_estimator') for m in diagnostics for s in m.status)
+
+
+def test_timer_and_parameter_services(ros_context, executor_kind):
+    node = TimescaleEstimator(context=ros_context, parameter_overrides=[
+        Parameter('diagnostics_period', value=0.05)])
+    client = rclpy.create_node('parameter_client', context=ros_context)
+    diagnostics = []
+    client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append,
+                               QoSProfile(depth=100))
+    executor = make_executor(executor_kind, context=ros_context)
+    executor.add_node(node)
+    executor.add_node(client)
+    params = AsyncParameterClient(client, 'timescale_estimator')
+    try:
+        # the diagnostics timer fires, again and again
+        spin_until(executor, lambda: len(diagnostics) >= 3, 'three /diagnostics messages')
+        spin_until(executor, lambda: params.services_are_ready(), 'the parameter services')
+        future = params.set_parameters([Parameter('transition', value='exact')])
+        spin_until(executor, future.done, 'set_parameters')
+        assert future.result().results[0].successful
+        assert node.session.kf.transition == 'exact'
+        future = params.set_parameters([Parameter('Q', value=[1.0, 2.0])])
+        spin_until(executor, future.done, 'set_parameters (refused)')
+        result = future.result().results[0]
+        assert not result.successful and 'Q must have 1 entries' in result.reason
+        future = params.get_parameters(['transition', 'Q'])
+        spin_until(executor, future.done, 'get_parameters')
+        values = future.result().values
+        assert values[0].string_value == 'exact' and list(values[1].double_array_value) == [1.0]
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        client.destroy_node()
+
+
+def start(args, log, env=None):
+    """Start the estimator as a process (output to the log file)."""
+    return subprocess.Popen(
+        [sys.executable, '-m', 'tskf_ros.nodes.timescale_estimator', *args, '--ros-args',
+         '-p', 'diagnostics_period:=0.1'], cwd=REPO, env=env or dict(os.environ),
+        stdout=log, stderr=subprocess.STDOUT, text=True)
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+@pytest.mark.parametrize('how', ['flag', 'environment'])
+def test_the_node_process_stops_cleanly(ros_context, tmp_path, executor_kind, sig, how):
+    log = (tmp_path / 'node.log').open('w+')
+    env = dict(os.environ)
+    env.pop(node_base.EXECUTOR_VARIABLE, None)
+    if how == 'flag':
+        proc = start(['--executor', executor_kind], log, env)
+    else:
+        env[node_base.EXECUTOR_VARIABLE] = executor_kind
+        proc = start([], log, env)
+    client = rclpy.create_node('watcher', context=ros_context)
+    diagnostics = []
+    client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append,
+                               QoSProfile(depth=10))
+    executor = make_executor('single', context=ros_context)
+    executor.add_node(client)
+    try:
+        # spinning: its timer publishes
+        spin_until(executor, lambda: from_estimator(diagnostics) or proc.poll() is not None,
+                   'the node process to publish /diagnostics')
+        assert proc.poll() is None, 'the node process ended by itself'
+    finally:
+        executor.shutdown()
+        client.destroy_node()
+        out = stop(proc, log, sig)
+        log.close()
+    assert proc.returncode == 0 and 'Traceback' not in out, out
+
+
+def test_an_unknown_executor_is_refused_in_one_line():
+    env = dict(os.environ)
+    env[node_base.EXECUTOR_VARIABLE] = 'threads'
+    proc = subprocess.run([sys.executable, '-m', 'tskf_ros.nodes.timescale_estimator'],
+                          cwd=REPO, env=env, capture_output=True, text=True, timeout=TIMEOUT)
+    assert proc.returncode == 1
+    assert proc.stderr.strip() == ('timescale_estimator: cannot start: executor must be one '
+                                   "of single, events, got 'threads'")
+
+
+def test_the_default_executor_and_the_environment(monkeypatch):
+    monkeypatch.delenv(node_base.EXECUTOR_VARIABLE, raising=False)
+    assert node_base.executor_kind() == node_base.DEFAULT_EXECUTOR
+    monkeypatch.setenv(node_base.EXECUTOR_VARIABLE, 'single')
+    assert node_base.executor_kind() == 'single'
+    assert node_base.executor_kind('events') == 'events'     # the flag wins
+
+
+@pytest.mark.parametrize('module', ['timescale_estimator', 'power_meter_simulator'])
+def test_help_exits_0_without_ros(module):
+    code, out = run_node(module, '--help')
+    assert code == 0 and 'usage' in out
+
+
+def test_a_parameter_file_that_sets_nothing_is_said_loudly(tmp_path):
+    from tskf_ros.nodes.node_base import unused_parameter_file
+    wrong = tmp_path / 'wrong.yaml'
+    wrong.write_text('some_other_node:\n  ros__parameters:\n    period: 2.0\n')
+    for path, expect_warning in ((wrong, True), (CONFIG / 'owc_estimator.yaml', False)):
+        argv = ['--ros-args', '--params-file', str(path)]
+        context = rclpy.context.Context()
+        rclpy.init(context=context, args=argv)
+        try:
+            node = TimescaleEstimator(context=context)
+            try:
+                warning = unused_parameter_file(node, argv)
+                assert bool(warning) == expect_warning, warning
+                if expect_warning:
+                    assert 'set none of the parameters of /timescale_estimator' in warning
+            finally:
+                node.destroy_node()
+        finally:
+            context.try_shutdown()

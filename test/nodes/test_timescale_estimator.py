@@ -1,0 +1,404 @@
+"""timescale_estimator in-process: outputs equal the core run offline, and each bad input."""
+
+from pathlib import Path
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
+import numpy as np
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Illuminance, TimeReference
+
+from tskf_ros.core.linear_models import owc, run_filter, spring_mass
+from tskf_ros.core.time_scales import discrete
+from tskf_ros.messages import conversions
+from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
+from tskf_ros.owc.estimator_session import NS
+
+import yaml
+
+CONFIG = Path(__file__).resolve().parents[2] / 'config'
+OUTPUTS = {'predicted': TwistWithCovarianceStamped, 'corrected': TwistWithCovarianceStamped,
+           'mu': TimeReference, 'revised/predicted': TwistWithCovarianceStamped,
+           'revised/corrected': TwistWithCovarianceStamped, 'revised/mu': TimeReference}
+# 1 Hz with gaps J = 3 (after 4) and J = 4 (after 12), and a dense stretch at 0.25 s
+STAMPS = np.array([1, 2, 3, 4, 7, 8, 9, 10, 11, 12, 16, 16.25, 16.5, 16.75, 17, 18, 19, 20])
+TIMEOUT = 60.0      # s: only a bound on waiting for DDS; no assertion depends on timing
+
+
+def yaml_parameters(name, **extra):
+    """Parameter overrides from a config/ YAML file, plus extra ones."""
+    data = yaml.safe_load((CONFIG / name).read_text())['/**/timescale_estimator'][
+        'ros__parameters']
+    data.update(extra)
+    return [Parameter(k, value=v) for k, v in data.items()]
+
+
+class Harness:
+    """The estimator and a client node (publisher, subscribers) on one executor."""
+
+    def __init__(self, context, overrides, executor_kind, *, best_effort=False):
+        self.node = TimescaleEstimator(context=context, parameter_overrides=overrides)
+        self.client = rclpy.create_node('client', context=context)
+        qos = qos_profile_sensor_data if best_effort else QoSProfile(depth=100)
+        self.pub = self.client.create_publisher(Illuminance, 'measurement', qos)
+        self.got = {k: [] for k in OUTPUTS}
+        for topic, kind in OUTPUTS.items():
+            self.client.create_subscription(kind, 'estimate/' + topic,
+                                            self.got[topic].append, QoSProfile(depth=1000))
+        self.diagnostics = []
+        self.client.create_subscription(DiagnosticArray, '/diagnostics',
+                                        self.diagnostics.append, 10)
+        self.executor = make_executor(executor_kind, context=context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.client)
+        self.spin_until(lambda: self.pub.get_subscription_count() > 0 and all(
+            self.client.count_publishers('estimate/' + t) > 0 for t in OUTPUTS))
+
+    def spin_until(self, condition, what='condition'):
+        """Spin until condition() holds; fail (not a timing assertion) after TIMEOUT."""
+        deadline = time.monotonic() + TIMEOUT
+        while not condition():
+            assert time.monotonic() < deadline, f'timed out waiting for {what}'
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def send(self, t, power, variance=0.0):
+        """Publish one sample (t in s, or an int in ns) and wait until the node took it."""
+        before = self.node.session.stats.received
+        stamp = t if isinstance(t, int) else int(round(t * NS))
+        self.pub.publish(conversions.power_to_msg(stamp, power, variance))
+        self.spin_until(lambda: self.node.session.stats.received > before, 'the sample')
+
+    def expect(self, **counts):
+        """Wait until each output topic has received count messages."""
+        self.spin_until(lambda: all(len(self.got[k.replace('_', '/')]) >= n
+                                    for k, n in counts.items()), f'outputs {counts}')
+
+    def estimates(self, topic, n):
+        """(stamps s, x, P) received on an estimate topic."""
+        out = [conversions.msg_to_estimate(m, n) for m in self.got[topic]]
+        return (np.array([o[0] / NS for o in out]), np.array([o[1] for o in out]),
+                np.array([o[2] for o in out]))
+
+    def close(self):
+        """Destroy the nodes and the executor."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.client.destroy_node()
+
+
+@pytest.fixture
+def make(ros_context, executor_kind):
+    """Build a Harness in this test's own context, on each executor; close it afterwards."""
+    made = []
+
+    def factory(overrides=None, **kwargs):
+        # no periodic /diagnostics (it would consume the counters a test reads, at a moment
+        # that depends on the load), and no wall-clock rate or staleness verdicts
+        quiet = [Parameter('diagnostics_period', value=3600.0),
+                 Parameter('stale_timeout', value=0.0),
+                 Parameter('min_rate_fraction', value=0.0)]
+        given = overrides or yaml_parameters('owc_estimator.yaml')
+        names = {p.name for p in given}
+        h = Harness(ros_context, given + [p for p in quiet if p.name not in names],
+                    executor_kind, **kwargs)
+        made.append(h)
+        return h
+    yield factory
+    for h in made:
+        h.close()
+
+
+def measurements(model, t, seed=0):
+    """Noisy measurements of a state near x0 at the points t (seeded)."""
+    rng = np.random.default_rng(seed)
+    x = model.x0 + 0.02 * rng.standard_normal((t.size, model.x0.size))
+    y = x @ model.C.T + (0 if model.D is None else model.D)
+    return y + np.sqrt(np.diag(model.R)) * rng.standard_normal(y.shape)
+
+
+@pytest.mark.parametrize('config, model, transition', [
+    ('owc_estimator.yaml', owc(), 'euler'),
+    ('reference_estimator.yaml', spring_mass(), 'exact')])
+def test_outputs_equal_offline_run(make, config, model, transition):
+    h = make(yaml_parameters(config))
+    y = measurements(model, STAMPS)
+    for t, yi in zip(STAMPS, y[:, 0]):
+        h.send(t, yi)
+    N = STAMPS.size
+    h.expect(predicted=N, corrected=N - 1, mu=N - 1)
+    ref = run_filter(model, discrete(STAMPS), y, transition=transition)
+    n = model.x0.size
+    t, x, P = h.estimates('predicted', n)
+    np.testing.assert_array_equal(t, STAMPS)
+    np.testing.assert_allclose(x, ref.x_pred, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(P, ref.P_pred, rtol=0, atol=1e-9)
+    t, x, P = h.estimates('corrected', n)
+    np.testing.assert_array_equal(t, STAMPS[:-1])
+    np.testing.assert_allclose(x, ref.x_corr[:-1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(P, ref.P_corr[:-1], rtol=0, atol=1e-9)
+    mu = [conversions.msg_to_jump(m) for m in h.got['mu']]
+    np.testing.assert_array_equal([m[0] / NS for m in mu], STAMPS[:-1])
+    np.testing.assert_allclose([m[1] for m in mu], np.diff(STAMPS), rtol=0, atol=1e-12)
+    assert not any(h.got[k] for k in ('revised/predicted', 'revised/corrected', 'revised/mu'))
+    assert h.node.session.stats.accepted == N
+
+
+def run_with(h, bad, *, before=(1.0, 2.0), after=4.0):
+    """Send good samples, then the bad one(s), then a good one; return the stamps seen."""
+    for t in before:
+        h.send(t, 200.0)
+    for args in bad:
+        h.send(*args)
+    h.send(after, 200.0)
+    h.expect(predicted=len(before) + 1, corrected=len(before), mu=len(before))
+    return h.estimates('predicted', 1)[0], h.estimates('corrected', 1)[0]
+
+
+def rejected(h, reason):
+    """Return the node's count of samples rejected for reason."""
+    return h.node.session.stats.rejected[reason]
+
+
+def test_nan_power_is_rejected(make):
+    h = make()
+    pred, corr = run_with(h, [(3.0, float('nan'))])
+    np.testing.assert_array_equal(pred, [1, 2, 4])
+    np.testing.assert_array_equal(corr, [1, 2])
+    assert rejected(h, 'non_finite') == 1
+
+
+def test_infinite_power_is_rejected(make):
+    h = make()
+    pred, _ = run_with(h, [(3.0, float('inf')), (3.5, float('-inf'))])
+    np.testing.assert_array_equal(pred, [1, 2, 4])
+    assert rejected(h, 'non_finite') == 2
+
+
+def test_nonpositive_power_is_a_gap(make):
+    h = make()
+    pred, _ = run_with(h, [(3.0, 0.0), (3.5, -5.0)], after=5.0)
+    np.testing.assert_array_equal(pred, [1, 2, 5])
+    h.expect(mu=2)
+    assert conversions.msg_to_jump(h.got['mu'][-1]) == (2 * NS, 3.0)      # J = 3
+    assert rejected(h, 'invalid_power') == 2
+    _, _, values = h.node.session.diagnostics()
+    assert values['gaps'] == 1 and values['gap_max_s'] == 3.0
+
+
+def test_duplicate_stamp_is_dropped(make):
+    h = make()
+    pred, corr = run_with(h, [(2.0, 201.0)])
+    np.testing.assert_array_equal(pred, [1, 2, 4])
+    np.testing.assert_array_equal(corr, [1, 2])
+    assert rejected(h, 'duplicate') == 1
+
+
+def test_zero_stamp_is_rejected(make):
+    h = make()
+    pred, _ = run_with(h, [(0, 200.0)])
+    np.testing.assert_array_equal(pred, [1, 2, 4])
+    assert rejected(h, 'zero_stamp') == 1
+
+
+def test_late_packet_is_inserted_and_revised(make):
+    h = make()
+    y = measurements(owc(), STAMPS)[:, 0]
+    order = list(range(8)) + [9, 10, 8] + list(range(11, STAMPS.size))   # t = 11 late
+    for i in order:
+        h.send(STAMPS[i], y[i])
+    N = STAMPS.size
+    h.expect(predicted=N - 1, corrected=N - 2, revised_corrected=3, revised_predicted=3,
+             revised_mu=3)
+    ref = run_filter(owc(), discrete(STAMPS), y[:, None])
+    t, x, _ = h.estimates('revised/corrected', 1)
+    np.testing.assert_array_equal(t, [10, 11, 12])
+    np.testing.assert_allclose(x, ref.x_corr[7:10], rtol=0, atol=1e-9)
+    t, x, _ = h.estimates('revised/predicted', 1)
+    np.testing.assert_array_equal(t, [11, 12, 16])
+    np.testing.assert_allclose(x, ref.x_pred[8:11], rtol=0, atol=1e-9)
+    # main topics: each stamp once, in order; after the insertion equal to the offline run
+    for topic in ('predicted', 'corrected'):
+        t, _, _ = h.estimates(topic, 1)
+        assert np.all(np.diff(t) > 0) and 11.0 not in t
+    t, x, _ = h.estimates('corrected', 1)
+    np.testing.assert_allclose(x[t > 12], ref.x_corr[10:-1], rtol=0, atol=1e-9)
+    assert h.node.session.stats.inserted == 1
+
+
+def test_too_old_packet_is_rejected(make):
+    h = make(yaml_parameters('owc_estimator.yaml', history_window=3.0))
+    pred, _ = run_with(h, [(1.5, 200.0)], before=(1.0, 2.0, 3.0, 4.0, 5.0), after=6.0)
+    np.testing.assert_array_equal(pred, [1, 2, 3, 4, 5, 6])
+    assert rejected(h, 'too_old') == 1 and not h.got['revised/predicted']
+
+
+def test_future_stamp_is_rejected(make):
+    h = make(yaml_parameters('owc_estimator.yaml', max_future=10.0))
+    now = h.node.get_clock().now().nanoseconds
+    for k in range(3):
+        h.send(now + k * NS, 200.0)
+    h.send(now + 3600 * NS, 200.0)
+    h.send(now + 3 * NS, 200.0)
+    h.expect(predicted=4)
+    assert rejected(h, 'future') == 1
+    assert [conversions.stamp_to_ns(m.header.stamp) - now for m in h.got['predicted']] == [
+        0, NS, 2 * NS, 3 * NS]
+
+
+def test_backward_jump_reinitialises(make):
+    h = make(yaml_parameters('owc_estimator.yaml', max_backward=30.0))
+    for t in (100.0, 101.0, 102.0):
+        h.send(t, 150.0)
+    h.send(5.0, 200.0)              # a looped bag: 97 s back
+    h.send(6.0, 200.0)
+    h.expect(predicted=5)
+    t, x, _ = h.estimates('predicted', 1)
+    np.testing.assert_array_equal(t, [100, 101, 102, 5, 6])
+    np.testing.assert_array_equal(x[3], owc().x0)          # restarted from x0
+    assert h.node.session.stats.resets['backward_jump'] == 1
+
+
+def test_forward_jump_reinitialises(make):
+    h = make(yaml_parameters('owc_estimator.yaml', max_jump=60.0))
+    for t in (1.0, 2.0, 500.0):
+        h.send(t, 200.0)
+    h.expect(predicted=3, corrected=1)
+    np.testing.assert_array_equal(h.estimates('predicted', 1)[0], [1, 2, 500])
+    np.testing.assert_array_equal(h.estimates('corrected', 1)[0], [1])
+    np.testing.assert_array_equal(h.estimates('predicted', 1)[1][-1], owc().x0)
+    assert h.node.session.stats.resets['forward_jump'] == 1
+
+
+def test_clock_jump_back_reinitialises(make):
+    h = make(yaml_parameters('owc_estimator.yaml') + [Parameter('use_sim_time', value=True)])
+    clock_pub = h.client.create_publisher(Clock, '/clock', 10)
+    h.spin_until(lambda: clock_pub.get_subscription_count() > 0, '/clock subscriber')
+    clock_pub.publish(Clock(clock=conversions.ns_to_stamp(1000 * NS)))
+    h.spin_until(lambda: h.node.get_clock().now().nanoseconds == 1000 * NS, 'sim time')
+    for t in (1.0, 2.0):
+        h.send(t, 200.0)
+    clock_pub.publish(Clock(clock=conversions.ns_to_stamp(10 * NS)))
+    h.spin_until(lambda: h.node.session.stats.resets['clock_jump'] == 1, 'the reset')
+    assert h.node.session.pending() is None
+    h.send(3.0, 200.0)
+    h.expect(predicted=3)
+    np.testing.assert_array_equal(h.estimates('predicted', 1)[1][-1], owc().x0)
+
+
+@pytest.mark.parametrize('name, value, reason', [
+    ('Q', [1.0, 0.0], 'Q must have 1 entries'),
+    ('R', [-100.0], 'positive definite'),
+    ('A', [1.0, 2.0], 'n^2 entries'),
+    ('P0', [-1.0], 'indefinite'),
+    ('transition', 'rk4', 'transition must be one of'),
+])
+def test_bad_parameter_is_refused_and_filter_keeps_running(make, name, value, reason):
+    h = make()
+    for t in (1.0, 2.0):
+        h.send(t, 200.0)
+    result = h.node.set_parameters([Parameter(name, value=value)])[0]
+    assert not result.successful and reason in result.reason
+    h.send(3.0, 210.0)
+    h.expect(predicted=3)
+    ref = run_filter(owc(), discrete([1.0, 2.0, 3.0]), np.array([[200.0], [200.0], [210.0]]))
+    np.testing.assert_allclose(h.estimates('predicted', 1)[1], ref.x_pred, rtol=0, atol=1e-9)
+
+
+def test_negative_rate_is_refused_by_its_range(make):
+    h = make()
+    result = h.node.set_parameters([Parameter('period', value=-1.0)])[0]
+    assert not result.successful
+    assert h.node.config.session.period == 1.0
+
+
+def test_good_parameter_change_is_used(make):
+    h = make()
+    assert h.node.set_parameters([Parameter('transition', value='exact')])[0].successful
+    assert h.node.session.kf.transition == 'exact'
+    stamps, power = (1.0, 2.0, 4.0), (200.0, 210.0, 190.0)
+    for t, p in zip(stamps, power):
+        h.send(t, p)
+    h.expect(predicted=3)
+    t, x, P = h.estimates('predicted', 1)
+    # model (3) sampled exactly, written out: F = e^mu, Q_d = (e^{2 mu} - 1) / 2, R_d = R / mu
+    c, d, R = -637.35, 511.97, 100.0
+    xs, Ps, want_x, want_P = 0.5435, 0.01, [0.5435], [0.01]
+    for k, mu in enumerate(np.diff(stamps)):
+        L = Ps * c / (c * c * Ps + R / mu)
+        xs, Ps = xs + L * (power[k] - c * xs - d), Ps - L * c * Ps
+        xs, Ps = np.exp(mu) * xs, np.exp(2 * mu) * Ps + (np.exp(2 * mu) - 1) / 2
+        want_x.append(xs)
+        want_P.append(Ps)
+    np.testing.assert_array_equal(t, stamps)
+    np.testing.assert_allclose(x[:, 0], want_x, rtol=1e-9)
+    np.testing.assert_allclose(P[:, 0, 0], want_P, rtol=1e-9)
+    # the Euler step (F = 1 + mu, Q_d = mu) would predict far from that: the change was used
+    L = want_P[1] * c / (c * c * want_P[1] + R / 2)
+    euler = 3 * (want_x[1] + L * (power[1] - c * want_x[1] - d))
+    assert abs(x[2, 0] - euler) > 0.1
+
+
+def test_diagnostics_warn_on_long_gap(make):
+    h = make(yaml_parameters('owc_estimator.yaml', max_gap=5.0))
+    for t in (1.0, 2.0, 10.0):
+        h.send(t, 200.0)
+    h.send(10.0, 200.0)                                   # a duplicate, counted
+    n = len(h.diagnostics)
+    h.node.publish_diagnostics()
+    h.spin_until(lambda: len(h.diagnostics) > n, '/diagnostics')
+    (status,) = h.diagnostics[-1].status
+    values = conversions.msg_to_diagnostics(h.diagnostics[-1])[status.name]
+    assert status.level == conversions.LEVELS['WARN']
+    assert values['gaps'] == '1' and float(values['gap_max_s']) == 8.0
+    assert values['rejected_duplicate'] == '1' and float(values['mu_max_s']) == 8.0
+    assert float(values['covariance_trace']) > 0
+
+
+def test_best_effort_publisher_is_matched(make):
+    h = make(best_effort=True)
+    for t in (1.0, 2.0, 3.0):
+        h.send(t, 200.0)
+    h.expect(predicted=3, corrected=2)
+
+
+def test_inputs_are_held_and_outputs_equal_the_core(make):
+    h = make(yaml_parameters('drogue_estimator.yaml'))
+    # best effort publisher: the input subscription matches it as well as a reliable one
+    pub = h.client.create_publisher(AccelStamped, 'input', qos_profile_sensor_data)
+    h.spin_until(lambda: pub.get_subscription_count() > 0, 'the input subscription')
+    rng = np.random.default_rng(6)
+    grid = np.arange(0.0, 110.0, 5.0) + 1000.0       # u every 5 s; fixes only at some
+    u = rng.standard_normal(grid.size) * 1e-3
+    fixes = {t: rng.standard_normal() for t in grid[[1, 2, 3, 19, 20, 21]]}
+    for t, uk in zip(grid, u):
+        before = h.node.session.stats.inputs_received
+        pub.publish(conversions.input_to_msg(int(t * NS), [uk]))
+        h.spin_until(lambda: h.node.session.stats.inputs_received > before, 'the input')
+        if t in fixes:
+            h.send(t, fixes[t])
+    # the core: the time-scale filter stepped at every input stamp from the first fix on
+    config = h.node.config.session
+    kf = config.model.make_filter(config.transition)
+    points = grid[1:]
+    pred, corr = [], []
+    for k, t in enumerate(points[:-1]):
+        res = kf.step(points[k + 1] - t, fixes.get(t), [u[k + 1]])
+        pred.append(res.x_predicted)
+        if t in fixes:
+            corr.append(res.x_corrected)
+    h.expect(predicted=points.size, corrected=len(fixes) - 1, mu=points.size - 1)
+    t, x, _ = h.estimates('predicted', 2)
+    np.testing.assert_array_equal(t, points)
+    np.testing.assert_allclose(x[1:], pred, rtol=0, atol=1e-9)
+    t, x, _ = h.estimates('corrected', 2)
+    np.testing.assert_array_equal(t, sorted(fixes)[:-1])
+    np.testing.assert_allclose(x, corr, rtol=0, atol=1e-9)
+    stats = h.node.session.stats
+    assert stats.inputs_accepted == grid.size and stats.accepted == len(fixes)
+    assert not stats.rejected
