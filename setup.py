@@ -55,7 +55,7 @@ setup(
             'timescale_estimator = tskf_ros.nodes.timescale_estimator:main',
             'record = tskf_ros.bag.recorder:console_main',
             'play = tskf_ros.bag.player:console_main',
-            'replay_offline = tskf_ros.bag.offline_replay:console_main',
+            'replay_offline = tskf_ros.bag.replay.cli:console_main',
             'reindex = tskf_ros.bag.reindex:console_main',
             'plot_bag = tskf_ros.tools.plot_bag:console_main',
             'make_sample_bags = tskf_ros.tools.sample_bags:console_main',

@@ -13,9 +13,10 @@ of a goal alternate within each repeat, so a load that comes and goes hits them 
    below, the same numpy calls as FilterPy 2.0.0's predict and update.  Goals: n = 1
    <= 0.25x, n = 2 <= 0.5x, n <= 6 <= 1.0x, n = 20, 50 <= 1.0x.
 2. `EstimatorSession.add` (the OWC model, 1 kHz, in order) against the step of the same
-   filter: <= 1.5x.  Both make the filter's float step (`scalar_step`); it is printed
-   alone, and so is the add without it (the session's own work).  A late sample (one
-   point late) against history_size 10 .. 10 000: flat (the largest / the smallest <= 2).
+   filter: <= 1.5x.  The add makes that step (`kf.step`, the session's one path); the add
+   with kf.step answering a stored result is printed too (the session's own work: checks,
+   gate, history, statistics, outcome).  A late sample (one point late) against
+   history_size 10 .. 10 000: flat (the largest / the smallest <= 2).
 3. One scanning-EKF step (runs = 1, as the live alignment node runs it) and the alignment
    session's whole `add` (gate, step, checks): <= 50 us.  The vectorised form, which the
    Monte-Carlo experiments use, is printed beside it.
@@ -28,17 +29,19 @@ import os
 import platform
 import statistics
 import time
+from typing import Optional
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 from tskf_ros import led  # noqa: E402
 from tskf_ros.core.linear_models import owc  # noqa: E402
-from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter  # noqa: E402
+from tskf_ros.core.timescale_kalman import StepResult, TimeScaleKalmanFilter  # noqa: E402
 from tskf_ros.core.units import NS  # noqa: E402
 from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession  # noqa: E402
-from tskf_ros.owc.estimator_session import EstimatorConfig, EstimatorSession  # noqa: E402
+from tskf_ros.owc.session import EstimatorConfig, EstimatorSession  # noqa: E402
 
 try:
     from filterpy.kalman import KalmanFilter
@@ -168,48 +171,44 @@ def goal_session(repeats: int, quick: bool) -> None:
     session = owc_session()
     kf = model.make_filter()
     stamp = [T0]
-    yv = np.array([y])
 
     def add() -> None:
         stamp[0] += 1_000_000
         session.add(stamp[0], y)
 
     def step() -> None:
-        kf.step(0.001, yv)
+        kf.step(0.001, y)       # a plain-float reading, as the node passes it to add
 
-    # both run the filter's float step (Table 3 on floats): alone, it is the part they share
-    floats = model.make_filter()
-    x0, P0 = floats.x.item(), floats.P.item()
-
-    def kernel() -> None:
-        floats.scalar_step(0.001, x0, P0, y, None, floats._r)
-
-    # what the session adds: the same add with the float step replaced by its result
+    # what the session adds: the same add with kf.step answering one stored result (and
+    # moving x, P to it, as a step does)
     replay = owc_session()
     replay.add(T0, y)
-    replay.add(T0 + 1_000_000, y)
-    result = replay.kf.scalar_step(0.001, x0, P0, y, None, replay.kf._r)
-    replay.kf.scalar_step = lambda *args: result
-    replay_stamp = [T0 + 1_000_000]
+    stored = replay.kf.step(0.001, y)
+    replay.kf.x, replay.kf.P = model.x0.copy(), model.P0.copy()
+
+    def replayed(mu: float, y: ArrayLike, u: Optional[ArrayLike] = None, *,
+                 R: Optional[ArrayLike] = None) -> StepResult:
+        replay.kf.x, replay.kf.P = stored.x_predicted, stored.P_predicted
+        return stored
+
+    replay.kf.step = replayed
+    replay_stamp = [T0]
 
     def add_without_step() -> None:
         replay_stamp[0] += 1_000_000
         replay.add(replay_stamp[0], y)
 
     calls = 2000 // (10 if quick else 1)
-    got = alternate({'add': add, 'step': step, 'rest': add_without_step, 'kernel': kernel},
-                    {'add': calls, 'step': calls, 'rest': calls, 'kernel': calls}, repeats)
+    got = alternate({'add': add, 'step': step, 'rest': add_without_step},
+                    {'add': calls, 'step': calls, 'rest': calls}, repeats)
     ratio = min(got['add']) / min(got['step'])
     print('\n2. EstimatorSession.add (OWC, n = 1, in order) vs the step of the same filter')
     print(f'   session.add {mm(got["add"])} us   step {mm(got["step"])} us   '
           f'ratio {ratio:.2f}   <= 1.50x {verdict(ratio <= 1.5)}')
-    print(f'   the float step both make (scalar_step): {mm(got["kernel"])} us; the step wraps '
-          'it in checks of mu, y, u and a StepResult of six arrays')
-    print(f'   session.add without the float step (checks, gate, history, stats, outcome): '
-          f'{mm(got["rest"])} us')
+    print('   session.add with kf.step answering a stored result (the work of the session '
+          f'alone: checks, gate, history, statistics, outcome): {mm(got["rest"])} us')
 
-    print('   a sample one point late (insert + re-run of 2 steps) vs history_size '
-          '(the issue measured 0.6 / 2.5 / 24.6 ms at 10 / 1000 / 10000 before)')
+    print('   a sample one point late (insert + re-run of 2 steps) vs history_size')
     sessions, clocks = {}, {}
     for h in HISTORIES:
         s = owc_session(h)

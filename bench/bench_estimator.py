@@ -64,8 +64,7 @@ from tskf_ros.messages.estimator_interface import (load_config, outcome_messages
 from tskf_ros.messages.qos import DEFAULT_DEPTH, sensor_input_qos  # noqa: E402
 from tskf_ros.nodes.node_base import make_executor, spin  # noqa: E402
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator  # noqa: E402
-from tskf_ros.owc.estimator_session import (Estimate, EstimatorSession, Jump,  # noqa: E402
-                                            Outcome)
+from tskf_ros.owc.session import Estimate, EstimatorSession, Jump, Outcome  # noqa: E402
 
 NS = 1_000_000_000
 PERIOD_NS = 1_000_000                       # the stream: one sample per ms of stamp time

@@ -20,8 +20,8 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 from tskf_ros.core import irregular  # noqa: E402
 from tskf_ros.core.units import NS  # noqa: E402
-from tskf_ros.owc.estimator_session import (EstimatorConfig, EstimatorSession,  # noqa: E402
-                                            model_from_flat)
+from tskf_ros.owc.session import (EstimatorConfig, EstimatorSession,  # noqa: E402
+                                  model_from_flat)
 
 PERIOD = 0.001
 MODEL = model_from_flat(A=[0.0, -1.0, 1.0, 0.0], C=[1.0, 0.0], Q=[1e-3, 0, 0, 1e-3],

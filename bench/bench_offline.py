@@ -8,28 +8,29 @@ Offline replay and bag reading, against the raw read-and-deserialize rate of the
 Cases, run in turn within each repeat (alternated, so that a busy spell of the shared
 machine hits them all), every one over the whole bag:
 
-- read (old): the reader before this revision (bench/legacy_reader.py, its own MCAP walk);
-- read (library only): the mcap package for every record, chunks' records included;
-- read: the package's reader (the mcap package, our record walk inside chunks);
-- read + deserialize: the reader, and rclpy's deserializer on the measurement topic: the
-  reference of the replay goals;
-- read + fixed decode: the reader, and cdr.fixed_decoder (what replay uses, rclpy only for
-  what it does not take) on the measurement topic;
-- I/O floor: read + deserialize, plus writing a bag with the same messages replay writes
-  (the inputs, and for every input the same number of output messages of the same types
-  at the same log times, pre-built and pre-serialized) through the same BagWriter:
-  everything replay does but the filter and building its messages;
-- I/O floor (mcap Writer): the same, with the mcap package's own Writer in BagWriter (as
-  before this revision: its add_message costs several times the chunk writer's);
+- read (old): the reader of an earlier revision (bench/legacy_reader.py, its own MCAP walk);
+- read: the package's reader (the mcap package's StreamReader, our walk inside chunks);
+- read + deserialize: the reader, and rclpy's deserializer on the measurement and input
+  topics: the reference of the replay goals;
+- read + rosbags deserialize: the same with rosbags' deserializer (replay's fallback);
+- write only: the package's BagWriter (mcap's public Writer) writing what replay writes
+  (the inputs as read and, for every input, the same output messages at the same log
+  times, pre-serialized), nothing read: the writer's cost;
 - replay -> bag: replay_offline writing its output bag;
+- replay -> bag, rosbags serializer: the same with the estimates serialized by rosbags'
+  serialize_cdr (the typestore's classes, reused) instead of cdr.EstimateEncoder;
+- replay -> bag, rosbags deserialize: the same with the measurements deserialized by
+  rosbags instead of cdr.fixed_decoder;
 - replay -> arrays: replay_arrays, the analysis mode (--npz without the file);
+- replay -> arrays, rclpy / rosbags deserialize: the same with the measurements
+  deserialized by rclpy (the live node's deserializer) or rosbags instead of
+  cdr.fixed_decoder;
 - session only: EstimatorSession.add (and add_input) over the bag's samples, already
   decoded: the filter alone.
 
 Each case: thread CPU time per message read (min and median over the repeats) and the
 wall rate (messages read / s, median).  Ratios are taken on the min CPU time per message
-(the least disturbed run).  Then the serialization routes of one estimate (the fixed
-layout of tskf_ros.bag.cdr, rosbags' serializer, rclpy), and the goals with their ratios.
+(the least disturbed run).  Then the serialization routes of one estimate, and the goals.
 Sets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and its own ROS_DOMAIN_ID, although nothing
 here uses DDS.
 """
@@ -51,23 +52,100 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 101))
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from legacy_reader import LegacyReader, LibraryOnlyReader  # noqa: E402
-from mcap.writer import Writer as McapWriter  # noqa: E402
+from legacy_reader import LegacyReader  # noqa: E402
 import numpy as np  # noqa: E402
-from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
+from rclpy.serialization import deserialize_message  # noqa: E402
 
-from tskf_ros.bag import offline_replay  # noqa: E402
-from tskf_ros.bag import writer as bag_writer  # noqa: E402
 from tskf_ros.bag.cdr import EstimateEncoder, serialize  # noqa: E402
 from tskf_ros.bag.message_types import message_class, typestore  # noqa: E402
 from tskf_ros.bag.reader import BagReader, RawMessage  # noqa: E402
+from tskf_ros.bag.replay import adapters, loop  # noqa: E402
 from tskf_ros.bag.writer import BagWriter  # noqa: E402
-from tskf_ros.messages import conversions  # noqa: E402
 from tskf_ros.messages.estimator_interface import input_from_msg, INPUT_TYPE  # noqa: E402
-from tskf_ros.owc.estimator_session import EstimatorSession  # noqa: E402
+from tskf_ros.owc.session import EstimatorSession  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'
+NS = 1_000_000_000
+
+
+def quiet(line: str) -> None:
+    """Log nothing."""
+
+
+class LibraryEncoder:
+    """EstimateEncoder's surface through rosbags: its classes (built once) and serialize_cdr."""
+
+    def __init__(self, frame_id: str, names: list, n: int) -> None:
+        store = typestore()
+        T = store.types
+        self.ser = store.serialize_cdr
+        self.n = n
+
+        def header():
+            return T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
+                sec=0, nanosec=0), frame_id=frame_id)
+        v3 = T['geometry_msgs/msg/Vector3']
+        self.twist = T['geometry_msgs/msg/TwistWithCovarianceStamped'](
+            header=header(), twist=T['geometry_msgs/msg/TwistWithCovariance'](
+                twist=T['geometry_msgs/msg/Twist'](linear=v3(x=0.0, y=0.0, z=0.0),
+                                                   angular=v3(x=0.0, y=0.0, z=0.0)),
+                covariance=np.zeros(36)))
+        self.states = T['sensor_msgs/msg/JointState'](
+            header=header(), name=list(names), position=np.zeros(n), velocity=np.zeros(n),
+            effort=np.zeros(0))
+        self.jump_msg = T['sensor_msgs/msg/TimeReference'](
+            header=header(), time_ref=T['builtin_interfaces/msg/Time'](sec=0, nanosec=0),
+            source='sigma')
+        self.jump_msg.header.frame_id = ''
+
+    def pair(self, stamp_ns, x, P):
+        n = self.n
+        sec, nsec = divmod(int(stamp_ns), NS)
+        tw, st = self.twist, self.states
+        tw.header.stamp.sec = st.header.stamp.sec = sec
+        tw.header.stamp.nanosec = st.header.stamp.nanosec = nsec
+        slots = list(np.asarray(x, dtype=float).reshape(-1)) + [0.0] * (6 - n)
+        lin, ang = tw.twist.twist.linear, tw.twist.twist.angular
+        lin.x, lin.y, lin.z, ang.x, ang.y, ang.z = slots
+        cov = tw.twist.covariance.reshape(6, 6)
+        cov[:n, :n] = np.asarray(P, dtype=float).reshape(n, n)
+        st.position[:] = x
+        st.velocity[:] = np.sqrt(np.maximum(np.diag(cov)[:n], 0.0))
+        return (bytes(self.ser(tw, 'geometry_msgs/msg/TwistWithCovarianceStamped')),
+                bytes(self.ser(st, 'sensor_msgs/msg/JointState')))
+
+    def jump(self, stamp_ns, sigma_ns):
+        m = self.jump_msg
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), NS)
+        m.time_ref.sec, m.time_ref.nanosec = divmod(int(sigma_ns), NS)
+        return bytes(self.ser(m, 'sensor_msgs/msg/TimeReference'))
+
+
+class Swapped:
+    """Replace an attribute for the duration of a case (the alternative routes)."""
+
+    def __init__(self, owner, name, value):
+        self.owner, self.name, self.value = owner, name, value
+
+    def __enter__(self):
+        self.old = getattr(self.owner, self.name)
+        setattr(self.owner, self.name, self.value)
+
+    def __exit__(self, *exc):
+        setattr(self.owner, self.name, self.old)
+
+
+def rclpy_sample_reader(msgtype, extract):
+    """Return the measurement reader through rclpy's deserializer (the live node's)."""
+    cls = message_class(msgtype)
+    return lambda data, log_ns: extract(deserialize_message(data, cls), log_ns)
+
+
+def rosbags_sample_reader(msgtype, extract):
+    """Return the measurement reader through rosbags alone (cdr.fixed_decoder's fallback)."""
+    des = typestore().deserialize_cdr
+    return lambda data, log_ns: extract(des(data, msgtype), log_ns)
 
 
 def read_only(cls):
@@ -79,74 +157,59 @@ def read_only(cls):
     return run
 
 
-def read_deserialize(ctx):
+def read_deserialize(decoders):
     """Read every message; deserialize the measurement and input topics (as replay does)."""
-    n = 0
-    todo = ctx['decode']
-    for raw in BagReader(ctx['bag']).messages():
-        n += 1
-        cls = todo.get(raw.topic)
-        if cls is not None:
-            deserialize_message(raw.data, cls)
-    return n
-
-
-def read_fixed_decode(ctx):
-    """Read every message; decode the measurements as replay does (cdr.fixed_decoder)."""
-    n = 0
-    todo = ctx['fixed']
-    for raw in BagReader(ctx['bag']).messages():
-        n += 1
-        read = todo.get(raw.topic)
-        if read is not None:
-            read(raw.data, raw.log_time_ns)
-    return n
-
-
-def io_floor_mcap(ctx):
-    """Run the I/O floor with the mcap package's Writer in BagWriter (as before)."""
-    fast = bag_writer._ChunkWriter
-    bag_writer._ChunkWriter = McapWriter
-    try:
-        return io_floor(ctx)
-    finally:
-        bag_writer._ChunkWriter = fast
-
-
-def io_floor(ctx):
-    """Read + deserialize + write what replay writes, pre-built (see the module doc)."""
-    todo, plan, prebuilt = ctx['decode'], ctx['plan'], ctx['prebuilt']
-    reader = BagReader(ctx['bag'])
-    out = ctx['tmp'] / 'floor'
-    _, est, _ = offline_replay._prepare(ctx['bag'], PARAMS, None, 'estimator', None,
-                                        lambda s: None)
-    n = 0
-    with BagWriter(out, overwrite=True) as writer:
-        offline_replay._add_topics(writer, reader, est, True, lambda s: None)
-        write = writer.write
-        steps = iter(plan)
-        for raw in reader.messages():
+    def run(ctx):
+        n = 0
+        todo = ctx[decoders]
+        for raw in BagReader(ctx['bag']).messages():
             n += 1
-            for topic, log_ns in next(steps):
-                if topic is None:
-                    write(raw.topic, raw.log_time_ns, raw.data)
-                    cls = todo.get(raw.topic)
-                    if cls is not None:
-                        deserialize_message(raw.data, cls)
-                else:
-                    write(topic, log_ns, prebuilt[topic])
-    return n
+            decode = todo.get(raw.topic)
+            if decode is not None:
+                decode(raw.data)
+        return n
+    return run
+
+
+def write_only(ctx):
+    """Write what replay writes, pre-serialized, through BagWriter (see the module doc)."""
+    _, est, _ = loop.prepare(ctx['bag'], PARAMS, None, 'estimator', None, quiet)
+    with BagWriter(ctx['tmp'] / 'written', overwrite=True) as writer:
+        loop.add_topics(writer, BagReader(ctx['bag']), est, True, quiet)
+        write = writer.write
+        for topic, log_ns, data in ctx['writes']:
+            write(topic, log_ns, data)
+    return ctx['count']
 
 
 def replay_bag(ctx):
-    res = offline_replay.replay(ctx['bag'], ctx['tmp'] / 'replayed', params_file=PARAMS,
-                                overwrite=True)
+    res = loop.replay(ctx['bag'], ctx['tmp'] / 'replayed', params_file=PARAMS, overwrite=True)
     return res.read
 
 
+def replay_bag_library(ctx):
+    with Swapped(adapters, 'EstimateEncoder', LibraryEncoder):
+        return replay_bag(ctx)
+
+
 def replay_arrays(ctx):
-    offline_replay.replay_arrays(ctx['bag'], PARAMS)
+    loop.replay_arrays(ctx['bag'], PARAMS)
     return ctx['count']
+
+
+def replay_arrays_rclpy(ctx):
+    with Swapped(adapters, 'sample_reader', rclpy_sample_reader):
+        return replay_arrays(ctx)
+
+
+def replay_arrays_rosbags(ctx):
+    with Swapped(adapters, 'sample_reader', rosbags_sample_reader):
+        return replay_arrays(ctx)
+
+
+def replay_bag_rosbags(ctx):
+    with Swapped(adapters, 'sample_reader', rosbags_sample_reader):
+        return replay_bag(ctx)
 
 
 def session_only(ctx):
@@ -162,47 +225,47 @@ def session_only(ctx):
 
 
 CASES = [('read (old)', read_only(LegacyReader)),
-         ('read (library only)', read_only(LibraryOnlyReader)),
          ('read', read_only(BagReader)),
-         ('read + deserialize', read_deserialize),
-         ('read + fixed decode', read_fixed_decode),
-         ('I/O floor', io_floor),
-         ('I/O floor (mcap Writer)', io_floor_mcap),
+         ('read + deserialize', read_deserialize('rclpy')),
+         ('read + rosbags deserialize', read_deserialize('rosbags')),
+         ('write only', write_only),
          ('replay -> bag', replay_bag),
+         ('replay -> bag, rosbags serializer', replay_bag_library),
+         ('replay -> bag, rosbags deserialize', replay_bag_rosbags),
          ('replay -> arrays', replay_arrays),
+         ('replay -> arrays, rclpy deserialize', replay_arrays_rclpy),
+         ('replay -> arrays, rosbags deserialize', replay_arrays_rosbags),
          ('session only', session_only)]
 
 
 def context(bag: Path, tmp: Path) -> dict:
-    """Everything the cases need, prepared untimed: the plan of writes, decoded samples."""
-    reader, est, result = offline_replay._prepare(bag, PARAMS, None, 'estimator', None,
-                                                  lambda s: None)
-    decode = {result.topic: est.cls}
-    fixed = {result.topic: est.read_sample}
+    """Everything the cases need, prepared untimed: the writes, the decoded samples."""
+    reader, est, result = loop.prepare(bag, PARAMS, None, 'estimator', None, quiet)
+    store = typestore()
+    types = {result.topic: result.msgtype}
     if result.input_topic:
-        decode[result.input_topic] = message_class(INPUT_TYPE)
-    memory = offline_replay.replay(bag, None, params_file=PARAMS)
-    plan, step, prebuilt = [], [], {}
+        types[result.input_topic] = INPUT_TYPE
+    rclpy_decoders = {t: (lambda d, c=message_class(m): deserialize_message(d, c))
+                      for t, m in types.items()}
+    rosbags_decoders = {t: (lambda d, m=m: store.deserialize_cdr(d, m))
+                        for t, m in types.items()}
+    memory = loop.replay(bag, None, params_file=PARAMS)
+    writes, encoded = [], {}
     for topic, log_ns, item in memory.outputs:
         if isinstance(item, RawMessage):
-            step.append((None, log_ns))
-            plan.append(step)
-            step = []
+            writes.append((topic, log_ns, item.data))
         else:
-            step.append((topic, log_ns))
-            prebuilt.setdefault(topic, serialize(item))
-    if step:
-        plan[-1] += step
+            writes.append((topic, log_ns, encoded.setdefault(topic, serialize(item))))
     samples = []
     for raw in BagReader(bag).messages():
         if raw.topic == result.topic:
-            msg = deserialize_message(raw.data, est.cls)
+            msg = deserialize_message(raw.data, message_class(result.msgtype))
             samples.append((0, est.extract(msg, raw.log_time_ns), raw.log_time_ns))
         elif raw.topic == result.input_topic:
-            msg = deserialize_message(raw.data, decode[raw.topic])
+            msg = deserialize_message(raw.data, message_class(INPUT_TYPE))
             samples.append((1, input_from_msg(msg, est.session), raw.log_time_ns))
-    return {'bag': bag, 'tmp': tmp, 'decode': decode, 'fixed': fixed, 'plan': plan,
-            'prebuilt': prebuilt, 'samples': samples, 'count': memory.read, 'config': est.config,
+    return {'bag': bag, 'tmp': tmp, 'rclpy': rclpy_decoders, 'rosbags': rosbags_decoders,
+            'writes': writes, 'samples': samples, 'count': memory.read, 'config': est.config,
             'written': sum(memory.written.values()), 'n_samples': memory.samples}
 
 
@@ -218,49 +281,18 @@ def measure(ctx: dict, repeats: int) -> dict:
 
 
 def serialization_routes(repeats: int, count: int = 5000) -> dict:
-    """Return {route: min us per estimate} for one estimate's two messages (n = 1)."""
-    store = typestore()
+    """Return {route: min us} for one estimate's two messages (n = 1) and one jump."""
     t = 1_700_000_000_123_456_789
     x, P = np.array([0.25]), np.array([[1e-4]])
-    enc = EstimateEncoder('link', ['theta'], 1)
-    T = store.types
-
-    def library():       # rosbags' own message classes, built directly, and its serializer
-        sec, nsec = divmod(t, 1_000_000_000)
-        header = T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
-            sec=sec, nanosec=nsec), frame_id='link')
-        cov = np.zeros(36)
-        cov[0] = P[0, 0]
-        v3 = T['geometry_msgs/msg/Vector3']
-        twist = T['geometry_msgs/msg/TwistWithCovariance'](
-            twist=T['geometry_msgs/msg/Twist'](linear=v3(x=float(x[0]), y=0.0, z=0.0),
-                                               angular=v3(x=0.0, y=0.0, z=0.0)),
-            covariance=cov)
-        store.serialize_cdr(T['geometry_msgs/msg/TwistWithCovarianceStamped'](
-            header=header, twist=twist), 'geometry_msgs/msg/TwistWithCovarianceStamped')
-        store.serialize_cdr(T['sensor_msgs/msg/JointState'](
-            header=header, name=['theta'], position=x.copy(),
-            velocity=np.sqrt(np.maximum(np.diag(P), 0.0)), effort=np.zeros(0)),
-            'sensor_msgs/msg/JointState')
-
-    def rclpy_route():   # what replay did before: rclpy messages, Fast-CDR
-        serialize_message(conversions.estimate_to_msg(t, x, P, frame_id='link'))
-        serialize_message(conversions.estimate_to_joint_state(t, x, P, ['theta'],
-                                                              frame_id='link'))
-
-    def direct():
-        enc.estimate(t, x, P)
-        enc.states(t, x, P)
-
-    routes = {'fixed layout (cdr.EstimateEncoder)': direct,
-              "rosbags' classes + serialize_cdr": library,
-              'rclpy messages + serialize_message (before)': rclpy_route}
+    routes = {'fixed layout (cdr.EstimateEncoder)': EstimateEncoder('link', ['theta'], 1),
+              "rosbags' classes (reused) + serialize_cdr": LibraryEncoder('link', ['theta'], 1)}
     best = {name: float('inf') for name in routes}
     for _ in range(repeats):
-        for name, fn in routes.items():
+        for name, enc in routes.items():
             c0 = time.thread_time()
             for _ in range(count):
-                fn()
+                enc.pair(t, x, P)
+                enc.jump(t, t + 5000)
             best[name] = min(best[name], (time.thread_time() - c0) / count * 1e6)
     return best
 
@@ -274,21 +306,20 @@ def profile(ctx: dict) -> None:
     stats = pstats.Stats(prof)
     total = stats.total_tt
     print(f'\nprofile of replay -> bag ({total:.1f} s under cProfile): cumulative share')
-    wanted = [('estimator_session.py', 'add', 'session.add (the filter)'),
-              ('offline_replay.py', 'encoded', 'encoding the outputs (fixed layout)'),
-              ('offline_replay.py', 'diagnostics_due', '/diagnostics (build + serialize)'),
-              ('writer.py', 'write', 'BagWriter.write (chunk writer)'),
+    wanted = [('session.py', 'add', 'session.add (the filter)'),
+              ('adapters.py', 'encoded', 'encoding the outputs (EstimateEncoder)'),
+              ('adapters.py', 'diagnostics_due', '/diagnostics (build + serialize)'),
+              ('writer.py', 'write', 'BagWriter.write (mcap Writer.add_message)'),
+              ('writer.py', 'add_message', "  of which mcap's Writer.add_message"),
               ('reader.py', 'messages', 'BagReader.messages (read)'),
-              ('offline_replay.py', 'read', 'decoding the measurements (fixed layout)'),
-              ('~', '<built-in method rclpy._rclpy_pybind11.rclpy_deserialize>',
-               'rclpy deserialize')]
+              ('adapters.py', 'read', 'deserializing the measurements')]
     shares = {}
     for (file, _, name), (_, _, _, ct, _) in stats.stats.items():
         for suffix, func, label in wanted:
             if file.endswith(suffix) and name == func:
                 shares[label] = max(shares.get(label, 0.0), ct)
     for label, ct in shares.items():
-        print(f'  {label:40s} {ct:7.2f} s  {ct / total:6.1%}')
+        print(f'  {label:44s} {ct:7.2f} s  {ct / total:6.1%}')
     stats.sort_stats('tottime').print_stats(12)
 
 
@@ -297,50 +328,50 @@ def report(runs: dict, ctx: dict, serial: dict) -> None:
     count = ctx['count']
     print(f"{ctx['bag']}: {count:,} messages, {ctx['n_samples']:,} samples; replay "
           f"writes {ctx['written']:,} output messages besides the {count:,} inputs")
-    print(f"{'case':24s} {'CPU us/msg min':>15s} {'median':>8s} {'wall msgs/s':>12s}")
+    print(f"{'case':36s} {'CPU us/msg min':>15s} {'median':>8s} {'wall msgs/s':>12s}")
     cpu = {}
     for name, rows in runs.items():
         per = [c / n * 1e6 for c, _, n in rows]
         walls = [n / w for _, w, n in rows]
         cpu[name] = min(per)
-        print(f'{name:24s} {min(per):15.2f} {statistics.median(per):8.2f} '
+        print(f'{name:36s} {min(per):15.2f} {statistics.median(per):8.2f} '
               f'{statistics.median(walls):12,.0f}')
     ref = cpu['read + deserialize']
 
     def ratio(name, base=ref):
         return base / cpu[name]
-    print('\nserialization of one estimate (TwistWithCovarianceStamped + JointState), '
-          'min CPU us:')
+    print('\nserialization of one estimate (TwistWithCovarianceStamped + JointState) and one '
+          'TimeReference, min CPU us:')
     for name, us in serial.items():
         print(f'  {name:48s} {us:7.2f}')
-    fixed = serial['fixed layout (cdr.EstimateEncoder)']
-    lib = serial["rosbags' classes + serialize_cdr"]
-    session = cpu['session only']
     goals = [
-        ('issue 12: read through the library vs the old reader (>= 1.0)',
-         ratio('read', cpu['read (old)']), 1.0),
-        ('  (library only, chunks included, vs the old reader)',
-         ratio('read (library only)', cpu['read (old)']), None),
-        ('issue 13.4: replay -> bag / read + deserialize (>= 0.25)', ratio('replay -> bag'),
-         0.25),
-        ('  I/O floor / read + deserialize (its ceiling)', ratio('I/O floor'), None),
-        ('  I/O floor, mcap Writer / read + deserialize (the ceiling before)',
-         ratio('I/O floor (mcap Writer)'), None),
-        ('  read + fixed decode / read + deserialize', ratio('read + fixed decode'), None),
-        ('issue 13.4: replay -> arrays / read + deserialize (>= 0.8)',
-         ratio('replay -> arrays'), 0.8),
-        ('issue 13.4: fixed layout vs library serialization (>= 2x to keep it)',
-         lib / fixed, 2.0),
-        ("  the session's share of replay -> bag's CPU", session / cpu['replay -> bag'], None),
-        ("  the session's share of replay -> arrays' CPU",
-         session / cpu['replay -> arrays'], None),
-        ('  replay -> arrays without the session / read + deserialize',
-         ref / (cpu['replay -> arrays'] - session), None),
+        ('replay -> bag / read + deserialize (>= 0.2)', ratio('replay -> bag'), 0.2),
+        ('  the same with rosbags serializing the estimates (no EstimateEncoder)',
+         ratio('replay -> bag, rosbags serializer'), None),
+        ('  the same with rosbags deserializing the measurements (no fixed_decoder)',
+         ratio('replay -> bag, rosbags deserialize'), None),
+        ("  the writer's share of replay -> bag (write only / replay -> bag)",
+         cpu['write only'] / cpu['replay -> bag'], None),
+        ('replay -> arrays / read + deserialize (>= 0.7)', ratio('replay -> arrays'), 0.7),
+        ('  the same with rosbags deserializing the measurements (no fixed_decoder)',
+         ratio('replay -> arrays, rosbags deserialize'), None),
+        ('  the same with rclpy deserializing the measurements',
+         ratio('replay -> arrays, rclpy deserialize'), None),
+        ('  read + rosbags deserialize / read + deserialize',
+         ratio('read + rosbags deserialize'), None),
+        ('  read / read (old)', cpu['read (old)'] / cpu['read'], None),
+        ('  EstimateEncoder vs rosbags serialize_cdr (times faster)',
+         serial["rosbags' classes (reused) + serialize_cdr"]
+         / serial['fixed layout (cdr.EstimateEncoder)'], None),
+        ("  the session's share of replay -> bag", cpu['session only'] / cpu['replay -> bag'],
+         None),
+        ("  the session's share of replay -> arrays",
+         cpu['session only'] / cpu['replay -> arrays'], None),
     ]
     print('\ngoals (ratios on min CPU per message):')
     for text, value, goal in goals:
         verdict = '' if goal is None else ('  met' if value >= goal else '  NOT met')
-        print(f'  {text:70s} {value:7.3f}{verdict}')
+        print(f'  {text:76s} {value:7.3f}{verdict}')
 
 
 def main() -> None:

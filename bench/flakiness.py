@@ -4,7 +4,7 @@ Run the DDS, subprocess and recorder tests N times in a row under CPU load; coun
 
     .venv/bin/python bench/flakiness.py                 # 20 runs, a busy loop per core
     .venv/bin/python bench/flakiness.py -n 5 --no-load
-    .venv/bin/python bench/flakiness.py -n 3 test/test_bag_recorder.py
+    .venv/bin/python bench/flakiness.py -n 3 test/bag/test_recorder.py
 
 Not part of the test suite (nor of CI): it proves that the tests which wait on DDS,
 subprocesses or the recorder do not flake on a loaded machine.  One busy-loop process per
@@ -26,9 +26,9 @@ import xml.etree.ElementTree as ElementTree
 
 REPO = Path(__file__).resolve().parent.parent
 # every test file that talks DDS, starts processes or records
-TESTS = ('test/test_pipeline_nodes.py', 'test/test_bag_replay.py', 'test/test_bag_recorder.py',
-         'test/test_alignment_node.py', 'test/test_estimator_node.py', 'test/test_bag_input.py',
-         'test/test_ros_env.py', 'test/test_colcon_build.py')
+TESTS = ('test/test_pipeline_nodes.py', 'test/bag/replay/test_adapters.py',
+         'test/bag/test_recorder.py', 'test/test_alignment_node.py', 'test/test_estimator_node.py',
+         'test/bag/replay/test_cli.py', 'test/test_ros_env.py', 'test/test_colcon_build.py')
 # s: one pytest run that takes longer than this is killed and counted as failed (a hang)
 RUN_LIMIT = 900.0
 BUSY = 'while True:\n    pass\n'

@@ -48,13 +48,14 @@ class Mutation:
 
 KF = 'tskf_ros/core/timescale_kalman.py'
 IRR = 'tskf_ros/core/irregular/theorem2.py'
-SESSION = 'tskf_ros/owc/estimator_session.py'
+INTERVALS = 'tskf_ros/owc/session/sampling_intervals.py'
+ADMISSION = 'tskf_ros/owc/session/admission.py'
 EKF = 'tskf_ros/led/scanning_ekf.py'
 
 MUTATIONS = (
-    Mutation('M6', 'Theorem 2 diagnostics with R instead of R / period', SESSION,
-             'float(kf.R[0, 0]) / cfg.period,', 'float(kf.R[0, 0]),',
-             ('test/test_estimation.py',), 'sampling_intervals'),
+    Mutation('M6', 'Theorem 2 diagnostics with R instead of R / period', INTERVALS,
+             'float(kf.R[0, 0]) / self.period,', 'float(kf.R[0, 0]),',
+             ('test/owc/session/test_sampling_intervals.py',), 'sampling_intervals'),
     Mutation('M10', "Cai's T_d measurement noise not scaled by 1 / mu",
              'tskf_ros/experiments/reproduce.py',
              "vscale = 1.0 / np.sqrt(mu_meas) if noise_scaling == 'theory' else "
@@ -101,12 +102,12 @@ MUTATIONS = (
              'return _predict(_correct(P, C, R / J), F_J, Q_J)',
              'return _predict(_correct(P, C, R / period), F_J, Q_J)',
              ('test/core/irregular/test_jump_covariance.py',), 'jump_covariance'),
-    Mutation('S1', 'session: sampling interval in periods off by one', SESSION,
-             'kappa = int(round(dt / cfg.period))', 'kappa = int(round(dt / cfg.period)) + 1',
-             ('test/test_estimation.py',), 'sampling_intervals'),
-    Mutation('S2', 'session: readings <= 0 no longer rejected as interruptions', SESSION,
-             'if cfg.nonpositive_is_gap and any(v <= 0 for v in values):', 'if False:',
-             ('test/test_estimation.py',), 'bad_samples'),
+    Mutation('S1', 'session: sampling interval in periods off by one', INTERVALS,
+             'return int(round(dt / self.period))', 'return int(round(dt / self.period)) + 1',
+             ('test/owc/session/test_sampling_intervals.py',), 'sampling_intervals'),
+    Mutation('S2', 'session: readings <= 0 no longer rejected as interruptions', ADMISSION,
+             'if not lowest > self.low:', 'if False:',
+             ('test/owc/session/test_admission.py',), 'bad_samples'),
     Mutation('E1', "scanning EKF: wrong sign of C_k,1,2 = x1 g'(x2 + psi_k)", EKF,
              'C[:, 0, 1] = x[:, 0] * dg(a1)', 'C[:, 0, 1] = -x[:, 0] * dg(a1)',
              ('test/led/test_scanning_ekf.py',)),

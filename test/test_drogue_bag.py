@@ -20,8 +20,9 @@ import pytest
 from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.message_types import message_class
-from tskf_ros.bag.offline_replay import InputError, replay
 from tskf_ros.bag.reader import BagReader
+from tskf_ros.bag.replay.loop import replay
+from tskf_ros.bag.replay.topic_choice import InputError
 from tskf_ros.core import irregular
 from tskf_ros.core.transitions import exact_input_matrix, van_loan
 from tskf_ros.experiments import drogue

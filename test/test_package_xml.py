@@ -57,7 +57,8 @@ def top_level_imports(paths):
                 names = [node.module]
             for name in names:
                 top = name.split('.')[0]
-                local = any((REPO / 'test').rglob(f'{top}.py'))
+                local = (any((REPO / 'test').rglob(f'{top}.py'))
+                         or (REPO / 'test' / top / '__init__.py').is_file())
                 if top not in sys.stdlib_module_names and top != 'tskf_ros' and not local:
                     found.setdefault(top, path.name)
     return found

@@ -7,7 +7,7 @@ import pytest
 
 from tskf_ros.core.linear_models import owc
 from tskf_ros.core.units import NS
-from tskf_ros.owc.estimator_session import EstimatorConfig, EstimatorSession
+from tskf_ros.owc.session import EstimatorConfig, EstimatorSession
 
 T0 = 1_700_000_000 * NS
 

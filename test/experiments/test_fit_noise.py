@@ -21,8 +21,8 @@ from tskf_ros.experiments import fit_noise
 from tskf_ros.experiments.bag_analysis import read_stream
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import load_config
-from tskf_ros.owc.estimator_session import EstimatorSession
 from tskf_ros.owc.innovation_trace import Measurement, run_stream
+from tskf_ros.owc.session import EstimatorSession
 
 REPO = Path(__file__).resolve().parents[2]
 A_TRUE, Q_TRUE, R_TRUE = -0.1, 0.04, 0.25

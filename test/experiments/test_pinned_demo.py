@@ -15,10 +15,11 @@ import pytest
 
 from tskf_ros.core.linear_models import OWC_LINEAR_RANGE
 from tskf_ros.core.time_scales import jumps
+from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_session import AlignmentSession
 from tskf_ros.led.led_link import closed_loop, LedLinkConfig
 from tskf_ros.messages import alignment_interface, estimator_interface
-from tskf_ros.owc.estimator_session import EstimatorSession, NS
+from tskf_ros.owc.session import EstimatorSession
 from tskf_ros.owc.vibrating_link import OwcLinkConfig, simulate_link
 
 import yaml

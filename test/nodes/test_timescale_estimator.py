@@ -15,10 +15,10 @@ from sensor_msgs.msg import Illuminance, TimeReference
 
 from tskf_ros.core.linear_models import owc, run_filter, spring_mass
 from tskf_ros.core.time_scales import discrete
+from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
-from tskf_ros.owc.estimator_session import NS
 
 import yaml
 

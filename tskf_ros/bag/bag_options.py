@@ -1,17 +1,4 @@
-"""
-What `record` and `play` share of `ros2 bag`'s options: topic selection, QoS overrides.
-
-Both follow rosbag2 Jazzy: a topic is taken if it is named, or matches the include regular
-expression (or everything is taken when neither is given), and is not excluded by name or by
-the exclude regular expression.  `record` searches the regular expressions anywhere in the
-name (rosbag2_transport's TopicFilter, std::regex_search), `play` matches the whole name
-(rosbag2's MCAP storage filter, std::regex_match).
-
-A QoS override file is rosbag2's YAML: topic name -> policies (history, depth, reliability,
-durability, deadline, lifespan, liveliness, liveliness_lease_duration,
-avoid_ros_namespace_conventions; durations as {sec, nsec}), as ros2bag's
-convert_yaml_to_qos_profile reads it.
-"""
+"""`ros2 bag` (Jazzy) topic selection and QoS override files, shared by record and play."""
 
 from dataclasses import dataclass, field
 from pathlib import Path

@@ -1,33 +1,4 @@
-"""
-Canonical CDR for every message this package generates.
-
-rclpy's serialize_message (Fast-CDR) ends some messages with alignment padding that it
-leaves uninitialised (a sensor_msgs/JointState of 60 bytes comes out as 68), so the same
-message does not give the same bytes twice and rosbags' deserializer refuses it.  The
-messages the package writes (the sample bags, replay_offline's outputs) are serialized
-here instead:
-
-- `serialize(msg)`: any rclpy message, through rosbags' typestore serializer (its
-  canonical XCDR1 little-endian encoding), after `to_store` has copied it field by field
-  into the typestore's own message class.
-- `EstimateEncoder`: the estimator's three output types (TwistWithCovarianceStamped,
-  JointState, TimeReference) written directly in their fixed layout from the session's
-  estimates, for offline replay, where building the rclpy message and serializing it cost
-  more than the filter (bench/bench_offline.py measures both routes).  Its bytes equal
-  `serialize` of the message tskf_ros.messages.conversions builds, for every state size
-  (test/test_bag_cdr.py).
-
-Readers accept both forms: rclpy's deserializer takes the padded and the canonical one.
-
-Reading: `fixed_decoder(msgtype, fields)` reads chosen fields of a message whose layout is
-fixed but for its header's frame_id (the stamped scalars replay_offline takes) straight from
-the CDR bytes, for offline replay, where rclpy's deserializer costs more than the filter.
-It takes the little-endian XCDR1 encapsulation (what rclpy, rosbag2 and rosbags write, the
-canonical and the padded form alike: trailing bytes are ignored, as rclpy ignores them) and
-returns None for anything else (a big-endian or another encapsulation, bytes too short for
-the layout): the caller then uses rclpy's deserializer, whose outcome (values, or its
-error) stands.  The frame_id is skipped, not decoded: rclpy accepts any bytes there too.
-"""
+"""Canonical CDR (XCDR1, rosbags' encoding) of what the package writes; fixed-layout codecs."""
 
 import array
 import math
@@ -39,12 +10,12 @@ import numpy as np
 from rosbags.interfaces import Nodetype
 
 from tskf_ros.bag.message_types import typestore
+from tskf_ros.core.units import NS
 
 __all__ = ['EstimateEncoder', 'fixed_decoder', 'fixed_fields', 'serialize', 'to_store',
            'type_name']
 
 CDR_HEADER = b'\x00\x01\x00\x00'    # XCDR1, little endian, no options
-NS_PER_S = 1_000_000_000
 ESTIMATE_SLOTS = 6
 _NUMPY = {'d': np.float64, 'f': np.float32, 'b': np.int8, 'B': np.uint8, 'h': np.int16,
           'H': np.uint16, 'i': np.int32, 'I': np.uint32, 'l': np.int64, 'L': np.uint64,
@@ -71,7 +42,7 @@ def _store_class(msg: Any) -> tuple:
 
 
 def _convert(value: Any) -> Any:
-    if hasattr(value, '_fields_and_field_types'):
+    if hasattr(value, 'get_fields_and_field_types'):
         return to_store(value)
     if isinstance(value, array.array):
         return np.array(value, dtype=_NUMPY[value.typecode])
@@ -92,7 +63,7 @@ def to_store(msg: Any) -> Any:
 
 def serialize(msg: Any) -> bytes:
     """Return the canonical CDR bytes of an rclpy message (rosbags' serializer)."""
-    return bytes(typestore().serialize_cdr(to_store(msg), _store_class(msg)[0].__msgtype__))
+    return bytes(typestore().serialize_cdr(to_store(msg), type_name(msg)))
 
 
 class _Layout:
@@ -163,7 +134,7 @@ class EstimateEncoder:
 
     @staticmethod
     def _stamp(ns: int) -> tuple[int, int]:
-        return divmod(int(ns), NS_PER_S)
+        return divmod(int(ns), NS)
 
     def estimate(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> bytes:
         """Return the TwistWithCovarianceStamped of conversions.estimate_to_msg, serialized."""
@@ -199,7 +170,7 @@ class EstimateEncoder:
             cov[i * ESTIMATE_SLOTS:i * ESTIMATE_SLOTS + n] = flat[i * n:i * n + n]
         # as np.maximum(diag, 0.0): -0.0 gives 0.0 and NaN stays NaN
         sd = [math.sqrt(d if d > 0.0 or d != d else 0.0) for d in flat[::n + 1]]
-        sec, nsec = divmod(int(stamp_ns), NS_PER_S)
+        sec, nsec = divmod(int(stamp_ns), NS)
         return (CDR_HEADER + self._estimate.pack(sec, nsec, self._frame, *v, *self._pad, *cov),
                 CDR_HEADER + self._states.pack(sec, nsec, self._states_prefix, *v,
                                                self._states_mid, *sd, self._states_tail))
@@ -218,6 +189,8 @@ _BASE_CODES = {'float64': 'd', 'float32': 'f', 'int8': 'b', 'uint8': 'B', 'byte'
                'int64': 'q', 'uint64': 'Q'}
 _HEADER_TYPE = 'std_msgs/msg/Header'
 _STAMP_HEAD = struct.Struct('<iII')     # header.stamp sec, nanosec, frame_id length
+# bytes after the last field that rosbags' deserializer lets pass (alignment padding)
+_TRAILING = 3
 
 
 def fixed_fields(msgtype: str) -> tuple[bool, list]:
@@ -259,9 +232,11 @@ def fixed_decoder(msgtype: str, fields: Sequence[str]) -> Callable[[Any], Option
     """
     Return decode(data) -> (stamp ns or None, *the values of `fields`), or None.
 
-    None: not the little-endian XCDR1 encapsulation, or too short for the layout (the
-    caller deserializes with rclpy).  stamp: header.stamp as sec * 1e9 + nanosec (None for
-    a type without a header).  See the module doc.
+    The values rosbags' deserialize_cdr gives for the same bytes, read from the little-endian
+    layout directly.  None where rosbags is left to decide (its values or its error): another
+    encapsulation (big endian), bytes too short for the layout or with more than the 3
+    trailing bytes rosbags allows, a frame_id without its NUL or not UTF-8.  stamp:
+    header.stamp as sec * 1e9 + nanosec (None for a type without a header).
     """
     stamped, layout = fixed_fields(msgtype)
     names = [name for name, _ in layout]
@@ -279,10 +254,9 @@ def fixed_decoder(msgtype: str, fields: Sequence[str]) -> Callable[[Any], Option
         need = 4 + body.size
 
         def decode_plain(data: Any) -> Optional[tuple]:
-            if len(data) < need or data[0] != 0 or data[1] != 1:
+            if not need <= len(data) <= need + _TRAILING or data[0] != 0 or data[1] != 1:
                 return None
-            values = body.unpack_from(data, 4)
-            return (None, *pick(values))
+            return (None, *pick(body.unpack_from(data, 4)))
         return decode_plain
     # after the frame_id's bytes (body offset 12 + length): one Struct per offset mod 8
     tails = [_tail(codes, k) for k in range(8)]
@@ -295,8 +269,12 @@ def fixed_decoder(msgtype: str, fields: Sequence[str]) -> Callable[[Any], Option
         sec, nanosec, length = head(data, 4)
         end = 16 + length
         tail = tails[(end - 4) & 7]
-        if size < end + tail.size:
+        if not length or not end + tail.size <= size <= end + tail.size + _TRAILING \
+                or data[end - 1]:
             return None
-        values = tail.unpack_from(data, end)
-        return (sec * NS_PER_S + nanosec, *pick(values))
+        try:
+            bytes(data[16:end - 1]).decode()
+        except UnicodeDecodeError:
+            return None
+        return (sec * NS + nanosec, *pick(tail.unpack_from(data, end)))
     return decode

@@ -1,13 +1,4 @@
-"""
-Keyboard controls of `play`, with the keys of rosbag2.
-
-Space pauses or resumes, cursor right plays the next message (when paused), cursor up and
-down change the rate by 0.1.
-
-KeyHandler turns bytes typed into calls on the player (it is what the tests feed);
-TerminalKeys reads them from stdin without waiting for Enter, only when stdin is a terminal
-(a pipe, a file or /dev/null is never read), and gives the terminal back its settings.
-"""
+"""Keyboard controls of `play` (rosbag2's keys): space, cursor right, cursor up and down."""
 
 import os
 import select

@@ -7,17 +7,21 @@ import re
 from typing import Any
 
 from rclpy.duration import Duration
+from rclpy.exceptions import NoTypeSupportImportedException
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
                        ReliabilityPolicy)
+from rclpy.type_support import check_is_valid_msg_type
 from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
                                 QosTime)
 from rosbags.typesys import get_typestore, Stores
 from rosbags.typesys.store import Typestore
 
-__all__ = ['BagTypeError', 'interface_package', 'message_class', 'qos_from_rclpy',
-           'qos_to_rclpy', 'typestore']
+__all__ = ['BagTypeError', 'DESERIALIZE_ERRORS', 'interface_package', 'message_class',
+           'qos_from_rclpy', 'qos_to_rclpy', 'typestore']
 
 _STORE = None
+# exceptions rclpy's deserialize_message raises on bytes that are not the type
+DESERIALIZE_ERRORS = (RuntimeError, ValueError, TypeError)
 # package/msg/Name: the ROS 2 interface name grammar (rosidl_adapter, REP 144)
 TYPE_NAME = re.compile(r'[a-z][a-z0-9_]*/msg/[A-Z][A-Za-z0-9]*')
 
@@ -75,8 +79,10 @@ def message_class(msgtype: str) -> Any:
         cls = getattr(module, name)
     except (ImportError, AttributeError):
         raise BagTypeError(f'message type {msgtype} is not installed here') from None
-    if not hasattr(cls, '_TYPE_SUPPORT') and not hasattr(type(cls), '_TYPE_SUPPORT'):
-        raise BagTypeError(f'{msgtype} is not a ROS message class')
+    try:
+        check_is_valid_msg_type(cls)
+    except (AttributeError, RuntimeError, NoTypeSupportImportedException):
+        raise BagTypeError(f'{msgtype} is not a ROS message class') from None
     return cls
 
 

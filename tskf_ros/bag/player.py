@@ -1,23 +1,4 @@
-"""
-play: publish a bag's messages at their recorded pace, with `ros2 bag play`'s (Jazzy) options.
-
-    tskf_play bags/owc_cai_td_1hz --rate 10 --clock
-    tskf_play bags/owc_cai_td_1hz --topics /received_power -m /received_power:=/power --loop
-    tskf_play bags/owc_ge_1khz --start-offset 30 --playback-duration 5 -p
-
-(`ros2 run tskf_ros play ...` in a colcon workspace.)  The serialized bytes are published as
-they are (never deserialized), in the bag's storage order (log time, as rosbag2).  Message
-i is published when its log time is reached by the bag time, which starts at the bag's
-start time (metadata.yaml) plus --start-offset and advances at --rate times the wall time,
-and stops while paused.  With --clock [HZ] (40 Hz when bare, off by default, as Jazzy),
-rosgraph_msgs/Clock is published on /clock at HZ with the bag time, so that nodes with
-use_sim_time follow the bag; with --loop, the bag restarts at its end, which is a backward
-jump of /clock and of the stamps (the estimator re-initialises, as it would on any clock
-reset).  Publishers offer the QoS recorded in the bag (reliable when unknown) unless
---qos-profile-overrides-path names the topic.  Pause, resume and step: -p/--start-paused,
-the keys of tskf_ros.bag.keyboard when stdin is a terminal, and the std_srvs/Trigger
-services ~/pause, ~/resume, ~/toggle_paused and ~/play_next.
-"""
+"""play: publish a bag at its recorded pace, with `ros2 bag play`'s (Jazzy) options."""
 
 import argparse
 import math
@@ -42,6 +23,16 @@ from tskf_ros.bag.message_types import BagTypeError, message_class, qos_to_rclpy
 from tskf_ros.bag.reader import BagError, BagReader, exit_status, RawMessage
 from tskf_ros.core.units import NS
 from tskf_ros.messages.qos import DEFAULT_DEPTH
+
+EPILOG = """examples:
+  play bags/owc_cai_td_1hz --rate 10 --clock
+  play bags/owc_cai_td_1hz --topics /received_power -m /received_power:=/power --loop
+  play bags/owc_ge_1khz --start-offset 30 --playback-duration 5 -p
+
+The stored bytes are published as they are, in storage (log time) order, at bag time =
+start + offset + rate x wall time (frozen while paused).  Keys when stdin is a terminal:
+space pause/resume, cursor right next message, cursor up/down rate +-0.1; services
+~/pause, ~/resume, ~/toggle_paused, ~/play_next."""
 
 NODE_NAME = 'player'
 # Hz: /clock rate of a bare --clock (rosbag2 Jazzy)
@@ -314,7 +305,8 @@ def build_parser() -> argparse.ArgumentParser:
     """Return the command line: the spelling, defaults and short options of Jazzy's."""
     parser = argparse.ArgumentParser(
         prog='play', description='Publish a bag at its recorded pace, with the options of '
-        'ros2 bag play (Jazzy).')
+        'ros2 bag play (Jazzy).', epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
     parser.add_argument('-s', '--storage', default='', choices=['mcap', 'sqlite3'],
                         help="the bag's storage (default: detected)")

@@ -1,17 +1,4 @@
-"""
-Read rosbag2 bags (MCAP or sqlite3 storage) message by message, surviving damage.
-
-A bag is a directory with metadata.yaml and its storage files, as `ros2 bag record` writes,
-or a bare .mcap file.  MCAP files are read by the `mcap` package (its StreamReader, record
-by record, with validate_crcs, and its chunk decompression and CRC check); the metadata's
-QoS profiles by rosbags' metadata parser; sqlite3 bags (older rosbag2) by rosbags' reader.
-What is ours is the salvage: a file truncated in the middle of a chunk, or whose chunk or
-data-section CRC fails, still yields every message before the damaged record; the damage
-is then kept in `BagReader.damage` and the iteration stops (see _mcap and _chunk).
-
-Problems that make a bag unreadable raise a BagError subclass whose message is one line
-naming the file and the problem.
-"""
+"""Read rosbag2 bags (MCAP, sqlite3) message by message, keeping what precedes any damage."""
 
 from dataclasses import dataclass, field
 from io import BytesIO
@@ -139,25 +126,6 @@ def parse_qos(value: object) -> list:
         return []
 
 
-class _Records(StreamReader):
-    """
-    The mcap package's StreamReader, reading MessageIndex records as bytes, unparsed.
-
-    A sequential read has no use for the indexes, and parsing their entries one by one
-    costs a fifth of reading a bag; their bytes are still read (and in the data-section
-    CRC), and the record is yielded as SKIPPED so that the caller knows where the next one
-    starts.  Overrides StreamReader._read_record (mcap pinned in requirements.txt).
-    """
-
-    SKIPPED = b'MessageIndex'
-
-    def _read_record(self, opcode: int, length: int) -> object:
-        if opcode == Opcode.MESSAGE_INDEX:
-            self._stream.read(length)
-            return self.SKIPPED
-        return super()._read_record(opcode, length)
-
-
 class BagReader:
     """
     A rosbag2 bag opened for reading: `topics`, `storage`, then `messages()` once or more.
@@ -173,7 +141,6 @@ class BagReader:
         self.metadata: dict = {}
         self.message_count: Optional[int] = None
         self.start_ns: Optional[int] = None
-        self.duration_ns: Optional[int] = None
         if not self.path.exists():
             raise BagNotFoundError(f'{self.path}: no such bag (file or directory)')
         if self.path.is_file():
@@ -213,7 +180,6 @@ class BagReader:
             self.message_count = _int_or_none(info.get('message_count'))
             self.start_ns = _int_or_none(
                 (info.get('starting_time') or {}).get('nanoseconds_since_epoch'))
-            self.duration_ns = _int_or_none((info.get('duration') or {}).get('nanoseconds'))
             for entry in info.get('topics_with_message_count') or []:
                 md = entry.get('topic_metadata', {})
                 name = md.get('name')
@@ -302,11 +268,9 @@ class BagReader:
         """
         Yield the messages of one MCAP file up to DataEnd, or up to the first damaged record.
 
-        The mcap package reads the records (StreamReader: magic, record framing, the
-        data-section CRC) and each chunk (get_chunk_data_stream: decompression, chunk CRC);
-        what is ours is the salvage (stop at the library's error, keep what came before,
-        say where and why) and the walk over the records of a decompressed chunk (see
-        _chunk).
+        The mcap package reads the records and checks the CRCs (its StreamReader, and
+        get_chunk_data_stream for each chunk); at its first error the damage is kept in
+        self.damage (doc/design/bags.md).
         """
         channels: dict[int, tuple] = {}
         schemas: dict[int, Schema] = {}
@@ -316,8 +280,8 @@ class BagReader:
             offset = len(MCAP_MAGIC)
             try:
                 # a record longer than the file is truncation, not a reason to allocate it
-                for record in _Records(f, emit_chunks=True, validate_crcs=True,
-                                       record_size_limit=size).records:
+                for record in StreamReader(f, emit_chunks=True, validate_crcs=True,
+                                           record_size_limit=size).records:
                     if isinstance(record, Chunk):
                         for msg in self._chunk(record, schemas, channels, wanted):
                             count += 1
@@ -386,10 +350,8 @@ class BagReader:
         """
         Yield the messages of a chunk (decompressed and CRC-checked by the mcap package).
 
-        The records inside are walked here, not by the package's breakup_chunk, which
-        reads every field through a stream object: reading costs 3.4 us per message with it,
-        0.75 us with this walk (bench/bench_offline.py prints both); schemas and channels
-        still go through the package's record classes.  A record that does not fit the
+        The records inside are walked here (MCAP record framing: opcode, length), schemas
+        and channels read by the package's record classes; a record that does not fit the
         chunk is damage.
         """
         stream, end = get_chunk_data_stream(chunk, validate_crc=True)

@@ -1,31 +1,4 @@
-"""
-record: write chosen topics to a rosbag2 MCAP bag, with `ros2 bag record`'s (Jazzy) options.
-
-    tskf_record --topics /received_power /true_angle -o /tmp/run1
-    tskf_record -a -o /tmp/run1 --exclude-regex '^/estimate' -b 50000000
-    tskf_record --topics /received_power:sensor_msgs/msg/Illuminance   # type given, no wait
-
-(`ros2 run tskf_ros record ...` in a colcon workspace.)  Without -o the bag is
-rosbag2_YYYY_MM_DD-HH_MM_SS in the current directory, as rosbag2 names it.  Subscribes raw
-(the serialized CDR bytes are written as they arrive, never deserialized), with the node
-clock's time of arrival as the log time (bag time follows /clock with --use-sim-time).
-Topic types come from the graph (or NAME:TYPE); a topic is subscribed as soon as a
-publisher appears, with a QoS compatible with every publisher's (reliable if all offer
-reliable, else best effort; history KEEP_ALL so that a reliable publisher is never
-dropped) unless --qos-profile-overrides-path names it, and the publishers' offered QoS goes
-to metadata.yaml.  -b/-d split the bag into <name>_0.mcap, <name>_1.mcap, ...
-(tskf_ros.bag.split_bag); unsplit, the one file is <name>.mcap.  The bag is written into a
-hidden .partial directory and renamed when it is closed: on Ctrl-C / SIGTERM the recorder
-first takes every message already delivered to its subscriptions (up to DRAIN_LIMIT s),
-then closes the bag properly; a bag that was not closed is never left under the final name.
-
-Faults: every --flush-interval seconds (default 1) the chunk in progress is written and
-fsynced, so a SIGKILL or a power loss loses at most that much; the hidden .partial
-directory left behind is turned into a bag by `reindex`.  When the disk fills (ENOSPC)
-the recorder stops, keeps what reached the disk, closes it as a valid bag under the final
-name and exits 1 with a one-line error.  A bad output path or option is refused before
-anything is subscribed or created.
-"""
+"""record: write topics to a rosbag2 MCAP bag, with `ros2 bag record`'s (Jazzy) options."""
 
 import argparse
 import datetime
@@ -52,6 +25,16 @@ from tskf_ros.bag.reader import BagError
 from tskf_ros.bag.split_bag import SplitBagWriter
 from tskf_ros.bag.writer import BagWriteError, BagWriter
 from tskf_ros.core.units import NS
+
+EPILOG = """examples:
+  record --topics /received_power /true_angle -o /tmp/run1
+  record -a -o /tmp/run1 --exclude-regex '^/estimate' -b 50000000
+  record --topics /received_power:sensor_msgs/msg/Illuminance   # type given, no wait
+
+The bag is written into a hidden .partial directory and renamed when closed.  Every
+--flush-interval s the chunk in progress is written and fsynced: after a SIGKILL or a power
+loss, `reindex` makes a bag of the .partial directory.  A full disk stops the recording;
+what reached the disk is closed as a valid bag and the command exits 1."""
 
 NODE_NAME = 'recorder'
 # not recorded by --all unless named
@@ -281,7 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     """Return the command line: the spelling, defaults and short options of Jazzy's."""
     parser = argparse.ArgumentParser(
         prog='record', description='Record topics to a rosbag2 MCAP bag (raw, receive time '
-        'as log time), with the options of ros2 bag record (Jazzy).')
+        'as log time), with the options of ros2 bag record (Jazzy).', epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('-o', '--output', type=Path,
                         help='bag directory to create (default: rosbag2_YYYY_MM_DD-HH_MM_SS '
                         'in the current directory, from the local date and time)')

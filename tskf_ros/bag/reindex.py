@@ -1,26 +1,4 @@
-"""
-reindex: turn a crashed recording into a valid, closed bag (as `ros2 bag reindex`).
-
-    reindex /tmp/.run1.partial-k3j9x1      # what `record -o /tmp/run1` left at a SIGKILL
-    reindex /tmp/run1                      # a bag whose metadata.yaml is missing or stale
-
-A recording that was killed (SIGKILL, power loss, a crash) leaves its hidden
-`.<name>.partial-XXXX/<name>/<name>.mcap` without a summary, a footer or metadata.yaml;
-the recorder flushed its chunks every --flush-interval, so the file holds everything up
-to the last flush and perhaps part of the next chunk.  reindex cuts the file after its
-last whole record, seals it (DataEnd, Footer, magic: a valid MCAP file without a summary
-section, which the `mcap` package's reader and rosbags' reader both open), writes
-metadata.yaml from the messages it holds, and moves the bag to <name> next to the
-.partial directory (or -o OUTPUT); a bag directory is repaired in place.  Nothing that
-can be read is dropped: the only bytes cut are a record that was cut short by the crash.
-An MCAP file that is already closed is left as it is: only metadata.yaml is written, as
-rosbag2's reindex does.
-
-Exit status: 0 done; 1 nothing to reindex (one-line error); 2 usage; 3 the file is
-damaged before its end: metadata.yaml lists the messages up to the damage, the bytes after
-it are kept in the file as they are, and the damage is reported (and in custom_data
-tskf_ros.reindex_damage).
-"""
+"""reindex: make a crashed recording a closed, valid bag, as `ros2 bag reindex` does."""
 
 import argparse
 import os
@@ -29,12 +7,20 @@ import re
 import sys
 from typing import Optional
 
+from tskf_ros.bag.bag_metadata import write_metadata
+from tskf_ros.bag.mcap_file import scan_mcap, seal_mcap
 from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED, MCAP_MAGIC
-from tskf_ros.bag.writer import scan_mcap, seal_mcap, write_metadata
 
 import yaml
 
 PROG = 'reindex'
+EPILOG = """examples:
+  reindex /tmp/.run1.partial-k3j9x1      # what `record -o /tmp/run1` left at a SIGKILL
+  reindex /tmp/run1                      # a bag whose metadata.yaml is missing or stale
+
+The file is cut after its last whole record and sealed (DataEnd, Footer, magic); nothing
+readable is dropped.  Exit status: 0 done; 1 nothing to reindex; 2 usage; 3 the file is
+damaged before its end (metadata.yaml lists the messages up to the damage)."""
 PARTIAL = re.compile(r'^\.(?P<name>.+)\.partial-[^/]+$')
 
 
@@ -111,7 +97,7 @@ def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optio
         note = (f'sealed after {kept} bytes' + (f' (cut {size - kept} bytes of a record cut '
                                                 'short)' if cut else ''))
     stats = scan_mcap(mcap)
-    damage = stats[4]
+    damage = stats.damage
     custom['tskf_ros.reindexed'] = note
     if damage is not None:
         custom['tskf_ros.reindex_damage'] = str(damage)
@@ -125,14 +111,15 @@ def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optio
                 partial.rmdir()     # only if empty: nothing else is ever deleted
             except OSError:
                 pass
-    return target, sum(stats[1].values()), damage
+    return target, sum(stats.counts.values()), damage
 
 
 def main(argv: Optional[list] = None) -> int:
     """Run the command line; return the exit status."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Turn a crashed recording (the .partial directory record '
-        'left, or a bag directory without a valid metadata.yaml) into a valid bag.')
+        'left, or a bag directory without a valid metadata.yaml) into a valid bag.',
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('path', type=Path, help='.<name>.partial-XXXX directory or bag '
                         'directory')
     parser.add_argument('-o', '--output', type=Path, help='bag directory to produce '

@@ -1,26 +1,4 @@
-"""
-A bag split into several MCAP files, as `ros2 bag record -b/-d` writes it.
-
-SplitBagWriter has BagWriter's surface (open, add_topic, write, flush, close, abort, error,
-counts) and writes `<name>_0.mcap`, `<name>_1.mcap`, ... into one bag directory, with one
-metadata.yaml listing every file (relative_file_paths and files, as rosbag2 does).  Each file
-is written by its own BagWriter, so each is a whole, sealed MCAP file with its own summary,
-schemas and channels (every topic is in every file), readable alone.
-
-A new file is started before a message when (rosbag2's rules, checked before each write):
-  - max_bytes > 0 and the message records written to the current file reach max_bytes
-    (counted uncompressed: payload plus MCAP's 31-byte message record header; the file on
-    disk adds schemas, channels, indexes and the summary, a few hundred bytes, or is smaller
-    when compressed), or
-  - max_duration_ns > 0 and the message's log time is more than max_duration_ns after the
-    first log time of the current file.
-A file always holds at least one message.
-
-The bag directory is built in a hidden `.<name>.partial-XXXX` directory next to the target
-and renamed into place when closed.  metadata.yaml there is rewritten after each finished
-file, so after a crash the .partial directory holds a valid bag of every finished file
-(the file in progress is in its own nested .partial directory, which `reindex` seals).
-"""
+"""A bag split into several MCAP files by size or duration, as `ros2 bag record -b/-d`."""
 
 import os
 from pathlib import Path
@@ -30,9 +8,9 @@ from typing import Optional, Sequence, Union
 
 from rosbags.interfaces import Qos
 
+from tskf_ros.bag.bag_metadata import METADATA_MARKER, write_yaml
 from tskf_ros.bag.reader import BagError
-from tskf_ros.bag.writer import (BagWriteError, BagWriter, check_replaceable, CHUNK_SIZE,
-                                 METADATA_MARKER)
+from tskf_ros.bag.writer import BagWriteError, BagWriter, check_replaceable, CHUNK_SIZE
 
 import yaml
 
@@ -72,16 +50,6 @@ def merge_metadata(infos: Sequence[dict], custom_data: Optional[dict] = None) ->
     data[METADATA_MARKER[0]] = METADATA_MARKER[1]
     info['custom_data'] = data
     return info
-
-
-def write_yaml(path: Path, doc: dict) -> None:
-    """Write a YAML document durably: a temporary file, fsync, rename."""
-    tmp = path.parent / f'.{path.name}.tmp'
-    with tmp.open('w') as f:
-        yaml.safe_dump(doc, f, default_flow_style=False, sort_keys=False)
-        f.flush()
-        os.fsync(f.fileno())
-    tmp.replace(path)
 
 
 class SplitBagWriter:

@@ -9,15 +9,15 @@ from typing import Optional
 import numpy as np
 from rclpy.serialization import deserialize_message
 
-from tskf_ros.bag.message_types import message_class
-from tskf_ros.bag.offline_replay import choose_input_topic, choose_topic, DESERIALIZE_ERRORS
+from tskf_ros.bag.message_types import DESERIALIZE_ERRORS, message_class
 from tskf_ros.bag.reader import BagReader, Damage
+from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic
 from tskf_ros.core.noise_fit import nis_summary
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATES_TYPE
 from tskf_ros.messages.estimator_interface import extractor, INPUT_TYPE, NodeConfig
-from tskf_ros.owc.estimator_session import EstimatorConfig, REJECT_REASONS, RESET_REASONS
 from tskf_ros.owc.innovation_trace import Input, Measurement, run_stream, StreamRun
+from tskf_ros.owc.session import EstimatorConfig, REJECT_REASONS, RESET_REASONS
 
 # metrics of evaluate_bag, in this order (the sweep's CSV columns after the key and settings)
 METRICS = (['n_messages', 'accepted', 'inputs', 'steps', 'gaps', 'resets',

@@ -105,7 +105,7 @@ def bags_dir() -> Path:
 
 def replay_sample_bag(out: Path) -> int:
     """Replay the Cai T_d sample bag through the estimator offline and plot the result."""
-    from tskf_ros.bag import offline_replay
+    from tskf_ros.bag.replay import cli as offline_replay
     from tskf_ros.tools import plot_bag
     bag = bags_dir() / 'owc_cai_td_1hz'
     params = config_dir() / 'owc_estimator.yaml'

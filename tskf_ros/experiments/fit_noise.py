@@ -23,8 +23,8 @@ from tskf_ros.experiments.bag_analysis import read_stream
 from tskf_ros.experiments.output import write_json, write_text
 from tskf_ros.messages.estimator_interface import load_config, NODE_NAME, ParamsError
 from tskf_ros.messages.parameters import read_params_yaml
-from tskf_ros.owc.estimator_session import EstimatorConfig
 from tskf_ros.owc.innovation_trace import fit_stream, Measurement, run_stream, StreamFit
+from tskf_ros.owc.session import EstimatorConfig
 
 import yaml
 

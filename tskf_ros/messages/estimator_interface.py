@@ -17,8 +17,8 @@ from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
 from tskf_ros.messages.qos import DIAGNOSTICS_TOPIC, reliable_qos
-from tskf_ros.owc.estimator_session import (ConfigError, EstimatorConfig, EstimatorSession,
-                                            model_from_flat, Outcome)
+from tskf_ros.owc.session import (ConfigError, EstimatorConfig, EstimatorSession,
+                                  model_from_flat, Outcome)
 
 NODE_NAME = 'timescale_estimator'
 MATRICES = ('A', 'B', 'C', 'D', 'G', 'Q', 'R', 'x0', 'P0')

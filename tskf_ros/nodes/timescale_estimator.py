@@ -22,7 +22,7 @@ from tskf_ros.messages.estimator_interface import (ConfigError, default_paramete
 from tskf_ros.messages.parameters import float_range
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
-from tskf_ros.owc.estimator_session import EstimatorSession, Outcome
+from tskf_ros.owc.session import EstimatorSession, Outcome
 
 
 class TimescaleEstimator(ReconfigurableNode):

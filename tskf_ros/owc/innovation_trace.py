@@ -20,14 +20,19 @@ No ROS, no I/O.
 
 from bisect import bisect_right
 from dataclasses import dataclass, field, replace
-from typing import Iterable, Optional
+from typing import Iterable, Optional, Union
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from tskf_ros.core.noise_fit import (fit, FitError, FitResult, innovation_terms, Innovations,
                                      StepRecord, with_noise)
 from tskf_ros.core.units import NS
-from tskf_ros.owc.estimator_session import EstimatorConfig, EstimatorSession, Stats
+from tskf_ros.owc.session import EstimatorConfig, EstimatorSession, Outcome, Stats
+
+FloatArray = NDArray[np.float64]
+# a point of a segment: (segment, stamp ns)
+Key = tuple[int, int]
 
 # statuses of a measurement or input that the session took as (part of) a point
 TAKEN = ('accepted', 'inserted', 'reset')
@@ -38,7 +43,7 @@ class Measurement:
     """A measurement sample: stamp (ns), value(s), variance, and the receiver time (ns)."""
 
     stamp_ns: int
-    value: object
+    value: ArrayLike
     variance: float = 0.0
     log_ns: Optional[int] = None
 
@@ -48,22 +53,21 @@ class Input:
     """An input sample u at a stamp (ns)."""
 
     stamp_ns: int
-    u: object
+    u: ArrayLike
 
 
 @dataclass
 class StreamRun:
     """What a session did over a stream (see the module docstring)."""
 
-    segments: list = field(default_factory=list)        # [[StepRecord]]
-    innovations: Optional[Innovations] = None
-    innovation_stamps: list = field(default_factory=list)   # (segment, stamp_ns)
-    corrected: dict = field(default_factory=dict)       # (segment, stamp_ns) -> x(t|t)
-    predicted: dict = field(default_factory=dict)       # (segment, stamp_ns) -> xhat(t)
-    stats: Stats = field(default_factory=Stats)
-    measurements: int = 0
-    inputs: int = 0
-    gated_stamps: set = field(default_factory=set)      # stamps the innovation gate rejected
+    segments: list[list[StepRecord]]
+    innovations: Innovations
+    corrected: dict[Key, FloatArray]        # x(t|t)
+    predicted: dict[Key, FloatArray]        # xhat(t)
+    stats: Stats
+    measurements: int
+    inputs: int
+    gated_stamps: set[int]                  # stamps the innovation gate rejected
 
     @property
     def steps(self) -> int:
@@ -81,26 +85,28 @@ class _Collector:
         self.D = np.zeros(m.C.shape[0]) if m.D is None else np.asarray(m.D, dtype=float)
         self.R = m.R
         self.segment = 0
-        self.y: dict = {}          # (seg, stamp) -> (y, variance)
-        self.jumps: dict = {}      # (seg, stamp) -> sigma_ns
-        self.pred: dict = {}       # (seg, stamp) -> (x, P)
-        self.corr: dict = {}       # (seg, stamp) -> x
-        self.terms: dict = {}      # (seg, stamp) -> (e, S)
-        self.inputs: dict = {0: []}    # seg -> [(stamp, u)] accepted, in order
-        self.carry: dict = {0: None}   # seg -> the input in force when it started
-        self.last_u = None
+        self.y: dict[Key, tuple[FloatArray, float]] = {}    # y and its variance
+        self.jumps: dict[Key, int] = {}                     # sigma_ns
+        self.pred: dict[Key, tuple[FloatArray, FloatArray]] = {}    # (x, P)
+        self.corr: dict[Key, FloatArray] = {}               # x
+        self.terms: dict[Key, tuple[FloatArray, FloatArray]] = {}   # (e, S)
+        # seg -> [(stamp, u)] accepted, in order; the input in force when it started
+        self.inputs: dict[int, list[tuple[int, FloatArray]]] = {0: []}
+        self.carry: dict[int, Optional[FloatArray]] = {0: None}
+        self.last_u: Optional[FloatArray] = None
 
     def new_segment(self) -> None:
         self.segment += 1
         self.inputs.setdefault(self.segment, [])
         self.carry[self.segment] = self.last_u
 
-    def u_at(self, seg: int, stamp_ns: int):
+    def u_at(self, seg: int, stamp_ns: int) -> Optional[FloatArray]:
         held = self.inputs[seg]
         i = bisect_right([s for s, _ in held], stamp_ns)
         return held[i - 1][1] if i else self.carry[seg]
 
-    def outcome(self, out, *, y=None, variance: float = 0.0, stamp_ns: int = 0) -> None:
+    def outcome(self, out: Outcome, *, y: Optional[FloatArray] = None, variance: float = 0.0,
+                stamp_ns: int = 0) -> None:
         if out.status == 'reset':
             self.new_segment()
         seg = self.segment
@@ -126,7 +132,7 @@ class _Collector:
             e = yk - self.C @ x - self.D
             self.terms[key] = (e, self.C @ P @ self.C.T + Rd)
 
-    def input_outcome(self, out, stamp_ns: int, u) -> None:
+    def input_outcome(self, out: Outcome, stamp_ns: int, u: FloatArray) -> None:
         if out.status in TAKEN:
             # the input is in force from its stamp: in the new segment after a reset
             seg = self.segment + (out.status == 'reset')
@@ -134,8 +140,8 @@ class _Collector:
             self.last_u = u
         self.outcome(out)       # an input point steps the filter from the previous point
 
-    def segments(self) -> list:
-        by_seg: dict = {}
+    def segments(self) -> list[list[StepRecord]]:
+        by_seg: dict[int, list[StepRecord]] = {}
         for (seg, t), sigma in sorted(self.jumps.items()):
             meas = self.y.get((seg, t))
             # a point with a measurement that was later stepped from; input-only: y None
@@ -147,7 +153,7 @@ class _Collector:
         return [by_seg[s] for s in sorted(by_seg)]
 
 
-def run_stream(config: EstimatorConfig, events: Iterable, *,
+def run_stream(config: EstimatorConfig, events: Iterable[Union[Measurement, Input]], *,
                use_now: bool = False) -> StreamRun:
     """
     Feed Measurement and Input events to a fresh EstimatorSession; return a StreamRun.
@@ -157,36 +163,33 @@ def run_stream(config: EstimatorConfig, events: Iterable, *,
     """
     session = EstimatorSession(config)
     col = _Collector(config)
-    run = StreamRun()
+    measurements, inputs, gated = 0, 0, set()
     for ev in events:
         if isinstance(ev, Input):
-            run.inputs += 1
+            inputs += 1
             u = np.asarray(ev.u, dtype=float).reshape(-1)
             col.input_outcome(session.add_input(ev.stamp_ns, u), int(ev.stamp_ns), u)
             continue
-        run.measurements += 1
+        measurements += 1
         out = session.add(ev.stamp_ns, ev.value, ev.variance,
                           now_ns=ev.log_ns if use_now else None)
         if out.status == 'rejected' and out.reason == 'gated':
-            run.gated_stamps.add(int(ev.stamp_ns))
+            gated.add(int(ev.stamp_ns))
         y = np.atleast_1d(np.asarray(ev.value, dtype=float)).reshape(-1)
         col.outcome(out, y=y, variance=float(ev.variance), stamp_ns=int(ev.stamp_ns))
-    run.stats = session.stats
-    run.segments = col.segments()
-    run.corrected = col.corr
-    run.predicted = {k: v[0] for k, v in col.pred.items()}
     keys = sorted(col.terms)
-    run.innovation_stamps = keys
     p = config.model.C.shape[0]
     if keys:
         e = np.array([col.terms[k][0] for k in keys]).reshape(len(keys), p)
         S = np.array([col.terms[k][1] for k in keys]).reshape(len(keys), p, p)
         nis, log_det = innovation_terms(e, S)
-        run.innovations = Innovations(e, S, nis, log_det)
+        innovations = Innovations(e, S, nis, log_det)
     else:
-        run.innovations = Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0),
-                                      np.zeros(0))
-    return run
+        innovations = Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0),
+                                  np.zeros(0))
+    return StreamRun(col.segments(), innovations, col.corr,
+                     {k: v[0] for k, v in col.pred.items()}, session.stats, measurements,
+                     inputs, gated)
 
 
 # the fewest measurement steps per fitted parameter
@@ -202,14 +205,14 @@ class StreamFit:
     result: FitResult
     config: EstimatorConfig         # the input config with the fitted Q and R
     run: StreamRun                  # the session with the fitted config (node's gate on)
-    excluded: set                   # stamps left out of the likelihood: the gate's at the fit
+    excluded: set[int]              # stamps left out of the likelihood: the gate's at the fit
     rounds: int
     gate_stable: bool
-    notes: list = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
 
-def fit_stream(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
-               fit_R: bool = True) -> StreamFit:
+def fit_stream(config: EstimatorConfig, events: list[Union[Measurement, Input]], *,
+               fit_Q: bool = True, fit_R: bool = True) -> StreamFit:
     """
     Fit Q and R by maximum likelihood over the innovations of the session's steps.
 

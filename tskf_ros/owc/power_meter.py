@@ -46,6 +46,7 @@ from typing import Callable, Optional, Protocol
 import pyvisa
 from pyvisa import rname
 from pyvisa.constants import StatusCode
+from pyvisa.resources import MessageBasedResource
 
 from tskf_ros.core.units import NS
 
@@ -143,7 +144,7 @@ class MeterConfig:
 class Resource(Protocol):
     """What the meter needs of an open VISA message-based resource (pyvisa's)."""
 
-    def write(self, message: str) -> object: ...
+    def write(self, message: str) -> int: ...
 
     def query(self, message: str) -> str: ...
 
@@ -176,8 +177,12 @@ class VisaOpener:
 
     def open_resource(self, resource: str, timeout_ms: int) -> Resource:
         """Open a message-based resource with newline termination."""
-        return self.manager.open_resource(resource, read_termination='\n',
-                                          write_termination='\n', timeout=timeout_ms)
+        opened = self.manager.open_resource(resource, read_termination='\n',
+                                            write_termination='\n', timeout=timeout_ms)
+        if not isinstance(opened, MessageBasedResource):
+            opened.close()
+            raise MeterError(f'{resource} is not a message-based (SCPI) instrument')
+        return opened
 
     def close(self) -> None:
         """Close the ResourceManager (and every resource still open in it)."""
@@ -310,13 +315,19 @@ class PowerMeter:
         self.connects += 1
         return True
 
+    def _device(self) -> Resource:
+        """Return the open resource; a MeterError (an I/O error to poll) if none is open."""
+        if self.resource is None:
+            raise MeterError('no resource is open')
+        return self.resource
+
     def configure(self) -> None:
         """Send the set-up commands, read the unit, then drain the device's error queue."""
         c = self.config
         for name in ('clear_status', 'set_unit', 'set_wavelength', 'set_averaging',
                      'configure'):
             if getattr(c.commands, name):
-                self.resource.write(c.command(name))
+                self._device().write(c.command(name))
         self.device_unit = self._query_unit() if c.commands.unit_query else UNITS[c.unit]
         self.device_errors = self._drain_errors()
         if self.device_errors:
@@ -346,7 +357,7 @@ class PowerMeter:
                     self.reads % c.unit_check_every == 0:
                 self.device_unit = self._query_unit()
             t0, m0 = self.clock(), self.monotonic()
-            reply = self.resource.query(c.command('read'))
+            reply = self._device().query(c.command('read'))
             t1, m1 = self.clock(), self.monotonic()
         except pyvisa.errors.VisaIOError as exc:
             if exc.error_code != StatusCode.error_timeout:
@@ -374,13 +385,13 @@ class PowerMeter:
         return Reading(t0 + (t1 - t0) // 2, power, t1 - t0)
 
     def _query_unit(self) -> Optional[str]:
-        return parse_unit(self.resource.query(self.config.command('unit_query')))
+        return parse_unit(self._device().query(self.config.command('unit_query')))
 
     def _drain_errors(self) -> list[str]:
         errors = []
         if self.config.commands.error_query:
             for _ in range(MAX_ERRORS_READ):
-                reply = self.resource.query(self.config.command('error_query')).strip()
+                reply = self._device().query(self.config.command('error_query')).strip()
                 if not reply or reply.split(',')[0].strip() in (NO_ERROR, '+0'):
                     break
                 errors.append(reply)
@@ -394,7 +405,7 @@ class PowerMeter:
             self.disconnect(f'{self.consecutive_timeouts} timeouts in a row')
             return
         try:        # a reply that arrives late must not be taken for the next one
-            self.resource.clear()
+            self._device().clear()
         except IO_ERRORS:
             pass
 

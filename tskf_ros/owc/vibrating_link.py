@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from tskf_ros.core.dropouts import Dropouts, gilbert_elliott_states
 from tskf_ros.core.linear_models import OWC_LINEAR_RANGE, OWC_OFFSET, OWC_SLOPE
@@ -45,12 +46,12 @@ class OwcLinkError(ValueError):
     """Parameters that do not describe a link that can be simulated."""
 
 
-def linear_power(theta: np.ndarray) -> np.ndarray:
+def linear_power(theta: ArrayLike) -> NDArray[np.float64]:
     """Cai et al. eq. (2): P = -637.35 theta + 511.97 (mW)."""
     return OWC_SLOPE * np.asarray(theta, dtype=float) + OWC_OFFSET
 
 
-def power_curve(theta: np.ndarray) -> np.ndarray:
+def power_curve(theta: ArrayLike) -> NDArray[np.float64]:
     """
     Received power (mW) at relative angle theta (rad): the shape of Cai et al. Fig. 5.
 

@@ -10,9 +10,9 @@ import matplotlib
 import numpy as np
 from rclpy.serialization import deserialize_message
 
-from tskf_ros.bag.message_types import BagTypeError, message_class
-from tskf_ros.bag.offline_replay import replay
+from tskf_ros.bag.message_types import BagTypeError, DESERIALIZE_ERRORS, message_class
 from tskf_ros.bag.reader import BagError, BagReader, error_exit, exit_status
+from tskf_ros.bag.replay.loop import replay
 from tskf_ros.core.units import NS
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages import conversions
@@ -22,8 +22,6 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402, I100, I202
 
 PROG = 'plot_bag'
-# exceptions rclpy's deserializer raises on bytes that are not the type
-DECODE_ERRORS = (RuntimeError, ValueError, TypeError)
 
 
 class PlotDamageError(BagError):
@@ -49,7 +47,7 @@ def _decode(reader: BagReader, topics: set) -> dict:
                                                              message_class(raw.msgtype))
         try:
             msg = deserialize_message(raw.data, cls)
-        except DECODE_ERRORS as exc:
+        except DESERIALIZE_ERRORS as exc:
             raise BagError(f'{reader.path}: a message on {raw.topic} does not deserialize as '
                            f'{raw.msgtype} ({str(exc).splitlines()[0] if str(exc) else exc!r})'
                            ) from None

@@ -1,19 +1,17 @@
 """Sample bags: regenerated from their README command they are the same; plots; layout."""
 
-import array
 import copy
-import dataclasses
 import json
 from pathlib import Path
 import re
 
-import numpy as np
+from bag.helpers import flatten, one_line, usage_error
 import pytest
 from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.message_types import message_class
-from tskf_ros.bag.offline_replay import main as offline_main
 from tskf_ros.bag.reader import BagReader
+from tskf_ros.bag.replay.cli import main as offline_main
 from tskf_ros.tools import sample_bags
 from tskf_ros.tools.plot_bag import main as plot_main
 
@@ -41,37 +39,6 @@ def messages(path):
            for m in reader.messages()]
     assert reader.damage is None
     return out
-
-
-def field_names(msg):
-    """Return the field names of an rclpy, rosbags or mcap_ros2 message, or None."""
-    if dataclasses.is_dataclass(msg):                       # rosbags
-        return [f.name for f in dataclasses.fields(msg) if not f.name.startswith('__')]
-    if hasattr(msg, 'get_fields_and_field_types'):         # rclpy
-        return list(msg.get_fields_and_field_types())
-    if type(msg).__module__ == 'mcap_ros2._dynamic':        # mcap_ros2
-        return list(msg.__slots__)
-    return None
-
-
-def flatten(msg, prefix=''):
-    """Return {field path: value} of a message, recursing into nested messages and lists."""
-    names = field_names(msg)
-    if names is not None:
-        out = {}
-        for name in names:
-            out.update(flatten(getattr(msg, name), f'{prefix}.{name}'))
-        return out
-    if isinstance(msg, (list, tuple, array.array, np.ndarray)):
-        out = {f'{prefix}.len': len(msg)}
-        for i, item in enumerate(msg):
-            out.update(flatten(item, f'{prefix}[{i}]'))
-        return out
-    if isinstance(msg, bytes) and len(msg) == 1:      # rclpy's `byte`; the others give an int
-        return {prefix: msg[0]}
-    if isinstance(msg, (float, np.floating)):
-        return {prefix: float(msg)}
-    return {prefix: msg.item() if isinstance(msg, np.generic) else msg}
 
 
 def assert_same_messages(got, want, rtol=1e-9):
@@ -157,3 +124,15 @@ def test_foxglove_layout_refers_to_topics_the_bags_have():
     for panel in layout['configById'].values():
         for path in panel.get('paths', []):
             assert path['value'].split('.')[0] in topics, path['value']
+
+
+def test_make_sample_bags_refuses_bad_paths_and_seeds(tmp_path, capsys):
+    (tmp_path / 'file').write_text('x')
+    assert sample_bags.main(['--out', str(tmp_path / 'file'), '--only', 'led_alignment']) == 1
+    one_line(capsys.readouterr().err, 'make_sample_bags: error: ', 'is not a directory')
+    with pytest.raises(SystemExit) as exit_:
+        sample_bags.main(['--out', str(tmp_path), '--seed', '-1'])
+    assert exit_.value.code == 2
+    usage_error(capsys.readouterr().err, 'make_sample_bags',
+                '--seed must be in [0, 2**32), got -1')
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['file']

@@ -1,4 +1,4 @@
-"""The recorder: raw MCAP bags that rosbags and mcap read, no losses, clean interruption."""
+"""The recorder: raw bags rosbags and mcap read, no losses, signals, a full disk, SIGKILL."""
 
 import os
 import signal
@@ -13,13 +13,15 @@ import pytest
 import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
+                       ReliabilityPolicy)
 from rclpy.serialization import deserialize_message
 from recording import latched_source, stop, wait_until_recording
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Illuminance, JointState
 
+from tskf_ros.bag import reindex
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.recorder import Recorder
 from tskf_ros.bag.writer import BagExistsError
@@ -28,11 +30,9 @@ from tskf_ros.tools.demo_collector import wait_for
 
 import yaml
 
-NS = 1_000_000_000
-# s: a bound on waiting for DDS or for progress, never an assertion about timing; generous
-# for a loaded 2-core machine (it costs nothing when things work)
-TIMEOUT = 60.0
-T0 = 1_700_000_000 * NS
+from .helpers import NS, T0, TIMEOUT
+from .test_writer import read_all
+
 WINDOW = 2000
 
 
@@ -225,3 +225,102 @@ def test_record_command_closes_the_bag_on_a_signal(tmp_path, sig):
     assert 'wrote' in err
     with Reader(bag) as reader:
         assert reader.message_count == 20, err
+
+
+# -- faults: a full disk, SIGKILL ---------------------------------------------------------
+
+FULL = 'No space left on device'
+
+
+def power(k):
+    """Return the power of sample k in mW: 200 + k, exact in binary."""
+    return 200.0 + k
+
+
+def powers(bag):
+    """Return the powers recorded in a bag, in order (and check every reader agrees)."""
+    read_all(bag)
+    return [deserialize_message(m.data, Illuminance).illuminance
+            for m in BagReader(bag).messages()]
+
+
+def test_record_command_says_the_disk_filled_and_keeps_the_bag(tmp_path):
+    bag = tmp_path / 'rec'
+    code = (
+        'import errno, os, sys\n'
+        'from tskf_ros.bag import mcap_file\n'
+        'real = mcap_file.OutputFile.write_some\n'
+        'def write_some(self, view):\n'
+        '    if self.pos + len(view) > 20000:\n'
+        '        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))\n'
+        '    return real(self, view)\n'
+        'mcap_file.OutputFile.write_some = write_some\n'
+        'from tskf_ros.bag.recorder import main\n'
+        f"sys.exit(main(['record', '-o', {str(bag)!r}, '/full_power', "
+        "'--flush-interval', '0.05']))\n")
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('full_source', context=context)
+    pub = node.create_publisher(Illuminance, 'full_power', QoSProfile(
+        depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    proc = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        wait_until_recording(pub, proc, TIMEOUT, pub.topic_name)
+        deadline = time.monotonic() + TIMEOUT
+        k = 0
+        while proc.poll() is None:      # publish until the recorder gives up
+            assert time.monotonic() < deadline, 'the recorder never stopped'
+            pub.publish(conversions.power_to_msg(T0 + k * NS, power(k), 4.0))
+            k += 1
+            time.sleep(0.002)           # pacing, not synchronisation
+        _, err = proc.communicate(timeout=TIMEOUT)
+    finally:
+        stop(proc, node, context)
+    assert proc.returncode == 1, err
+    assert 'Traceback' not in err
+    lines = [line for line in err.splitlines() if line.startswith('record: ')]
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f'record: error: {bag}: the disk is full ({FULL}) after '), err
+    kept = powers(bag)
+    assert kept
+    assert f'kept the {len(kept)} messages written before, closed in {bag} ' in lines[0]
+    # what is kept is a run of what was published, in order, nothing skipped
+    assert kept == [kept[0] + i for i in range(len(kept))]
+
+
+def test_sigkill_loses_at_most_the_flush_interval(tmp_path, capsys):
+    bag = tmp_path / 'killed'
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('kill_source', context=context)
+    pub = node.create_publisher(Illuminance, 'kill_power', QoSProfile(
+        depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'tskf_ros.bag.recorder', '-o', str(bag), '/kill_power',
+         '--flush-interval', '0.2'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    on_disk = 0
+    try:
+        wait_until_recording(pub, proc, TIMEOUT, pub.topic_name)
+        deadline = time.monotonic() + TIMEOUT
+        k = 0
+        while on_disk < 30:             # until flushes have put 30 messages on disk
+            assert time.monotonic() < deadline, 'nothing reached the disk'
+            pub.publish(conversions.power_to_msg(T0 + k * NS, power(k), 4.0))
+            k += 1
+            time.sleep(0.01)            # pacing, not synchronisation
+            files = list(tmp_path.glob('.killed.partial-*/killed/killed.mcap'))
+            if k % 10 == 0 and files and files[0].stat().st_size:
+                on_disk = sum(1 for _ in BagReader(files[0]).messages())
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate(timeout=TIMEOUT)
+    finally:
+        stop(proc, node, context)
+    assert not bag.exists()
+    partials = list(tmp_path.glob('.killed.partial-*'))
+    assert len(partials) == 1
+    assert reindex.main([str(partials[0])]) == 0
+    kept = powers(bag)
+    assert len(kept) >= on_disk
+    assert kept == [kept[0] + i for i in range(len(kept))]

@@ -8,7 +8,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Illuminance
 
-from tskf_ros.bag import reindex, writer as writer_module
+from tskf_ros.bag import mcap_file, reindex
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.split_bag import SplitBagWriter
 from tskf_ros.bag.writer import BagExistsError, DiskFullError
@@ -16,8 +16,8 @@ from tskf_ros.messages import conversions
 
 import yaml
 
-NS = 1_000_000_000
-T0 = 1_700_000_000 * NS
+from .helpers import NS, T0
+
 TOPIC = '/received_power'
 
 
@@ -87,7 +87,7 @@ def test_a_crash_leaves_the_finished_files_as_a_bag_and_nothing_under_the_name(t
 def test_a_full_disk_in_a_later_file_keeps_everything_written_before(tmp_path, monkeypatch):
     # a disk of 9000 bytes for all the files together
     used = {}
-    real = writer_module._File._write_some
+    real = mcap_file.OutputFile.write_some
 
     def write_some(self, view):
         room = 9000 - sum(used.values())
@@ -96,7 +96,7 @@ def test_a_full_disk_in_a_later_file_keeps_everything_written_before(tmp_path, m
         n = real(self, view[:room])
         used[self.path] = used.get(self.path, 0) + n
         return n
-    monkeypatch.setattr(writer_module._File, '_write_some', write_some)
+    monkeypatch.setattr(mcap_file.OutputFile, 'write_some', write_some)
     w = open_split(tmp_path / 'full', max_bytes=1500, chunk_size=300)
     written = 0
     with pytest.raises(DiskFullError):

@@ -1,38 +1,40 @@
-"""Live replay (player + estimator or alignment node) against offline replay; the player."""
-
-from pathlib import Path
+"""The adapters: offline replay equals the live nodes; measurements read as rosbags reads them."""
 
 from geometry_msgs.msg import TwistWithCovarianceStamped
+from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Illuminance, TimeReference
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.serde import SerdeError
+from sensor_msgs.msg import TimeReference
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from tskf_ros.bag.message_types import message_class
-from tskf_ros.bag.offline_replay import replay
-from tskf_ros.bag.player import Player, PlayerError
+from tskf_ros.bag.message_types import message_class, typestore
+from tskf_ros.bag.player import Player
 from tskf_ros.bag.reader import BagReader
+from tskf_ros.bag.replay.adapters import OfflineEstimator, sample_reader
+from tskf_ros.bag.replay.loop import replay
 from tskf_ros.messages import alignment_interface, estimator_interface
 from tskf_ros.messages import conversions
+from tskf_ros.messages.estimator_interface import (extractor, INPUT_TYPE, INPUT_TYPES,
+                                                   load_config)
 from tskf_ros.nodes.alignment import Alignment
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.tools.demo_collector import wait_for
 
 import yaml
 
-REPO = Path(__file__).resolve().parent.parent
-BAG = REPO / 'bags' / 'owc_cai_td_1hz'
-PARAMS = REPO / 'config' / 'owc_estimator.yaml'
-LED_BAG = REPO / 'bags' / 'led_alignment'
-LED_PARAMS = REPO / 'config' / 'alignment.yaml'
-# s: a bound on waiting for DDS, never an assertion about timing (generous: a loaded machine)
-TIMEOUT = 60.0
+from ..helpers import BAGS, CONFIG, SAMPLES, TIMEOUT
+from ..test_cdr import damaged, store_messages
+
+BAG = BAGS / 'owc_cai_td_1hz'
+PARAMS = CONFIG / 'owc_estimator.yaml'
+LED_BAG = BAGS / 'led_alignment'
+LED_PARAMS = CONFIG / 'alignment.yaml'
 # the live nodes' queues: deeper than a whole bag, so that in one process (delivery within
 # the publish call) nothing is dropped however late the executor takes the messages
 DEEP = 1000
@@ -269,60 +271,80 @@ def test_offline_alignment_reproduces_the_recorded_run_until_a_sample_is_missing
     assert np.abs(x - recorded[stamp]).max() > 1e-3, 'the scan phase moves at a gap'
 
 
-def test_player_selects_remaps_offsets_and_loops(ros_context):
-    received = []
-    clocks = []
-    player = Player(BAG, rate=1000.0, loop=True, start_offset=250.0, clock_hz=500.0,
-                    topics=['/received_power'], remap={'/received_power': '/power'},
-                    context=ros_context)
-    client = rclpy.create_node('loop_client', context=ros_context)
-    # the bag recorded a best-effort (sensor data) publisher; the player offers the same
-    client.create_subscription(Illuminance, '/power', received.append,
-                               QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT))
-    client.create_subscription(Clock, '/clock', clocks.append, QoSProfile(depth=1000))
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(client)
+# -- the measurement (and the input u) as rosbags reads it ---------------------------------
+
+def outcome(read, data, log_ns=123):
+    """Return ('ok', the sample with its floats as bit patterns) or ('error',)."""
     try:
-        spin_until(executor, lambda: player.pubs['/received_power'].get_subscription_count()
-                   and player.clock_pub.get_subscription_count(), 'matching')
-        executor.add_node(player)
-        # in process, into a queue deeper than two passes: nothing of the best-effort
-        # stream is lost; wait until the client has the first pass and the start of the
-        # second, and has seen /clock go back (a late tick may publish a whole pass at once
-        # and skip the clock's jump: the player keeps looping until one shows it)
-        spin_until(executor, lambda: player.loops >= 2 and len(received) > 51 and any(
-            b.clock.sec < a.clock.sec for a, b in zip(clocks, clocks[1:])),
-            lambda: f'two loops and /clock going back (loops {player.loops}, '
-            f'{len(received)} messages, {len(clocks)} clocks)')
-    finally:
-        executor.shutdown()
-        player.destroy_node()
-        client.destroy_node()
-    assert set(player.published) == {'/power'}
-    stamps = [conversions.stamp_to_ns(m.header.stamp) // 10**9 - 1_700_000_000
-              for m in received]
-    # 250 s into a bag that starts at t = 0: t = 250..300 (all of T_d's seconds there)
-    first = stamps[:stamps.index(300) + 1]
-    assert first == list(range(250, 301))
-    assert stamps[len(first)] == 250, 'the loop starts again at the offset'
-    times = [conversions.stamp_to_ns(c.clock) for c in clocks]
-    assert min(times) >= 1_700_000_250 * 10**9
-    assert any(b < a for a, b in zip(times, times[1:])), '/clock jumps back at the loop'
+        stamp, value, variance = read(data, log_ns)
+    except SerdeError:
+        return ('error',)
+    return ('ok', stamp, np.array([value, variance]).tobytes())
 
 
-def test_player_refuses_bad_options(ros_context):
-    with pytest.raises(PlayerError, match='no topic /nope'):
-        Player(BAG, topics=['/nope'], context=ros_context)
-    with pytest.raises(PlayerError, match='past the end'):
-        Player(BAG, start_offset=1000.0, context=ros_context)
-    with pytest.raises(PlayerError, match='rate'):
-        Player(BAG, rate=0.0, context=ros_context)
+def rosbags_route(msgtype):
+    """Return what the replay reads, through rosbags' deserializer alone."""
+    store, extract = typestore(), extractor(msgtype)
+    return lambda data, log_ns: extract(store.deserialize_cdr(data, msgtype), log_ns)
 
 
-def test_sample_bag_metadata_matches_its_messages():
-    reader = BagReader(BAG)
-    counts = {}
-    for m in reader.messages():
-        counts[m.topic] = counts.get(m.topic, 0) + 1
-    assert counts == {t: i.count for t, i in reader.topics.items()}
-    assert reader.damage is None
+@pytest.mark.parametrize('msgtype', list(INPUT_TYPES))
+@settings(max_examples=60, deadline=None)
+@given(data=st.data(), log_ns=st.integers(0, 2 ** 63 - 1))
+def test_a_measurement_is_what_rosbags_reads_in_every_form(msgtype, data, log_ns):
+    """Canonical little and big endian (rosbags), and rclpy's Fast-CDR: the drawn values."""
+    store = typestore()
+    msg = data.draw(store_messages(msgtype))
+    read = sample_reader(msgtype, extractor(msgtype))
+    little = bytes(store.serialize_cdr(msg, msgtype))
+    forms = {'little': little,
+             'big': bytes(store.serialize_cdr(msg, msgtype, little_endian=False)),
+             'rclpy': serialize_message(deserialize_message(little, message_class(msgtype)))}
+    kind = INPUT_TYPES[msgtype]
+    stamp = (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+             if kind.stamped else log_ns)
+    want = ('ok', stamp, np.array([getattr(msg, kind.value), getattr(msg, kind.variance)
+                                   if kind.variance else 0.0], dtype=float).tobytes())
+    for form, raw in forms.items():
+        assert outcome(read, raw, log_ns) == want, form
+
+
+@settings(max_examples=400, deadline=None)
+@given(case=damaged())
+def test_damaged_bytes_give_the_outcome_rosbags_gives(case):
+    """Values where rosbags gives values (the same), its error where it refuses them."""
+    msgtype, raw = case
+    read = sample_reader(msgtype, extractor(msgtype))
+    assert outcome(read, raw) == outcome(rosbags_route(msgtype), raw)
+
+
+@pytest.mark.parametrize('name', SAMPLES)
+def test_every_measurement_of_the_sample_bags_reads_as_rclpy_and_rosbags_read_it(name):
+    reader = BagReader(BAGS / name)
+    topics = {t: i.msgtype for t, i in reader.topics.items() if i.msgtype in INPUT_TYPES}
+    assert topics, name
+    seen = 0
+    for raw in reader.messages():
+        msgtype = topics.get(raw.topic)
+        if msgtype is not None:
+            by_rclpy = extractor(msgtype)(deserialize_message(raw.data,
+                                                              message_class(msgtype)),
+                                          raw.log_time_ns)
+            got = outcome(sample_reader(msgtype, extractor(msgtype)), raw.data,
+                          raw.log_time_ns)
+            assert got == outcome(rosbags_route(msgtype), raw.data, raw.log_time_ns)
+            assert got == ('ok', by_rclpy[0], np.array(by_rclpy[1:]).tobytes())
+            seen += 1
+    assert seen > 0
+
+
+def test_the_input_u_is_what_rclpy_reads():
+    config = load_config(CONFIG / 'drogue_estimator.yaml')
+    est = OfflineEstimator(config, 'sensor_msgs/msg/Illuminance')
+    inputs = [m for m in BagReader(BAGS / 'drogue').messages() if m.msgtype == INPUT_TYPE]
+    assert inputs
+    for raw in inputs:
+        want = conversions.msg_to_input(deserialize_message(raw.data, message_class(INPUT_TYPE)),
+                                        est.session.u.size)
+        (stamp, u), _ = est.process_input(raw.data, raw.log_time_ns)
+        assert stamp == want[0] and u.tobytes() == want[1].tobytes()

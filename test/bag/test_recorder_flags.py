@@ -31,10 +31,8 @@ from tskf_ros.tools.demo_collector import wait_for
 
 import yaml
 
-NS = 1_000_000_000
-T0 = 1_700_000_000 * NS
-# s: a bound on waiting for DDS or a process, never an assertion about timing
-TIMEOUT = 60.0
+from .helpers import NS, one_line, T0, TIMEOUT, usage_error
+
 RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                       reliability=ReliabilityPolicy.RELIABLE)
 
@@ -311,3 +309,45 @@ def test_record_command_splits_by_size_and_loses_nothing(tmp_path):
     assert f'record: wrote {bag}: /p 40' in err
     meta, per_file = check_split(bag, 40)
     assert len(per_file) >= 3
+
+
+# -- refused before anything starts: one line --------------------------------------------
+
+def test_record_to_a_path_under_a_file_is_refused_up_front(tmp_path, capsys):
+    (tmp_path / 'file').write_text('x')
+    code = recorder.main(['record', '-o', str(tmp_path / 'file' / 'bag'), '--topics', '/x'])
+    assert code == 1
+    one_line(capsys.readouterr().err, 'record: error: ', 'is not a directory')
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['file']
+
+
+def test_record_to_an_unwritable_path_is_one_line(tmp_path):
+    # /proc refuses new directories even to root
+    proc = subprocess.run([sys.executable, '-m', 'tskf_ros.bag.recorder', '-o',
+                           '/proc/tskf_no_such_bag', '--topics', '/x'], capture_output=True,
+                          text=True,
+                          timeout=TIMEOUT)
+    assert proc.returncode == 1, proc.stderr
+    one_line(proc.stderr, 'record: error: /proc/tskf_no_such_bag: ')
+
+
+@pytest.mark.parametrize('args, text', [
+    (['--topics', '/x', '--flush-interval', '-1'],
+     '--flush-interval must be a finite number >= 0, got -1.0'),
+    (['--topics', '/bad topic'], 'not a topic name: /bad topic'),
+    (['--topics', '/x', '-b', '-1'], '--max-bag-size must be >= 0, got -1'),
+    (['--topics', '/x', '-d', '-2'], '--max-bag-duration must be >= 0, got -2'),
+    (['--topics', '/x', '--compression-format', 'zstd'],
+     '--compression-format needs --compression-mode file or message'),
+    (['--topics', '/x', '--exclude-topics', '/y'], '--exclude-topics needs --all or --regex'),
+    (['--topics', '/x', '--exclude-regex', 'y'], '--exclude-regex needs --all or --regex'),
+    ([], 'need --all, --topics or --regex'),
+    (['--topics', '/x', '--custom-data', 'novalue'],
+     "--custom-data: expected KEY=VALUE, got 'novalue'"),
+])
+def test_record_refuses_bad_values(tmp_path, capsys, args, text):
+    with pytest.raises(SystemExit) as exit_:
+        recorder.main(['record', '-o', str(tmp_path / 'bag')] + args)
+    assert exit_.value.code == 2
+    usage_error(capsys.readouterr().err, 'record', text)
+    assert list(tmp_path.iterdir()) == []

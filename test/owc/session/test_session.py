@@ -1,35 +1,21 @@
-"""The streaming estimator session (ROS-free): equal to the offline run, and bad input."""
+"""
+EstimatorSession (ROS-free) in order, against independent formulations.
 
+The offline run of the core filter over the same time scale, a textbook scalar filter, a
+direct run with the inputs held; and hostile streams (Hypothesis).
+"""
+
+from hostile_streams import check_psd, moves, SETTINGS, stamps_of, values
+from hypothesis import given, strategies as st
 import numpy as np
+from owc_streams import collect, feed, measurements, OWC, power, STAMPS, T0, THETA
 import pytest
+from scalar_reference import C, check_step, close, D, P0, Reference, scalar_session, X0
 
-from tskf_ros.core.linear_models import LinearModel, owc, OWC_SLOPE, run_filter, spring_mass
+from tskf_ros.core.linear_models import owc, run_filter, spring_mass
 from tskf_ros.core.time_scales import discrete
-from tskf_ros.owc.estimator_session import (ConfigError, EstimatorConfig, EstimatorSession,
-                                            model_from_flat, NS)
-
-# 1 Hz with gaps J = 3 (after 4) and J = 4 (after 12), and a dense stretch at 0.25 s
-STAMPS = np.array([1, 2, 3, 4, 7, 8, 9, 10, 11, 12, 16, 16.25, 16.5, 16.75, 17, 18, 19, 20])
-
-
-def measurements(model, t, seed=0):
-    """Noisy measurements of a state near the model's x0 at the points t."""
-    rng = np.random.default_rng(seed)
-    x = model.x0 + 0.02 * rng.standard_normal((t.size, model.x0.size))
-    y = x @ model.C.T + (0 if model.D is None else model.D)
-    return y + np.sqrt(np.diag(model.R)) * rng.standard_normal(y.shape)
-
-
-def feed(session, t, y):
-    """Feed (t, y) in order; return the outcomes."""
-    return [session.add(int(round(ti * NS)), yi) for ti, yi in zip(t, y)]
-
-
-def collect(outcomes, kind, revised=False):
-    """(stamps in s, states) of the estimates of one kind."""
-    est = [e for o in outcomes for e in o.estimates if e.kind == kind and e.revised == revised]
-    return np.array([e.stamp_ns / NS for e in est]), np.array([e.x for e in est]), \
-        np.array([e.P for e in est])
+from tskf_ros.core.units import MAX_STAMP_NS, NS
+from tskf_ros.owc.session import EstimatorConfig, EstimatorSession, model_from_flat
 
 
 @pytest.mark.parametrize('model, transition', [(owc(), 'euler'), (owc(), 'exact'),
@@ -61,6 +47,37 @@ def test_session_equals_offline_run(model, transition):
     assert level == 'OK'
 
 
+@pytest.mark.parametrize('transition', ['euler', 'exact'])
+@pytest.mark.parametrize('message_variance', [False, True])
+def test_in_order_samples_equal_a_textbook_scalar_filter(transition, message_variance):
+    rng = np.random.default_rng(3)
+    s = scalar_session(transition=transition, use_message_variance=message_variance,
+                       gate=0.0)
+    ref = Reference(transition=transition)
+    # irregular intervals, a few gaps of several periods
+    gaps = rng.choice([0.2, 0.5, 1.0, 1.0, 1.7, 4.0], size=60)
+    stamps = T0 + np.concatenate(([0], np.cumsum(np.round(gaps * NS)))).astype(np.int64)
+    stamps = [int(t) for t in stamps]
+    ys = [float(v) for v in C * X0 + D + rng.normal(0, 1.0, len(stamps))]
+    variances = [float(v) for v in rng.uniform(0.0, 0.5, len(stamps))]
+    variances[::5] = [0.0] * len(variances[::5])         # some samples use R / mu
+    first = s.add(stamps[0], ys[0], variances[0])
+    assert first.estimates[0].x[0] == X0 and first.estimates[0].P[0, 0] == P0
+    for k in range(1, len(stamps)):
+        out = s.add(stamps[k], ys[k], variances[k])
+        mu = (stamps[k] - stamps[k - 1]) / NS
+        want = ref.step(mu, ys[k - 1], variances[k - 1] if message_variance else 0.0)
+        check_step(out, stamps[k - 1], stamps[k], want)
+        close(out.jumps[0].mu, mu)
+    close(s.kf.x[0], ref.x)
+    close(s.kf.P[0, 0], ref.P)
+    _, _, values = s.diagnostics()
+    assert values['accepted'] == len(stamps) and values['received'] == len(stamps)
+    close(values['covariance_trace'], ref.P)
+    close(values['mu_max_s'], max((b - a) / NS for a, b in zip(stamps, stamps[1:])))
+    assert values['gaps'] == sum(1 for a, b in zip(stamps, stamps[1:]) if b - a > 1.5 * NS)
+
+
 def test_non_regressive_step_is_refused_and_the_filter_goes_on():
     session = EstimatorSession(EstimatorConfig(spring_mass(), nonpositive_is_gap=False))
     session.add(1 * NS, 0.5)
@@ -69,106 +86,6 @@ def test_non_regressive_step_is_refused_and_the_filter_goes_on():
     out = session.add(int(2.5 * NS), 0.5)          # mu = 1.5 is fine
     assert out.status == 'accepted' and [e.stamp_ns for e in out.estimates] == [
         1 * NS, int(2.5 * NS)]
-
-
-def test_late_sample_is_inserted_and_rerun_equals_offline():
-    model = owc()
-    y = measurements(model, STAMPS)
-    order = list(range(STAMPS.size))
-    order.remove(8)
-    order.insert(11, 8)                # t = 11 arrives after t = 16.25
-    session = EstimatorSession(EstimatorConfig(model))
-    out = feed(session, STAMPS[order], y[order])
-    assert out[11].status == 'inserted'
-    ref = run_filter(model, discrete(STAMPS), y)
-    # revised estimates: from the left neighbour t = 10 up to the newest point 16.25
-    t, x, _ = collect([out[11]], 'corrected', revised=True)
-    np.testing.assert_array_equal(t, [10, 11, 12, 16])
-    np.testing.assert_allclose(x, ref.x_corr[7:11], rtol=0, atol=1e-9)
-    t, x, _ = collect([out[11]], 'predicted', revised=True)
-    np.testing.assert_array_equal(t, [11, 12, 16, 16.25])
-    np.testing.assert_allclose(x, ref.x_pred[8:12], rtol=0, atol=1e-9)
-    # everything after the insertion equals the offline run on the full time scale
-    t, x, _ = collect(out[12:], 'corrected')
-    np.testing.assert_allclose(x, ref.x_corr[11:-1], rtol=0, atol=1e-9)
-    # the main stream never repeats a stamp
-    for kind in ('predicted', 'corrected'):
-        t, _, _ = collect(out, kind)
-        assert np.all(np.diff(t) > 0)
-    assert session.stats.inserted == 1
-
-
-def test_bad_samples_are_rejected_without_touching_the_state():
-    session = EstimatorSession(EstimatorConfig(owc(), max_future=5.0))
-    assert session.add(1 * NS, 200.0).status == 'accepted'
-    before = session.kf.state()
-    cases = [((0, 200.0), 'zero_stamp'), ((2 * NS, float('nan')), 'non_finite'),
-             ((2 * NS, float('inf')), 'non_finite'), ((2 * NS, 200.0, -1.0), 'bad_variance'),
-             ((2 * NS, 0.0), 'invalid_power'), ((2 * NS, -3.0), 'invalid_power'),
-             ((1 * NS, 200.0), 'duplicate')]
-    for args, reason in cases:
-        out = session.add(*args)
-        assert out.reason == reason and not out.estimates
-    out = session.add(20 * NS, 200.0, now_ns=10 * NS)
-    assert out.reason == 'future'
-    np.testing.assert_array_equal(session.kf.state()[0], before[0])
-    counts = session.stats.rejected
-    assert counts['non_finite'] == 2 and counts['invalid_power'] == 2 and counts['future'] == 1
-
-
-def test_too_old_and_clock_jumps():
-    cfg = EstimatorConfig(owc(), history_window=5.0, max_backward=20.0, max_jump=30.0)
-    session = EstimatorSession(cfg)
-    feed(session, np.arange(1.0, 13.0), np.full(12, 200.0))
-    assert session.add(3 * NS, 200.0).reason == 'too_old'           # 9 s late > 5 s
-    out = session.add(100 * NS, 200.0)                               # 88 s ahead
-    assert out.status == 'reset' and out.reason == 'forward_jump'
-    assert [e.kind for e in out.estimates] == ['predicted']
-    np.testing.assert_array_equal(out.estimates[0].x, owc().x0)
-    out = session.add(50 * NS, 200.0)                                # 50 s back
-    assert out.status == 'reset' and out.reason == 'backward_jump'
-    assert session.stats.resets['forward_jump'] == 1
-    assert session.stats.resets['backward_jump'] == 1
-
-
-def test_long_gap_warns():
-    session = EstimatorSession(EstimatorConfig(owc(), max_gap=5.0))
-    feed(session, np.array([1.0, 2.0, 9.0, 10.0]), np.full(4, 200.0))
-    level, message, values = session.diagnostics()
-    assert level == 'WARN' and 'max_gap' in message and values['gap_max_s'] == 7.0
-    assert session.diagnostics()[0] == 'OK'
-
-
-def test_outputs_stay_finite_and_psd_under_hostile_input():
-    rng = np.random.default_rng(5)
-    session = EstimatorSession(EstimatorConfig(spring_mass(), max_jump=1e4, max_backward=1e4,
-                                               history_window=1e4, nonpositive_is_gap=False))
-    stamps = np.cumsum(rng.exponential(1.0, 400)) + 1
-    stamps[rng.integers(0, 400, 40)] *= rng.uniform(0.5, 1.5, 40)
-    values = rng.normal(0, 1e6, 400)
-    values[rng.integers(0, 400, 20)] = np.nan
-    for t, v in zip(stamps, values):
-        for e in session.add(int(t * NS), v).estimates:
-            assert np.all(np.isfinite(e.x)) and np.all(np.isfinite(e.P))
-            np.testing.assert_array_equal(e.P, e.P.T)
-            assert np.linalg.eigvalsh(e.P)[0] >= -1e-9 * max(1.0, np.abs(e.P).max())
-
-
-def test_model_from_flat_and_bad_configs():
-    m = model_from_flat(A=[0, 1, -1, -2], C=[1, 0], G=[0, 1], Q=[1], R=[2], x0=[1, 1],
-                        P0=[2, 0, 0, 3])
-    np.testing.assert_array_equal(m.A, spring_mass().A)
-    assert m.G.shape == (2, 1) and m.D is None
-    with pytest.raises(ConfigError, match='A must have n'):
-        model_from_flat(A=[1, 2], C=[1], Q=[1], R=[1], x0=[0], P0=[1])
-    with pytest.raises(ConfigError, match='Q must have'):
-        model_from_flat(A=[1], C=[1], Q=[1, 0], R=[1], x0=[0], P0=[1])
-    with pytest.raises(ConfigError, match='indefinite'):
-        EstimatorConfig(model_from_flat(A=[1], C=[1], Q=[-1], R=[1], x0=[0], P0=[1]))
-    with pytest.raises(ConfigError, match='period'):
-        EstimatorConfig(owc(), period=-1.0)
-    with pytest.raises(ConfigError, match='transition'):
-        EstimatorConfig(owc(), transition='rk4')
 
 
 def test_reconfigure_keeps_the_estimate():
@@ -182,61 +99,36 @@ def test_reconfigure_keeps_the_estimate():
     assert out.status == 'reset' and session.pending() is None
 
 
-def fang_scalar_fixed_point(a, c, q, r, kappa, iterations=20_000):
-    """
-    Theorem 2's fixed point of X = f^kappa(g(X)) by plain iteration from X = q.
-
-    Written here independently of tskf_ros.core.irregular (which solves a quadratic):
-    g(X) = (1/X + c^2/r)^-1 (information form of eq. (23)), f(Y) = a^2 Y + q (eq. (22)).
-    """
-    X = q
-    for _ in range(iterations):
-        Y = 1.0 / (1.0 / X + c * c / r)
-        for _ in range(kappa):
-            Y = a * a * Y + q
-        if abs(Y - X) <= 1e-15 * X:
-            break
-        X = Y
-    return Y
+def check_estimator_outcome(out, limit):
+    for e in out.estimates:
+        assert 0 < e.stamp_ns <= MAX_STAMP_NS
+        assert np.all(np.isfinite(e.x)) and float(np.max(np.abs(e.x))) <= limit
+        check_psd(e.P, (e.kind, e.stamp_ns))
+        assert np.sqrt(float(np.trace(e.P))) <= limit
+    for j in out.jumps:
+        assert 0 < j.stamp_ns < j.sigma_ns <= MAX_STAMP_NS and np.isfinite(j.mu)
 
 
-@pytest.mark.parametrize('period', [1.0, 0.5, 2.0])
-def test_sampling_intervals_are_checked_against_fang_section_iii(period):
-    # a scalar unstable model: no pathological interval; Theorem 2 bounds for 1..4 periods
-    cfg = EstimatorConfig(model=owc(), max_gap=100.0, period=period)
-    s = EstimatorSession(cfg)
-    t = 10 * NS
-    for dt in (1, 1, 3, 1, 4, 2):
-        t += int(round(dt * period * NS))
-        s.add(t, 200.0)
-    level, _, values = s.diagnostics()
-    assert values['intervals_seen_periods'] == '1 2 3 4'
-    assert values['interval_warnings'] == ''
-    # Fang's discrete system of one nominal period h (Euler: a = 1 + h, q = h G Q G^T = h)
-    # measured with R / h at every sample (Table 3's R_d at mu = h): Theorem 2 for 1 and 4
-    a, q, r = 1.0 + period, period, 100.0 / period
-    lo = fang_scalar_fixed_point(a, OWC_SLOPE, q, r, 1)
-    hi = fang_scalar_fixed_point(a, OWC_SLOPE, q, r, 4)
-    assert values['theorem2_peak_bound_low'] == pytest.approx(lo, rel=1e-9)
-    assert values['theorem2_peak_bound_high'] == pytest.approx(hi, rel=1e-9)
-    if period == 1.0:
-        # a = 2, q = 1, r = 100, kappa = 1: X = 4 r X / (c^2 X + r) + 1, that is
-        # c^2 X^2 - (3 r + c^2) X - r = 0
-        c2 = OWC_SLOPE ** 2
-        b = 300 + c2
-        assert lo == pytest.approx((b + np.sqrt(b * b + 400 * c2)) / (2 * c2), rel=1e-12)
-    # eigenvalues +-2 of the one-period transition: every even interval is pathological
-    # (I + h A = diag(2, -2) with h = 1), and C = [1, 1] cannot tell the modes apart
-    model = LinearModel('pm2', A=np.diag([1.0, -3.0]), C=np.array([[1.0, 1.0]]),
-                        Q=np.eye(2), R=np.eye(1), x0=np.zeros(2), P0=np.eye(2))
-    s = EstimatorSession(EstimatorConfig(model=model, nonpositive_is_gap=False))
-    t = 10 * NS
-    for dt in (1, 1, 2, 1):
-        t += dt * NS
-        s.add(t, 0.5)
-    level, message, values = s.diagnostics()
-    assert level == 'WARN' and 'interval(s) 2' in message
-    assert values['interval_warnings'].startswith('2: degenerate')
+@SETTINGS
+@given(st.lists(st.tuples(moves, values), min_size=1, max_size=40))
+def test_the_session_survives_anything_and_recovers(ops):
+    # hostile stamps and values: nothing raises, nothing non-finite, beyond the limit or
+    # not PSD is returned, and ordinary samples are used again within gate_patience + 1
+    limit = 1e9
+    session = EstimatorSession(EstimatorConfig(OWC, state_limit=limit))
+    good = power(THETA)
+    for stamp, value in zip(stamps_of([m for m, _ in ops]), [v for _, v in ops]):
+        out = session.add(stamp, value, now_ns=T0)
+        check_estimator_outcome(out, limit)
+    level, message, diag = session.diagnostics(now_ns=T0)
+    assert level in ('OK', 'WARN', 'ERROR') and isinstance(message, str)
+    # ordinary samples, 1 s apart, from well after anything that was sent
+    start = MAX_STAMP_NS - 100 * NS
+    outs = [session.add(start + k * NS, good, now_ns=T0) for k in range(12)]
+    for out in outs:
+        check_estimator_outcome(out, limit)
+    # a reset or a gate lockout (at most gate_patience + 1 samples) and then accepted
+    assert all(o.status == 'accepted' for o in outs[-5:]), [o.reason for o in outs]
 
 
 # -- the input u (add_input): zero-order hold, input-only points ---------------------------
@@ -350,14 +242,14 @@ def test_bad_inputs_are_rejected_without_touching_the_state():
                                                max_jump=30.0))
     session.add(1 * NS, 0.5)
     session.add_input(2 * NS, [0.1])
-    before = session.kf.state()
+    x_before, P_before = session.kf.x, session.kf.P
     cases = [((3 * NS, [0.1, 0.2]), 'input_size'), ((3 * NS, [np.nan]), 'input_non_finite'),
              ((3 * NS, [np.inf]), 'input_non_finite'), ((0, [0.1]), 'input_zero_stamp'),
              ((int(1.5 * NS), [0.1]), 'input_late'), ((2 * NS, [0.3]), 'input_duplicate')]
     for args, reason in cases:
         out = session.add_input(*args)
         assert (out.status, out.reason) == ('rejected', reason) and not out.estimates
-    np.testing.assert_array_equal(session.kf.state()[0], before[0])
+    assert session.kf.x is x_before and session.kf.P is P_before
     np.testing.assert_array_equal(session.u, [0.1])
     _, _, values = session.diagnostics()
     assert values['rejected_input_non_finite'] == 2 and values['rejected_input_late'] == 1

@@ -1,0 +1,1 @@
+"""Tests of tskf_ros.bag, one file per module."""

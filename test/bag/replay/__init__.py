@@ -1,0 +1,1 @@
+"""Tests of tskf_ros.bag.replay, one file per module."""

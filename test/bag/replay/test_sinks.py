@@ -1,0 +1,55 @@
+"""The sinks: the arrays of the analysis mode hold what the output bag holds (rosbags)."""
+
+import numpy as np
+from rosbags.rosbag2 import Reader
+
+from tskf_ros.bag.message_types import typestore
+from tskf_ros.bag.replay.cli import main
+
+from ..helpers import BAGS, CONFIG, NS
+
+
+def test_replay_arrays_hold_what_the_output_bag_holds(tmp_path, capsys):
+    """The arrays against the output bag decoded by rosbags, field by field."""
+    bag = BAGS / 'drogue'
+    params = CONFIG / 'drogue_estimator.yaml'
+    assert main([str(bag), str(tmp_path / 'est'), '-q', '--params-file', str(params)]) == 0
+    assert main([str(bag), '--npz', str(tmp_path / 'a.npz'), '-q',
+                 '--params-file', str(params)]) == 0
+    with np.load(tmp_path / 'a.npz') as f:
+        arrays = dict(f)
+    store = typestore()
+    with Reader(tmp_path / 'est') as reader:
+        by_topic = {}
+        for conn, t, data in reader.messages():
+            by_topic.setdefault(conn.topic, []).append(
+                (t, store.deserialize_cdr(data, conn.msgtype)))
+    for kind in ('predicted', 'corrected', 'revised/predicted', 'revised/corrected'):
+        rows = by_topic.get(f'/estimate/{kind}', [])
+        name = f'estimate/{kind}'
+        assert arrays[f'{name}.log_ns'].tolist() == [t for t, _ in rows]
+        assert arrays[f'{name}.stamp_ns'].tolist() == [
+            m.header.stamp.sec * NS + m.header.stamp.nanosec for _, m in rows]
+        n = arrays[f'{name}.x'].shape[1]
+        for k, (_, m) in enumerate(rows):
+            v = m.twist.twist
+            slots = [v.linear.x, v.linear.y, v.linear.z, v.angular.x, v.angular.y, v.angular.z]
+            assert arrays[f'{name}.x'][k].tolist() == slots[:n]
+            assert arrays[f'{name}.P'][k].tolist() == \
+                m.twist.covariance.reshape(6, 6)[:n, :n].tolist()
+    mu = by_topic.get('/estimate/mu', [])
+    assert arrays['estimate/mu.sigma_ns'].tolist() == [
+        m.time_ref.sec * NS + m.time_ref.nanosec for _, m in mu]
+    diag = by_topic['/diagnostics']
+    assert arrays['diagnostics.log_ns'].tolist() == [t for t, _ in diag]
+    assert arrays['diagnostics.message'].tolist() == [m.status[0].message for _, m in diag]
+    power = by_topic['/received_power']
+    assert arrays['sample.value'].tolist() == [m.illuminance for _, m in power]
+    assert set(arrays['sample.status'].tolist()) <= {'accepted', 'inserted', 'gap',
+                                                     'rejected', 'reset'}
+    assert len(arrays['input.log_ns']) == len(by_topic['/input'])
+    assert str(arrays['meta.damage']) == ''
+    capsys.readouterr()
+    assert main([str(bag), '--npz', str(tmp_path / 'a.npz'), '-q']) == 1
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'exists already' in err

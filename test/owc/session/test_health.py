@@ -1,0 +1,96 @@
+"""
+A step whose state is absurd, non-finite or not PSD re-initialises the filter, says so.
+
+The state limit against a textbook scalar filter: the session re-initialises at the very
+sample where the reference's predictor crosses it.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+from owc_streams import T0
+import pytest
+from scalar_reference import C, check_step, D, P0, Reference, scalar_session, X0
+
+from tskf_ros.core.linear_models import spring_mass
+from tskf_ros.core.units import NS
+from tskf_ros.owc.session import EstimatorConfig, EstimatorSession, model_from_flat
+
+
+def test_the_state_limit_reinitialises_at_the_sample_the_reference_crosses_it():
+    limit = 10.0
+    s = scalar_session(state_limit=limit, gate=0.0)
+    ref = Reference()
+    ys = [C * 0.5 * j + D for j in range(40)]          # a ramp: x runs past the limit
+    s.add(T0, ys[0])
+    for j in range(1, len(ys)):
+        _, _, x_p, P_p = ref.step(1.0, ys[j - 1])
+        out = s.add(T0 + j * NS, ys[j])
+        if abs(x_p) > limit or not P_p <= limit * limit:
+            break
+        check_step(out, T0 + (j - 1) * NS, T0 + j * NS, (*ref.corrected, x_p, P_p))
+    else:
+        pytest.fail('the reference never crossed the limit')
+    assert (out.status, out.reason) == ('reset', 'state_health') and 'state_limit' in out.message
+    (start,) = out.estimates
+    assert (start.kind, start.stamp_ns, start.x[0], start.P[0, 0]) == (
+        'predicted', T0 + j * NS, X0, P0)
+    assert s.diagnostics()[0] == 'ERROR'
+    # and it goes on from x0, P0 at that sample
+    again = Reference()
+    check_step(s.add(T0 + (j + 1) * NS, ys[j]), T0 + j * NS, T0 + (j + 1) * NS,
+               again.step(1.0, ys[j]))
+
+
+@pytest.mark.parametrize('which', ['P(t|t)', 'P(sigma(t))'])
+def test_a_covariance_that_is_not_psd_is_refused(which):
+    s = scalar_session(gate=0.0)
+    for j in range(3):
+        s.add(T0 + j * NS, C * X0 + D)
+    kf = s.kf
+    honest = kf.step
+
+    def broken(*args, **kwargs):
+        res = honest(*args, **kwargs)
+        field = 'P_corrected' if which == 'P(t|t)' else 'P_predicted'
+        return replace(res, **{field: np.array([[-1e-3]])})
+
+    kf.step = broken
+    out = s.add(T0 + 3 * NS, C * X0 + D)
+    assert (out.status, out.reason) == ('reset', 'state_health')
+    assert f'{which} lost positive semi-definiteness' in out.message
+    assert [(e.kind, e.x[0], e.P[0, 0]) for e in out.estimates] == [('predicted', X0, P0)]
+    assert s.kf is not kf                # a new filter, from x0, P0
+
+
+def test_an_absurd_step_reinitialises_the_filter_and_the_diagnostics_say_error():
+    # A = 2 per s with the exact transition: a 30 s gap multiplies the state by e^60
+    model = model_from_flat(A=[2.0], C=[1.0], Q=[1.0], R=[1.0], x0=[1.0], P0=[1.0])
+    s = EstimatorSession(EstimatorConfig(model, transition='exact', max_jump=100.0,
+                                         nonpositive_is_gap=False, gate=0.0))
+    for k in range(3):
+        s.add(T0 + k * NS, 1.0)
+    out = s.add(T0 + 33 * NS, 1.0)
+    assert (out.status, out.reason) == ('reset', 'state_health')
+    assert 'state_limit' in out.message
+    level, message, values = s.diagnostics()
+    assert level == 'ERROR' and 're-initialised itself' in message
+    assert values['resets_state_health'] == 1
+    # the filter goes on from the sample that triggered it
+    assert s.add(T0 + 34 * NS, 1.0).status == 'accepted'
+    assert s.diagnostics()[0] != 'ERROR'       # consumed by the report above
+
+
+def test_outputs_stay_finite_and_psd_under_hostile_input():
+    rng = np.random.default_rng(5)
+    session = EstimatorSession(EstimatorConfig(spring_mass(), max_jump=1e4, max_backward=1e4,
+                                               history_window=1e4, nonpositive_is_gap=False))
+    stamps = np.cumsum(rng.exponential(1.0, 400)) + 1
+    stamps[rng.integers(0, 400, 40)] *= rng.uniform(0.5, 1.5, 40)
+    values = rng.normal(0, 1e6, 400)
+    values[rng.integers(0, 400, 20)] = np.nan
+    for t, v in zip(stamps, values):
+        for e in session.add(int(t * NS), v).estimates:
+            assert np.all(np.isfinite(e.x)) and np.all(np.isfinite(e.P))
+            np.testing.assert_array_equal(e.P, e.P.T)
+            assert np.linalg.eigvalsh(e.P)[0] >= -1e-9 * max(1.0, np.abs(e.P).max())

@@ -1,0 +1,80 @@
+"""metadata.yaml of a bag as rosbag2 (Jazzy, metadata version 9) writes it, written durably."""
+
+import os
+from pathlib import Path
+from typing import Optional
+
+from rosbags.rosbag2.metadata import dump_qos_v9
+
+from tskf_ros.bag.mcap_file import McapStats, scan_mcap
+
+import yaml
+
+__all__ = ['add_custom_data', 'METADATA_MARKER', 'METADATA_VERSION', 'write_metadata',
+           'write_yaml']
+
+# custom_data key (and value) of every bag this package writes; overwrite needs it
+METADATA_MARKER = ('tskf_ros.writer', 'tskf_ros')
+# metadata.yaml version (rosbag2 Jazzy)
+METADATA_VERSION = 9
+
+
+def write_yaml(path: Path, doc: dict) -> None:
+    """Write a YAML document durably: a temporary file, fsync, rename."""
+    tmp = path.parent / f'.{path.name}.tmp'
+    with tmp.open('w') as f:
+        yaml.safe_dump(doc, f, default_flow_style=False, sort_keys=False)
+        f.flush()
+        os.fsync(f.fileno())
+    tmp.replace(path)
+
+
+def write_metadata(bagdir: Path, path: Path, *, stats: Optional[McapStats] = None,
+                   custom_data: Optional[dict] = None) -> dict:
+    """
+    Write bagdir/metadata.yaml (rosbag2 version 9) for the MCAP file `path`; return it.
+
+    stats: the file's topics, counts and log time span; read from the file if None.
+    """
+    stats = stats or scan_mcap(path)
+    counts, lo, hi = stats.counts, stats.first, stats.last
+    total = sum(counts.values())
+    span = {'nanoseconds': (hi - lo) if total else 0}
+    start = {'nanoseconds_since_epoch': lo or 0}
+    data = dict(custom_data or {})
+    data[METADATA_MARKER[0]] = METADATA_MARKER[1]
+    info = {
+        'version': METADATA_VERSION,
+        'storage_identifier': 'mcap',
+        'relative_file_paths': [path.name],
+        'duration': span,
+        'starting_time': start,
+        'message_count': total,
+        'topics_with_message_count': [
+            {'topic_metadata': {'name': name, 'type': ti.msgtype,
+                                'serialization_format': ti.serialization_format or 'cdr',
+                                'offered_qos_profiles': dump_qos_v9(ti.qos),
+                                'type_description_hash': digest},
+             'message_count': counts.get(name, 0)}
+            for name, (ti, digest) in stats.topics.items()],
+        'compression_format': '',
+        'compression_mode': '',
+        'files': [{'path': path.name, 'starting_time': dict(start), 'duration': dict(span),
+                   'message_count': total}],
+        'custom_data': data,
+        'ros_distro': 'jazzy',
+    }
+    write_yaml(bagdir / 'metadata.yaml', {'rosbag2_bagfile_information': info})
+    return info
+
+
+def add_custom_data(bagdir: Path, custom_data: dict) -> None:
+    """Add custom_data entries and METADATA_MARKER to a metadata.yaml another writer wrote."""
+    meta = bagdir / 'metadata.yaml'
+    doc = yaml.safe_load(meta.read_text())
+    info = doc['rosbag2_bagfile_information']
+    data = dict(info.get('custom_data') or {})
+    data.update(custom_data)
+    data[METADATA_MARKER[0]] = METADATA_MARKER[1]
+    info['custom_data'] = data
+    write_yaml(meta, doc)

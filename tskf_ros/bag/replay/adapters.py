@@ -1,0 +1,157 @@
+"""The live nodes' work on one bag message at a time, without DDS or a clock."""
+
+from typing import Any, Callable, Optional, Union
+
+from rclpy.qos import QoSProfile
+from rosbags.serde import SerdeError
+
+from tskf_ros.bag.cdr import EstimateEncoder, fixed_decoder, serialize
+from tskf_ros.bag.message_types import typestore
+from tskf_ros.core.units import NS
+from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
+from tskf_ros.messages import alignment_interface as aligner
+from tskf_ros.messages import estimator_interface as estimator
+from tskf_ros.messages.estimator_interface import (bag_outcome_messages, BAG_OUTPUT_TOPICS,
+                                                   extractor, input_from_msg, INPUT_TYPE,
+                                                   INPUT_TYPES, NodeConfig, output_qos)
+from tskf_ros.owc.session import EstimatorSession, Outcome
+
+__all__ = ['ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimator', 'sample_reader', 'Sample',
+           'UNDECODABLE']
+
+# what deserializing a message that is not of its type raises (rosbags' deserializer)
+UNDECODABLE = (SerdeError,)
+# (kind, revised) -> bag topic of the estimates and of mu (TwistWithCovarianceStamped,
+# TimeReference), and of the JointState mirror of each estimate topic
+ESTIMATE_TOPICS = BAG_OUTPUT_TOPICS
+STATES_TOPICS = {(kind, revised): BAG_OUTPUT_TOPICS[kind + '_states', revised]
+                 for kind, revised in BAG_OUTPUT_TOPICS if not kind.endswith('_states')
+                 and kind != 'mu'}
+# (stamp ns, value, variance) of a measurement
+Sample = tuple[int, float, float]
+AnyOutcome = Union[Outcome, AlignOutcome]
+AnyConfig = Union[NodeConfig, aligner.NodeConfig]
+
+
+def sample_reader(msgtype: str,
+                  extract: Callable[[Any, int], Sample]) -> Callable[[bytes, int], Sample]:
+    """
+    Return read(cdr bytes, log ns) -> (stamp ns, value, variance) for a type of INPUT_TYPES.
+
+    What extract(rosbags' deserialize_cdr(data), log_ns) returns (or the SerdeError it
+    raises), read from the bytes by cdr.fixed_decoder, or by rosbags where that leaves it.
+    """
+    kind = INPUT_TYPES[msgtype]
+    decode = fixed_decoder(msgtype, [kind.value] + ([kind.variance] if kind.variance else []))
+    deserialize = typestore().deserialize_cdr
+
+    def slow(data: bytes, log_ns: int) -> Sample:
+        return extract(deserialize(data, msgtype), log_ns)
+    if not kind.stamped:
+        def read_plain(data: bytes, log_ns: int) -> Sample:
+            got = decode(data)
+            return slow(data, log_ns) if got is None else (int(log_ns), got[1], 0.0)
+        return read_plain
+    if kind.variance is None:
+        def read_no_variance(data: bytes, log_ns: int) -> Sample:
+            got = decode(data)
+            return slow(data, log_ns) if got is None else (got[0], got[1], 0.0)
+        return read_no_variance
+
+    def read(data: bytes, log_ns: int) -> Sample:
+        return decode(data) or slow(data, log_ns)
+    return read
+
+
+class OfflineEstimator:
+    """The live timescale_estimator node's work on one message at a time."""
+
+    interface = estimator   # the node's module in tskf_ros.messages
+    session_class: type = EstimatorSession
+
+    def __init__(self, config: AnyConfig, msgtype: str) -> None:
+        self.config = config
+        self.session = self.session_class(config.session)
+        self.extract = extractor(msgtype)
+        self.read_sample = sample_reader(msgtype, self.extract)
+        self._deserialize = typestore().deserialize_cdr
+        self.period_ns = int(round(config.diagnostics_period * NS))
+        self.next_diag: Optional[int] = None
+        self._encoder: Optional[EstimateEncoder] = None
+
+    def output_topics(self) -> list[tuple[str, str, QoSProfile]]:
+        """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
+        qos = output_qos(self.config)
+        return [(name, estimator.output_type(key), qos)
+                for key, name in BAG_OUTPUT_TOPICS.items()]
+
+    def diagnostics_due(self, log_ns: int) -> list[tuple[int, Any]]:
+        """
+        Return the /diagnostics message due at log_ns, if any: at most one.
+
+        When several periods have elapsed since the last one, the message is stamped at the
+        latest due time (the others would repeat the same state).
+        """
+        if self.period_ns <= 0:
+            return []
+        if self.next_diag is None:
+            self.next_diag = log_ns + self.period_ns
+        if log_ns < self.next_diag:
+            return []
+        due = self.next_diag + (log_ns - self.next_diag) // self.period_ns * self.period_ns
+        self.next_diag = due + self.period_ns
+        return [(due, self.interface.diagnostics_message(self.session, self.config, due))]
+
+    def process(self, data: bytes, log_ns: int) -> tuple[Sample, AnyOutcome]:
+        """Decode one measurement and run it; return ((stamp, value, variance), outcome)."""
+        sample = self.read_sample(data, log_ns)
+        return sample, self.session.add(*sample, now_ns=log_ns)
+
+    def process_input(self, data: bytes, log_ns: int) -> tuple[tuple, Outcome]:
+        """Deserialize one input u (rosbags) and run it; return ((stamp, u), outcome)."""
+        sample = input_from_msg(self._deserialize(data, INPUT_TYPE), self.session)
+        return sample, self.session.add_input(*sample)
+
+    def messages(self, out: AnyOutcome) -> list[tuple[str, Any]]:
+        """Return the (bag topic, rclpy message) pairs the live node publishes for out."""
+        return bag_outcome_messages(out, self.config)
+
+    def encoded(self, out: AnyOutcome) -> list[tuple[str, bytes]]:
+        """Return what messages(out) returns, serialized (canonical CDR, EstimateEncoder)."""
+        enc = self._encoder
+        if enc is None:
+            names = self.config.session.model.state_names
+            enc = self._encoder = EstimateEncoder(self.config.frame_id, names, len(names))
+        pairs = []
+        for e in out.estimates:
+            key = e.kind, e.revised
+            twist, states = enc.pair(e.stamp_ns, e.x, e.P)
+            pairs += ((ESTIMATE_TOPICS[key], twist), (STATES_TOPICS[key], states))
+        pairs += [(ESTIMATE_TOPICS['mu', j.revised], enc.jump(j.stamp_ns, j.sigma_ns))
+                  for j in out.jumps]
+        return pairs
+
+
+class OfflineAligner(OfflineEstimator):
+    """The live alignment node's work on one message at a time."""
+
+    interface = aligner
+    session_class = AlignmentSession
+
+    def output_topics(self) -> list[tuple[str, str, QoSProfile]]:
+        """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
+        return [(name, aligner.OUTPUT_TYPES[key], aligner.output_qos(self.config, key))
+                for key, name in aligner.BAG_OUTPUT_TOPICS.items()]
+
+    def process(self, data: bytes, log_ns: int) -> tuple[Sample, AnyOutcome]:
+        """Decode one intensity sample and run it; return (sample, outcome)."""
+        sample = self.read_sample(data, log_ns)
+        return sample, self.session.add(sample[0], sample[1], now_ns=log_ns)
+
+    def messages(self, out: AnyOutcome) -> list[tuple[str, Any]]:
+        """Return the (bag topic, rclpy message) pairs the live node publishes for out."""
+        return aligner.bag_outcome_messages(out, self.config)
+
+    def encoded(self, out: AnyOutcome) -> list[tuple[str, bytes]]:
+        """Return what messages(out) returns, serialized (canonical CDR, rosbags)."""
+        return [(topic, serialize(msg)) for topic, msg in self.messages(out)]

@@ -1,0 +1,221 @@
+"""The replay loop: every message of a bag in storage order through the node's session."""
+
+from contextlib import contextmanager
+import gc
+import os
+from pathlib import Path
+import time
+from typing import Callable, Iterator, Optional, Union
+
+from numpy.typing import NDArray
+
+from tskf_ros.bag.message_types import qos_from_rclpy, typestore
+from tskf_ros.bag.reader import BagReader, Damage
+from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
+                                          UNDECODABLE)
+from tskf_ros.bag.replay.sinks import ArraySink, BagSink, Collector, ReplayResult, Sink
+from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic, InputError
+from tskf_ros.bag.writer import BagExistsError, BagWriter
+from tskf_ros.messages import alignment_interface as aligner
+from tskf_ros.messages import estimator_interface as estimator
+from tskf_ros.messages.estimator_interface import (BAG_POWER_TOPIC, DIAGNOSTICS_TOPIC,
+                                                   DIAGNOSTICS_TYPE, INPUT_TYPE, load_config)
+
+__all__ = ['add_topics', 'FILTER_INPUT', 'FILTERS', 'prepare', 'replay', 'replay_arrays']
+
+PathLike = Union[str, os.PathLike]
+Log = Callable[[str], None]
+FILTERS = ('estimator', 'alignment')
+# filter -> (default input topic, suffix of the default output)
+FILTER_INPUT = {'estimator': (BAG_POWER_TOPIC, '_estimated'),
+                'alignment': (aligner.BAG_INPUT_TOPIC, '_aligned')}
+
+
+def _quiet(line: str) -> None:
+    """Log nothing."""
+
+
+def prepare(bag: PathLike, config: Union[AnyConfig, PathLike, None], topic: Optional[str],
+            filter: str, input_topic: Optional[str], log: Log,  # noqa: A002
+            ) -> tuple[BagReader, OfflineEstimator, ReplayResult]:
+    """Open the bag, load the config, choose the topics; raise before anything is written."""
+    if filter not in FILTERS:
+        raise ValueError(f'filter must be one of {FILTERS}, got {filter!r}')
+    reader = BagReader(bag)
+    aligning = filter == 'alignment'
+    if not isinstance(config, (estimator.NodeConfig, aligner.NodeConfig)):
+        config = (aligner.load_config if aligning else load_config)(config)
+    result = ReplayResult()
+    result.topic, result.msgtype, result.assumptions = choose_topic(
+        reader, topic, FILTER_INPUT[filter][0])
+    if aligning:
+        result.assumptions.append(aligner.OPEN_LOOP_NOTE)
+    else:
+        result.input_topic, notes = choose_input_topic(reader, input_topic)
+        result.assumptions += notes
+    for line in result.assumptions:
+        log(line)
+    est = (OfflineAligner if aligning else OfflineEstimator)(config, result.msgtype)
+    return reader, est, result
+
+
+def replay(bag: PathLike, output: Optional[PathLike] = None, *,
+           params_file: Optional[PathLike] = None, topic: Optional[str] = None,
+           overwrite: bool = False, compress: bool = False, diagnostics: bool = True,
+           log: Log = _quiet,
+           filter: str = 'estimator',  # noqa: A002 (the CLI's --filter)
+           input_topic: Optional[str] = None) -> ReplayResult:
+    """
+    Run the estimator over `bag`; write `output` (a new bag) or, if None, collect in memory.
+
+    filter='alignment' runs the alignment node's session instead (open loop: its commands
+    do not move the recorded receiver).
+    input_topic: the estimator's input u (default /input if present; see choose_input_topic).
+    In memory, `result.outputs` holds (topic, log time, rclpy message or the input's
+    RawMessage) in order.
+
+    Raises BagError / ParamsError / BagTypeError before anything is written if the bag or
+    the parameters cannot be used.  Damage met while reading stops the replay; what came
+    before is processed and written, and `result.damage` says where it stopped.
+    """
+    t0 = time.perf_counter()
+    if output is not None:
+        _check_output(Path(bag), Path(output), overwrite)
+    reader, est, result = prepare(bag, params_file, topic, filter, input_topic, log)
+    if output is None:
+        result.damage = _run(reader, est, Collector(result), result, diagnostics)
+        result.seconds = time.perf_counter() - t0
+        return result
+    writer = BagWriter(output, overwrite=overwrite, compress=compress)
+    writer.open()
+    try:
+        add_topics(writer, reader, est, diagnostics, log)
+        if filter == 'alignment':
+            writer.set_custom_data('tskf_ros.open_loop', aligner.OPEN_LOOP_NOTE)
+        with _gc_paused(filter == 'estimator'):
+            result.damage = _run(reader, est, BagSink(writer, result), result, diagnostics)
+        if result.damage is not None:
+            writer.set_custom_data('tskf_ros.input_damage', str(result.damage))
+        writer.close()
+    except BaseException:
+        writer.abort()
+        raise
+    result.seconds = time.perf_counter() - t0
+    return result
+
+
+def replay_arrays(bag: PathLike, config: Union[AnyConfig, PathLike, None] = None, *,
+                  topic: Optional[str] = None, input_topic: Optional[str] = None,
+                  diagnostics: bool = True, log: Log = _quiet) -> dict[str, NDArray]:
+    """
+    Run the estimator over `bag` and return its outputs as numpy arrays; write nothing.
+
+    config: a NodeConfig (estimator_interface.load_config / parameters_to_config), a
+    parameter file, or None for the node's defaults.  The keys (see ArraySink) hold what
+    the output bag's topics hold, one row per message; 'meta.damage' is '' or the damage
+    that stopped the reading (the rows are what came before it).  Raises as replay().
+    """
+    reader, est, result = prepare(bag, config, topic, 'estimator', input_topic, log)
+    sink = ArraySink(est)
+    with _gc_paused():
+        result.damage = _run(reader, est, sink, result, diagnostics)
+        arrays = sink.arrays(result)
+        del sink            # its rows go now, before the collector would scan them
+    return arrays
+
+
+@contextmanager
+def _gc_paused(pause: bool = True) -> Iterator[None]:
+    """
+    Pause Python's cyclic garbage collector (if it runs) for the estimator's replay loop.
+
+    The loop makes no reference cycles; the collector would only rescan the rows kept
+    (doc/design/bags.md).  It is restored on the way out, whatever happens.
+    """
+    was = pause and gc.isenabled()
+    if was:
+        gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
+def add_topics(writer: BagWriter, reader: BagReader, est: OfflineEstimator,
+               diagnostics: bool, log: Log) -> None:
+    """Add the input bag's topics (those with a definition) and the node's outputs."""
+    store = typestore()
+    for name, info in reader.topics.items():
+        if info.msgtype in store.fielddefs or info.msgdef:
+            writer.add_topic(name, info.msgtype, qos=info.qos, msgdef=info.msgdef)
+        else:
+            log(f'{name}: type {info.msgtype} has no definition here; not copied')
+    for name, msgtype, qos in est.output_topics():
+        if not writer.has_topic(name):
+            writer.add_topic(name, msgtype, qos=[qos_from_rclpy(qos)])
+    if diagnostics and not writer.has_topic(DIAGNOSTICS_TOPIC):
+        writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, qos=[qos_from_rclpy(
+            est.output_topics()[0][2])])
+
+
+def _check_output(bag: Path, output: Path, overwrite: bool) -> None:
+    """Raise a BagError if `output` cannot be written (before anything is read or made)."""
+    out, src = output.resolve(), bag.resolve()
+    if out == src or src.is_relative_to(out) or out.is_relative_to(src):
+        raise BagExistsError(f'{output}: is (or holds, or is inside) the input bag {bag}; '
+                             'give another output')
+    BagWriter(output, overwrite=overwrite).check_target()
+
+
+def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayResult,
+         diagnostics: bool) -> Optional[Damage]:
+    """Read, estimate, hand the outputs to the sink; return the damage that stopped it."""
+    topic, input_topic = result.topic, result.input_topic
+    process, process_input = est.process, est.process_input
+    copy = sink.copy if sink.copies else None
+    outcome = sink.outcome
+    statuses = result.statuses
+    # the log time from which est.diagnostics_due may have something (None: never)
+    due_at = -1 if diagnostics else None
+    read = samples = 0          # result.read and result.samples, kept in locals
+    try:
+        for raw in reader.messages():
+            read += 1
+            log_ns = raw.log_time_ns
+            if due_at is not None and log_ns >= due_at:
+                for t, msg in est.diagnostics_due(log_ns):
+                    sink.diagnostics(t, msg)
+                due_at = est.next_diag
+            if copy is not None:
+                copy(raw)
+            name = raw.topic
+            if name == topic:
+                try:
+                    sample, out = process(raw.data, log_ns)
+                except UNDECODABLE as exc:
+                    return _undecodable(reader, read, name, result.msgtype, exc)
+                samples += 1
+                statuses[out.status] += 1
+                outcome(est, log_ns, sample, out, False)
+            elif name == input_topic:
+                try:
+                    sample, out = process_input(raw.data, log_ns)
+                except UNDECODABLE as exc:
+                    return _undecodable(reader, read, name, INPUT_TYPE, exc)
+                result.inputs += 1
+                result.input_statuses[out.status] += 1
+                outcome(est, log_ns, sample, out, True)
+    finally:
+        result.read += read
+        result.samples += samples
+    if result.samples == 0 and reader.damage is None:
+        raise InputError(f'{reader.path}: no messages on {topic}')
+    return reader.damage
+
+
+def _undecodable(reader: BagReader, read: int, topic: str, msgtype: str,
+                 exc: Exception) -> Damage:
+    """Return the Damage of message `read` (1 first), which does not deserialize."""
+    return Damage(str(reader.path), -1, f'message {read} on {topic} '
+                  f'does not deserialize as {msgtype} ({exc})', read - 1)
