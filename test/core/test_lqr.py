@@ -305,8 +305,11 @@ def test_no_stationary_solution_is_refused():
     one_line(excinfo)
 
 
-def test_one_step_needs_a_right_scattered_point():
+def test_one_step_needs_a_right_scattered_point_and_a_stretch_a_length():
     for mu in (0.0, -1.0, np.inf):
         with pytest.raises(LQRError, match='finite mu > 0') as excinfo:
             regulator().step(F, mu)
+        one_line(excinfo)
+        with pytest.raises(LQRError, match='finite length > 0') as excinfo:
+            regulator().integrate(F, mu)
         one_line(excinfo)

@@ -158,6 +158,8 @@ class TimeScaleLQR:
         Return S at the start and s -> S(start + s), s in [0, duration] (scipy's DOP853).
         """
         A, B, Q, R = self.A, self.B, self.Q, self.R
+        if not (math.isfinite(duration) and duration > 0):
+            raise LQRError(f'a dense stretch needs a finite length > 0, got {duration}')
         if not np.all(np.linalg.eigvalsh(R) > 0):
             raise LQRError('a dense stretch needs R positive definite (the continuous '
                            'Riccati equation has R^-1)')
