@@ -35,3 +35,12 @@ def test_experiment_writes_the_schema(tmp_path, capsys):
             inside = np.mean(np.abs((traj.phi + 180.0) % 360.0 - 180.0) <= 15.0, axis=0)
             assert got['angular']['mean'][i] == pytest.approx(100 * np.mean(inside), abs=1e-9)
     assert 'noise' in capsys.readouterr().out
+
+
+def test_alignment_mc_records_the_controller(tmp_path, capsys):
+    out = tmp_path / 'a.json'
+    assert alignment_mc.main(['--runs', '3', '--steps', '30', '--noise-levels', '0.2',
+                              '--controller', 'lqg', '--json', str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data['config']['controller'] == 'lqg'
+    assert set(data['results']) == set(led.ALGORITHMS)

@@ -12,7 +12,7 @@ Simon, Optimal State Estimation, Wiley 2006, eqs. 5.17-5.19):
 d is an offset of the predicted measurement: Cai et al.'s output offset D for a linear
 model, h(x) - H x for an extended filter linearised at x (so H x + d = h(x)).
 The time-scale filter, the switching and lifted filters and the scanning EKF all call
-these; `update_batch` runs the same update over a leading axis of independent runs.
+these; `update_batch` and `predict_batch` run them over a leading axis of independent runs.
 """
 
 import numba
@@ -154,6 +154,16 @@ def update_batch(x: NDArray[np.float64], P: NDArray[np.float64], z: NDArray[np.f
     return x_out, P_out
 
 
+@_jit
+def predict_batch(x: NDArray[np.float64], P: NDArray[np.float64], F: Matrix, Q: Matrix,
+                  Bu: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Run `predict` for every run i on (x[i], P[i], Bu[i]), F and Q shared; returns (x, P)."""
+    x_out, P_out = np.empty_like(x), np.empty_like(P)
+    for i in range(x.shape[0]):
+        x_out[i], P_out[i] = predict(x[i], P[i], F, Q, Bu[i])
+    return x_out, P_out
+
+
 def warm_up() -> None:
     """Compile every kernel for float64 arrays, or load them from numba's on-disk cache."""
     x, P, F, z = np.zeros(2), np.eye(2), np.eye(2), np.zeros(1)
@@ -162,3 +172,4 @@ def warm_up() -> None:
     predict(x, P, F, P, x)
     update(x, P, z, H, R, z)
     update_batch(x[None], P[None], x[None], F[None], P[None], x[None])
+    predict_batch(x[None], P[None], F, P, x[None])

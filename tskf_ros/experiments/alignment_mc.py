@@ -53,19 +53,21 @@ class HoldLast:
 
 
 def build(name: str, runs: int, link: led.TrackingLinkConfig, response: led.IncidenceResponse,
-          ekf: led.EKFConfig, clip: bool) -> led.Aligner:
-    """Build the aligner for `name` (led.ALGORITHMS or 'ekf_hold')."""
+          ekf: led.EKFConfig, clip: bool, controller: str = 'p') -> led.Aligner:
+    """Build the aligner for `name` (led.ALGORITHMS or 'ekf_hold'); the EKF's controller."""
     if name == 'ekf_hold':
         return HoldLast(led.make_aligner('ekf', runs=runs, dt=link.dt, response=response,
-                                         ekf=ekf))
-    return led.make_aligner(name, runs=runs, dt=link.dt, response=response, ekf=ekf, clip=clip)
+                                         ekf=ekf, controller=controller))
+    return led.make_aligner(name, runs=runs, dt=link.dt, response=response, ekf=ekf, clip=clip,
+                            controller=controller)
 
 
 def evaluate(name: str, runs: int, link: led.TrackingLinkConfig, rng: np.random.Generator,
-             response: led.IncidenceResponse, ekf: led.EKFConfig, clip: bool
-             ) -> tuple[np.ndarray, np.ndarray]:
+             response: led.IncidenceResponse, ekf: led.EKFConfig, clip: bool,
+             controller: str = 'p') -> tuple[np.ndarray, np.ndarray]:
     """Return the tracking % (angular, measure) per run of one algorithm on one link."""
-    traj = led.simulate_tracking(build(name, runs, link, response, ekf, clip), link, rng, response)
+    aligner = build(name, runs, link, response, ekf, clip, controller)
+    traj = led.simulate_tracking(aligner, link, rng, response)
     return led.tracking(traj, threshold=led.TRACKING_LEVEL * link.max_intensity)
 
 
@@ -83,7 +85,7 @@ def _record(results: dict, name: str, angular: np.ndarray, measure: np.ndarray) 
 def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.TrackingLinkConfig,
           seed: int, response: led.IncidenceResponse, ekf: led.EKFConfig,
           algorithms: Sequence[str] = led.ALGORITHMS, clip: bool = False,
-          progress: Optional[Progress] = None) -> dict:
+          controller: str = 'p', progress: Optional[Progress] = None) -> dict:
     """Run every algorithm at each value of a LinkConfig field ('noise' or 'dropout')."""
     results = _empty(algorithms)
     start = time.perf_counter()
@@ -93,7 +95,7 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
         parts = []
         for name in algorithms:
             rng = np.random.default_rng(seed)     # common random numbers: the same draws
-            angular, measure = evaluate(name, runs, cfg, rng, response, ekf, clip)
+            angular, measure = evaluate(name, runs, cfg, rng, response, ekf, clip, controller)
             _record(results, name, angular, measure)
             parts.append(f'{name} {np.mean(angular):5.1f}%')
         if progress is not None:
@@ -107,7 +109,7 @@ def _config_record(args: argparse.Namespace, response: led.IncidenceResponse) ->
     return {'runs': args.runs, 'beta_deg_per_s': args.beta, 'steps': args.steps, 'dt_s': args.dt,
             'seed': args.seed, 'x2_0_deg': args.x2_0, 'max_intensity_v': led.MAX_INTENSITY,
             'units_per_degree': response.units_per_degree, 'x1_floor': args.x1_floor,
-            'clip_three_point': args.clip_three_point,
+            'clip_three_point': args.clip_three_point, 'controller': args.controller,
             'tracking': {'angle_deg': led.TRACKING_ANGLE,
                          'level_v': led.TRACKING_LEVEL * led.MAX_INTENSITY}}
 
@@ -198,7 +200,7 @@ def single_run(beta: float, args: argparse.Namespace, response: led.IncidenceRes
     """Run the EKF once (default noise: R_sys); return it and its tracking %."""
     link = led.TrackingLinkConfig(beta=beta, dt=args.dt, steps=args.steps, noise=args.run_noise,
                                   x2_0=args.x2_0, dropout=args.dropout)
-    aligner = build('ekf', 1, link, response, ekf, False)
+    aligner = build('ekf', 1, link, response, ekf, False, args.controller)
     traj = led.simulate_tracking(aligner, link, np.random.default_rng(args.seed), response)
     angular, measure = led.tracking(traj)
     return traj, float(angular[0]), float(measure[0])
@@ -238,6 +240,9 @@ def parser() -> argparse.ArgumentParser:
                        help='fit units per degree of g (default: the 20%%-at-15-deg unit)')
     units.add_argument('--literal-units', action='store_true',
                        help='read g with phi in degrees, as printed (1 unit per degree)')
+    p.add_argument('--controller', choices=led.CONTROLLERS, default='p',
+                   help="the EKF's controller: p (the paper's eq. (21)) or lqg "
+                        '(tskf_ros.led.lqg_alignment)')
     p.add_argument('--x1-floor', type=float, default=None,
                    help='keep x1hat >= this (not in the paper; default off)')
     p.add_argument('--clip-three-point', action='store_true',
@@ -283,7 +288,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     link = led.TrackingLinkConfig(beta=args.beta, dt=args.dt, steps=args.steps, x2_0=args.x2_0,
                                   dropout=args.dropout)
     common = {'runs': args.runs, 'seed': args.seed, 'response': response, 'ekf': ekf,
-              'clip': args.clip_three_point, 'progress': progress}
+              'clip': args.clip_three_point, 'controller': args.controller,
+              'progress': progress}
     progress(f'g at {response.units_per_degree:.4g} fit units per degree; beta {args.beta:g} '
              f'deg/s; {args.steps} steps of {args.dt:g} s; {args.runs} runs per point')
 
@@ -300,8 +306,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.png:
             fig = plot_tracking(
                 args.noise_levels, out['results'], xlabel='noise level (std of v, V)',
-                title=f'beta = {args.beta:g} deg/s, {args.runs} runs, dropout {args.dropout:g}'
-                      ' (error bars: std / 5)')
+                title=f'beta = {args.beta:g} deg/s, {args.runs} runs, dropout {args.dropout:g},'
+                      f' EKF controller {args.controller} (error bars: std / 5)')
             save_figure(fig, args.png)
             progress(f'wrote {args.png}')
 
@@ -310,7 +316,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             continue
         traj, angular, measure = single_run(beta, args, response, ekf)
         fig = plot_run(traj, threshold=led.TRACKING_LEVEL * led.MAX_INTENSITY,
-                       title=f'EKF, beta = {beta:g} deg/s, noise {args.run_noise:g} V: '
+                       title=f'EKF ({args.controller}), beta = {beta:g} deg/s, '
+                             f'noise {args.run_noise:g} V: '
                              f'tracking {angular:.1f}% (angle), {measure:.1f}% (measure)')
         save_figure(fig, path)
         progress(f'wrote {path} (beta {beta:g} deg/s: tracking {angular:.1f}%)')

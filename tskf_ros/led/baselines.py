@@ -11,6 +11,7 @@ from typing import Optional, Union
 import numpy as np
 
 from tskf_ros.led.intensity_model import AlignmentError, FloatArray, IncidenceResponse
+from tskf_ros.led.lqg_alignment import LQGAligner, LQGConfig
 from tskf_ros.led.scanning_ekf import (as_measurement, EKFConfig, Measurement, PAPER_DT,
                                        ScanningEKF, StampClock)
 
@@ -106,15 +107,22 @@ class ThreePointAveraging(_SteppingAligner):
 
 
 ALGORITHMS = ('ekf', 'hill_climbing', 'three_point')
-# the aligner of each of ALGORITHMS
-AnyAligner = Union[ScanningEKF, HillClimbing, ThreePointAveraging]
+# the EKF's controller: the paper's P controller (21), or the LQG of lqg_alignment
+CONTROLLERS = ('p', 'lqg')
+# the aligner of each of ALGORITHMS (the EKF with either controller)
+AnyAligner = Union[ScanningEKF, LQGAligner, HillClimbing, ThreePointAveraging]
 
 
 def make_aligner(name: str, *, runs: int = 1, dt: float = PAPER_DT,
                  response: Optional[IncidenceResponse] = None,
                  ekf: Optional[EKFConfig] = None, gamma: float = HILL_STEP,
-                 clip: bool = False) -> AnyAligner:
+                 clip: bool = False, controller: str = 'p',
+                 lqg: Optional[LQGConfig] = None) -> AnyAligner:
     """Build the aligner called `name` (one of ALGORITHMS); clip is for three_point."""
+    if controller not in CONTROLLERS:
+        raise AlignmentError(f'unknown controller {controller!r}; expected one of {CONTROLLERS}')
+    if name == 'ekf' and controller == 'lqg':
+        return LQGAligner(lqg if lqg is not None else LQGConfig(dt=dt), response, runs=runs)
     if name == 'ekf':
         config = ekf if ekf is not None else EKFConfig(dt=dt)
         return ScanningEKF(config, response, runs=runs)

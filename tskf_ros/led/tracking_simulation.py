@@ -14,6 +14,7 @@ import numpy as np
 from tskf_ros.led.intensity_model import (AlignmentError, FloatArray, IncidenceResponse,
                                           MAX_INTENSITY, TRACKING_ANGLE, TRACKING_LEVEL,
                                           wrap_degrees)
+from tskf_ros.led.lqg_alignment import LQGAligner
 from tskf_ros.led.scanning_ekf import Aligner, PAPER_DT, PAPER_Q_SYS, ScanningEKF
 
 
@@ -50,7 +51,7 @@ class Trajectory:
     clean: FloatArray      # x1 g(phi), the clean measurement (V)
     z: FloatArray          # the measurement given to the aligner, NaN when missing
     command: FloatArray    # motor command returned by the aligner
-    estimate: Optional[FloatArray] = None   # (steps, runs, 2) posterior, EKF only
+    estimate: Optional[FloatArray] = None   # (steps, runs, 2) posterior [x1, x2], EKFs
 
 
 def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random.Generator,
@@ -75,7 +76,7 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
     missing = rng.random((steps, n)) < link.dropout
     t = np.arange(steps, dtype=float) * link.dt
     shape = (steps, n)
-    ekf = aligner if isinstance(aligner, ScanningEKF) else None
+    ekf = aligner if isinstance(aligner, (ScanningEKF, LQGAligner)) else None
     estimate = None if ekf is None else np.empty((steps, n, 2))
     out = Trajectory(t=t, phi=np.empty(shape), x2=np.empty(shape), x1=np.empty(shape),
                      clean=np.empty(shape), z=np.empty(shape), command=np.empty(shape),
@@ -92,7 +93,7 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
         cmd = aligner.step(t[k], z)
         out.command[k] = cmd
         if ekf is not None and estimate is not None:
-            estimate[k] = ekf.x
+            estimate[k] = ekf.x[:, :2]
         # (25): x2_k = x2_{k-1} + beta + u_{k-1} + w2 (here on phi = x2 + psi, with the scan)
         phi = phi + drift + cmd + w2[k]
         x1 = np.abs(x1 + w1[k])
