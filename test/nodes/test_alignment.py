@@ -55,23 +55,26 @@ def spin_until(executor, condition, what):
 # -- the closed loop ----------------------------------------------------------------------
 
 
-# (algorithm, link, max |phi| after convergence in deg: the EKF's includes its +-10 scan)
-@pytest.mark.parametrize('algorithm, link, worst', [
-    ('ekf', {'seed': 3}, 11.11),
-    ('ekf', {'seed': 4, 'noise': 1.0, 'blockage': 'gilbert_elliott', 'ge_p_gb': 0.05}, 12.88),
-    ('ekf', {'seed': 5, 'blockage': 'bernoulli', 'drop_probability': 0.3}, 11.08),
-    ('hill_climbing', {'seed': 6}, 6.40),
-    ('three_point', {'seed': 7}, 6.91),
+# (algorithm, controller, link, max |phi| after convergence in deg: the EKF's includes its
+# +-10 scan; the LQG's scan is +-4 after acquisition)
+@pytest.mark.parametrize('algorithm, controller, link, worst', [
+    ('ekf', 'p', {'seed': 3}, 11.11),
+    ('ekf', 'p', {'seed': 4, 'noise': 1.0, 'blockage': 'gilbert_elliott', 'ge_p_gb': 0.05},
+     12.88),
+    ('ekf', 'p', {'seed': 5, 'blockage': 'bernoulli', 'drop_probability': 0.3}, 11.08),
+    ('ekf', 'lqg', {'seed': 3}, 5.33),
+    ('hill_climbing', 'p', {'seed': 6}, 6.40),
+    ('three_point', 'p', {'seed': 7}, 6.91),
 ])
-def test_loop_tracks_and_equals_the_core_loop(ros_context, executor_kind, algorithm, link,
-                                              worst):
+def test_loop_tracks_and_equals_the_core_loop(ros_context, executor_kind, algorithm, controller,
+                                              link, worst):
     steps = 400
     sim_params = yaml_parameters('led_link_simulator.yaml', '/**/led_link_simulator', **link,
                                  time_factor=0.0, duration=steps * DT, start_time=1.0,
                                  wait_for_subscribers=1, command_timeout=TIMEOUT)
     sim = LedLinkSimulator(context=ros_context, parameter_overrides=sim_params)
     node = Alignment(context=ros_context, parameter_overrides=yaml_parameters(
-        'alignment.yaml', '/**/alignment', algorithm=algorithm))
+        'alignment.yaml', '/**/alignment', algorithm=algorithm, controller=controller))
     # the reference: the ROS-free loop with the same link and session settings
     ref = closed_loop(sim.config.link, AlignmentSession(node.config.session), steps)
     delivered = sum(not s.blocked for s in ref.samples)

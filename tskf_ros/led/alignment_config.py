@@ -42,6 +42,7 @@ class AlignmentConfig:
     """The session's settings (Table I defaults); angles in degrees, intensities in volts."""
 
     algorithm: str = 'ekf'                       # one of led.ALGORITHMS
+    controller: str = 'p'                        # ekf's controller: one of led.CONTROLLERS
     dt: float = led.PAPER_DT                     # s: the nominal sample period (mu = dt / dt)
     gain: float = led.PAPER_GAIN                 # G of the P controller (21)
     x0: tuple[float, ...] = led.PAPER_X0         # xhat_0 = [x1 (V), x2 (deg)]
@@ -71,6 +72,9 @@ class AlignmentConfig:
         if self.algorithm not in led.ALGORITHMS:
             raise led.AlignmentError(f'algorithm must be one of {led.ALGORITHMS}, '
                                      f'got {self.algorithm!r}')
+        if self.controller not in led.CONTROLLERS:
+            raise led.AlignmentError(f'controller must be one of {led.CONTROLLERS}, '
+                                     f'got {self.controller!r}')
         for name in ('dt', 'gain', 'x1_floor', 'gamma', 'units_per_degree', 'base_initial',
                      'max_gap', 'max_backward', 'gate', 'state_limit', 'max_step',
                      'stale_timeout', 'min_rate_fraction', 'rate_window'):
@@ -134,4 +138,5 @@ class AlignmentConfig:
     def make_aligner(self) -> led.AnyAligner:
         """Build the configured aligner for one run."""
         return led.make_aligner(self.algorithm, runs=1, dt=self.dt, response=self.response(),
-                                ekf=self.ekf(), gamma=self.gamma, clip=self.clip)
+                                ekf=self.ekf(), gamma=self.gamma, clip=self.clip,
+                                controller=self.controller, lqg=led.LQGConfig(dt=self.dt))

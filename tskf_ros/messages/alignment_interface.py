@@ -45,6 +45,10 @@ B = ParameterType.PARAMETER_BOOL
 SESSION_PARAMETERS = {
     'algorithm': (ParameterType.PARAMETER_STRING, 'ekf (the scanning EKF of Section IV), '
                   'hill_climbing or three_point (the baselines of Section V)', None, False),
+    'controller': (ParameterType.PARAMETER_STRING, 'the controller of the ekf: p (Solanki '
+                   'et al. eq. (21), u = -G x2hat) or lqg (the time-scale LQR of Bohner & '
+                   'Wintz 2013 on a drift-estimating EKF; its estimates are not published)',
+                   None, False),
     'dt': (D, 's: nominal sample period; the EKF predicts over mu = elapsed / dt steps',
            (1e-6, 3600.0), False),
     'gain': (D, 'G of the P controller u = -G x2hat (21); needs G > 1/91 for 2 deg scan '

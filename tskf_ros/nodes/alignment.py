@@ -53,7 +53,9 @@ class Alignment(ReconfigurableNode):
         cfg = self.config.session
         self.get_logger().info(
             f'aligning with {cfg.algorithm}'
-            + (f' (G = {cfg.gain:g}, {len(cfg.scan)} scan angles)'
+            + (' and the time-scale LQG controller' if cfg.algorithm == 'ekf'
+               and cfg.controller == 'lqg' else
+               f' (G = {cfg.gain:g}, {len(cfg.scan)} scan angles)'
                if cfg.algorithm == 'ekf' else f' (gamma = {cfg.gamma:g} deg)')
             + f', base starting at {cfg.base_initial:g} deg')
 
@@ -69,6 +71,8 @@ class Alignment(ReconfigurableNode):
                 d.type, d.dynamic_typing = ParameterType.PARAMETER_NOT_SET, True
             if name == 'algorithm':
                 d.additional_constraints = 'one of ' + ', '.join(led.ALGORITHMS)
+            if name == 'controller':
+                d.additional_constraints = 'one of ' + ', '.join(led.CONTROLLERS)
             self.declare_parameter(name, value, d)
         self.declare_parameter('frame_id', defaults['frame_id'], ParameterDescriptor(
             description='frame_id of the estimates', type=ParameterType.PARAMETER_STRING))
