@@ -313,3 +313,13 @@ def test_one_step_needs_a_right_scattered_point_and_a_stretch_a_length():
         with pytest.raises(LQRError, match='finite length > 0') as excinfo:
             regulator().integrate(F, mu)
         one_line(excinfo)
+
+
+def test_gains_unpack_as_s_and_l():
+    lqr = TimeScaleLQR([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], np.eye(2), [[1.0]], np.eye(2))
+    S, L = lqr.gains([0.5, 0.25, 1.0])
+    assert S.shape == (4, 2, 2) and L.shape == (3, 1, 2)
+    # the last gain is (8) at t_2 from S(t_f) = F: (R + mu B^T F B)^-1 B^T F (I + mu A)
+    mu, A, B, F = 1.0, np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.eye(2)
+    want = np.linalg.solve(np.eye(1) + mu * B.T @ F @ B, B.T @ F @ (np.eye(2) + mu * A))
+    np.testing.assert_allclose(L[-1], want, rtol=1e-12)

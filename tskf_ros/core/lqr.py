@@ -21,8 +21,9 @@ mu (x^T Q x + u^T R u); at mu = 0, (7) is the continuous Riccati equation
 cost is J = 1/2 x(t_0)^T S(t_0) x(t_0).  Derivations and choices: doc/design/lqr.md.
 """
 
+from dataclasses import dataclass, field
 import math
-from typing import Callable, NamedTuple, Optional
+from typing import Callable, Iterator, NamedTuple, Optional
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -47,9 +48,10 @@ class NotInvertibleError(LQRError):
     """R + mu B^T S^sigma B is singular at some point: Theorem 2.17 gives no gain there."""
 
 
-class LQRGains(NamedTuple):
+@dataclass(frozen=True)
+class LQRGains:
     """
-    The backward sweep over t_0 < ... < t_K = t_f.
+    The backward sweep over t_0 < ... < t_K = t_f; unpacks as (S, L).
 
     S[k] = S(t_k) for k = 0..K, L[k] = the gain (8) at t_k for k = 0..K-1, and for every
     dense stretch k (a right-dense [t_k, t_{k+1}]) stretches[k](s) = S(t_k + s),
@@ -58,7 +60,11 @@ class LQRGains(NamedTuple):
 
     S: Matrix
     L: Matrix
-    stretches: dict[int, Callable[[float], Matrix]]
+    stretches: dict[int, Callable[[float], Matrix]] = field(default_factory=dict)
+
+    def __iter__(self) -> Iterator[Matrix]:
+        """Yield S and L, so that `S, L = lqr.gains(mu)`."""
+        return iter((self.S, self.L))
 
 
 class Stationary(NamedTuple):
