@@ -22,7 +22,8 @@ import time
 # runnable from a source checkout without installing: the repository root on the path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tskf_ros.owc.power_meter import MeterConfig, PowerMeter  # noqa: E402
+from tskf_ros.owc.meter_settings import MeterConfig  # noqa: E402
+from tskf_ros.owc.power_meter import PowerMeter  # noqa: E402
 
 SIM_YAML = Path(__file__).resolve().parent.parent / 'config' / 'pm100_sim.yaml'
 

@@ -11,8 +11,9 @@ import math
 from hypothesis import given, settings, strategies as st
 import pytest
 
-from tskf_ros.owc.power_meter import (MeterConfig, MeterError, PowerMeter, ScpiCommands,
-                                      SKIP_REASONS, to_milliwatts)
+from tskf_ros.owc.meter_settings import (MeterConfig, MeterError, ScpiCommands, SKIP_REASONS,
+                                         to_milliwatts)
+from tskf_ros.owc.power_meter import PowerMeter
 from visa_faults import bench, FaultyOpener
 
 

@@ -20,7 +20,8 @@ import shutil
 import pyvisa
 from pyvisa.constants import StatusCode
 
-from tskf_ros.owc.power_meter import DEFAULT_RESOURCE, VisaOpener
+from tskf_ros.owc.meter_settings import DEFAULT_RESOURCE
+from tskf_ros.owc.power_meter import VisaOpener
 
 SIM_YAML = Path(__file__).resolve().parent.parent / 'config' / 'pm100_sim.yaml'
 

@@ -10,8 +10,9 @@ from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import POWER_TOPIC
 from tskf_ros.messages.parameters import descriptor
 from tskf_ros.messages.qos import SENSOR_OUTPUT_QOS
-from tskf_ros.owc.power_meter import (MeterConfig, MeterError, PowerMeter, Reading,
-                                      ScpiCommands, UNITS)
+from tskf_ros.owc.meter_settings import (MeterConfig, MeterError, Reading, ScpiCommands,
+                                         UNITS)
+from tskf_ros.owc.power_meter import PowerMeter
 
 __all__ = ['DriverConfig', 'declare_all', 'default_parameters', 'diagnostics_message',
            'make_config', 'MeterError', 'NODE_NAME', 'PARAMETERS', 'POWER_TOPIC',

@@ -1,0 +1,145 @@
+"""The settings of an SCPI optical power meter and the reading of its replies in mW."""
+
+from dataclasses import dataclass, field, fields
+import math
+from typing import Optional
+
+from pyvisa import rname
+
+# the simulated PM100D of config/pm100_sim.yaml; a real one: USB0::0x1313::0x8078::<serial>
+DEFAULT_RESOURCE = 'USB0::0x1313::0x8078::P0000000::INSTR'
+# SCPI unit word -> mW per unit ('MW' is milliwatt: SCPI suffixes are case-blind, M = milli)
+LINEAR_UNITS = {'W': 1e3, 'MW': 1.0, 'UW': 1e-3, 'NW': 1e-6}
+DBM = 'DBM'
+UNITS = {'W': 'W', 'mW': 'MW', 'dBm': DBM}      # the unit parameter -> its SCPI word
+# SCPI's overflow (+-9.9E37) and not-a-number (9.91E37) sentinels
+SCPI_OVERFLOW = 9.9e37
+# why a reading was not published; 'no_clock': the stamping clock read 0 (a node on
+# use_sim_time before /clock arrives), a stamp the estimator would reject
+SKIP_REASONS = ('timeout', 'overflow', 'not_finite', 'negative', 'above_max', 'unparseable',
+                'wrong_unit', 'no_clock')
+# the error-queue reply that means 'empty' starts with this code
+NO_ERROR = '0'
+MAX_ERRORS_READ = 20
+
+
+class MeterError(ValueError):
+    """A power-meter setting that cannot work (bad resource name, command template, range)."""
+
+
+@dataclass(frozen=True)
+class ScpiCommands:
+    """The SCPI strings, the PM100's by default; '' leaves a step out."""
+
+    identify: str = '*IDN?'
+    clear_status: str = '*CLS'
+    set_unit: str = 'SENS:POW:UNIT {unit}'
+    unit_query: str = 'SENS:POW:UNIT?'
+    set_wavelength: str = 'SENS:CORR:WAV {wavelength:g}'
+    set_averaging: str = 'SENS:AVER:COUN {averaging:d}'
+    configure: str = 'CONF:POW'
+    read: str = 'MEAS:POW?'
+    error_query: str = 'SYST:ERR?'
+
+
+@dataclass(frozen=True)
+class MeterConfig:
+    """What to open, how to set it up, how to judge its readings, how to retry."""
+
+    resource: str = DEFAULT_RESOURCE
+    backend: str = '@py'
+    unit: str = 'W'                 # W | mW | dBm, the unit the meter is set to
+    wavelength: float = 1550.0      # nm, the sensor's calibration wavelength
+    averaging: int = 1              # samples the meter averages per reading
+    timeout: float = 1.0            # s, one query
+    max_power: float = 1e4          # mW, a reading above is refused
+    max_timeouts: int = 3           # timeouts in a row that mean the device is gone
+    reconnect_initial: float = 0.5  # s, first retry delay; doubles per failure
+    reconnect_max: float = 30.0     # s, the cap of the retry delay
+    unit_check_every: int = 1       # query the unit before every n-th reading; 0: never
+    commands: ScpiCommands = field(default_factory=ScpiCommands)
+
+    def __post_init__(self) -> None:
+        try:
+            rname.parse_resource_name(self.resource)
+        except rname.InvalidResourceName as exc:
+            raise MeterError(f'resource {self.resource!r} is not a VISA resource name '
+                             f'({exc})') from None
+        if self.unit not in UNITS:
+            raise MeterError(f'unit must be one of {", ".join(UNITS)}, got {self.unit!r}')
+        checks = {'wavelength': self.wavelength > 0, 'averaging': self.averaging >= 1,
+                  'timeout': self.timeout > 0, 'max_power': self.max_power > 0,
+                  'max_timeouts': self.max_timeouts >= 1,
+                  'reconnect_initial': self.reconnect_initial > 0,
+                  'reconnect_max': self.reconnect_max >= self.reconnect_initial,
+                  'unit_check_every': self.unit_check_every >= 0}
+        bad = [name for name, ok in checks.items() if not ok]
+        if bad:
+            raise MeterError(f'out of range: {", ".join(f"{n}={getattr(self, n)!r}" for n in bad)}'
+                             ' (reconnect_max must be >= reconnect_initial)')
+        if not self.commands.read:
+            raise MeterError('the read command is empty')
+        for f in fields(ScpiCommands):
+            self.command(f.name)
+
+    def command(self, name: str) -> str:
+        """Return the command `name` with {unit}, {wavelength} and {averaging} filled in."""
+        template = getattr(self.commands, name)
+        try:
+            return template.format(unit=UNITS[self.unit], wavelength=self.wavelength,
+                                   averaging=self.averaging)
+        except (KeyError, IndexError, ValueError) as exc:
+            raise MeterError(f'command {name} {template!r}: {exc!r} (fields: {{unit}}, '
+                             '{wavelength}, {averaging})') from None
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One published reading: stamp (ns, stamping clock), power (mW), query latency (ns)."""
+
+    stamp_ns: int
+    power_mw: float
+    latency_ns: int
+
+
+def parse_unit(word: str) -> Optional[str]:
+    """Return the SCPI unit word of a reply ('w', 'dBm' -> 'W', 'DBM'), None if unknown."""
+    w = word.strip().upper()
+    return w if w in LINEAR_UNITS or w == DBM else None
+
+
+def to_milliwatts(reply: str, unit: Optional[str], max_power: float
+                  ) -> tuple[Optional[float], str, Optional[str]]:
+    """
+    Return (power mW, '', unit) for a valid reply, else (None, reason, unit).
+
+    `unit` is the SCPI unit word the meter last reported (None: unknown); a unit the reply
+    names after the number ('1.2E-3 W') takes precedence.  The unit returned is the one
+    the value was read in; the reason is one of SKIP_REASONS.
+    """
+    parts = reply.split()
+    if len(parts) == 2:
+        unit = parse_unit(parts[1])
+    try:
+        if not 1 <= len(parts) <= 2:
+            raise ValueError(reply)
+        value = float(parts[0])
+    except ValueError:
+        return None, 'unparseable', unit
+    if not math.isfinite(value):
+        return None, 'not_finite', unit
+    if abs(value) >= SCPI_OVERFLOW:
+        return None, 'overflow', unit
+    if unit is None:
+        return None, 'wrong_unit', unit
+    if unit == DBM:
+        # P [mW] = 10^(P [dBm] / 10): any finite dBm is a positive power
+        if value > 10 * math.log10(max_power):
+            return None, 'above_max', unit
+        return 10.0 ** (value / 10.0), '', unit
+    if value < 0:
+        return None, 'negative', unit
+    mw = value * LINEAR_UNITS[unit]
+    if mw > max_power:
+        return None, 'above_max', unit
+    return mw, '', unit
