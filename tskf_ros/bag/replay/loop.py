@@ -15,7 +15,7 @@ from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEsti
                                           UNDECODABLE)
 from tskf_ros.bag.replay.sinks import (ArraySink, BagSink, Collector, ReplayResult, Sink,
                                        SMOOTHED_TOPIC)
-from tskf_ros.bag.replay.smoothing import SmoothingRecorder
+from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic, InputError
 from tskf_ros.bag.writer import BagExistsError, BagWriter
 from tskf_ros.messages import alignment_interface as aligner
@@ -71,7 +71,7 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
     Run the estimator over `bag`; write `output` (a new bag) or, if None, collect in memory.
 
     smooth=True (the estimator, into a bag) also writes the RTS-smoothed estimates x(t|T)
-    of every segment on SMOOTHED_TOPIC once the bag has been read (bag/replay/smoothing).
+    of every segment on SMOOTHED_TOPIC once the bag has been read (bag/replay/rts_replay).
 
     filter='alignment' runs the alignment node's session instead (open loop: its commands
     do not move the recorded receiver).

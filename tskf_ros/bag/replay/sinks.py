@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 from tskf_ros.bag.cdr import serialize
 from tskf_ros.bag.reader import Damage, RawMessage
 from tskf_ros.bag.replay.adapters import AnyOutcome, ESTIMATE_TOPICS, OfflineEstimator
-from tskf_ros.bag.replay.smoothing import SmoothingRecorder
+from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.messages.estimator_interface import DIAGNOSTICS_TOPIC
