@@ -13,9 +13,9 @@ from tskf_ros.bag.message_types import qos_from_rclpy, typestore
 from tskf_ros.bag.reader import BagReader, Damage
 from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
                                           UNDECODABLE)
+from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.replay.sinks import (ArraySink, BagSink, Collector, ReplayResult, Sink,
                                        SMOOTHED_TOPIC)
-from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic, InputError
 from tskf_ros.bag.writer import BagExistsError, BagWriter
 from tskf_ros.messages import alignment_interface as aligner
