@@ -1,8 +1,11 @@
 """python -m tskf_ros.experiments.smoothing: RMS table and figures on the sample bags."""
 
 import numpy as np
+import pytest
 
 from tskf_ros.experiments import smoothing
+from tskf_ros.experiments.bag_analysis import evaluate_bag
+from tskf_ros.messages.estimator_interface import load_config
 
 
 def test_writes_the_figure_and_the_table_for_the_cai_bag(tmp_path, capsys):
@@ -32,3 +35,14 @@ def test_a_missing_bag_is_one_line(tmp_path, capsys):
     assert smoothing.main(['--bags', str(tmp_path), '--out', str(tmp_path / 'o')]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith('smoothing: error: no bag')
+
+
+def test_the_sweep_reports_the_smoothed_rms_of_the_replay():
+    # evaluate_bag (the sweep's row) feeds the session from read_stream; the experiment
+    # replays the bag: both must score the same smoothed estimates against the truth
+    bag = smoothing.BAGS[0]
+    config = load_config(smoothing.REPO / 'config' / bag.params)
+    row = evaluate_bag(smoothing.REPO / 'bags' / bag.name, config)
+    c = smoothing.compare(smoothing.REPO / 'bags', bag, smoothing.REPO / 'config')
+    assert row['rms_smoothed'] == pytest.approx(c.series['smoothed'].rms, rel=1e-12)
+    assert row['rms_corrected'] == pytest.approx(c.series['corrected'].rms, rel=1e-12)
