@@ -2,10 +2,11 @@
 
 import sys
 
-from bag.helpers import make_bag, one_line
+from bag.helpers import BAGS, make_bag, one_line
 from bag.test_reader import corrupt_bag
 
 from tskf_ros.bag.reader import EXIT_DAMAGED
+from tskf_ros.bag.replay.cli import main as replay_main
 from tskf_ros.tools import plot_bag
 
 import yaml
@@ -60,3 +61,31 @@ def test_a_bag_of_an_unknown_package_type_is_refused_in_one_line(tmp_path, capsy
     assert 'Zen' not in out.out
     one_line(out.err, 'plot_bag: error: ', 'this/msg/X')
     assert 'this' not in sys.modules
+
+
+def _legends(monkeypatch):
+    """Make plot_bag keep the legend entries of the figures it saves; return them."""
+    seen = []
+    save = plot_bag._save
+
+    def keep(fig, path):
+        seen.append([t.get_text() for ax in fig.axes if ax.get_legend()
+                     for t in ax.get_legend().get_texts()])
+        return save(fig, path)
+    monkeypatch.setattr(plot_bag, '_save', keep)
+    return seen
+
+
+def test_plot_bag_draws_the_smoothed_estimate_when_the_bag_has_it(tmp_path, monkeypatch):
+    params = str(BAGS.parent / 'config' / 'owc_estimator.yaml')
+    for smooth in (True, False):
+        out = tmp_path / f'est{smooth}'
+        args = [str(BAGS / 'owc_cai_td_1hz'), str(out), '--params-file', params, '-q']
+        assert replay_main(args + ['--smooth'] * smooth) == 0
+        seen = _legends(monkeypatch)
+        assert plot_bag.main([str(out), '--out', str(tmp_path / 'png'),
+                              '--params-file', params]) == 0
+        labels = [label for fig in seen for label in fig]
+        assert ('smoothed x(t|T)' in labels) is smooth
+        assert any(label.startswith('smoothed: RMS') for label in labels) is smooth
+        assert 'corrected x(t|t)' in labels

@@ -11,6 +11,7 @@ from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.message_types import DESERIALIZE_ERRORS, message_class
 from tskf_ros.bag.reader import BagReader, Damage
+from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic
 from tskf_ros.core.noise_fit import nis_summary
 from tskf_ros.messages import conversions
@@ -23,7 +24,7 @@ from tskf_ros.owc.session import EstimatorConfig, REJECT_REASONS, RESET_REASONS
 METRICS = (['n_messages', 'accepted', 'inputs', 'steps', 'gaps', 'resets',
             'nis_n', 'nis_mean', 'nis_band_lo', 'nis_band_hi', 'nis_consistent',
             'nis_fraction_in_band', 'log_likelihood', 'truth_topic', 'truth_states',
-            'truth_points', 'rms_corrected', 'rms_predicted']
+            'truth_points', 'rms_corrected', 'rms_predicted', 'rms_smoothed']
            + [f'rejected_{r}' for r in REJECT_REASONS] + [f'resets_{r}' for r in RESET_REASONS]
            + ['damage'])
 
@@ -93,14 +94,15 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
     return stream
 
 
-def truth_errors(run: StreamRun, stream: Stream, state_names: tuple
-                 ) -> tuple[str, list, int, float, float]:
+def truth_errors(run: StreamRun, stream: Stream, state_names: tuple,
+                 smoothed: Optional[dict] = None) -> tuple[str, list, int, float, float, float]:
     """
-    Return (truth topic, states matched, points, RMS corrected, RMS predicted).
+    Return (truth topic, states matched, points, RMS corrected, predicted, smoothed).
 
     The truth topic is the JointState topic sharing the most joint names with the model's
     state names; the error is taken at every estimate stamp the truth has, over the
-    matched states (root mean square over stamps and states).
+    matched states (root mean square over stamps and states).  smoothed: the RTS
+    estimates as {(segment, stamp_ns): x} (NaN without).
     """
     best, names = '', []
     for t, joints in sorted(stream.truth.items()):
@@ -108,7 +110,7 @@ def truth_errors(run: StreamRun, stream: Stream, state_names: tuple
         if len(common) > len(names):
             best, names = t, common
     if not names:
-        return '', [], 0, float('nan'), float('nan')
+        return '', [], 0, float('nan'), float('nan'), float('nan')
     joints = stream.truth[best]
     index = [state_names.index(n) for n in names]
 
@@ -125,16 +127,18 @@ def truth_errors(run: StreamRun, stream: Stream, state_names: tuple
 
     points, rms_c = rms(run.corrected)
     _, rms_p = rms(run.predicted)
-    return best, names, points, rms_c, rms_p
+    _, rms_s = rms(smoothed) if smoothed is not None else (0, float('nan'))
+    return best, names, points, rms_c, rms_p, rms_s
 
 
-def stream_metrics(run: StreamRun, stream: Stream, config: EstimatorConfig) -> dict:
-    """Return the metrics of METRICS for a session run over a stream."""
+def stream_metrics(run: StreamRun, stream: Stream, config: EstimatorConfig,
+                   smoothed: Optional[dict] = None) -> dict:
+    """Return the metrics of METRICS for a session run over a stream (and its smoothing)."""
     st = run.stats
     p = config.model.C.shape[0]
     nis = nis_summary(run.innovations.nis, p)
-    truth_topic, names, points, rms_c, rms_p = truth_errors(
-        run, stream, tuple(config.model.state_names))
+    truth_topic, names, points, rms_c, rms_p, rms_s = truth_errors(
+        run, stream, tuple(config.model.state_names), smoothed)
     out = {'n_messages': run.measurements, 'accepted': st.accepted, 'inputs': run.inputs,
            'steps': run.steps, 'gaps': st.gaps_total, 'resets': sum(st.resets.values()),
            'nis_n': nis['n'], 'nis_mean': nis['mean'], 'nis_band_lo': nis['band'][0],
@@ -143,6 +147,7 @@ def stream_metrics(run: StreamRun, stream: Stream, config: EstimatorConfig) -> d
            'log_likelihood': run.innovations.log_likelihood() if nis['n'] else None,
            'truth_topic': truth_topic, 'truth_states': ' '.join(names),
            'truth_points': points, 'rms_corrected': rms_c, 'rms_predicted': rms_p,
+           'rms_smoothed': rms_s,
            'damage': str(stream.damage) if stream.damage is not None else ''}
     for r in REJECT_REASONS:
         out[f'rejected_{r}'] = st.rejected[r]
@@ -164,5 +169,8 @@ def evaluate_bag(bag: os.PathLike, config: NodeConfig, *, topic: Optional[str] =
     stream = read_stream(Path(bag), session_config, topic=topic, input_topic=input_topic)
     if stream.measurements == 0 and stream.damage is None:
         raise ValueError(f'{bag}: no messages on {stream.topic}')
-    run = run_stream(session_config, stream.events, use_now=True)
-    return stream_metrics(run, stream, session_config)
+    smoother = SmoothingRecorder(session_config)
+    run = run_stream(session_config, stream.events, use_now=True, observe=smoother.outcome)
+    rows = smoother.smoothed()
+    smoothed = {(int(seg), int(t)): x for seg, t, x in zip(rows.segment, rows.stamp_ns, rows.x)}
+    return stream_metrics(run, stream, session_config, smoothed)

@@ -20,7 +20,7 @@ No ROS, no I/O.
 
 from bisect import bisect_right
 from dataclasses import dataclass, field, replace
-from typing import Iterable, Optional, Union
+from typing import Callable, Iterable, Optional, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -154,12 +154,14 @@ class _Collector:
 
 
 def run_stream(config: EstimatorConfig, events: Iterable[Union[Measurement, Input]], *,
-               use_now: bool = False) -> StreamRun:
+               use_now: bool = False,
+               observe: Optional[Callable[[Outcome], None]] = None) -> StreamRun:
     """
     Feed Measurement and Input events to a fresh EstimatorSession; return a StreamRun.
 
     use_now passes each measurement's log_ns as the receiver clock (now_ns), as the
     offline replay does (it matters only for max_future and the input-rate statistics).
+    observe, if given, is called with every outcome, in order (e.g. a smoother's).
     """
     session = EstimatorSession(config)
     col = _Collector(config)
@@ -168,11 +170,16 @@ def run_stream(config: EstimatorConfig, events: Iterable[Union[Measurement, Inpu
         if isinstance(ev, Input):
             inputs += 1
             u = np.asarray(ev.u, dtype=float).reshape(-1)
-            col.input_outcome(session.add_input(ev.stamp_ns, u), int(ev.stamp_ns), u)
+            out = session.add_input(ev.stamp_ns, u)
+            if observe is not None:
+                observe(out)
+            col.input_outcome(out, int(ev.stamp_ns), u)
             continue
         measurements += 1
         out = session.add(ev.stamp_ns, ev.value, ev.variance,
                           now_ns=ev.log_ns if use_now else None)
+        if observe is not None:
+            observe(out)
         if out.status == 'rejected' and out.reason == 'gated':
             gated.add(int(ev.stamp_ns))
         y = np.atleast_1d(np.asarray(ev.value, dtype=float)).reshape(-1)

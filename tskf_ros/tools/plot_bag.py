@@ -13,6 +13,7 @@ from rclpy.serialization import deserialize_message
 from tskf_ros.bag.message_types import BagTypeError, DESERIALIZE_ERRORS, message_class
 from tskf_ros.bag.reader import BagError, BagReader, error_exit, exit_status
 from tskf_ros.bag.replay.loop import replay
+from tskf_ros.bag.replay.sinks import SMOOTHED_TOPIC
 from tskf_ros.core.units import NS
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages import conversions
@@ -81,6 +82,12 @@ def estimator_figure(data: dict, measurement: list, C: float, D: float, title: s
     tp, xp, vp = _series(data['/estimate/predicted'], 'estimate')
     tc, xc, vc = _series(data['/estimate/corrected'], 'estimate')
     tm, mu = _series(data['/estimate/mu'], 'jump')
+    # replay_offline --smooth: the RTS estimates x(t|T), drawn beside the filter's
+    series = [(tp, xp, vp, 'C0', 'predictor xhat(t)', 'predictor'),
+              (tc, xc, vc, 'C3', 'corrected x(t|t)', 'corrected')]
+    if data.get(SMOOTHED_TOPIC):
+        ts, xs, vs = _series(data[SMOOTHED_TOPIC], 'estimate')
+        series.append((ts, xs, vs, 'C4', 'smoothed x(t|T)', 'smoothed'))
     ty = np.array([conversions.msg_to_power(m)[0] for _, m in measurement], float) / NS
     y = np.array([conversions.msg_to_power(m)[1] for _, m in measurement])
     truth = data.get(BAG_TRUTH_TOPIC) or []
@@ -100,8 +107,7 @@ def estimator_figure(data: dict, measurement: list, C: float, D: float, title: s
             ax.plot(pos(t_true[keep]), x_true[keep], 'k-', lw=1, label='true angle')
         ax.plot(pos(ty), (y - D) / C, '.', color='0.6', ms=3,
                 label='implied by measurement (y - D) / C')
-        for t, x, v, color, name in ((tp, xp, vp, 'C0', 'predictor xhat(t)'),
-                                     (tc, xc, vc, 'C3', 'corrected x(t|t)')):
+        for t, x, v, color, name, _ in series:
             s = 2 * np.sqrt(np.maximum(v, 0))
             ax.plot(pos(t), x, '-', color=color, lw=1, label=name)
             ax.fill_between(pos(t), x - s, x + s, color=color, alpha=0.2,
@@ -115,8 +121,7 @@ def estimator_figure(data: dict, measurement: list, C: float, D: float, title: s
             ax.legend(fontsize=7, loc='upper right')
         ax = axes[1, col]
         if t_true.size:
-            for t, x, v, color, name in ((tp, xp, vp, 'C0', 'predictor'),
-                                         (tc, xc, vc, 'C3', 'corrected')):
+            for t, x, v, color, _, name in series:
                 err = x - np.interp(t, t_true, x_true)
                 ax.plot(pos(t), err, '.-', color=color, lw=0.6, ms=2,
                         label=f'{name}: RMS {np.sqrt(np.mean(err ** 2)):.3g} rad')
@@ -238,7 +243,8 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
     C, D = float(model.C[0, 0]), float(model.D[0]) if model.D is not None else 0.0
     if '/estimate/corrected' in reader.topics:
         meas_topic = topic or '/received_power'
-        wanted = {'/estimate/predicted', '/estimate/corrected', '/estimate/mu', meas_topic}
+        wanted = {'/estimate/predicted', '/estimate/corrected', '/estimate/mu', meas_topic,
+                  SMOOTHED_TOPIC}
         data = _decode(reader, (wanted | {BAG_TRUTH_TOPIC}) & set(reader.topics))
         measurement = data.get(meas_topic, [])
         _require(reader, data, ['/estimate/predicted', '/estimate/corrected', '/estimate/mu'])

@@ -116,12 +116,16 @@ class OfflineEstimator:
         """Return the (bag topic, rclpy message) pairs the live node publishes for out."""
         return bag_outcome_messages(out, self.config)
 
+    def encoder(self) -> EstimateEncoder:
+        """Return the replay's encoder of the estimate messages (made once)."""
+        if self._encoder is None:
+            names = self.config.session.model.state_names
+            self._encoder = EstimateEncoder(self.config.frame_id, names, len(names))
+        return self._encoder
+
     def encoded(self, out: AnyOutcome) -> list[tuple[str, bytes]]:
         """Return what messages(out) returns, serialized (canonical CDR, EstimateEncoder)."""
-        enc = self._encoder
-        if enc is None:
-            names = self.config.session.model.state_names
-            enc = self._encoder = EstimateEncoder(self.config.frame_id, names, len(names))
+        enc = self._encoder or self.encoder()
         pairs = []
         for e in out.estimates:
             key = e.kind, e.revised

@@ -28,6 +28,8 @@ EPILOG = f"""examples:
   {PROG} --filter alignment bags/led_alignment /tmp/led_aligned \\
       --params-file config/alignment.yaml
   {PROG} bags/owc_ge_1khz --npz /tmp/owc_ge.npz
+  {PROG} bags/owc_cai_td_1hz /tmp/owc_smoothed --smooth \
+      --params-file config/owc_estimator.yaml
 
 exit status: 0 done; 1 the bag or the parameters could not be used (one-line error);
 3 the input was damaged: what came before the damage was processed and written, and the
@@ -71,6 +73,11 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument('--npz', type=Path, metavar='FILE',
                         help='analysis mode: write no bag, write the outputs as numpy arrays '
                         'to FILE (.npz; keys: see ArraySink); the estimator only')
+    parser.add_argument('--smooth', action='store_true',
+                        help='also write the Rauch-Tung-Striebel smoothed estimates x(t|T) '
+                        '(the whole stream, each segment between resets on its own): on '
+                        '/estimate/smoothed, or as estimate/smoothed.* arrays; the estimator '
+                        'only')
     parser.add_argument('-q', '--quiet', action='store_true', help='only errors')
     args = parser.parse_args(argv)
     if args.npz is not None and (args.output is not None or args.filter != 'estimator'
@@ -80,6 +87,8 @@ def main(argv: Optional[list[str]] = None) -> int:
     if args.npz is not None and (not args.npz.name or args.npz.is_dir()):
         parser.error(f'--npz {args.npz}: a directory; give a file name, e.g. '
                      f'{args.npz / "out.npz"}')
+    if args.smooth and args.filter != 'estimator':
+        parser.error('--smooth smooths the estimator: not with --filter alignment')
     output = args.output or default_output(args.bag, args.filter)
 
     def log(line: str) -> None:
@@ -92,7 +101,7 @@ def main(argv: Optional[list[str]] = None) -> int:
         res = replay(args.bag, output, params_file=args.params_file, topic=args.topic,
                      overwrite=args.overwrite, compress=args.compress,
                      diagnostics=not args.no_diagnostics, log=log, filter=args.filter,
-                     input_topic=args.input_topic)
+                     input_topic=args.input_topic, smooth=args.smooth)
     except (BagError, ParamsError, BagTypeError, OSError) as exc:
         return error_exit(PROG, exc, args.bag)
     rate = res.read / res.seconds if res.seconds else float('nan')
@@ -115,7 +124,8 @@ def _npz_main(args: argparse.Namespace, log: Callable[[str], None]) -> int:
             raise BagExistsError(f'{path}: exists already, not overwriting (use --overwrite)')
         arrays = replay_arrays(args.bag, args.params_file, topic=args.topic,
                                input_topic=args.input_topic,
-                               diagnostics=not args.no_diagnostics, log=log)
+                               diagnostics=not args.no_diagnostics, log=log,
+                               smooth=args.smooth)
         save_npz(path, arrays)
     except (BagError, ParamsError, BagTypeError, OSError) as exc:
         return error_exit(PROG, exc, path)

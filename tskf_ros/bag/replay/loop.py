@@ -13,7 +13,9 @@ from tskf_ros.bag.message_types import qos_from_rclpy, typestore
 from tskf_ros.bag.reader import BagReader, Damage
 from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
                                           UNDECODABLE)
-from tskf_ros.bag.replay.sinks import ArraySink, BagSink, Collector, ReplayResult, Sink
+from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
+from tskf_ros.bag.replay.sinks import (ArraySink, BagSink, Collector, ReplayResult, Sink,
+                                       SMOOTHED_TOPIC)
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic, InputError
 from tskf_ros.bag.writer import BagExistsError, BagWriter
 from tskf_ros.messages import alignment_interface as aligner
@@ -64,9 +66,12 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
            overwrite: bool = False, compress: bool = False, diagnostics: bool = True,
            log: Log = _quiet,
            filter: str = 'estimator',  # noqa: A002 (the CLI's --filter)
-           input_topic: Optional[str] = None) -> ReplayResult:
+           input_topic: Optional[str] = None, smooth: bool = False) -> ReplayResult:
     """
     Run the estimator over `bag`; write `output` (a new bag) or, if None, collect in memory.
+
+    smooth=True (the estimator, into a bag) also writes the RTS-smoothed estimates x(t|T)
+    of every segment on SMOOTHED_TOPIC once the bag has been read (bag/replay/rts_replay).
 
     filter='alignment' runs the alignment node's session instead (open loop: its commands
     do not move the recorded receiver).
@@ -81,6 +86,8 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
     t0 = time.perf_counter()
     if output is not None:
         _check_output(Path(bag), Path(output), overwrite)
+    if smooth and (filter != 'estimator' or output is None):
+        raise ValueError('smoothing is for the estimator written into a bag (or arrays)')
     reader, est, result = prepare(bag, params_file, topic, filter, input_topic, log)
     if output is None:
         result.damage = _run(reader, est, Collector(result), result, diagnostics)
@@ -92,8 +99,15 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
         add_topics(writer, reader, est, diagnostics, log)
         if filter == 'alignment':
             writer.set_custom_data('tskf_ros.open_loop', aligner.OPEN_LOOP_NOTE)
+        smoother = None
+        if smooth:
+            smoother = SmoothingRecorder(est.config.session)
+            writer.add_topic(SMOOTHED_TOPIC, estimator.ESTIMATE_TYPE,
+                             qos=[qos_from_rclpy(est.output_topics()[0][2])])
+        sink = BagSink(writer, result, smoother)
         with _gc_paused(filter == 'estimator'):
-            result.damage = _run(reader, est, BagSink(writer, result), result, diagnostics)
+            result.damage = _run(reader, est, sink, result, diagnostics)
+            sink.finish(est)
         if result.damage is not None:
             writer.set_custom_data('tskf_ros.input_damage', str(result.damage))
         writer.close()
@@ -106,17 +120,19 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
 
 def replay_arrays(bag: PathLike, config: Union[AnyConfig, PathLike, None] = None, *,
                   topic: Optional[str] = None, input_topic: Optional[str] = None,
-                  diagnostics: bool = True, log: Log = _quiet) -> dict[str, NDArray]:
+                  diagnostics: bool = True, log: Log = _quiet,
+                  smooth: bool = False) -> dict[str, NDArray]:
     """
     Run the estimator over `bag` and return its outputs as numpy arrays; write nothing.
 
     config: a NodeConfig (estimator_interface.load_config / parameters_to_config), a
     parameter file, or None for the node's defaults.  The keys (see ArraySink) hold what
     the output bag's topics hold, one row per message; 'meta.damage' is '' or the damage
-    that stopped the reading (the rows are what came before it).  Raises as replay().
+    that stopped the reading (the rows are what came before it).  smooth=True adds the
+    RTS-smoothed estimates (estimate/smoothed.*).  Raises as replay().
     """
     reader, est, result = prepare(bag, config, topic, 'estimator', input_topic, log)
-    sink = ArraySink(est)
+    sink = ArraySink(est, SmoothingRecorder(est.config.session) if smooth else None)
     with _gc_paused():
         result.damage = _run(reader, est, sink, result, diagnostics)
         arrays = sink.arrays(result)

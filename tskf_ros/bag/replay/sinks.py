@@ -10,11 +10,15 @@ from numpy.typing import NDArray
 from tskf_ros.bag.cdr import serialize
 from tskf_ros.bag.reader import Damage, RawMessage
 from tskf_ros.bag.replay.adapters import AnyOutcome, ESTIMATE_TOPICS, OfflineEstimator
+from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.messages.estimator_interface import DIAGNOSTICS_TOPIC
 
-__all__ = ['ArraySink', 'BagSink', 'Collector', 'ReplayResult', 'Sink']
+__all__ = ['ArraySink', 'BagSink', 'Collector', 'ReplayResult', 'Sink', 'SMOOTHED_TOPIC']
+
+# the RTS-smoothed estimates x(t|T) of replay_offline --smooth (TwistWithCovarianceStamped)
+SMOOTHED_TOPIC = ESTIMATE_TOPICS['corrected', False].rsplit('/', 1)[0] + '/smoothed'
 
 
 @dataclass
@@ -82,9 +86,12 @@ class BagSink:
 
     copies = True
 
-    def __init__(self, writer: BagWriter, result: ReplayResult) -> None:
+    def __init__(self, writer: BagWriter, result: ReplayResult,
+                 smoother: Optional[SmoothingRecorder] = None) -> None:
         self.writer = writer
         self.written = result.written
+        self.smoother = smoother
+        self.last_log_ns = 0
 
     def copy(self, raw: RawMessage) -> None:
         """Write the input message's bytes as they were read (if its topic was added)."""
@@ -99,6 +106,21 @@ class BagSink:
         for topic, _ in pairs:
             written[topic] += 1
         self.writer.write_many(log_ns, pairs)
+        if self.smoother is not None:
+            self.smoother.outcome(out)
+            self.last_log_ns = max(self.last_log_ns, log_ns)
+
+    def finish(self, est: OfflineEstimator) -> None:
+        """Write the smoothed estimates (if smoothing), logged at the last input's time."""
+        if self.smoother is None:
+            return
+        rows = self.smoother.smoothed()
+        enc = est.encoder()
+        pairs = [(SMOOTHED_TOPIC, enc.estimate(t, x, P))
+                 for t, x, P in zip(rows.stamp_ns.tolist(), rows.x, rows.P)]
+        self.written[SMOOTHED_TOPIC] += len(pairs)
+        if pairs:
+            self.writer.write_many(self.last_log_ns, pairs)
 
     def diagnostics(self, stamp_ns: int, msg: Any) -> None:
         """Write the /diagnostics message."""
@@ -120,12 +142,17 @@ class ArraySink:
       TwistWithCovarianceStamped topics (their *_states mirrors are x and sqrt(diag P));
     - estimate/mu.{log_ns, stamp_ns, sigma_ns, mu} (mu in s) and estimate/revised/mu;
     - diagnostics.{log_ns, level, message} (level 0 OK .. 3 STALE);
-    - meta.{topic, input_topic, damage, assumptions}: strings.
+    - meta.{topic, input_topic, damage, assumptions}: strings;
+    - with a smoother (replay_offline --smooth): estimate/smoothed.{stamp_ns, x, P,
+      segment}, the RTS estimates x(t|T) at every stepped point, and the segment (0 first,
+      a reset starts the next) each belongs to.
     """
 
     copies = False      # copy() does nothing: the loop need not call it
 
-    def __init__(self, est: OfflineEstimator) -> None:
+    def __init__(self, est: OfflineEstimator,
+                 smoother: Optional[SmoothingRecorder] = None) -> None:
+        self.smoother = smoother
         self.n = len(est.config.session.model.state_names)
         self.samples: list[tuple] = []
         self.inputs: list[tuple] = []
@@ -145,6 +172,8 @@ class ArraySink:
         rows = self.estimates
         for e in out.estimates:
             rows[e.kind, e.revised].append((log_ns, e.stamp_ns, e.x, e.P))
+        if self.smoother is not None:
+            self.smoother.outcome(out)
         for j in out.jumps:
             rows['mu', j.revised].append((log_ns, j.stamp_ns, j.sigma_ns))
 
@@ -178,6 +207,11 @@ class ArraySink:
                 out[f'{name}.P'] = _stacked(cols[3], (-1, n, n))
         _columns(out, 'diagnostics', self.diag, (('log_ns', i8), ('level', np.int8),
                                                  ('message', str)))
+        if self.smoother is not None:
+            smoothed = self.smoother.smoothed()
+            name = SMOOTHED_TOPIC.lstrip('/')
+            for column in smoothed._fields:
+                out[f'{name}.{column}'] = getattr(smoothed, column)
         out['meta.topic'] = np.array(result.topic)
         out['meta.input_topic'] = np.array(result.input_topic)
         out['meta.damage'] = np.array(str(result.damage or ''))

@@ -1,0 +1,121 @@
+"""replay_offline --smooth: the RTS estimates of a replayed stream, per segment, arrays and bag."""
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import Reader
+
+from tskf_ros.bag.message_types import typestore
+from tskf_ros.bag.replay.cli import main
+from tskf_ros.bag.replay.loop import replay_arrays
+from tskf_ros.bag.replay.sinks import SMOOTHED_TOPIC
+from tskf_ros.core.smoother import rts_smooth
+from tskf_ros.messages.estimator_interface import load_config
+
+from ..helpers import BAGS, CONFIG, make_bag, NS
+
+CAI = BAGS / 'owc_cai_td_1hz'
+PARAMS = CONFIG / 'owc_estimator.yaml'
+KEY = SMOOTHED_TOPIC.lstrip('/')
+
+
+def reference(arrays, config):
+    """rts_smooth called directly on each segment's points (all but the newest of each)."""
+    model = config.session.model
+    status = arrays['sample.status']
+    stamps, values = arrays['sample.stamp_ns'], arrays['sample.value']
+    segments, current = [], []
+    for t, y, s in zip(stamps.tolist(), values.tolist(), status.tolist()):
+        if s == 'reset':
+            segments.append(current)
+            current = []
+        if s in ('accepted', 'reset'):
+            current.append((t, y))
+        else:
+            assert s in ('gap', 'rejected'), s      # no late inserts in these bags
+    segments.append(current)
+    ts, xs, Ps = [], [], []
+    for seg in segments:
+        if len(seg) < 2:
+            continue
+        t = np.array([p[0] for p in seg])
+        mu = np.diff(t) / NS
+        y = np.array([p[1] for p in seg[:-1]])
+        got = rts_smooth(model.A, model.C, mu, y, Q=model.Q, R=model.R, G=model.G,
+                         D=model.D, x0=model.x0, P0=model.P0,
+                         transition=config.session.transition)
+        ts.append(t[:-1])
+        xs.append(got.xs)
+        Ps.append(got.Ps)
+    return np.concatenate(ts), np.concatenate(xs), np.concatenate(Ps)
+
+
+def test_smoothed_arrays_equal_rts_smooth_on_the_sample_bag(tmp_path):
+    config = load_config(PARAMS)
+    arrays = replay_arrays(CAI, config, smooth=True)
+    t, x, P = reference(arrays, config)
+    np.testing.assert_array_equal(arrays[f'{KEY}.stamp_ns'], t)
+    np.testing.assert_allclose(arrays[f'{KEY}.x'], x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(arrays[f'{KEY}.P'], P, rtol=0, atol=1e-9)
+    # the newest stepped point: x(T|T) is the filter's corrected estimate there
+    corrected = arrays['estimate/corrected.x']
+    assert arrays[f'{KEY}.x'][-1] == pytest.approx(corrected[-1], abs=1e-12)
+    # smoothing uses later data: its variance is never above the filter's
+    assert (arrays[f'{KEY}.P'][:, 0, 0]
+            <= arrays['estimate/corrected.P'][:, 0, 0] + 1e-12).all()
+
+
+def test_each_segment_between_resets_is_smoothed_on_its_own(tmp_path):
+    # a 70 s jump (> max_jump 60 s) re-initialises the session: two segments
+    bag = make_bag(tmp_path / 'two', [*range(30), *range(100, 130)])
+    config = load_config(PARAMS)
+    arrays = replay_arrays(bag, config, smooth=True)
+    assert (arrays['sample.status'] == 'reset').sum() == 1
+    t, x, P = reference(arrays, config)
+    np.testing.assert_array_equal(arrays[f'{KEY}.stamp_ns'], t)
+    np.testing.assert_allclose(arrays[f'{KEY}.x'], x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(arrays[f'{KEY}.P'], P, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(arrays[f'{KEY}.segment'], [0] * 29 + [1] * 29)
+
+
+def test_cli_smooth_writes_the_topic_and_npz(tmp_path, capsys):
+    out = tmp_path / 'smoothed'
+    assert main([str(CAI), str(out), '--smooth', '--params-file', str(PARAMS), '-q']) == 0
+    npz = tmp_path / 'a.npz'
+    assert main([str(CAI), '--npz', str(npz), '--smooth', '--params-file', str(PARAMS),
+                 '-q']) == 0
+    arrays = dict(np.load(npz))
+    store = typestore()
+    with Reader(out) as reader:
+        conns = [c for c in reader.connections if c.topic == SMOOTHED_TOPIC]
+        assert [c.msgtype for c in conns] == ['geometry_msgs/msg/TwistWithCovarianceStamped']
+        msgs = [store.deserialize_cdr(raw, conns[0].msgtype)
+                for _, _, raw in reader.messages(connections=conns)]
+    stamps = [m.header.stamp.sec * NS + m.header.stamp.nanosec for m in msgs]
+    np.testing.assert_array_equal(stamps, arrays[f'{KEY}.stamp_ns'])
+    np.testing.assert_allclose([m.twist.twist.linear.x for m in msgs],
+                               arrays[f'{KEY}.x'][:, 0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose([m.twist.covariance[0] for m in msgs],
+                               arrays[f'{KEY}.P'][:, 0, 0], rtol=0, atol=1e-12)
+
+
+def test_without_smooth_nothing_changes(tmp_path):
+    config = load_config(PARAMS)
+    plain = replay_arrays(CAI, config)
+    smoothed = replay_arrays(CAI, config, smooth=True)
+    assert not any(k.startswith(KEY) for k in plain)
+    columns = ('stamp_ns', 'x', 'P', 'segment')
+    assert set(smoothed) - set(plain) == {f'{KEY}.{c}' for c in columns}
+    for k, v in plain.items():
+        np.testing.assert_array_equal(smoothed[k], v, err_msg=k)
+    out = tmp_path / 'plain'
+    assert main([str(CAI), str(out), '--params-file', str(PARAMS), '-q']) == 0
+    with Reader(out) as reader:
+        assert SMOOTHED_TOPIC not in {c.topic for c in reader.connections}
+
+
+def test_smooth_with_the_alignment_filter_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([str(BAGS / 'led_alignment'), str(tmp_path / 'a'), '--filter', 'alignment',
+              '--smooth'])
+    assert exc.value.code == 2
+    assert '--smooth' in capsys.readouterr().err
