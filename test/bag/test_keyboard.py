@@ -68,6 +68,7 @@ def test_keys_typed_in_a_real_terminal_pause_and_resume_the_command(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
+        seen[0] += proc.stderr.read().decode(errors='replace')   # what it said at the end
         proc.stderr.close()
         after = termios.tcgetattr(slave)
         os.close(master)

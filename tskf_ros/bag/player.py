@@ -407,6 +407,11 @@ def main(args: Optional[list] = None, stdin=None) -> int:
     except BagError as exc:
         print(f'play: error: {exc}', file=sys.stderr)
         return 1
+    except Exception:
+        # a SIGINT or SIGTERM shuts the context down while the executor may be building its
+        # wait set, which then raises rclpy's RCLError: an interrupt, not a failure
+        if rclpy.ok():
+            raise
     finally:
         if keys is not None:
             keys.close()
