@@ -66,5 +66,7 @@ setup(
             'sweep = tskf_ros.experiments.sweep:console_main',
             'foxglove_bridge = tskf_ros.tools.foxglove_bridge:main',
         ],
+        # the fixtures of tskf_ros.testing, for any pytest run where the package is installed
+        'pytest11': ['tskf_ros = tskf_ros.testing.plugin'],
     },
 )
