@@ -6,9 +6,9 @@ import shutil
 import subprocess
 import sys
 
+from entry_points import console_scripts
 import pytest
 from rclpy.parameter import Parameter
-from test_colcon_build import console_scripts
 from tskf_ros.testing import node_class, NODES, spin_until
 from tskf_ros.testing.nodes import overrides
 

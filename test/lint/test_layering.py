@@ -17,7 +17,7 @@ import sys
 
 import pytest
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = 'tskf_ros'
 # folder -> the folders of tskf_ros it may import (its own included)
 ALLOWED = {

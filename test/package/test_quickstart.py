@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 STATUS = '[quickstart] exit status '
 
 
