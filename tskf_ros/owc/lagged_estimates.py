@@ -126,7 +126,8 @@ class LaggedEstimates:
 
     def _steps(self, out: Outcome) -> list[_Step]:
         """Return the steps of an outcome, oldest first (the revised ones of a re-run)."""
-        corrected, predicted = {}, {}
+        corrected: dict[int, tuple[Array, Array]] = {}
+        predicted: dict[int, tuple[Array, Array]] = {}
         for e in out.estimates:
             (predicted if e.kind == 'predicted' else corrected)[e.stamp_ns] = (e.x, e.P)
         steps = []
