@@ -9,15 +9,15 @@ Each case runs in a process of its own (this script with `worker`), spinning as
 
 - node: TimescaleEstimator on the OWC model (3), period 1 ms;
 - relay: a node with the same entities (measurement and input subscriptions, the same
-  five output publishers, /diagnostics on a 1 s timer, ~/reset, the parameter services)
+  output publishers, /diagnostics on a 1 s timer, ~/reset, the parameter services)
   that fills preallocated messages of the same types from each input and publishes the
-  same five per input (predicted, corrected, their JointState mirrors, mu), no filter;
+  same two per input (predicted and corrected, Float64MultiArray estimates), no filter;
 - stub: the node with a session that filters nothing (StubSession: a fixed steady-state
   outcome at each stamp), so that node - stub is the session's cost in place.
 
 A driver in this process publishes Illuminance samples 1 ms apart (the stamp is the
 sequence number), keeping at most `--window` without their predicted estimate, and
-subscribes to the five outputs with the same types in both cases.  The worker measures,
+subscribes to the two outputs with the same types in both cases.  The worker measures,
 between its warm-up'th and last input, the CPU time of its executor thread
 (time.thread_time), of its whole process (DDS threads included) and the wall time.  The
 cases alternate (relay, node, stub, relay, ...) for `--repeats` rounds per executor;
@@ -45,7 +45,7 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 1))
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped  # noqa: E402
+from geometry_msgs.msg import AccelStamped  # noqa: E402
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
@@ -54,7 +54,8 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
-from sensor_msgs.msg import Illuminance, JointState, TimeReference  # noqa: E402
+from sensor_msgs.msg import Illuminance  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from tskf_ros.messages import conversions  # noqa: E402
@@ -72,10 +73,7 @@ T0_NS = 1_000 * NS
 # the node's parameters for this stream (everything else: the defaults, model (3))
 NODE_PARAMETERS = {'period': PERIOD_NS / NS}
 # what the node publishes per input in steady state: (topic, type), the relay the same
-OUTPUTS = [(OUTPUT_TOPICS[(kind, False)], cls) for kind, cls in (
-    ('corrected', TwistWithCovarianceStamped), ('corrected_states', JointState),
-    ('predicted', TwistWithCovarianceStamped), ('predicted_states', JointState),
-    ('mu', TimeReference))]
+OUTPUTS = [(OUTPUT_TOPICS[kind], Float64MultiArray) for kind in ('corrected', 'predicted')]
 GOAL = 2.0                                  # node CPU per input <= GOAL x the relay's
 
 
@@ -96,29 +94,21 @@ class Relay(Node):
         self.create_subscription(AccelStamped, 'input', lambda msg: None, qos_in)
         qos_out = output_qos(config)
         self.pubs = [self.create_publisher(cls, topic, qos_out) for topic, cls in OUTPUTS]
+        # the node's other output publisher (estimate/revised), idle in steady state
+        self.create_publisher(Float64MultiArray, OUTPUT_TOPICS['revised'], qos_out)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DEFAULT_DEPTH)
         self.create_timer(config.diagnostics_period,
                           lambda: self.diag_pub.publish(DiagnosticArray()))
         self.create_service(Trigger, '~/reset', lambda request, response: response)
-        names = list(config.session.model.state_names)
-        self.msgs = [TwistWithCovarianceStamped(),
-                     JointState(name=names, position=[0.0], velocity=[0.0]),
-                     TwistWithCovarianceStamped(),
-                     JointState(name=names, position=[0.0], velocity=[0.0]),
-                     TimeReference(source='sigma')]
+        names = config.session.model.state_names
+        self.msgs = [Float64MultiArray(layout=conversions.state_estimate_layout(kind, names))
+                     for kind in ('corrected', 'predicted')]
 
     def _on_measurement(self, msg: Illuminance) -> None:
         stamp = msg.header.stamp
-        value = msg.illuminance
-        for out in self.msgs:
-            out.header.stamp = stamp
-        corrected, corrected_states, predicted, predicted_states, mu = self.msgs
-        corrected.twist.twist.linear.x = value
-        corrected_states.position[0] = value
-        predicted.twist.twist.linear.x = value
-        predicted_states.position[0] = value
-        mu.time_ref = stamp
+        data = [float(stamp.sec), float(stamp.nanosec), PERIOD_NS / NS, msg.illuminance, 0.0]
         for pub, out in zip(self.pubs, self.msgs):
+            out.data = data
             pub.publish(out)
 
 
@@ -208,7 +198,7 @@ def worker(kind: str, executor_kind: str, warmup: int, messages: int, ros_args: 
 
 
 class Driver:
-    """Publish the stream into a worker's namespace and take its five outputs."""
+    """Publish the stream into a worker's namespace and take its two outputs."""
 
     def __init__(self, context: Context, namespace: str, window: int) -> None:
         self.node = rclpy.create_node('driver', namespace=namespace, context=context)
@@ -225,12 +215,12 @@ class Driver:
         def count(msg) -> None:
             self.counts[i] += 1
             if topic == 'estimate/predicted':
-                seq = (conversions.stamp_to_ns(msg.header.stamp) - T0_NS) // PERIOD_NS
+                seq = (conversions.msg_to_state_estimate(msg).stamp_ns - T0_NS) // PERIOD_NS
                 self.acked = max(self.acked, seq)
         return count
 
     def ready(self) -> bool:
-        """Return whether the worker matched our publisher and we its five outputs."""
+        """Return whether the worker matched our publisher and we its two outputs."""
         return self.pub.get_subscription_count() >= 1 and all(
             self.node.count_publishers(topic) >= 1 for topic, _ in OUTPUTS)
 
@@ -318,9 +308,9 @@ def in_process_costs(messages: int, repeat: int = 3) -> dict:
             for _, msg in outcome_messages(out, config):
                 serialize_message(msg)
     parts = {'session.add': run_session,
-             'build 5 messages (outcome_messages)': lambda: [
+             'build 2 messages (outcome_messages)': lambda: [
                  outcome_messages(o, config) for o in outcomes],
-             'fill 5 reused (OutcomeMessages)': fill,
+             'fill 2 reused (OutcomeMessages)': fill,
              'build + serialize_message': build_and_serialize,
              'fill + serialize_message': fill_and_serialize}
     return {name: min(timeit.repeat(f, timer=time.thread_time, number=1, repeat=repeat))

@@ -7,8 +7,12 @@ Thread CPU time (time.thread_time_ns) per sample, min / median over the repeats,
 the filter's `step` alone (Euler, a measurement every point, irregular mu); that step's
 jump F (`transition_matrices`, cached by mu); and `FixedLagSmoother.add` with a full
 window (the step results made beforehand, so the add is timed alone).  The model is a
-position-velocity pair (n = 2) and a 6-state chain (n = 6), one output.  Figures only;
-nothing is asserted.
+position-velocity pair (n = 2) and a 6-state chain (n = 6), one output.
+
+Then the estimator node's path with smoothing_lag = L: `EstimatorSession.add` alone
+against `EstimatorSession.add` + `LaggedEstimates.outcome` (the outcome read into the
+window, its add and the backward pass), per sample on a 100 Hz stream of the n = 2 model,
+measured side by side in one run.  Figures only; nothing is asserted.
 """
 
 import argparse
@@ -23,6 +27,10 @@ import numpy as np
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 from tskf_ros.core import FixedLagSmoother, TimeScaleKalmanFilter  # noqa: E402
+from tskf_ros.core.units import NS  # noqa: E402
+from tskf_ros.owc.lagged_estimates import LaggedEstimates  # noqa: E402
+from tskf_ros.owc.session import (EstimatorConfig, EstimatorSession,  # noqa: E402
+                                  model_from_flat)
 
 LAGS = (10, 100, 1000)
 SIZES = (2, 6)
@@ -82,6 +90,44 @@ def bench(n: int, lag: int, samples: int, repeats: int) -> dict:
             'add': per_sample(add, samples, repeats)}
 
 
+def session_config(n: int) -> EstimatorConfig:
+    """Return the session config of model(n), sampled at about 100 Hz."""
+    m = model(n)
+    flat = {key: np.ravel(value).tolist() for key, value in m.items()}
+    flat['R'] = [m['R']]
+    return EstimatorConfig(model_from_flat(name='chain', state_names=tuple(
+        f'x{i}' for i in range(n)), D=[], G=[], B=[], **flat), period=0.01,
+        history_size=max(1000, 4 * max(LAGS)), min_rate_fraction=0.0, stale_timeout=0.0,
+        gate=0.0, nonpositive_is_gap=False)
+
+
+def bench_node(n: int, lag: int, samples: int, repeats: int) -> dict:
+    """Time session.add with and without LaggedEstimates.outcome, per sample."""
+    rng = np.random.default_rng(1)
+    total = lag + 2 + samples * repeats
+    stamps = np.cumsum([int(MUS[k % len(MUS)] * NS) for k in range(total)]) + NS
+    ys = rng.normal(size=total).tolist()
+    config = session_config(n)
+
+    def make(smooth: bool) -> Callable[[int], None]:
+        session = EstimatorSession(config)
+        lagged = LaggedEstimates(lag, config) if smooth else None
+        cursor = [0]
+
+        def feed(count: int) -> None:
+            k = cursor[0]
+            for i in range(k, k + count):
+                out = session.add(int(stamps[i]), ys[i])
+                if lagged is not None:
+                    lagged.outcome(out)
+            cursor[0] = k + count
+        feed(lag + 2)       # a full window before the timing
+        return feed
+    plain, smoothed = make(False), make(True)
+    return {'add': per_sample(plain, samples, repeats),
+            'lagged': per_sample(smoothed, samples, repeats)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--repeats', type=int, default=7)
@@ -98,6 +144,12 @@ def main() -> None:
             (s, sm), (f, fm), (a, am) = r['step'], r['F'], r['add']
             print(f'{n:>3} {lag:>5} {s:7.1f} / {sm:5.1f} {f:7.2f} / {fm:5.2f} '
                   f'{a:8.1f} / {am:6.1f} {a / s:11.1f}')
+    print('\nthe estimator node with smoothing_lag = L (n = 2): per sample, us (min / median)')
+    print(f'{"L":>5} {"session.add":>15} {"add + lagged":>17} {"ratio":>7}')
+    for lag in LAGS:
+        r = bench_node(2, lag, max(10, args.samples * 10 // lag), args.repeats)
+        (p, pm), (q, qm) = r['add'], r['lagged']
+        print(f'{lag:>5} {p:7.1f} / {pm:5.1f} {q:8.1f} / {qm:6.1f} {q / p:7.1f}')
 
 
 if __name__ == '__main__':

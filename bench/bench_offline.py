@@ -76,50 +76,25 @@ def quiet(line: str) -> None:
 class LibraryEncoder:
     """EstimateEncoder's surface through rosbags: its classes (built once) and serialize_cdr."""
 
-    def __init__(self, frame_id: str, names: list, n: int) -> None:
+    def __init__(self, names: list) -> None:
         store = typestore()
         T = store.types
         self.ser = store.serialize_cdr
-        self.n = n
+        n = self.n = len(names)
+        dim = T['std_msgs/msg/MultiArrayDimension']
+        self.msgs = {kind: T['std_msgs/msg/Float64MultiArray'](
+            layout=T['std_msgs/msg/MultiArrayLayout'](
+                dim=[dim(label=kind, size=n + 1, stride=(n + 1) * n),
+                     dim(label=','.join(names), size=n, stride=n)], data_offset=3),
+            data=np.zeros(3 + n + n * n)) for kind in EstimateEncoder.KINDS}
 
-        def header():
-            return T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
-                sec=0, nanosec=0), frame_id=frame_id)
-        v3 = T['geometry_msgs/msg/Vector3']
-        self.twist = T['geometry_msgs/msg/TwistWithCovarianceStamped'](
-            header=header(), twist=T['geometry_msgs/msg/TwistWithCovariance'](
-                twist=T['geometry_msgs/msg/Twist'](linear=v3(x=0.0, y=0.0, z=0.0),
-                                                   angular=v3(x=0.0, y=0.0, z=0.0)),
-                covariance=np.zeros(36)))
-        self.states = T['sensor_msgs/msg/JointState'](
-            header=header(), name=list(names), position=np.zeros(n), velocity=np.zeros(n),
-            effort=np.zeros(0))
-        self.jump_msg = T['sensor_msgs/msg/TimeReference'](
-            header=header(), time_ref=T['builtin_interfaces/msg/Time'](sec=0, nanosec=0),
-            source='sigma')
-        self.jump_msg.header.frame_id = ''
-
-    def pair(self, stamp_ns, x, P):
-        n = self.n
-        sec, nsec = divmod(int(stamp_ns), NS)
-        tw, st = self.twist, self.states
-        tw.header.stamp.sec = st.header.stamp.sec = sec
-        tw.header.stamp.nanosec = st.header.stamp.nanosec = nsec
-        slots = list(np.asarray(x, dtype=float).reshape(-1)) + [0.0] * (6 - n)
-        lin, ang = tw.twist.twist.linear, tw.twist.twist.angular
-        lin.x, lin.y, lin.z, ang.x, ang.y, ang.z = slots
-        cov = tw.twist.covariance.reshape(6, 6)
-        cov[:n, :n] = np.asarray(P, dtype=float).reshape(n, n)
-        st.position[:] = x
-        st.velocity[:] = np.sqrt(np.maximum(np.diag(cov)[:n], 0.0))
-        return (bytes(self.ser(tw, 'geometry_msgs/msg/TwistWithCovarianceStamped')),
-                bytes(self.ser(st, 'sensor_msgs/msg/JointState')))
-
-    def jump(self, stamp_ns, sigma_ns):
-        m = self.jump_msg
-        m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), NS)
-        m.time_ref.sec, m.time_ref.nanosec = divmod(int(sigma_ns), NS)
-        return bytes(self.ser(m, 'sensor_msgs/msg/TimeReference'))
+    def estimate(self, kind, stamp_ns, mu, x, P):
+        n, m = self.n, self.msgs[kind]
+        m.data[0], m.data[1] = divmod(int(stamp_ns), NS)
+        m.data[2] = mu
+        m.data[3:3 + n] = np.asarray(x, dtype=float).reshape(n)
+        m.data[3 + n:] = np.asarray(P, dtype=float).reshape(n * n)
+        return bytes(self.ser(m, 'std_msgs/msg/Float64MultiArray'))
 
 
 class Swapped:
@@ -281,18 +256,18 @@ def measure(ctx: dict, repeats: int) -> dict:
 
 
 def serialization_routes(repeats: int, count: int = 5000) -> dict:
-    """Return {route: min us} for one estimate's two messages (n = 1) and one jump."""
+    """Return {route: min us} for one step's two estimates (n = 1): corrected, predicted."""
     t = 1_700_000_000_123_456_789
     x, P = np.array([0.25]), np.array([[1e-4]])
-    routes = {'fixed layout (cdr.EstimateEncoder)': EstimateEncoder('link', ['theta'], 1),
-              "rosbags' classes (reused) + serialize_cdr": LibraryEncoder('link', ['theta'], 1)}
+    routes = {'fixed layout (cdr.EstimateEncoder)': EstimateEncoder(['theta']),
+              "rosbags' classes (reused) + serialize_cdr": LibraryEncoder(['theta'])}
     best = {name: float('inf') for name in routes}
     for _ in range(repeats):
         for name, enc in routes.items():
             c0 = time.thread_time()
             for _ in range(count):
-                enc.pair(t, x, P)
-                enc.jump(t, t + 5000)
+                enc.estimate('corrected', t, 5e-6, x, P)
+                enc.estimate('predicted', t + 5000, 5e-6, x, P)
             best[name] = min(best[name], (time.thread_time() - c0) / count * 1e6)
     return best
 
@@ -340,8 +315,7 @@ def report(runs: dict, ctx: dict, serial: dict) -> None:
 
     def ratio(name, base=ref):
         return base / cpu[name]
-    print('\nserialization of one estimate (TwistWithCovarianceStamped + JointState) and one '
-          'TimeReference, min CPU us:')
+    print("\nserialization of one step's two estimates (Float64MultiArray), min CPU us:")
     for name, us in serial.items():
         print(f'  {name:48s} {us:7.2f}')
     goals = [

@@ -32,11 +32,11 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(os.getpid() % 100 + 1))
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from geometry_msgs.msg import TwistWithCovarianceStamped  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import Illuminance  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from tskf_ros.messages import conversions  # noqa: E402
 from tskf_ros.messages.estimator_interface import default_parameters  # noqa: E402
@@ -46,7 +46,9 @@ from bench_estimator import OUTPUTS  # noqa: E402, I100 - bench/, next to this s
 
 NS = 1_000_000_000
 T0_NS = 1_000 * NS
-STAMP = struct.Struct('<iI')
+# the estimate's data = [sec, nanosec, mu, x, P] of the OWC model (n = 1): the last 5 doubles
+STAMP = struct.Struct('<dd')
+ESTIMATE_DOUBLES = 5
 TIMEOUT = 60.0          # s: a bound on discovery and on the node settling, never a result
 
 
@@ -96,7 +98,7 @@ def main() -> None:
     parser.add_argument('--rate', type=float, default=2000.0)
     parser.add_argument('--executor', default='events', choices=['single', 'events'])
     parser.add_argument('--outputs', default='all', choices=['all', 'predicted'],
-                        help='subscribe to all five outputs per input, or to '
+                        help='subscribe to both outputs per input, or to '
                         'estimate/predicted only')
     depth = default_parameters()['queue_depth']
     parser.add_argument('--queue-depth', type=int, default=depth,
@@ -113,6 +115,10 @@ def main() -> None:
          args.executor, '--ros-args', '-r', f'__ns:={namespace}',
          '-p', f'period:={1.0 / args.rate!r}', '-p', 'diagnostics_period:=0.5',
          '-p', f'queue_depth:={args.queue_depth}',
+         # every estimate is counted: the outputs keep as many as the input queue
+         *[arg for topic in ('predicted', 'corrected') for arg in (
+             '-p', f'qos_overrides.{namespace}/estimate/{topic}.publisher.depth:='
+             f'{args.queue_depth}')],
          '--log-level', 'warn'], cwd=REPO, stdout=log, stderr=subprocess.STDOUT, text=True)
     context = Context()
     rclpy.init(context=context)
@@ -120,13 +126,13 @@ def main() -> None:
     seen = set()
     received = []          # the node's 'received' counter, one entry per /diagnostics
     # the outputs are taken serialized (raw): this process must not be what limits the
-    # node on a 2-core machine; the stamp is read from the CDR bytes (after the 4-byte
-    # encapsulation header: header.stamp.sec int32, .nanosec uint32, little endian)
+    # node on a 2-core machine; the stamp is read from the CDR bytes (the estimate layout's
+    # data, the message's last field: sec and nanosec as float64, little endian)
 
     def on_predicted(data: bytes) -> None:
-        sec, nanosec = STAMP.unpack_from(data, 4)
-        seen.add((sec * NS + nanosec - T0_NS) // period_ns)
-    monitor.create_subscription(TwistWithCovarianceStamped, 'estimate/predicted',
+        sec, nanosec = STAMP.unpack_from(data, len(data) - 8 * ESTIMATE_DOUBLES)
+        seen.add((int(sec) * NS + int(nanosec) - T0_NS) // period_ns)
+    monitor.create_subscription(Float64MultiArray, 'estimate/predicted',
                                 on_predicted, QoSProfile(depth=10000), raw=True)
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
@@ -137,7 +143,7 @@ def main() -> None:
                                 QoSProfile(depth=100))
     others = {}
     if args.outputs == 'all':
-        # the other four outputs per input, taken and counted (the node publishes only the
+        # the other output per input, taken and counted (the node publishes only the
         # outputs somebody subscribes to)
         for topic, cls in OUTPUTS:
             if topic != 'estimate/predicted':

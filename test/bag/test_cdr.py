@@ -92,43 +92,24 @@ def test_joint_state_padding_is_what_rosbags_refuses():
 
 # -- EstimateEncoder against rosbags' serializer -------------------------------------------
 
-def library_bytes(stamp_ns, x, P, frame, names, sigma_ns):
+def library_bytes(kind, stamp_ns, mu, x, P, names):
     """
-    Serialize the estimator's three outputs with rosbags, from their definition.
+    Serialize an estimate with rosbags, from its documented layout (doc/interfaces.md).
 
-    TwistWithCovarianceStamped: x in linear.x .. angular.z (zeros after x), P in the top left
-    of the 6 x 6 covariance; JointState: name = names, position = x, velocity =
-    sqrt(max(P_ii, 0)), no effort; TimeReference: time_ref = sigma, source 'sigma', no frame.
+    std_msgs/msg/Float64MultiArray: dim[0] = (kind, n + 1, (n + 1) n), dim[1] = (the names
+    joined by commas, n, n), data_offset 3, data = [sec, nanosec, mu, x, P row by row].
     """
     store = typestore()
     T = store.types
     sec, nsec = divmod(stamp_ns, NS)
-
-    def header(frame_id):
-        return T['std_msgs/msg/Header'](
-            stamp=T['builtin_interfaces/msg/Time'](sec=sec, nanosec=nsec), frame_id=frame_id)
     n = x.size
-    slots = list(x) + [0.0] * (6 - n)
-    cov = np.zeros((6, 6))
-    cov[:n, :n] = P
-    v3 = T['geometry_msgs/msg/Vector3']
-    twist = T['geometry_msgs/msg/TwistWithCovarianceStamped'](
-        header=header(frame), twist=T['geometry_msgs/msg/TwistWithCovariance'](
-            twist=T['geometry_msgs/msg/Twist'](linear=v3(*slots[:3]), angular=v3(*slots[3:])),
-            covariance=cov.reshape(36)))
-    with np.errstate(invalid='ignore'):
-        sd = np.sqrt(np.maximum(np.diag(P), 0.0))
-    states = T['sensor_msgs/msg/JointState'](header=header(frame), name=list(names),
-                                             position=x.copy(), velocity=sd,
-                                             effort=np.zeros(0))
-    ref_sec, ref_nsec = divmod(sigma_ns, NS)
-    jump = T['sensor_msgs/msg/TimeReference'](
-        header=header(''), time_ref=T['builtin_interfaces/msg/Time'](sec=ref_sec,
-                                                                     nanosec=ref_nsec),
-        source='sigma')
-    return [bytes(store.serialize_cdr(twist, 'geometry_msgs/msg/TwistWithCovarianceStamped')),
-            bytes(store.serialize_cdr(states, 'sensor_msgs/msg/JointState')),
-            bytes(store.serialize_cdr(jump, 'sensor_msgs/msg/TimeReference'))]
+    dim = T['std_msgs/msg/MultiArrayDimension']
+    msg = T['std_msgs/msg/Float64MultiArray'](
+        layout=T['std_msgs/msg/MultiArrayLayout'](
+            dim=[dim(label=kind, size=n + 1, stride=(n + 1) * n),
+                 dim(label=','.join(names), size=n, stride=n)], data_offset=3),
+        data=np.concatenate([[float(sec), float(nsec), mu], x, P.reshape(-1)]))
+    return bytes(store.serialize_cdr(msg, 'std_msgs/msg/Float64MultiArray'))
 
 
 def same_values(got, want, msgtype):
@@ -148,29 +129,27 @@ stamps = st.integers(-2 ** 31 * NS, 2 ** 31 * NS - 1)
 
 
 @settings(max_examples=300, deadline=None)
-@given(n=st.integers(1, 6), data=st.data(), frame=text, stamp=stamps, sigma=stamps)
-def test_the_fixed_layout_is_what_rosbags_serializes(n, data, frame, stamp, sigma):
+@given(n=st.integers(1, 6), data=st.data(), kind=st.sampled_from(EstimateEncoder.KINDS),
+       stamp=st.integers(0, 2 ** 31 * NS - 1), mu=any_float)
+def test_the_fixed_layout_is_what_rosbags_serializes(n, data, kind, stamp, mu):
     x = np.array(data.draw(st.lists(any_float, min_size=n, max_size=n)))
     P = np.array(data.draw(st.lists(any_float, min_size=n * n, max_size=n * n))).reshape(n, n)
-    names = data.draw(st.lists(text, min_size=n, max_size=n))
-    enc = EstimateEncoder(frame, names, n)
-    twist, states, jump = library_bytes(stamp, x, P, frame, names, sigma)
-    got = enc.pair(stamp, x, P)
-    assert got[0] == enc.estimate(stamp, x, P) == twist      # bit for bit, NaNs included
-    assert got[1] == enc.states(stamp, x, P)
-    assert enc.jump(stamp, sigma) == jump
-    if np.isnan(np.diag(P)).any() or (np.diag(P) == 0).any():
-        # sqrt(max(P_ii, 0)): which NaN, which zero's sign, is numpy's or math's choice
-        same_values(got[1], states, 'sensor_msgs/msg/JointState')
-    else:
-        assert got[1] == states
+    names = data.draw(st.lists(text.filter(lambda t: ',' not in t), min_size=n, max_size=n))
+    enc = EstimateEncoder(names)
+    want = library_bytes(kind, stamp, mu, x, P, names)
+    assert enc.estimate(kind, stamp, mu, x, P) == want      # bit for bit, NaNs included
+    # and rclpy reads it back as the message conversions builds
+    msg = deserialize_message(want, message_class('std_msgs/msg/Float64MultiArray'))
+    got = conversions.msg_to_state_estimate(msg)
+    assert (got.kind, got.stamp_ns, got.names) == (kind, stamp, tuple(names))
+    np.testing.assert_array_equal(got.x, x)
+    np.testing.assert_array_equal(got.P, P)
+    assert serialize(conversions.state_estimate_to_msg(kind, stamp, mu, x, P, names)) == want
 
 
 def test_the_fixed_layout_refuses_what_does_not_fit():
     with pytest.raises(ValueError):
-        EstimateEncoder('', ['a'] * 7, 7)
-    with pytest.raises(ValueError):
-        EstimateEncoder('', ['a'], 2)
+        EstimateEncoder([])
 
 
 # -- fixed_decoder against rosbags' deserializer -------------------------------------------

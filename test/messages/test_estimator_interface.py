@@ -1,20 +1,21 @@
-"""The node's reused output messages are what rosbags serializes from x, P; unwatched: unsent."""
+"""The node's reused estimate messages are what rosbags serializes from x, P; unwatched: unsent."""
 
 from pathlib import Path
 import time
 
-from bag.test_cdr import library_bytes, same_values
-from geometry_msgs.msg import TwistWithCovarianceStamped
+from bag.test_cdr import library_bytes
 from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
+import pytest
 import rclpy
-from rclpy.qos import QoSProfile
-from sensor_msgs.msg import JointState
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from tskf_ros.bag.cdr import serialize
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
-from tskf_ros.messages.estimator_interface import load_config, outcome_messages, OutcomeMessages
+from tskf_ros.messages.estimator_interface import (load_config, outcome_messages,
+                                                   OutcomeMessages, output_qos, OUTPUT_TOPICS)
 from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.owc.session import Estimate, EstimatorSession, Jump, Outcome
@@ -55,18 +56,24 @@ def configs_and_outcomes(draw):
     return config, draw(st.lists(outcomes(n), min_size=1, max_size=3))
 
 
+def step_of(e, jumps):
+    """Return mu (s) of the step an estimate comes from: into a predicted, out of a corrected."""
+    mu = 0.0
+    for j in jumps:         # the last jump that matches, as a later step overwrites
+        if (j.sigma_ns if e.kind == 'predicted' else j.stamp_ns) == e.stamp_ns:
+            mu = (j.sigma_ns - j.stamp_ns) / NS
+    return mu
+
+
 def expected_bytes(out, config):
-    """Return {(kind, revised): [bytes]} of an outcome, serialized by rosbags from x, P, mu."""
+    """Return {output: [bytes]} of an outcome, serialized by rosbags from x, P, mu."""
     names = config.session.model.state_names
     want = {}
     for e in out.estimates:
-        twist, states, _ = library_bytes(e.stamp_ns, np.asarray(e.x), np.asarray(e.P),
-                                         config.frame_id, names, 0)
-        want.setdefault((e.kind, e.revised), []).append(twist)
-        want.setdefault((e.kind + '_states', e.revised), []).append(states)
-    for j in out.jumps:
-        want.setdefault(('mu', j.revised), []).append(
-            library_bytes(j.stamp_ns, np.zeros(1), np.zeros((1, 1)), '', [''], j.sigma_ns)[2])
+        topic = 'revised' if e.revised else e.kind
+        want.setdefault(topic, []).append(library_bytes(
+            e.kind, e.stamp_ns, step_of(e, out.jumps), np.asarray(e.x), np.asarray(e.P),
+            names))
     return want
 
 
@@ -78,18 +85,11 @@ def test_the_reused_messages_are_what_rosbags_serializes_from_the_estimates(case
     for out in outs:
         got = {}
         for key, msg in reused.messages(out):
-            # serialized before the next message is filled, as the node publishes it; in
-            # canonical CDR (rosbags): rclpy's Fast-CDR leaves padding bytes uninitialised,
-            # so the same message need not give the same bytes twice through it
+            # serialized before the next message is filled, as the node publishes it
             got.setdefault(key, []).append(serialize(msg))
-        want = expected_bytes(out, config)
-        assert got.keys() == want.keys()
-        for key, items in got.items():
-            assert len(items) == len(want[key]), key
-            for a, b in zip(items, want[key]):
-                if a != b:     # only sqrt(max(-0.0, 0)): the sign of that zero is free
-                    same_values(a, b, 'sensor_msgs/msg/JointState')
-                    assert key[0].endswith('_states'), key
+        assert got == expected_bytes(out, config)
+        assert {key: [serialize(m) for _, m in outcome_messages(out, config) if _ == key]
+                for key in got} == got
 
 
 def test_each_field_is_what_the_estimate_says():
@@ -97,56 +97,74 @@ def test_each_field_is_what_the_estimate_says():
     config = load_config(CONFIG / 'reference_estimator.yaml', {'frame_id': 'rig'})
     x, P = np.array([0.5, -1.25]), np.array([[4.0, 0.3], [0.3, 0.25]])
     t = 1_700_000_000 * NS + 123
-    out = Outcome('accepted', estimates=[Estimate('corrected', t, x, P)],
+    out = Outcome('accepted', estimates=[Estimate('corrected', t, x, P),
+                                         Estimate('predicted', t + 5 * NS // 1000, x, P)],
                   jumps=[Jump(t, t + 5 * NS // 1000)])
     msgs = {}
     for key, msg in OutcomeMessages(config).messages(out):
-        msgs[key] = msg
-    twist = msgs[('corrected', False)]
-    assert twist.header.stamp.sec == 1_700_000_000 and twist.header.stamp.nanosec == 123
-    assert twist.header.frame_id == 'rig'
-    assert (twist.twist.twist.linear.x, twist.twist.twist.linear.y) == (0.5, -1.25)
-    assert (twist.twist.twist.linear.z, twist.twist.twist.angular.x) == (0.0, 0.0)
-    cov = np.asarray(twist.twist.covariance).reshape(6, 6)
-    np.testing.assert_array_equal(cov[:2, :2], P)
-    assert not cov[2:].any() and not cov[:, 2:].any()
-    states = msgs[('corrected_states', False)]
-    assert list(states.name) == ['position', 'velocity'] and states.header.frame_id == 'rig'
-    assert list(states.position) == [0.5, -1.25] and list(states.velocity) == [2.0, 0.5]
-    assert conversions.msg_to_jump(msgs[('mu', False)]) == (t, 0.005)
+        msgs[key] = list(msg.data), [(d.label, d.size, d.stride) for d in msg.layout.dim], \
+            msg.layout.data_offset
+    # data = [sec, nanosec, mu, x, P]; dim: rows = mean then covariance, columns = states
+    assert msgs['corrected'] == ([1_700_000_000.0, 123.0, 0.005, 0.5, -1.25, 4.0, 0.3, 0.3,
+                                  0.25], [('corrected', 3, 6), ('position,velocity', 2, 2)],
+                                 3)
+    assert msgs['predicted'][0][:3] == [1_700_000_000.0, 5_000_123.0, 0.005]
+    assert msgs['predicted'][1][0] == ('predicted', 3, 6)
+    # the generic reading of the layout: array(i, j) = data[offset + stride[1] i + j]
+    data, dims, offset = msgs['corrected']
+    n = dims[1][1]
+    array = np.array(data[offset:]).reshape(dims[0][1], n)
+    np.testing.assert_array_equal(array[0], x)
+    np.testing.assert_array_equal(array[1:], P)
 
 
-def test_a_smaller_state_leaves_nothing_of_a_larger_one():
-    msg = TwistWithCovarianceStamped()
-    conversions.fill_estimate_msg(msg, NS, np.arange(1.0, 4.0), np.ones((3, 3)))
-    conversions.fill_estimate_msg(msg, 2 * NS, [7.0], [[2.0]])
-    assert serialize(msg) == library_bytes(2 * NS, np.array([7.0]), np.array([[2.0]]), '',
-                                           ['x'], 0)[0]
-    states = JointState(name=['a', 'b', 'c'], position=[1.0, 2.0, 3.0], velocity=[1.0] * 3)
-    conversions.fill_joint_state(states, NS, [7.0], [[4.0]])
-    assert list(states.position) == [7.0] and list(states.velocity) == [2.0]
+def test_the_prior_at_a_first_point_has_mu_zero():
+    config = load_config(CONFIG / 'owc_estimator.yaml')
+    out = EstimatorSession(config.session).add(NS, 200.0)
+    (key, msg), = outcome_messages(out, config)
+    e = conversions.msg_to_state_estimate(msg)
+    assert key == 'predicted' and (e.kind, e.stamp_ns, e.mu, e.names) == (
+        'predicted', NS, 0.0, ('theta',))
 
 
-def test_a_late_sample_publishes_every_revision():
-    # a late sample revises several points: one reused message carries each in turn
+def test_an_estimate_of_another_layout_is_refused():
+    msg = conversions.state_estimate_to_msg('corrected', NS, 1.0, [1.0, 2.0], np.eye(2),
+                                            ['a', 'b'])
+    short = Float64MultiArray(layout=msg.layout, data=list(msg.data)[:-1])
+    with pytest.raises(ValueError, match='8 entries for 2 states'):
+        conversions.msg_to_state_estimate(short)
+    flat = Float64MultiArray(layout=msg.layout, data=msg.data)
+    flat.layout.dim = [MultiArrayDimension(label='x', size=9, stride=9)]
+    with pytest.raises(ValueError, match='2 dimensions'):
+        conversions.msg_to_state_estimate(flat)
+
+
+def test_a_late_sample_publishes_every_revision_on_one_topic():
+    # a late sample revises several points: each on estimate/revised, its kind in the layout
     config = load_config(CONFIG / 'owc_estimator.yaml')
     session = EstimatorSession(config.session)
     for k in (1, 2, 3, 5, 6):
         session.add(k * NS, 200.0 + k)
     out = session.add(4 * NS, 190.0)
     assert out.status == 'inserted'
-    revised = [(key, conversions.msg_to_estimate(msg, 1)[0])
-               for key, msg in OutcomeMessages(config).messages(out)
-               if key == ('corrected', True)]
-    want = [e.stamp_ns for e in out.estimates if (e.kind, e.revised) == ('corrected', True)]
-    assert len(want) >= 2 and [s for _, s in revised] == want
+    revised = [conversions.msg_to_state_estimate(msg)
+               for key, msg in OutcomeMessages(config).messages(out) if key == 'revised']
+    want = [(e.kind, e.stamp_ns) for e in out.estimates if e.revised]
+    assert len(want) >= 4 and [(e.kind, e.stamp_ns) for e in revised] == want
+    assert {'predicted', 'corrected'} == {kind for kind, _ in want}
+
+
+def test_the_outputs_are_at_most_five_topics_with_diagnostics():
+    assert len(OUTPUT_TOPICS) + 1 <= 5
+    qos = output_qos(load_config())
+    assert qos.depth == 10 and qos.reliability == ReliabilityPolicy.RELIABLE
 
 
 def test_the_node_publishes_only_what_somebody_subscribes_to(ros_context, executor_kind):
     node = TimescaleEstimator(context=ros_context)
     client = rclpy.create_node('only_predicted', context=ros_context)
     predicted = []
-    client.create_subscription(TwistWithCovarianceStamped, 'estimate/predicted',
+    client.create_subscription(Float64MultiArray, 'estimate/predicted',
                                predicted.append, QoSProfile(depth=100))
     published = {key: 0 for key in node.pubs}
     for key, pub in node.pubs.items():
@@ -159,7 +177,7 @@ def test_the_node_publishes_only_what_somebody_subscribes_to(ros_context, execut
     executor.add_node(client)
     deadline = time.monotonic() + TIMEOUT
     try:
-        while node.pubs[('predicted', False)].get_subscription_count() < 1:
+        while node.pubs['predicted'].get_subscription_count() < 1:
             assert time.monotonic() < deadline, 'our subscription never matched'
             executor.spin_once(timeout_sec=0.05)
         for k in (1, 2, 3):
@@ -171,22 +189,9 @@ def test_the_node_publishes_only_what_somebody_subscribes_to(ros_context, execut
         executor.shutdown()
         node.destroy_node()
         client.destroy_node()
-    assert published == {key: 3 if key == ('predicted', False) else 0 for key in node.pubs}
-    assert [conversions.stamp_to_ns(m.header.stamp) for m in predicted] == [NS, 2 * NS, 3 * NS]
-
-
-def test_the_joint_state_mirror_names_each_state_and_its_standard_deviation():
-    config = load_config(CONFIG / 'reference_estimator.yaml')
-    x, P = np.array([0.5, -1.25]), np.array([[4.0, 0.3], [0.3, 0.25]])
-    out = Outcome('accepted', estimates=[Estimate('corrected', T0, x, P)])
-    msgs = dict(outcome_messages(out, config))
-    states = msgs[('corrected_states', False)]
-    assert list(states.name) == ['position', 'velocity']
-    np.testing.assert_allclose(states.position, [0.5, -1.25], rtol=1e-12)
-    np.testing.assert_allclose(states.velocity, [2.0, 0.5], rtol=1e-12)      # sqrt(diag P)
-    assert conversions.stamp_to_ns(states.header.stamp) == T0
-    twist = msgs[('corrected', False)]
-    assert states.header.frame_id == twist.header.frame_id == ''
+    assert published == {key: 3 if key == 'predicted' else 0 for key in node.pubs}
+    assert [conversions.msg_to_state_estimate(m).stamp_ns for m in predicted] == [
+        NS, 2 * NS, 3 * NS]
 
 
 def test_load_config_has_the_new_defaults():

@@ -4,15 +4,17 @@ from pathlib import Path
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
+from geometry_msgs.msg import AccelStamped
 import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Illuminance, TimeReference
+from sensor_msgs.msg import Illuminance
+from std_msgs.msg import Float64MultiArray
 
+from tskf_ros.core import rts_smooth
 from tskf_ros.core.linear_models import owc, run_filter, spring_mass
 from tskf_ros.core.time_scales import discrete
 from tskf_ros.core.units import NS
@@ -23,9 +25,12 @@ from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 import yaml
 
 CONFIG = Path(__file__).resolve().parents[2] / 'config'
-OUTPUTS = {'predicted': TwistWithCovarianceStamped, 'corrected': TwistWithCovarianceStamped,
-           'mu': TimeReference, 'revised/predicted': TwistWithCovarianceStamped,
-           'revised/corrected': TwistWithCovarianceStamped, 'revised/mu': TimeReference}
+# the estimate topics (without estimate/smoothed, which only smoothing_lag > 0 makes)
+TOPICS = ('predicted', 'corrected', 'revised')
+# what the harness keeps: the estimates by topic and kind, and the steps (t_k, mu_k) that
+# the predicted estimates carry
+OUTPUTS = ('predicted', 'corrected', 'mu', 'revised/predicted', 'revised/corrected',
+           'revised/mu')
 # 1 Hz with gaps J = 3 (after 4) and J = 4 (after 12), and a dense stretch at 0.25 s
 STAMPS = np.array([1, 2, 3, 4, 7, 8, 9, 10, 11, 12, 16, 16.25, 16.5, 16.75, 17, 18, 19, 20])
 TIMEOUT = 60.0      # s: only a bound on waiting for DDS; no assertion depends on timing
@@ -48,9 +53,9 @@ class Harness:
         qos = qos_profile_sensor_data if best_effort else QoSProfile(depth=100)
         self.pub = self.client.create_publisher(Illuminance, 'measurement', qos)
         self.got = {k: [] for k in OUTPUTS}
-        for topic, kind in OUTPUTS.items():
-            self.client.create_subscription(kind, 'estimate/' + topic,
-                                            self.got[topic].append, QoSProfile(depth=1000))
+        for topic in TOPICS:
+            self.client.create_subscription(Float64MultiArray, 'estimate/' + topic,
+                                            self._keep(topic), QoSProfile(depth=1000))
         self.diagnostics = []
         self.client.create_subscription(DiagnosticArray, '/diagnostics',
                                         self.diagnostics.append, 10)
@@ -58,7 +63,16 @@ class Harness:
         self.executor.add_node(self.node)
         self.executor.add_node(self.client)
         self.spin_until(lambda: self.pub.get_subscription_count() > 0 and all(
-            self.client.count_publishers('estimate/' + t) > 0 for t in OUTPUTS))
+            self.client.count_publishers('estimate/' + t) > 0 for t in TOPICS))
+
+    def _keep(self, topic):
+        def keep(msg):
+            e = conversions.msg_to_state_estimate(msg)
+            prefix = 'revised/' if topic == 'revised' else ''
+            self.got[prefix + e.kind].append(e)
+            if e.kind == 'predicted' and e.mu > 0:      # the step t_k -> t_{k+1}, mu_k
+                self.got[prefix + 'mu'].append((e.stamp_ns - round(e.mu * NS), e.mu))
+        return keep
 
     def spin_until(self, condition, what='condition'):
         """Spin until condition() holds; fail (not a timing assertion) after TIMEOUT."""
@@ -81,9 +95,10 @@ class Harness:
 
     def estimates(self, topic, n):
         """(stamps s, x, P) received on an estimate topic."""
-        out = [conversions.msg_to_estimate(m, n) for m in self.got[topic]]
-        return (np.array([o[0] / NS for o in out]), np.array([o[1] for o in out]),
-                np.array([o[2] for o in out]))
+        out = self.got[topic]
+        assert all(e.x.size == n for e in out)
+        return (np.array([e.stamp_ns / NS for e in out]), np.array([e.x for e in out]),
+                np.array([e.P for e in out]))
 
     def close(self):
         """Destroy the nodes and the executor."""
@@ -142,7 +157,7 @@ def test_outputs_equal_offline_run(make, config, model, transition):
     np.testing.assert_array_equal(t, STAMPS[:-1])
     np.testing.assert_allclose(x, ref.x_corr[:-1], rtol=0, atol=1e-9)
     np.testing.assert_allclose(P, ref.P_corr[:-1], rtol=0, atol=1e-9)
-    mu = [conversions.msg_to_jump(m) for m in h.got['mu']]
+    mu = h.got['mu']
     np.testing.assert_array_equal([m[0] / NS for m in mu], STAMPS[:-1])
     np.testing.assert_allclose([m[1] for m in mu], np.diff(STAMPS), rtol=0, atol=1e-12)
     assert not any(h.got[k] for k in ('revised/predicted', 'revised/corrected', 'revised/mu'))
@@ -185,7 +200,7 @@ def test_nonpositive_power_is_a_gap(make):
     pred, _ = run_with(h, [(3.0, 0.0), (3.5, -5.0)], after=5.0)
     np.testing.assert_array_equal(pred, [1, 2, 5])
     h.expect(mu=2)
-    assert conversions.msg_to_jump(h.got['mu'][-1]) == (2 * NS, 3.0)      # J = 3
+    assert h.got['mu'][-1] == (2 * NS, 3.0)      # J = 3
     assert rejected(h, 'invalid_power') == 2
     _, _, values = h.node.session.diagnostics()
     assert values['gaps'] == 1 and values['gap_max_s'] == 3.0
@@ -247,7 +262,7 @@ def test_future_stamp_is_rejected(make):
     h.send(now + 3 * NS, 200.0)
     h.expect(predicted=4)
     assert rejected(h, 'future') == 1
-    assert [conversions.stamp_to_ns(m.header.stamp) - now for m in h.got['predicted']] == [
+    assert [e.stamp_ns - now for e in h.got['predicted']] == [
         0, NS, 2 * NS, 3 * NS]
 
 
@@ -402,3 +417,107 @@ def test_inputs_are_held_and_outputs_equal_the_core(make):
     stats = h.node.session.stats
     assert stats.inputs_accepted == grid.size and stats.accepted == len(fixes)
     assert not stats.rejected
+
+
+# -- QoS: outputs reliable at depth 10, overridable; the input keeps sensor data ----------
+
+def test_outputs_keep_ten_and_a_qos_override_takes_effect(make):
+    h = make(yaml_parameters(
+        'owc_estimator.yaml', queue_depth=250,
+        **{'qos_overrides./estimate/corrected.publisher.depth': 3,
+           'qos_overrides./estimate/corrected.publisher.reliability': 'best_effort'}))
+    pubs = h.node.pubs
+    assert set(pubs) == {'predicted', 'corrected', 'revised'}      # smoothing off
+    assert pubs['predicted'].qos_profile.depth == 10
+    assert pubs['predicted'].qos_profile.reliability == ReliabilityPolicy.RELIABLE
+    assert pubs['corrected'].qos_profile.depth == 3
+    assert pubs['corrected'].qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+    # the override is a read-only parameter of the node, as rclpy declares it
+    assert h.node.get_parameter('qos_overrides./estimate/corrected.publisher.depth').value == 3
+    assert not h.node.set_parameters([Parameter(
+        'qos_overrides./estimate/predicted.publisher.depth', value=5)])[0].successful
+    assert h.node.sub.qos_profile.depth == 250
+    assert h.node.sub.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+    # the best-effort output still reaches a (best-effort matching) subscriber
+    for t in (1.0, 2.0, 3.0):
+        h.send(t, 200.0)
+    h.expect(predicted=3)
+
+
+# -- fixed-lag smoothing: x(t_j|t_{j+L}) equals the full smoother on that prefix ---------
+
+def smoothed_reference(model, stamps, y, last):
+    """rts_smooth (the full RTS smoother) over the points stamps[:last + 1]: (xs, Ps)."""
+    mu = np.diff(stamps)[:last + 1]
+    return rts_smooth(model.A, model.C, mu, y[:last + 1], Q=model.Q, R=model.R, G=model.G,
+                      D=model.D, x0=model.x0, P0=model.P0)
+
+
+def smoothed_harness(make, lag, **extra):
+    h = make(yaml_parameters('owc_estimator.yaml', smoothing_lag=lag, **extra))
+    got = []
+    h.client.create_subscription(Float64MultiArray, 'estimate/smoothed',
+                                 lambda m: got.append(conversions.msg_to_state_estimate(m)),
+                                 QoSProfile(depth=1000))
+    h.spin_until(lambda: h.node.pubs['smoothed'].get_subscription_count() > 0)
+    return h, got
+
+
+def test_smoothing_lag_publishes_the_fixed_lag_estimate(make):
+    lag = 3
+    h, got = smoothed_harness(make, lag)
+    y = measurements(owc(), STAMPS)
+    for t, yi in zip(STAMPS, y[:, 0]):
+        h.send(t, yi)
+    # the newest point is not stepped yet: N - 1 steps, the last lag of them not yet due
+    due = STAMPS.size - 1 - lag
+    h.spin_until(lambda: len(got) >= due, 'the smoothed estimates')
+    assert [e.stamp_ns / NS for e in got] == STAMPS[:due].tolist()
+    assert {e.kind for e in got} == {'smoothed'}
+    for j, e in enumerate(got):
+        xs, Ps = smoothed_reference(owc(), STAMPS, y, j + lag)
+        np.testing.assert_allclose(e.x, xs[j], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(e.P, Ps[j], rtol=1e-9, atol=1e-15)
+        assert e.mu == STAMPS[j + 1] - STAMPS[j]
+    # smoothing used the later measurements: never a larger variance than the filter's
+    _, _, P_corr = h.estimates('corrected', 1)
+    assert all(e.P[0, 0] <= P_corr[j][0, 0] + 1e-15 for j, e in enumerate(got))
+
+
+def test_a_late_sample_rebuilds_the_window(make):
+    # t = 11 (point 8) comes after t = 12 and 16; lag 2: points 0..6 were out before it
+    lag = 2
+    h, got = smoothed_harness(make, lag)
+    y = measurements(owc(), STAMPS)
+    order = list(range(8)) + [9, 10, 8] + list(range(11, STAMPS.size))
+    for i in order:
+        h.send(STAMPS[i], y[i, 0])
+    due = STAMPS.size - 1 - lag
+    h.spin_until(lambda: len(got) >= due, 'the smoothed estimates')
+    # every point once, in order, the late one included: none skipped, none repeated
+    assert [e.stamp_ns / NS for e in got] == STAMPS[:due].tolist()
+    without = np.delete(np.arange(STAMPS.size), 8)
+    for j, e in enumerate(got):
+        if j == 6:      # out before t = 11 came: smoothed on 9, 10 and 12 (no 11)
+            xs, _ = smoothed_reference(owc(), STAMPS[without], y[without], 6 + lag)
+        else:           # the rest on the run as revised (the late sample in its place)
+            xs, _ = smoothed_reference(owc(), STAMPS, y, j + lag)
+        np.testing.assert_allclose(e.x, xs[j], rtol=0, atol=1e-9)
+
+
+def test_a_reset_flushes_the_window(make):
+    lag = 3
+    h, got = smoothed_harness(make, lag, max_jump=60.0)
+    stamps = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
+    y = measurements(owc(), stamps)
+    for t, yi in zip(stamps, y[:, 0]):
+        h.send(t, yi)
+    h.spin_until(lambda: len(got) >= 2, 'the smoothed estimates')
+    h.send(500.0, 200.0)                    # a forward jump: the filter starts anew
+    h.spin_until(lambda: len(got) >= 5, 'the flushed window')
+    assert [e.stamp_ns / NS for e in got] == [1, 2, 3, 4, 5]
+    # the window's points come out smoothed on what it held: steps from 1 .. 5
+    xs, _ = smoothed_reference(owc(), np.append(stamps, 7.0), y, 4)
+    np.testing.assert_allclose([e.x[0] for e in got[2:]], xs[2:, 0], rtol=0, atol=1e-9)
+    assert [e.stamp_ns / NS for e in got].count(5) == 1
+    assert h.node.session.stats.resets['forward_jump'] == 1

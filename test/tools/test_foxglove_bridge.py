@@ -48,7 +48,7 @@ MSG_LINE = re.compile(r'^MSG: (\S+)$', re.M)
 # every message type the package's nodes publish or take
 PACKAGE_TYPES = sorted({
     *estimator_interface.INPUT_TYPES, ESTIMATE_TYPE, STATES_TYPE,
-    estimator_interface.JUMP_TYPE, estimator_interface.INPUT_TYPE,
+    estimator_interface.ESTIMATE_TYPE, estimator_interface.INPUT_TYPE,
     estimator_interface.DIAGNOSTICS_TYPE, alignment_interface.COMMAND_TYPE})
 
 

@@ -120,7 +120,7 @@ def test_foxglove_layout_refers_to_topics_the_bags_have():
     topics = set()
     for name in ('owc_cai_td_1hz', 'led_alignment'):
         topics |= set(BagReader(BAGS / name).topics)
-    topics |= {'/estimate/predicted', '/estimate/corrected', '/estimate/mu', '/diagnostics'}
+    topics |= {'/estimate/predicted', '/estimate/corrected', '/diagnostics'}
     for panel in layout['configById'].values():
         for path in panel.get('paths', []):
             assert path['value'].split('.')[0] in topics, path['value']

@@ -93,8 +93,8 @@ def test_offline_replay_of_the_drogue_bag_against_drogue_py():
     assert res.input_topic == '/input' and res.inputs == len(u)
     assert res.samples == len(fixes) and res.statuses == {'accepted': len(fixes)}
     assert res.input_statuses == {'accepted': len(u)}
-    estimates = {kind: {_index(s): (x, P) for s, x, P in (
-        conversions.msg_to_estimate(msg, 2) for topic, _, msg in res.outputs
+    estimates = {kind: {_index(e.stamp_ns): (e.x, e.P) for e in (
+        conversions.msg_to_state_estimate(msg) for topic, _, msg in res.outputs
         if topic == f'/estimate/{kind}')} for kind in ('corrected', 'predicted')}
     node = {k: x[1] for k, (x, _) in estimates['corrected'].items()}
     k0 = run.observable_from()

@@ -1,7 +1,6 @@
 """Canonical CDR (XCDR1, rosbags' encoding) of what the package writes; fixed-layout codecs."""
 
 import array
-import math
 import operator
 import struct
 from typing import Any, Callable, Optional, Sequence
@@ -11,12 +10,12 @@ from rosbags.interfaces import Nodetype
 
 from tskf_ros.bag.message_types import typestore
 from tskf_ros.core.units import NS
+from tskf_ros.messages.conversions import ESTIMATE_OFFSET
 
 __all__ = ['EstimateEncoder', 'fixed_decoder', 'fixed_fields', 'serialize', 'to_store',
            'type_name']
 
 CDR_HEADER = b'\x00\x01\x00\x00'    # XCDR1, little endian, no options
-ESTIMATE_SLOTS = 6
 _NUMPY = {'d': np.float64, 'f': np.float32, 'b': np.int8, 'B': np.uint8, 'h': np.int16,
           'H': np.uint16, 'i': np.int32, 'I': np.uint32, 'l': np.int64, 'L': np.uint64,
           'q': np.int64, 'Q': np.uint64}
@@ -94,93 +93,41 @@ class EstimateEncoder:
     """
     The estimator's outputs as canonical CDR, written directly in their fixed layout.
 
-    One encoder per replay: the frame id and the state names are fixed, so everything
-    after the stamp is laid out once; each message is then one struct.pack.
+    Each is a std_msgs/msg/Float64MultiArray in the layout of
+    conversions.state_estimate_to_msg.  One encoder per replay: the state names are fixed,
+    so the layout of each kind of estimate is laid out once; each message is then one
+    struct.pack of its data.
     """
 
-    def __init__(self, frame_id: str, names: Sequence[str], n: int) -> None:
-        if not 0 < n <= ESTIMATE_SLOTS:
-            raise ValueError(f'a state of {n} entries does not fit the estimate message')
-        if len(names) != n:
-            raise ValueError(f'{len(names)} state names for {n} states')
+    KINDS = ('predicted', 'corrected', 'smoothed')
+
+    def __init__(self, names: Sequence[str]) -> None:
+        n = len(names)
+        if not n:
+            raise ValueError('an estimate needs at least one state')
         self.n = n
-        head = _Layout(8)                       # after the stamp: frame_id
-        head.string(frame_id)
-        head.put(b'', 8)                        # then float64s
-        frame = head.cut(0)
-        self._estimate = struct.Struct(f'<iI{len(frame)}s{ESTIMATE_SLOTS}d'
-                                       f'{ESTIMATE_SLOTS ** 2}d')
-        self._frame = frame
-        self._zeros = [0.0] * (ESTIMATE_SLOTS ** 2)
-        self._pad = (0.0,) * (ESTIMATE_SLOTS - n)
-        # JointState: header, name[], position[], velocity[], effort[] (empty)
-        lay = _Layout(8)
-        lay.string(frame_id)
-        lay.put(struct.pack('<I', len(names)), 4)
-        for name in names:
-            lay.string(name)
-        lay.put(struct.pack('<I', n), 4)
-        lay.put(b'', 8)
-        self._states_prefix = lay.cut(8 * n)
-        lay.put(struct.pack('<I', n), 4)
-        lay.put(b'', 8)
-        self._states_mid = lay.cut(8 * n)
-        lay.put(struct.pack('<I', 0), 4)
-        self._states_tail = lay.cut(0)
-        self._states = struct.Struct(f'<iI{len(self._states_prefix)}s{n}d'
-                                     f'{len(self._states_mid)}s{n}d{len(self._states_tail)}s')
-        # TimeReference: header (stamp, frame_id ''), time_ref, source 'sigma'
-        self._jump = struct.Struct('<iI4s4siI4s6s')
+        count = ESTIMATE_OFFSET + n + n * n
+        self._prefix = {}
+        for kind in self.KINDS:
+            lay = _Layout(0)
+            lay.put(struct.pack('<I', 2), 4)
+            lay.string(kind)
+            lay.put(struct.pack('<II', n + 1, (n + 1) * n), 4)
+            lay.string(','.join(names))
+            lay.put(struct.pack('<II', n, n), 4)
+            lay.put(struct.pack('<II', ESTIMATE_OFFSET, count), 4)
+            lay.put(b'', 8)
+            self._prefix[kind] = CDR_HEADER + lay.cut(0)
+        self._data = struct.Struct(f'<{count}d')
 
-    @staticmethod
-    def _stamp(ns: int) -> tuple[int, int]:
-        return divmod(int(ns), NS)
-
-    def estimate(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> bytes:
-        """Return the TwistWithCovarianceStamped of conversions.estimate_to_msg, serialized."""
+    def estimate(self, kind: str, stamp_ns: int, mu: float, x: np.ndarray,
+                 P: np.ndarray) -> bytes:
+        """Return conversions.state_estimate_to_msg(kind, ...) serialized."""
         n = self.n
-        v = np.asarray(x, dtype=float).reshape(-1).tolist()
-        cov = self._zeros.copy()
-        rows = np.asarray(P, dtype=float).reshape(n, n).tolist()
-        for i in range(n):
-            cov[i * ESTIMATE_SLOTS:i * ESTIMATE_SLOTS + n] = rows[i]
-        v += [0.0] * (ESTIMATE_SLOTS - n)
-        sec, nsec = self._stamp(stamp_ns)
-        return CDR_HEADER + self._estimate.pack(sec, nsec, self._frame, *v, *cov)
-
-    def states(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> bytes:
-        """Return the JointState of conversions.estimate_to_joint_state, serialized."""
-        n = self.n
-        P = np.asarray(P, dtype=float).reshape(n, n)
-        # as np.maximum(diag, 0.0): -0.0 gives 0.0 and NaN stays NaN
-        sd = [math.sqrt(d if d > 0.0 or d != d else 0.0)
-              for d in (float(P[i, i]) for i in range(n))]
-        sec, nsec = self._stamp(stamp_ns)
-        return CDR_HEADER + self._states.pack(
-            sec, nsec, self._states_prefix, *np.asarray(x, dtype=float).reshape(-1).tolist(),
-            self._states_mid, *sd, self._states_tail)
-
-    def pair(self, stamp_ns: int, x: np.ndarray, P: np.ndarray) -> tuple[bytes, bytes]:
-        """Return (estimate(...), states(...)) of one estimate, its arrays read once."""
-        n = self.n
-        v = np.asarray(x, dtype=float).reshape(-1).tolist()
-        flat = np.asarray(P, dtype=float).reshape(-1).tolist()
-        cov = self._zeros.copy()
-        for i in range(n):
-            cov[i * ESTIMATE_SLOTS:i * ESTIMATE_SLOTS + n] = flat[i * n:i * n + n]
-        # as np.maximum(diag, 0.0): -0.0 gives 0.0 and NaN stays NaN
-        sd = [math.sqrt(d if d > 0.0 or d != d else 0.0) for d in flat[::n + 1]]
         sec, nsec = divmod(int(stamp_ns), NS)
-        return (CDR_HEADER + self._estimate.pack(sec, nsec, self._frame, *v, *self._pad, *cov),
-                CDR_HEADER + self._states.pack(sec, nsec, self._states_prefix, *v,
-                                               self._states_mid, *sd, self._states_tail))
-
-    def jump(self, stamp_ns: int, sigma_ns: int) -> bytes:
-        """Return the TimeReference of conversions.jump_to_msg, serialized."""
-        sec, nsec = self._stamp(stamp_ns)
-        ref_sec, ref_nsec = self._stamp(sigma_ns)
-        return CDR_HEADER + self._jump.pack(sec, nsec, b'\x01\0\0\0', b'\0\0\0\0', ref_sec,
-                                            ref_nsec, b'\x06\0\0\0', b'sigma\0')
+        return self._prefix[kind] + self._data.pack(
+            sec, nsec, mu, *np.asarray(x, dtype=float).reshape(n).tolist(),
+            *np.asarray(P, dtype=float).reshape(n * n).tolist())
 
 
 # struct codes of the fixed-size base types a fixed-layout decoder reads

@@ -1,22 +1,23 @@
 """Messages to and from the core: the only place where ROS messages meet numpy arrays."""
 
-import math
-from typing import Mapping, Sequence
+from typing import Mapping, NamedTuple, Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 import numpy as np
-from sensor_msgs.msg import Illuminance, JointState, TimeReference
-from std_msgs.msg import Float64MultiArray
+from sensor_msgs.msg import Illuminance, JointState
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
 from tskf_ros.core.units import NS
 
 SLOTS = 6
-# the type of every estimate: a stamped state vector with its covariance (see above)
+# the alignment node's estimate: its state vector with its covariance (see below)
 ESTIMATE_TYPE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
 # the type of its mirror by name
 STATES_TYPE = 'sensor_msgs/msg/JointState'
+# the time-scale estimator's estimates: a stamped state vector with its covariance
+STATE_ESTIMATE_TYPE = 'std_msgs/msg/Float64MultiArray'
 LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
 
@@ -81,56 +82,6 @@ def estimate_to_msg(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
     return msg
 
 
-def set_stamp(stamp: Time, ns: int) -> Time:
-    """Set a builtin_interfaces/Time in place to integer nanoseconds (>= 0); return it."""
-    stamp.sec, stamp.nanosec = divmod(int(ns), NS)
-    return stamp
-
-
-def fill_estimate_msg(msg: TwistWithCovarianceStamped, stamp_ns: int, x: np.ndarray,
-                      P: np.ndarray) -> TwistWithCovarianceStamped:
-    """
-    Fill a TwistWithCovarianceStamped in place as estimate_to_msg builds one; return it.
-
-    The frame_id is left as it is: a publisher of estimates reuses one message per topic
-    (building nine nested message objects per estimate costs more than the filter step).
-    """
-    x = np.asarray(x, dtype=float).reshape(-1)
-    n = x.size
-    if n > SLOTS:
-        raise ValueError(f'a state of {n} > {SLOTS} entries does not fit the message')
-    P = np.asarray(P, dtype=float).reshape(n, n)
-    set_stamp(msg.header.stamp, stamp_ns)
-    v = x.tolist() + [0.0] * (SLOTS - n)
-    t = msg.twist.twist
-    t.linear.x, t.linear.y, t.linear.z = v[0], v[1], v[2]
-    t.angular.x, t.angular.y, t.angular.z = v[3], v[4], v[5]
-    cov = msg.twist.covariance
-    if cov.dtype != np.float64 or cov.shape != (SLOTS * SLOTS,):
-        cov = msg.twist.covariance = np.zeros(SLOTS * SLOTS)
-    cov.fill(0.0)
-    cov.reshape(SLOTS, SLOTS)[:n, :n] = P
-    return msg
-
-
-def fill_joint_state(msg: JointState, stamp_ns: int, x: np.ndarray,
-                     P: np.ndarray) -> JointState:
-    """Fill a JointState in place as estimate_to_joint_state builds one (names kept)."""
-    x = np.asarray(x, dtype=float).reshape(-1)
-    n = x.size
-    # sqrt(max(P_ii, 0)) in plain floats, as np.sqrt(np.maximum(diag, 0)) does (NaN stays)
-    sd = [math.sqrt(p) if p > 0.0 else (p if p != p else 0.0)
-          for p in np.asarray(P, dtype=float).reshape(n, n).diagonal().tolist()]
-    set_stamp(msg.header.stamp, stamp_ns)
-    position, velocity = msg.position, msg.velocity
-    if len(position) == n and len(velocity) == n:
-        for i, (xi, si) in enumerate(zip(x.tolist(), sd)):
-            position[i], velocity[i] = xi, si
-    else:
-        msg.position, msg.velocity = x.tolist(), sd
-    return msg
-
-
 def estimate_to_joint_state(stamp_ns: int, x: np.ndarray, P: np.ndarray,
                             names: Sequence[str], *, frame_id: str = '') -> JointState:
     """Convert x and P -> JointState: name = names, position = x, velocity = sqrt(diag P)."""
@@ -151,24 +102,79 @@ def msg_to_estimate(msg: TwistWithCovarianceStamped, n: int
     return stamp_to_ns(msg.header.stamp), v[:n], cov[:n, :n]
 
 
-def jump_to_msg(stamp_ns: int, sigma_ns: int) -> TimeReference:
-    """Convert the point t and sigma(t) -> TimeReference (mu = time_ref - stamp)."""
-    msg = TimeReference(time_ref=ns_to_stamp(sigma_ns), source='sigma')
-    msg.header.stamp = ns_to_stamp(stamp_ns)
+# -- estimates of the time-scale estimator: std_msgs/msg/Float64MultiArray ----------------
+#
+# common_interfaces has no stamped state vector with a covariance (doc/interfaces.md): the
+# geometry types give their slots a meaning (an angle is no linear velocity), JointState
+# has no covariance, and the stamped scalars hold one value.  An estimate is therefore a
+# Float64MultiArray whose layout says what it holds:
+#
+#   data[0], data[1]   the stamp t_k: sec, nanosec (exact in a float64)
+#   data[2]            mu (s): the graininess of the filter step the estimate comes from
+#   layout.data_offset = 3: the three entries above are the array's leading padding
+#   dim[0]: label = the kind ('predicted', 'corrected', 'smoothed'), size n + 1,
+#           stride (n + 1) n: row 0 is the mean x, rows 1..n the covariance P
+#   dim[1]: label = the state names, comma-separated, size n, stride n
+#
+# so that array(i, j) = data[3 + n i + j]: x_j = data[3 + j], P_ij = data[3 + n + n i + j].
+
+ESTIMATE_OFFSET = 3
+
+
+class StateEstimate(NamedTuple):
+    """An estimate read from its message: kind, stamp (ns), mu (s), x, P, state names."""
+
+    kind: str
+    stamp_ns: int
+    mu: float
+    x: np.ndarray
+    P: np.ndarray
+    names: tuple[str, ...]
+
+
+def state_estimate_layout(kind: str, names: Sequence[str]) -> MultiArrayLayout:
+    """Return the layout of an estimate of the states `names` (see above)."""
+    n = len(names)
+    return MultiArrayLayout(
+        dim=[MultiArrayDimension(label=kind, size=n + 1, stride=(n + 1) * n),
+             MultiArrayDimension(label=','.join(names), size=n, stride=n)],
+        data_offset=ESTIMATE_OFFSET)
+
+
+def state_estimate_to_msg(kind: str, stamp_ns: int, mu: float, x: np.ndarray, P: np.ndarray,
+                          names: Sequence[str]) -> Float64MultiArray:
+    """Convert an estimate (x, P at stamp_ns, from a step of mu s) -> Float64MultiArray."""
+    msg = Float64MultiArray(layout=state_estimate_layout(kind, names))
+    return fill_state_estimate(msg, stamp_ns, mu, x, P)
+
+
+def fill_state_estimate(msg: Float64MultiArray, stamp_ns: int, mu: float, x: np.ndarray,
+                        P: np.ndarray) -> Float64MultiArray:
+    """Fill the data of an estimate message in place (its layout kept); return it."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    n = x.size
+    sec, nanosec = divmod(int(stamp_ns), NS)
+    msg.data = [float(sec), float(nanosec), float(mu)] + x.tolist() + \
+        np.asarray(P, dtype=float).reshape(n * n).tolist()
     return msg
 
 
-def fill_jump_msg(msg: TimeReference, stamp_ns: int, sigma_ns: int) -> TimeReference:
-    """Fill a TimeReference in place as jump_to_msg builds one (source kept); return it."""
-    set_stamp(msg.header.stamp, stamp_ns)
-    set_stamp(msg.time_ref, sigma_ns)
-    return msg
-
-
-def msg_to_jump(msg: TimeReference) -> tuple[int, float]:
-    """Convert TimeReference -> (stamp ns, mu in s)."""
-    t = stamp_to_ns(msg.header.stamp)
-    return t, (stamp_to_ns(msg.time_ref) - t) / NS
+def msg_to_state_estimate(msg: Float64MultiArray) -> StateEstimate:
+    """Convert a Float64MultiArray of the layout above -> StateEstimate; ValueError if not."""
+    dims, offset = msg.layout.dim, int(msg.layout.data_offset)
+    data = np.asarray(msg.data, dtype=float)
+    if len(dims) != 2 or offset != ESTIMATE_OFFSET:
+        raise ValueError('not an estimate: its layout must have 2 dimensions and data_offset '
+                         f'{ESTIMATE_OFFSET}')
+    n = int(dims[1].size)
+    if int(dims[0].size) != n + 1 or data.size != offset + n + n * n:
+        raise ValueError(f'not an estimate: {data.size} entries for {n} states')
+    names = tuple(dims[1].label.split(','))
+    if len(names) != n:     # not the node's labels: no names
+        names = ()
+    stamp_ns = int(data[0]) * NS + int(data[1])
+    return StateEstimate(dims[0].label, stamp_ns, float(data[2]), data[offset:offset + n],
+                         data[offset + n:].reshape(n, n), names)
 
 
 def diagnostics_to_msg(stamp_ns: int, name: str, level: str, message: str,

@@ -5,18 +5,17 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, Optional, Union
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
+from geometry_msgs.msg import AccelStamped
 import numpy as np
 from rclpy.qos import QoSProfile
-from sensor_msgs.msg import (FluidPressure, Illuminance, JointState, Range, RelativeHumidity,
-                             Temperature, TimeReference)
-from std_msgs.msg import Float32, Float64
+from sensor_msgs.msg import FluidPressure, Illuminance, Range, RelativeHumidity, Temperature
+from std_msgs.msg import Float32, Float64, Float64MultiArray
 
 from tskf_ros.core.linear_models import owc
 from tskf_ros.messages import conversions
-from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
+from tskf_ros.messages.conversions import STATE_ESTIMATE_TYPE
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
-from tskf_ros.messages.qos import DIAGNOSTICS_TOPIC, reliable_qos
+from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, reliable_qos
 from tskf_ros.owc.session import (ConfigError, EstimatorConfig, EstimatorSession,
                                   model_from_flat, Outcome)
 
@@ -63,6 +62,8 @@ SCALARS = {
                           'rate_window: diagnostics WARN; 0: off', (0.0, 1.0)),
     'rate_window': (10.0, 's over which the input rate is measured', (0.01, 3600.0)),
 }
+SMOOTHING_LAG_HELP = ('L > 0: publish the fixed-lag smoothed estimate x(t_k|t_{k+L}) on '
+                      'estimate/smoothed, L points (steps) behind the filter; 0: off')
 MEASUREMENT_RANGE_HELP = ('[lo, hi]: a physical reading outside is rejected (out_of_range); '
                           'empty: any finite value')
 PARAMETERS = MATRICES + tuple(SCALARS) + (
@@ -74,18 +75,14 @@ PARAMETERS = MATRICES + tuple(SCALARS) + (
 MEASUREMENT_TOPIC = 'measurement'   # the estimator's y: neutral, remapped per application
 POWER_TOPIC = 'received_power'      # the OWC power meter's (the simulator's, the bags')
 INPUT_TOPIC = 'input'
-# (estimate kind, revised) -> output topic; '<kind>_states' is the JointState mirror
+# output -> topic: the filter's estimates as they come, a late sample's re-run, and the
+# fixed-lag smoothed estimate (only with smoothing_lag > 0).  With /diagnostics these are
+# the node's five outputs; doc/interfaces.md has their layout.
 OUTPUT_TOPICS = {
-    ('predicted', False): 'estimate/predicted',
-    ('corrected', False): 'estimate/corrected',
-    ('mu', False): 'estimate/mu',
-    ('predicted_states', False): 'estimate/predicted_states',
-    ('corrected_states', False): 'estimate/corrected_states',
-    ('predicted', True): 'estimate/revised/predicted',
-    ('corrected', True): 'estimate/revised/corrected',
-    ('mu', True): 'estimate/revised/mu',
-    ('predicted_states', True): 'estimate/revised/predicted_states',
-    ('corrected_states', True): 'estimate/revised/corrected_states',
+    'predicted': 'estimate/predicted',
+    'corrected': 'estimate/corrected',
+    'revised': 'estimate/revised',
+    'smoothed': 'estimate/smoothed',
 }
 
 # the same topics in a bag, resolved in '/', with their types
@@ -93,14 +90,19 @@ BAG_POWER_TOPIC = '/' + POWER_TOPIC
 BAG_INPUT_TOPIC = '/' + INPUT_TOPIC
 BAG_OUTPUT_TOPICS = {key: '/' + topic for key, topic in OUTPUT_TOPICS.items()}
 BAG_TRUTH_TOPIC = '/true_angle'
-JUMP_TYPE = 'sensor_msgs/msg/TimeReference'
+# every output is an estimate: std_msgs/msg/Float64MultiArray in the layout of
+# conversions.state_estimate_to_msg (stamp, mu, kind, x, P, state names)
+ESTIMATE_TYPE = STATE_ESTIMATE_TYPE
 
 
-def output_type(key: tuple) -> str:
-    """Return the message type of the output (kind, revised)."""
-    kind = key[0]
-    return JUMP_TYPE if kind == 'mu' else STATES_TYPE if kind.endswith('_states') \
-        else ESTIMATE_TYPE
+def output_key(kind: str, revised: bool = False) -> str:
+    """Return the output (a key of OUTPUT_TOPICS) of an estimate of `kind`."""
+    return 'revised' if revised else kind
+
+
+def output_type(key: str) -> str:
+    """Return the message type of an output (every one is an estimate)."""
+    return ESTIMATE_TYPE
 
 
 INPUT_TYPE = 'geometry_msgs/msg/AccelStamped'
@@ -112,12 +114,13 @@ __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'BAG_POWER_TOPIC', 'BAG_TRUTH
            'DIAGNOSTICS_TYPE', 'diagnostics_message', 'ESTIMATE_TYPE', 'extractor',
            'INPUT_TOPIC', 'INPUT_TYPE', 'INPUT_TYPES', 'input_from_msg', 'InputType',
            'output_type',
-           'JUMP_TYPE', 'load_config', 'MATRICES', 'MATRIX_HELP', 'measurement_class',
+           'load_config', 'MATRICES', 'MATRIX_HELP', 'measurement_class',
            'MEASUREMENT_RANGE_HELP', 'MEASUREMENT_TOPIC',
            'NODE_NAME', 'NodeConfig',
-           'outcome_messages', 'OutcomeMessages', 'OUTPUT_TOPICS', 'output_qos',
+           'outcome_messages', 'OutcomeMessages', 'output_key', 'OUTPUT_TOPICS', 'output_qos',
            'PARAMETERS',
-           'parameters_to_config', 'ParamsError', 'POWER_TOPIC', 'SCALARS']
+           'parameters_to_config', 'ParamsError', 'POWER_TOPIC', 'SCALARS',
+           'SMOOTHING_LAG_HELP', 'estimate_mu', 'step_mus']
 
 
 def parameters_to_config(values: dict) -> NodeConfig:
@@ -179,71 +182,82 @@ def load_config(params_file: Optional[Union[str, Path]] = None,
 
 
 def output_qos(config: NodeConfig) -> QoSProfile:
-    """Return the QoS of the estimate publishers: reliable, keep last queue_depth."""
-    return reliable_qos(config.queue_depth)
+    """
+    Return the default QoS of the estimate publishers: reliable, keep last 10.
+
+    The node lets `qos_overrides.<topic>.publisher.*` parameters change it (rclpy's
+    QoSOverridingOptions.with_default_policies(): depth, durability, history,
+    reliability), as robot_localization does.
+    """
+    return reliable_qos(DEFAULT_DEPTH)
+
+
+def step_mus(out: Outcome) -> tuple[dict[int, float], dict[int, float]]:
+    """Return mu (s) of the outcome's steps by their start point and by their end point."""
+    start = {j.stamp_ns: j.mu for j in out.jumps}
+    end = {j.sigma_ns: j.mu for j in out.jumps}
+    return start, end
+
+
+def estimate_mu(kind: str, stamp_ns: int, mus: tuple[dict[int, float], dict[int, float]]
+                ) -> float:
+    """
+    Return the mu of the step an estimate comes from (0 for the prior at a first point).
+
+    A corrected estimate at t_k comes from the step t_k -> sigma(t_k), a predicted one at
+    t_k from the step into t_k.
+    """
+    start, end = mus
+    return (end if kind == 'predicted' else start).get(stamp_ns, 0.0)
 
 
 def outcome_messages(out: Outcome, config: NodeConfig) -> list:
-    """Return the ((kind, revised), message) pairs to publish for an Outcome, in order."""
-    frame, names = config.frame_id, config.session.model.state_names
-    msgs = []
-    for e in out.estimates:
-        msgs.append(((e.kind, e.revised),
-                     conversions.estimate_to_msg(e.stamp_ns, e.x, e.P, frame_id=frame)))
-        msgs.append(((e.kind + '_states', e.revised), conversions.estimate_to_joint_state(
-            e.stamp_ns, e.x, e.P, names, frame_id=frame)))
-    msgs += [(('mu', j.revised), conversions.jump_to_msg(j.stamp_ns, j.sigma_ns))
-             for j in out.jumps]
-    return msgs
+    """Return the (output, message) pairs to publish for an Outcome, in order."""
+    names = config.session.model.state_names
+    mus = step_mus(out)
+    return [(output_key(e.kind, e.revised), conversions.state_estimate_to_msg(
+        e.kind, e.stamp_ns, estimate_mu(e.kind, e.stamp_ns, mus), e.x, e.P, names))
+        for e in out.estimates]
 
 
 class OutcomeMessages:
     """
-    The live node's output messages: one preallocated message per output, filled in place.
+    The live node's output messages: one preallocated message per output and kind.
 
     `messages(out)` yields what outcome_messages(out, config) returns, equal field for
     field (test_outcome_messages), but each message is reused: it is valid until the next
     one is yielded (a late sample's revisions fill the same message one after the other),
     which suits a publisher (rclpy serializes in publish) and nothing that keeps them.
-    Filling costs a few microseconds where building nine nested message objects per
-    estimate costs tens.
     """
 
     def __init__(self, config: NodeConfig) -> None:
-        frame, names = config.frame_id, list(config.session.model.state_names)
-        self.msgs = {}
-        for key in OUTPUT_TOPICS:
-            kind = output_type(key)
-            if kind == ESTIMATE_TYPE:
-                msg = TwistWithCovarianceStamped()
-                msg.header.frame_id = frame
-            elif kind == STATES_TYPE:
-                msg = JointState(name=names, position=[0.0] * len(names),
-                                 velocity=[0.0] * len(names))
-                msg.header.frame_id = frame
-            else:
-                msg = TimeReference(source='sigma')
-            self.msgs[key] = msg
+        names = config.session.model.state_names
+        self.msgs = {(key, kind): Float64MultiArray(
+            layout=conversions.state_estimate_layout(kind, names))
+            for key in OUTPUT_TOPICS for kind in ('predicted', 'corrected', 'smoothed')}
 
     def messages(self, out: Outcome,
-                 wanted: Optional[Callable[[tuple], bool]] = None) -> Iterator[tuple]:
+                 wanted: Optional[Callable[[str], bool]] = None) -> Iterator[tuple]:
         """
-        Yield the ((kind, revised), message) pairs to publish for an Outcome, in order.
+        Yield the (output, message) pairs to publish for an Outcome, in order.
 
-        With `wanted`, only the outputs for which wanted(key) is true are filled and yielded
-        (the node skips the topics nobody subscribes to).
+        With `wanted`, only the outputs for which wanted(output) is true are filled and
+        yielded (the node skips the topics nobody subscribes to).
         """
-        msgs = self.msgs
+        msgs, mus = self.msgs, None
         for e in out.estimates:
-            key, mirror = (e.kind, e.revised), (e.kind + '_states', e.revised)
+            key = output_key(e.kind, e.revised)
             if wanted is None or wanted(key):
-                yield key, conversions.fill_estimate_msg(msgs[key], e.stamp_ns, e.x, e.P)
-            if wanted is None or wanted(mirror):
-                yield mirror, conversions.fill_joint_state(msgs[mirror], e.stamp_ns, e.x, e.P)
-        for j in out.jumps:
-            key = ('mu', j.revised)
-            if wanted is None or wanted(key):
-                yield key, conversions.fill_jump_msg(msgs[key], j.stamp_ns, j.sigma_ns)
+                mus = mus or step_mus(out)
+                yield key, conversions.fill_state_estimate(
+                    msgs[key, e.kind], e.stamp_ns, estimate_mu(e.kind, e.stamp_ns, mus),
+                    e.x, e.P)
+
+    def smoothed(self, stamp_ns: int, mu: float, x: np.ndarray,
+                 P: np.ndarray) -> Float64MultiArray:
+        """Return the smoothed output's message filled with one fixed-lag estimate."""
+        return conversions.fill_state_estimate(self.msgs['smoothed', 'smoothed'], stamp_ns,
+                                               mu, x, P)
 
 
 def bag_outcome_messages(out: Outcome, config: NodeConfig) -> list[tuple[str, Any]]:

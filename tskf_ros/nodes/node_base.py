@@ -265,6 +265,8 @@ class ReconfigurableNode(Node):
         self.restart(why, 'clock_jump')
 
     def _validate(self, changes: list) -> SetParametersResult:
+        if not self._own(changes):      # rclpy's own (qos_overrides.*, use_sim_time)
+            return SetParametersResult(successful=True)
         try:
             config = self.make_config(self.parameter_values(changes))
         except self.CONFIG_ERRORS as exc:
@@ -273,8 +275,12 @@ class ReconfigurableNode(Node):
         self._pending = config
         return SetParametersResult(successful=True)
 
+    def _own(self, changes: list) -> bool:
+        """Tell whether a change touches a parameter of the node's config (PARAMETERS)."""
+        return any(p.name in self.PARAMETERS for p in changes)
+
     def _apply(self, changes: list) -> None:
-        if self._pending is None:
+        if self._pending is None or not self._own(changes):
             return
         config, self._pending = self._pending, None
         if config.diagnostics_period != self.config.diagnostics_period:

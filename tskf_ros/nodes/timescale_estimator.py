@@ -3,25 +3,26 @@
 from typing import Any, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
+from geometry_msgs.msg import AccelStamped
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import JointState, TimeReference
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.core.timescale_kalman import FilterError, TRANSITIONS
-from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.estimator_interface import (ConfigError, default_parameters,
                                                    diagnostics_message, extractor,
                                                    input_from_msg, INPUT_TOPIC, INPUT_TYPES,
-                                                   JUMP_TYPE, MATRICES, MATRIX_HELP,
+                                                   MATRICES, MATRIX_HELP,
                                                    measurement_class, MEASUREMENT_RANGE_HELP,
                                                    MEASUREMENT_TOPIC, NODE_NAME, NodeConfig,
                                                    OutcomeMessages, output_qos, OUTPUT_TOPICS,
-                                                   output_type, PARAMETERS,
-                                                   parameters_to_config, SCALARS)
+                                                   PARAMETERS, parameters_to_config, SCALARS,
+                                                   SMOOTHING_LAG_HELP)
 from tskf_ros.messages.parameters import float_range
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
+from tskf_ros.owc.lagged_estimates import LaggedEstimate, LaggedEstimates
 from tskf_ros.owc.session import EstimatorSession, Outcome
 
 
@@ -44,11 +45,15 @@ class TimescaleEstimator(ReconfigurableNode):
                                             self._on_measurement, qos_in)
         self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
                                                   qos_in)
-        qos_out = output_qos(self.config)
-        types = {JUMP_TYPE: TimeReference, STATES_TYPE: JointState,
-                 ESTIMATE_TYPE: TwistWithCovarianceStamped}
-        self.pubs = {key: self.create_publisher(types[output_type(key)], topic, qos_out)
-                     for key, topic in OUTPUT_TOPICS.items()}
+        # reliable, depth 10, each overridable by qos_overrides.<topic>.publisher.* parameters
+        # (rclpy applies an override to the profile given: one profile per publisher)
+        self.smoothing_lag = self.get_parameter('smoothing_lag').value
+        self.lagged = (LaggedEstimates(self.smoothing_lag, self.config.session)
+                       if self.smoothing_lag else None)
+        self.pubs = {key: self.create_publisher(
+            Float64MultiArray, topic, output_qos(self.config),
+            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+            for key, topic in OUTPUT_TOPICS.items() if key != 'smoothed' or self.lagged}
         self.outputs = OutcomeMessages(self.config)
         self.start_diagnostics()
         self.watch_clock_jumps()
@@ -95,10 +100,15 @@ class TimescaleEstimator(ReconfigurableNode):
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=2, to_value=1_000_000)]))
         self.declare_parameter('queue_depth', defaults['queue_depth'], ParameterDescriptor(
-            description=('depth of the input and output queues (1000: 0.5 s of a 2 kHz '
-                         'stream, the margin a loaded machine needs)'), read_only=True,
+            description=('depth of the input queues (1000: 0.5 s of a 2 kHz stream, the '
+                         'margin a loaded machine needs); the outputs keep 10, overridable '
+                         'by qos_overrides parameters'), read_only=True,
             type=ParameterType.PARAMETER_INTEGER,
             integer_range=[IntegerRange(from_value=1, to_value=100_000)]))
+        self.declare_parameter('smoothing_lag', 0, ParameterDescriptor(
+            description=SMOOTHING_LAG_HELP, read_only=True,
+            type=ParameterType.PARAMETER_INTEGER,
+            integer_range=[IntegerRange(from_value=0, to_value=100_000)]))
         gap_help = ('a measurement <= 0 is an invalid reading, a gap (Cai IV-C: power); '
                     'false for models whose output may be negative')
         self.declare_parameter('nonpositive_is_gap', defaults['nonpositive_is_gap'],
@@ -127,7 +137,8 @@ class TimescaleEstimator(ReconfigurableNode):
                                ParameterDescriptor(description=MEASUREMENT_RANGE_HELP,
                                                    dynamic_typing=True))
         self.declare_parameter('frame_id', defaults['frame_id'], ParameterDescriptor(
-            description='frame_id of the estimates: a TF frame, or empty',
+            description='hardware_id of the /diagnostics status (the device or frame '
+            "estimated); empty: the node's name",
             type=ParameterType.PARAMETER_STRING))
 
     def make_config(self, values: dict) -> NodeConfig:
@@ -137,7 +148,11 @@ class TimescaleEstimator(ReconfigurableNode):
     def reconfigure(self, config: NodeConfig) -> str:
         """Switch the session to a validated config; return what it did."""
         self.outputs = OutcomeMessages(config)
-        return self.session.reconfigure(config.session).message
+        message = self.session.reconfigure(config.session).message
+        if self.lagged is not None:     # the window of the old model ends here
+            self._publish_smoothed(self.lagged.flush())
+            self.lagged = LaggedEstimates(self.smoothing_lag, config.session)
+        return message
 
     # -- data -----------------------------------------------------------------------------
 
@@ -170,8 +185,15 @@ class TimescaleEstimator(ReconfigurableNode):
         # output nobody subscribes to (its topic is volatile) is neither filled nor published
         for key, msg in self.outputs.messages(out, self._subscribed):
             self.pubs[key].publish(msg)
+        if self.lagged is not None:
+            self._publish_smoothed(self.lagged.outcome(out))
 
-    def _subscribed(self, key: tuple) -> bool:
+    def _publish_smoothed(self, estimates: list[LaggedEstimate]) -> None:
+        pub = self.pubs['smoothed']
+        for e in estimates:
+            pub.publish(self.outputs.smoothed(e.stamp_ns, e.mu, e.x, e.P))
+
+    def _subscribed(self, key: str) -> bool:
         return self.pubs[key].get_subscription_count() > 0
 
     def restart(self, why: str, reason: str = 'clock_jump') -> None:
@@ -180,6 +202,8 @@ class TimescaleEstimator(ReconfigurableNode):
             return
         out = self.session.reset(reason, why)
         self.get_logger().warning(f'filter re-initialised: {out.message}')
+        if self.lagged is not None:
+            self._publish_smoothed(self.lagged.outcome(out))
 
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""

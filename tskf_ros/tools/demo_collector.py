@@ -4,7 +4,6 @@ from dataclasses import dataclass, field
 import time
 from typing import Callable, Optional, Union
 
-from geometry_msgs.msg import TwistWithCovarianceStamped
 import numpy as np
 import rclpy
 from rclpy.context import Context
@@ -13,6 +12,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Illuminance, JointState
+from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.messages import conversions
 
@@ -39,9 +39,9 @@ class Collector(Node):
         lossless = QoSProfile(depth=10_000, reliability=qos_profile_sensor_data.reliability)
         self.create_subscription(Illuminance, 'received_power', self._on_power, lossless)
         self.create_subscription(JointState, 'true_angle', self._on_truth, deep)
-        self.create_subscription(TwistWithCovarianceStamped, 'estimate/predicted',
+        self.create_subscription(Float64MultiArray, 'estimate/predicted',
                                  self._on_estimate(self.record.predicted), deep)
-        self.create_subscription(TwistWithCovarianceStamped, 'estimate/corrected',
+        self.create_subscription(Float64MultiArray, 'estimate/corrected',
                                  self._on_estimate(self.record.corrected), deep)
 
     def _on_power(self, msg: Illuminance) -> None:
@@ -54,9 +54,9 @@ class Collector(Node):
 
     @staticmethod
     def _on_estimate(store: dict) -> Callable:
-        def callback(msg: TwistWithCovarianceStamped) -> None:
-            t, x, P = conversions.msg_to_estimate(msg, 1)
-            store[t] = (float(x[0]), float(P[0, 0]))
+        def callback(msg: Float64MultiArray) -> None:
+            e = conversions.msg_to_state_estimate(msg)
+            store[e.stamp_ns] = (float(e.x[0]), float(e.P[0, 0]))
         return callback
 
     def done(self, samples: int) -> bool:

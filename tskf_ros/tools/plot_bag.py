@@ -17,12 +17,14 @@ from tskf_ros.bag.replay.sinks import SMOOTHED_TOPIC
 from tskf_ros.core.units import NS
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages import conversions
-from tskf_ros.messages.estimator_interface import BAG_TRUTH_TOPIC, load_config, ParamsError
+from tskf_ros.messages.estimator_interface import (BAG_OUTPUT_TOPICS, BAG_TRUTH_TOPIC,
+                                                   load_config, ParamsError)
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402, I100, I202
 
 PROG = 'plot_bag'
+PREDICTED, CORRECTED = BAG_OUTPUT_TOPICS['predicted'], BAG_OUTPUT_TOPICS['corrected']
 
 
 class PlotDamageError(BagError):
@@ -65,28 +67,27 @@ def _require(reader: BagReader, data: dict, topics) -> None:
         raise BagError(f'{reader.path}: no messages on {", ".join(empty)}: nothing to plot')
 
 
-def _series(msgs: list, kind: str) -> tuple:
-    """Turn estimate or jump messages into arrays (t in s)."""
-    if kind == 'estimate':
-        rows = [conversions.msg_to_estimate(m, 2) for _, m in msgs]
-        t = np.array([r[0] for r in rows], dtype=float) / NS
-        x = np.array([r[1] for r in rows]).reshape(-1, 2)
-        var = np.array([r[2][0, 0] for r in rows])
-        return t, x[:, 0], var
-    rows = [conversions.msg_to_jump(m) for _, m in msgs]
-    return np.array([r[0] for r in rows], dtype=float) / NS, np.array([r[1] for r in rows])
+def _series(msgs: list) -> tuple:
+    """Turn estimate messages into arrays: t (s), x_0, P_00, mu (s)."""
+    rows = [conversions.msg_to_state_estimate(m) for _, m in msgs]
+    t = np.array([r.stamp_ns for r in rows], dtype=float) / NS
+    x = np.array([r.x[0] for r in rows], dtype=float)
+    var = np.array([r.P[0, 0] for r in rows], dtype=float)
+    return t, x, var, np.array([r.mu for r in rows], dtype=float)
 
 
 def estimator_figure(data: dict, measurement: list, C: float, D: float, title: str):
     """Draw Cai Fig. 2's two styles of an estimator run; return the figure."""
-    tp, xp, vp = _series(data['/estimate/predicted'], 'estimate')
-    tc, xc, vc = _series(data['/estimate/corrected'], 'estimate')
-    tm, mu = _series(data['/estimate/mu'], 'jump')
+    tp, xp, vp, mu_p = _series(data[PREDICTED])
+    tc, xc, vc, _ = _series(data[CORRECTED])
+    # mu_k of each step t_k -> t_{k+1}: carried by the prediction into t_{k+1}
+    steps = mu_p > 0
+    tm, mu = tp[steps] - mu_p[steps], mu_p[steps]
     # replay_offline --smooth: the RTS estimates x(t|T), drawn beside the filter's
     series = [(tp, xp, vp, 'C0', 'predictor xhat(t)', 'predictor'),
               (tc, xc, vc, 'C3', 'corrected x(t|t)', 'corrected')]
     if data.get(SMOOTHED_TOPIC):
-        ts, xs, vs = _series(data[SMOOTHED_TOPIC], 'estimate')
+        ts, xs, vs, _ = _series(data[SMOOTHED_TOPIC])
         series.append((ts, xs, vs, 'C4', 'smoothed x(t|T)', 'smoothed'))
     ty = np.array([conversions.msg_to_power(m)[0] for _, m in measurement], float) / NS
     y = np.array([conversions.msg_to_power(m)[1] for _, m in measurement])
@@ -252,13 +253,12 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
     config = load_config(params_file)
     model = config.session.model
     C, D = float(model.C[0, 0]), float(model.D[0]) if model.D is not None else 0.0
-    if '/estimate/corrected' in reader.topics:
+    if CORRECTED in reader.topics:
         meas_topic = topic or '/received_power'
-        wanted = {'/estimate/predicted', '/estimate/corrected', '/estimate/mu', meas_topic,
-                  SMOOTHED_TOPIC}
+        wanted = {PREDICTED, CORRECTED, meas_topic, SMOOTHED_TOPIC}
         data = _decode(reader, (wanted | {BAG_TRUTH_TOPIC}) & set(reader.topics))
         measurement = data.get(meas_topic, [])
-        _require(reader, data, ['/estimate/predicted', '/estimate/corrected', '/estimate/mu'])
+        _require(reader, data, [PREDICTED, CORRECTED])
         written.damage = reader.damage
     else:
         log(f'{bag}: no estimates in the bag: running the estimator offline first')
@@ -276,8 +276,7 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
         if res.msgtype != 'sensor_msgs/msg/Illuminance':
             measurement = []
         written.damage = res.damage
-        if not data.get('/estimate/corrected') or not data.get('/estimate/predicted') \
-                or not data.get('/estimate/mu'):
+        if not data.get(CORRECTED) or not data.get(PREDICTED):
             if res.damage is not None:
                 raise PlotDamageError(res.damage)
             raise BagError(f'{bag}: too few samples on {res.topic} for an estimate: '

@@ -101,15 +101,19 @@ def yaml_overrides(path, key='/**/timescale_estimator'):
 
 
 def offline_estimates(bag):
-    """Return {topic: [(stamp, x, P or mu)]} of the offline replay, collected in memory."""
+    """Return {topic: [StateEstimate]} of the offline replay, collected in memory."""
     res = replay(bag, None, params_file=PARAMS, diagnostics=False)
     out = {}
     for topic, _, msg in res.outputs:
-        if isinstance(msg, TwistWithCovarianceStamped):
-            out.setdefault(topic, []).append(conversions.msg_to_estimate(msg, 1))
-        elif isinstance(msg, TimeReference):
-            out.setdefault(topic, []).append(conversions.msg_to_jump(msg))
+        if isinstance(msg, Float64MultiArray):
+            out.setdefault(topic, []).append(conversions.msg_to_state_estimate(msg))
     return res, out
+
+
+def deep_outputs():
+    """Return qos_overrides that keep DEEP estimates on every output of the estimator."""
+    return [Parameter(f'qos_overrides./{topic}.publisher.depth', value=DEEP)
+            for topic in estimator_interface.OUTPUT_TOPICS.values()]
 
 
 def test_node_defaults_are_the_adapters(ros_context):
@@ -132,12 +136,11 @@ def test_live_replay_equals_offline_replay(ros_context):
     assert res.samples == 288 and res.statuses == {'accepted': 288}
     est = TimescaleEstimator(context=ros_context, parameter_overrides=yaml_overrides(PARAMS)
                              + [Parameter('use_sim_time', value=True),
-                                Parameter('queue_depth', value=DEEP)])
+                                Parameter('queue_depth', value=DEEP)] + deep_outputs())
     player = Player(BAG, rate=100.0, clock_hz=200.0, topics=['/received_power'],
                     remap={'/received_power': '/measurement'}, context=ros_context)
     client = rclpy.create_node('replay_client', context=ros_context)
-    kinds = {t: TimeReference if t.endswith('mu') else TwistWithCovarianceStamped
-             for t in offline}
+    kinds = {t: Float64MultiArray for t in offline}
     live = {t: [] for t in offline}
     for topic, cls in kinds.items():
         client.create_subscription(cls, topic, live[topic].append, QoSProfile(depth=DEEP))
@@ -166,18 +169,16 @@ def test_live_replay_equals_offline_replay(ros_context):
     # the estimator ran on the bag's clock
     assert abs(sim_now - 1_700_000_300 * 10**9) < 5 * 10**9
     assert est.session.stats.accepted == 288
+    assert set(offline) == {'/estimate/predicted', '/estimate/corrected'}
     for topic, expected in offline.items():
         got = live[topic]
         assert len(got) == len(expected), topic
-        if topic.endswith('mu'):
-            got = [conversions.msg_to_jump(m) for m in got]
-            assert got == expected, topic
-            continue
-        got = [conversions.msg_to_estimate(m, 1) for m in got]
-        assert [g[0] for g in got] == [e[0] for e in expected], topic
+        got = [conversions.msg_to_state_estimate(m) for m in got]
+        assert [(g.kind, g.stamp_ns, g.mu) for g in got] == [
+            (e.kind, e.stamp_ns, e.mu) for e in expected], topic
         for g, e in zip(got, expected):
-            np.testing.assert_allclose(g[1], e[1], rtol=0, atol=1e-12)
-            np.testing.assert_allclose(g[2], e[2], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(g.x, e.x, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(g.P, e.P, rtol=0, atol=1e-12)
 
 
 def test_alignment_node_defaults_are_the_adapters(ros_context):

@@ -24,22 +24,26 @@ def test_replay_arrays_hold_what_the_output_bag_holds(tmp_path, capsys):
         for conn, t, data in reader.messages():
             by_topic.setdefault(conn.topic, []).append(
                 (t, store.deserialize_cdr(data, conn.msgtype)))
+    assert {'/estimate/predicted', '/estimate/corrected'} <= set(by_topic)
+    revised = by_topic.get('/estimate/revised', [])
     for kind in ('predicted', 'corrected', 'revised/predicted', 'revised/corrected'):
-        rows = by_topic.get(f'/estimate/{kind}', [])
+        # the layout: data = [sec, nanosec, mu, x, P], dim[0].label the kind
+        rows = [(t, m) for t, m in by_topic.get(f'/estimate/{kind}', revised)
+                if m.layout.dim[0].label == kind.split('/')[-1]]
         name = f'estimate/{kind}'
         assert arrays[f'{name}.log_ns'].tolist() == [t for t, _ in rows]
         assert arrays[f'{name}.stamp_ns'].tolist() == [
-            m.header.stamp.sec * NS + m.header.stamp.nanosec for _, m in rows]
+            int(m.data[0]) * NS + int(m.data[1]) for _, m in rows]
         n = arrays[f'{name}.x'].shape[1]
         for k, (_, m) in enumerate(rows):
-            v = m.twist.twist
-            slots = [v.linear.x, v.linear.y, v.linear.z, v.angular.x, v.angular.y, v.angular.z]
-            assert arrays[f'{name}.x'][k].tolist() == slots[:n]
-            assert arrays[f'{name}.P'][k].tolist() == \
-                m.twist.covariance.reshape(6, 6)[:n, :n].tolist()
-    mu = by_topic.get('/estimate/mu', [])
-    assert arrays['estimate/mu.sigma_ns'].tolist() == [
-        m.time_ref.sec * NS + m.time_ref.nanosec for _, m in mu]
+            assert m.layout.data_offset == 3 and m.layout.dim[1].size == n
+            assert arrays[f'{name}.x'][k].tolist() == m.data[3:3 + n].tolist()
+            assert arrays[f'{name}.P'][k].tolist() == m.data[3 + n:].reshape(n, n).tolist()
+    # each step t -> sigma(t) is the mu of the prediction into sigma(t) (0: a prior, no step)
+    steps = [(int(m.data[0]) * NS + int(m.data[1]), m.data[2])
+             for _, m in by_topic['/estimate/predicted'] if m.data[2] > 0]
+    assert arrays['estimate/mu.sigma_ns'].tolist() == [sigma for sigma, _ in steps]
+    np.testing.assert_allclose(arrays['estimate/mu.mu'], [mu for _, mu in steps], rtol=1e-15)
     diag = by_topic['/diagnostics']
     assert arrays['diagnostics.log_ns'].tolist() == [t for t, _ in diag]
     assert arrays['diagnostics.message'].tolist() == [m.status[0].message for _, m in diag]

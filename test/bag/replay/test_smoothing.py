@@ -87,15 +87,21 @@ def test_cli_smooth_writes_the_topic_and_npz(tmp_path, capsys):
     store = typestore()
     with Reader(out) as reader:
         conns = [c for c in reader.connections if c.topic == SMOOTHED_TOPIC]
-        assert [c.msgtype for c in conns] == ['geometry_msgs/msg/TwistWithCovarianceStamped']
+        assert [c.msgtype for c in conns] == ['std_msgs/msg/Float64MultiArray']
         msgs = [store.deserialize_cdr(raw, conns[0].msgtype)
                 for _, _, raw in reader.messages(connections=conns)]
-    stamps = [m.header.stamp.sec * NS + m.header.stamp.nanosec for m in msgs]
+    # the estimate layout: data = [sec, nanosec, mu, x, P], dim[0].label the kind
+    assert {m.layout.dim[0].label for m in msgs} == {'smoothed'}
+    stamps = [int(m.data[0]) * NS + int(m.data[1]) for m in msgs]
     np.testing.assert_array_equal(stamps, arrays[f'{KEY}.stamp_ns'])
-    np.testing.assert_allclose([m.twist.twist.linear.x for m in msgs],
+    np.testing.assert_allclose([m.data[3] for m in msgs],
                                arrays[f'{KEY}.x'][:, 0], rtol=0, atol=1e-12)
-    np.testing.assert_allclose([m.twist.covariance[0] for m in msgs],
+    np.testing.assert_allclose([m.data[4] for m in msgs],
                                arrays[f'{KEY}.P'][:, 0, 0], rtol=0, atol=1e-12)
+    # mu: the step from each point to the next of its segment
+    mus = np.array([m.data[2] for m in msgs])
+    same = np.diff(arrays[f'{KEY}.segment']) == 0
+    np.testing.assert_allclose(mus[:-1][same], np.diff(stamps)[same] / NS, rtol=1e-12)
 
 
 def test_without_smooth_nothing_changes(tmp_path):

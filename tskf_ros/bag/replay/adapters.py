@@ -12,8 +12,9 @@ from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages import estimator_interface as estimator
 from tskf_ros.messages.estimator_interface import (bag_outcome_messages, BAG_OUTPUT_TOPICS,
-                                                   extractor, input_from_msg, INPUT_TYPE,
-                                                   INPUT_TYPES, NodeConfig, output_qos)
+                                                   estimate_mu, extractor, input_from_msg,
+                                                   INPUT_TYPE, INPUT_TYPES, NodeConfig,
+                                                   output_key, output_qos, step_mus)
 from tskf_ros.owc.session import EstimatorSession, Outcome
 
 __all__ = ['ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimator', 'sample_reader', 'Sample',
@@ -21,12 +22,8 @@ __all__ = ['ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimator', 'sample_read
 
 # what deserializing a message that is not of its type raises (rosbags' deserializer)
 UNDECODABLE = (SerdeError,)
-# (kind, revised) -> bag topic of the estimates and of mu (TwistWithCovarianceStamped,
-# TimeReference), and of the JointState mirror of each estimate topic
+# output (predicted, corrected, revised, smoothed) -> bag topic of the estimates
 ESTIMATE_TOPICS = BAG_OUTPUT_TOPICS
-STATES_TOPICS = {(kind, revised): BAG_OUTPUT_TOPICS[kind + '_states', revised]
-                 for kind, revised in BAG_OUTPUT_TOPICS if not kind.endswith('_states')
-                 and kind != 'mu'}
 # (stamp ns, value, variance) of a measurement
 Sample = tuple[int, float, float]
 AnyOutcome = Union[Outcome, AlignOutcome]
@@ -82,8 +79,9 @@ class OfflineEstimator:
     def output_topics(self) -> list[tuple[str, str, QoSProfile]]:
         """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
         qos = output_qos(self.config)
+        # the smoothed estimates are written only by a replay that smooths (loop.replay)
         return [(name, estimator.output_type(key), qos)
-                for key, name in BAG_OUTPUT_TOPICS.items()]
+                for key, name in BAG_OUTPUT_TOPICS.items() if key != 'smoothed']
 
     def diagnostics_due(self, log_ns: int) -> list[tuple[int, Any]]:
         """
@@ -119,21 +117,17 @@ class OfflineEstimator:
     def encoder(self) -> EstimateEncoder:
         """Return the replay's encoder of the estimate messages (made once)."""
         if self._encoder is None:
-            names = self.config.session.model.state_names
-            self._encoder = EstimateEncoder(self.config.frame_id, names, len(names))
+            self._encoder = EstimateEncoder(self.config.session.model.state_names)
         return self._encoder
 
     def encoded(self, out: AnyOutcome) -> list[tuple[str, bytes]]:
         """Return what messages(out) returns, serialized (canonical CDR, EstimateEncoder)."""
         enc = self._encoder or self.encoder()
-        pairs = []
-        for e in out.estimates:
-            key = e.kind, e.revised
-            twist, states = enc.pair(e.stamp_ns, e.x, e.P)
-            pairs += ((ESTIMATE_TOPICS[key], twist), (STATES_TOPICS[key], states))
-        pairs += [(ESTIMATE_TOPICS['mu', j.revised], enc.jump(j.stamp_ns, j.sigma_ns))
-                  for j in out.jumps]
-        return pairs
+        mus = step_mus(out)
+        return [(ESTIMATE_TOPICS[output_key(e.kind, e.revised)],
+                 enc.estimate(e.kind, e.stamp_ns, estimate_mu(e.kind, e.stamp_ns, mus), e.x,
+                              e.P))
+                for e in out.estimates]
 
 
 class OfflineAligner(OfflineEstimator):

@@ -17,8 +17,16 @@ from tskf_ros.messages.estimator_interface import DIAGNOSTICS_TOPIC
 
 __all__ = ['ArraySink', 'BagSink', 'Collector', 'ReplayResult', 'Sink', 'SMOOTHED_TOPIC']
 
-# the RTS-smoothed estimates x(t|T) of replay_offline --smooth (TwistWithCovarianceStamped)
-SMOOTHED_TOPIC = ESTIMATE_TOPICS['corrected', False].rsplit('/', 1)[0] + '/smoothed'
+# the RTS-smoothed estimates x(t|T) of replay_offline --smooth (the live node's fixed-lag
+# smoothed topic, which has the same layout)
+SMOOTHED_TOPIC = ESTIMATE_TOPICS['smoothed']
+# (kind, revised) -> the name of its arrays (ArraySink): one set per kind of estimate
+ARRAY_NAMES = {('predicted', False): 'estimate/predicted',
+               ('corrected', False): 'estimate/corrected',
+               ('mu', False): 'estimate/mu',
+               ('predicted', True): 'estimate/revised/predicted',
+               ('corrected', True): 'estimate/revised/corrected',
+               ('mu', True): 'estimate/revised/mu'}
 
 
 @dataclass
@@ -116,8 +124,11 @@ class BagSink:
             return
         rows = self.smoother.smoothed()
         enc = est.encoder()
-        pairs = [(SMOOTHED_TOPIC, enc.estimate(t, x, P))
-                 for t, x, P in zip(rows.stamp_ns.tolist(), rows.x, rows.P)]
+        # mu of each point's step, from the segment it belongs to
+        stepped = [seg.sigma for seg in self.smoother.segments if seg.sigma]
+        pairs = [(SMOOTHED_TOPIC, enc.estimate('smoothed', t, (stepped[s][t] - t) / NS, x, P))
+                 for t, s, x, P in zip(rows.stamp_ns.tolist(), rows.segment.tolist(), rows.x,
+                                       rows.P)]
         self.written[SMOOTHED_TOPIC] += len(pairs)
         if pairs:
             self.writer.write_many(self.last_log_ns, pairs)
@@ -138,9 +149,11 @@ class ArraySink:
       (status accepted / inserted / gap / rejected / reset; reason why, or '');
     - input.{log_ns, stamp_ns, status}: every input u read (if the bag has one);
     - estimate/{predicted,corrected}.{log_ns, stamp_ns, x (rows x n), P (rows x n x n)},
-      and estimate/revised/... for the estimates revised by a late sample: the
-      TwistWithCovarianceStamped topics (their *_states mirrors are x and sqrt(diag P));
-    - estimate/mu.{log_ns, stamp_ns, sigma_ns, mu} (mu in s) and estimate/revised/mu;
+      and estimate/revised/{predicted,corrected} for the estimates revised by a late
+      sample (the messages of the topics estimate/predicted, estimate/corrected and
+      estimate/revised);
+    - estimate/mu.{log_ns, stamp_ns, sigma_ns, mu} (mu in s) and estimate/revised/mu: the
+      steps t -> sigma(t) the filter took (the mu the estimate messages carry);
     - diagnostics.{log_ns, level, message} (level 0 OK .. 3 STALE);
     - meta.{topic, input_topic, damage, assumptions}: strings;
     - with a smoother (replay_offline --smooth): estimate/smoothed.{stamp_ns, x, P,
@@ -156,7 +169,7 @@ class ArraySink:
         self.n = len(est.config.session.model.state_names)
         self.samples: list[tuple] = []
         self.inputs: list[tuple] = []
-        self.estimates: dict[tuple, list] = {key: [] for key in ESTIMATE_TOPICS}
+        self.estimates: dict[tuple, list] = {key: [] for key in ARRAY_NAMES}
         self.diag: list[tuple] = []
 
     def copy(self, raw: RawMessage) -> None:
@@ -195,12 +208,12 @@ class ArraySink:
             _columns(out, 'input', self.inputs, (('log_ns', i8), ('stamp_ns', i8),
                                                  ('status', str)))
         for key, rows in self.estimates.items():
-            name = ESTIMATE_TOPICS[key].lstrip('/')
+            name = ARRAY_NAMES[key]
             if key[0] == 'mu':
                 _columns(out, name, rows, (('log_ns', i8), ('stamp_ns', i8),
                                            ('sigma_ns', i8)))
                 out[f'{name}.mu'] = (out[f'{name}.sigma_ns'] - out[f'{name}.stamp_ns']) / NS
-            elif not key[0].endswith('_states'):
+            else:
                 cols = list(zip(*rows)) if rows else [(), (), (), ()]
                 _columns(out, name, cols[:2], (('log_ns', i8), ('stamp_ns', i8)), zipped=True)
                 out[f'{name}.x'] = _stacked(cols[2], (-1, n))
