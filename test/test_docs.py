@@ -1,11 +1,14 @@
-"""The documentation builds (Sphinx, warnings as errors, nitpicky) and says nothing of issues."""
+"""The documentation builds (Sphinx, -W -n), lists every node parameter, says nothing of issues."""
 
+import html
 from pathlib import Path
 import re
 import subprocess
 import sys
 
 from test_command_names import documentation
+
+from tskf_ros.messages.parameter_schema import load_schema
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DOC = REPO_ROOT / 'doc'
@@ -29,6 +32,16 @@ def test_the_documentation_builds_without_a_warning(tmp_path):
     assert drafts, 'doc/design/ holds no draft'
     missing = [name for name in drafts if not (out / 'design' / f'{name}.html').is_file()]
     assert not missing, f'design drafts without a page: {missing}'
+    # every node page shows its schema's parameter table, every parameter with its default
+    # (test/nodes/test_parameter_schema.py checks the running nodes against the schemas)
+    for schema in sorted((REPO_ROOT / 'config' / 'schema').glob('*.yaml')):
+        page = (out / 'nodes' / f'{schema.stem}.html').read_text()
+        table = page[page.index('parameter-table'):]
+        table = table[:table.index('</table>')]
+        for row in load_schema(schema.stem).table_rows():
+            cell = f'<code class="docutils literal notranslate"><span class="pre">{row.name}'
+            assert cell in table, f'{schema.stem}: {row.name} not in its page'
+            assert html.escape(row.description, quote=False) in table, row.name
 
 
 def test_no_page_mentions_issues():
