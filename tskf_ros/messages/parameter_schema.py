@@ -5,13 +5,14 @@ from functools import lru_cache
 import math
 from pathlib import Path
 import sys
-from typing import Any, Callable, NamedTuple, Optional, Sequence
+from typing import Any, NamedTuple, Optional, Sequence
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from tskf_ros.messages.parameter_validation import format_number, RANGES, VALIDATORS
 from tskf_ros.messages.parameters import read_params_yaml
 
 import yaml
@@ -42,70 +43,6 @@ class SchemaFormatError(ValueError):
 
 class ParameterError(ValueError):
     """A parameter value the schema refuses: one line naming the parameter and the rule."""
-
-
-def _g(value: Any) -> str:
-    """Return a number as the docs and messages write it (1e-06 -> 1e-6, 3600.0 -> 3600)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return repr(value) if isinstance(value, str) else str(value)
-    text = f'{value:g}'
-    mantissa, _, exponent = text.partition('e')
-    return f'{mantissa}e{int(exponent)}' if exponent else text
-
-
-@dataclass(frozen=True)
-class Validator:
-    """One validation function of generate_parameter_library's YAML: its check and texts."""
-
-    check: Callable[..., bool]
-    doc: Callable[..., str]          # the rule as the node pages show it
-    must: Callable[..., str]         # the rule after 'must' in a refusal
-    arity: int
-
-
-def _among(options: Sequence) -> str:
-    return ', '.join(map(str, options))
-
-
-VALIDATORS = {
-    'bounds': Validator(lambda v, lo, hi: lo <= v <= hi,
-                        lambda lo, hi: f'{_g(lo)} to {_g(hi)}',
-                        lambda lo, hi: f'be within [{_g(lo)}, {_g(hi)}]', 2),
-    'gt': Validator(lambda v, x: v > x, lambda x: f'> {_g(x)}', lambda x: f'be > {_g(x)}', 1),
-    'gt_eq': Validator(lambda v, x: v >= x, lambda x: f'>= {_g(x)}',
-                       lambda x: f'be >= {_g(x)}', 1),
-    'lt': Validator(lambda v, x: v < x, lambda x: f'< {_g(x)}', lambda x: f'be < {_g(x)}', 1),
-    'lt_eq': Validator(lambda v, x: v <= x, lambda x: f'<= {_g(x)}',
-                       lambda x: f'be <= {_g(x)}', 1),
-    'one_of': Validator(lambda v, options: v in options,
-                        lambda options: f'one of {_among(options)}',
-                        lambda options: f'be one of {_among(options)}', 1),
-    'not_empty': Validator(lambda v: len(v) > 0, lambda: 'not empty', lambda: 'not be empty', 0),
-    'fixed_size': Validator(lambda v, n: len(v) == n, lambda n: f'{n} entries',
-                            lambda n: f'have {n} entries', 1),
-    'size_gt': Validator(lambda v, n: len(v) > n, lambda n: f'more than {n} entries',
-                         lambda n: f'have more than {n} entries', 1),
-    'size_lt': Validator(lambda v, n: len(v) < n, lambda n: f'fewer than {n} entries',
-                         lambda n: f'have fewer than {n} entries', 1),
-    'unique': Validator(lambda v: len(set(v)) == len(v), lambda: 'no duplicates',
-                        lambda: 'have no duplicates', 0),
-    'subset_of': Validator(lambda v, options: all(e in options for e in v),
-                           lambda options: f'each one of {_among(options)}',
-                           lambda options: f'have each entry one of {_among(options)}', 1),
-    'element_bounds': Validator(lambda v, lo, hi: all(lo <= e <= hi for e in v),
-                                lambda lo, hi: f'each {_g(lo)} to {_g(hi)}',
-                                lambda lo, hi: f'have each entry within [{_g(lo)}, {_g(hi)}]',
-                                2),
-    'lower_element_bounds': Validator(lambda v, lo: all(e >= lo for e in v),
-                                      lambda lo: f'each >= {_g(lo)}',
-                                      lambda lo: f'have each entry >= {_g(lo)}', 1),
-    'upper_element_bounds': Validator(lambda v, hi: all(e <= hi for e in v),
-                                      lambda hi: f'each <= {_g(hi)}',
-                                      lambda hi: f'have each entry <= {_g(hi)}', 1),
-}
-
-# the validations of a number's range (their refusals say 'out of range', as rclpy's do)
-RANGES = frozenset({'bounds', 'gt', 'gt_eq', 'lt', 'lt_eq'})
 
 
 @dataclass(frozen=True)
@@ -192,7 +129,7 @@ class ParameterSpec:
             if not VALIDATORS[name].check(value, *args):
                 rule = VALIDATORS[name].must(*args)
                 if name in RANGES:
-                    return f'{self.name} = {_g(value)} is out of range: it must {rule}'
+                    return f'{self.name} = {format_number(value)} is out of range: it must {rule}'
                 return f'{self.name} must {rule}, got {value!r}'
         return ''
 
@@ -204,9 +141,11 @@ class ParameterSpec:
         if isinstance(value, bool):
             return str(value).lower()
         if isinstance(value, list):
-            return '[' + ', '.join(_g(e) if not isinstance(e, str) else e
+            return '[' + ', '.join(format_number(e) if not isinstance(e, str) else e
                                    for e in value) + ']'
-        return "''" if value == '' else _g(value) if not isinstance(value, str) else value
+        if isinstance(value, str):
+            return value or "''"
+        return format_number(value)
 
 
 def _article(type_name: str) -> str:
