@@ -22,7 +22,8 @@ from sensor_msgs.msg import Illuminance, JointState
 from std_srvs.srv import Trigger
 
 from tskf_ros.core.units import NS
-from tskf_ros.messages.parameter_schema import load_schema, ParameterError, ParameterSchema
+from tskf_ros.messages.parameter_schema import (load_schema, ParameterError, ParameterSchema,
+                                                SchemaFormatError)
 from tskf_ros.messages.parameters import parameters_for_node
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
 
@@ -45,9 +46,10 @@ EXECUTOR_VARIABLE = 'TSKF_EXECUTOR'
 # KeyboardInterrupt or ExternalShutdownException (test/nodes/test_node_base.py checks
 # both executors).  SingleThreadedExecutor.spin() needs no such loop.
 SPIN_TIMEOUT = 1.0
-# a parameter override refused at declaration (out of its range, wrong type): one line
+# a parameter override refused at declaration (out of its range, wrong type), or a schema
+# that cannot be read (a broken installation): one line
 ROS_PARAMETER_ERRORS = (InvalidParameterTypeException, InvalidParameterValueException,
-                        ParameterError)
+                        ParameterError, SchemaFormatError)
 # exit status of a command line the node cannot parse (as argparse's usage errors)
 EXIT_USAGE = 2
 # rcl's source locations in its error strings (", at /project/src/parse.c:935")
