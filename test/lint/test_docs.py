@@ -1,5 +1,6 @@
-"""The documentation builds (Sphinx, warnings as errors, nitpicky) and says nothing of issues."""
+"""The documentation builds (Sphinx, -W -n), lists every node parameter, says nothing of issues."""
 
+import html
 from pathlib import Path
 import re
 import subprocess
@@ -7,10 +8,14 @@ import sys
 
 from documented_commands import documentation
 
+from tskf_ros.messages.parameter_schema import load_schema
+
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DOC = REPO_ROOT / 'doc'
 # the project rule: no user-facing text mentions issues (of a tracker or otherwise)
 ISSUE = re.compile(r'\bissues?\b', re.IGNORECASE)
+SMART_QUOTES = {'\u2018': "'", '\u2019': "'", '\u201c': '"', '\u201d': '"',
+                '\u2014': '---', '\u2013': '--', '\u2026': '...'}
 
 
 def test_the_documentation_builds_without_a_warning(tmp_path):
@@ -29,6 +34,21 @@ def test_the_documentation_builds_without_a_warning(tmp_path):
     assert drafts, 'doc/design/ holds no draft'
     missing = [name for name in drafts if not (out / 'design' / f'{name}.html').is_file()]
     assert not missing, f'design drafts without a page: {missing}'
+    # every node page shows its schema's parameter table, row for row, cell for cell
+    # (test/nodes/test_parameter_schema.py checks the running nodes against the schemas)
+    for schema in sorted((REPO_ROOT / 'config' / 'schema').glob('*.yaml')):
+        page = (out / 'nodes' / f'{schema.stem}.html').read_text()
+        table = page[page.index('parameter-table'):]
+        table = table[:table.index('</table>')]
+        cells = [html.unescape(re.sub(r'<[^>]+>', '', cell)).strip()
+                 for cell in re.findall(r'<td>(.*?)</td>', table, re.DOTALL)]
+        # Sphinx's smart quotes: 'a' -> \u2018a\u2019, -- -> \u2013, ... -> \u2026
+        for fancy, plain in SMART_QUOTES.items():
+            cells = [cell.replace(fancy, plain) for cell in cells]
+        rows = [tuple(cells[i:i + 6]) for i in range(0, len(cells), 6)]
+        want = [(r.name, r.type_name, r.default, r.constraints, 'yes' if r.read_only else '',
+                 r.description) for r in load_schema(schema.stem).table_rows()]
+        assert rows == want, schema.stem
 
 
 def test_no_page_mentions_issues():

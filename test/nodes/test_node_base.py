@@ -158,3 +158,58 @@ def test_a_parameter_file_that_sets_nothing_is_said_loudly(tmp_path):
                 node.destroy_node()
         finally:
             context.try_shutdown()
+
+
+def test_the_default_executor_spins_without_a_polling_loop(monkeypatch, ros_context):
+    # SingleThreadedExecutor.spin() returns on SIGINT and SIGTERM by itself; only the
+    # EventsExecutor needs node_base.spin's loop of spin_once calls with a timeout
+    monkeypatch.delenv(node_base.EXECUTOR_VARIABLE, raising=False)
+    assert node_base.DEFAULT_EXECUTOR == 'single'
+    calls = []
+
+    class Recorder(rclpy.executors.SingleThreadedExecutor):
+        def spin(self):
+            calls.append('spin')
+
+        def spin_once(self, timeout_sec=None):
+            calls.append('spin_once')
+
+    executor = Recorder(context=ros_context)
+    try:
+        node_base.spin(executor, ros_context)
+    finally:
+        executor.shutdown()
+    assert calls == ['spin']
+    default = make_executor(None, context=ros_context)
+    try:
+        assert type(default) is rclpy.executors.SingleThreadedExecutor
+    finally:
+        default.shutdown()
+
+
+# a malformed ROS argument on the command line of each node: rcl's RCLInvalidROSArgsError
+# and UnknownROSArgsError escaped run_node as a traceback
+MALFORMED = [
+    ('timescale_estimator', ['-p', 'period:=['], "'-p period:=['"),
+    ('power_meter_simulator', ['-p', 'period:=['], "'-p period:=['"),
+    ('led_link_simulator', ['-p', 'period:=['], "'-p period:=['"),
+    ('alignment', ['-p', 'period:=['], "'-p period:=['"),
+    ('power_meter_driver', ['-p', 'backend:=@py'], "'-p backend:=@py'"),
+    ('timescale_estimator', ['-p', 'backend:=@py'], "'-p backend:=@py'"),
+    ('timescale_estimator', ['-p', 'gate'], "'-p gate'"),
+    ('power_meter_driver', ['-r', 'a:='], "'-r a:='"),
+    ('alignment', ['--no-such-flag'], "'--no-such-flag'"),
+]
+
+
+@pytest.mark.parametrize('module, ros_args, named', MALFORMED,
+                         ids=[f'{m}{"".join(a)}' for m, a, _ in MALFORMED])
+def test_a_malformed_ros_argument_is_one_line_and_exit_2(module, ros_args, named):
+    proc = subprocess.run([sys.executable, '-m', f'tskf_ros.nodes.{module}', '--ros-args',
+                           *ros_args], cwd=REPO, env=dict(os.environ), capture_output=True,
+                          text=True, timeout=TIMEOUT)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == node_base.EXIT_USAGE == 2, proc.stderr
+    assert len(lines) == 1 and 'Traceback' not in proc.stderr + proc.stdout, proc.stderr
+    assert lines[0].startswith(f'{module}: cannot start: '), lines[0]
+    assert named in lines[0] and '.c:' not in lines[0], lines[0]

@@ -11,66 +11,17 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import FluidPressure, Illuminance, Range, RelativeHumidity, Temperature
 from std_msgs.msg import Float32, Float64, Float64MultiArray
 
-from tskf_ros.core.linear_models import owc
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATE_ESTIMATE_TYPE
+from tskf_ros.messages.parameter_schema import load_schema, ParameterError
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, reliable_qos
 from tskf_ros.owc.session import (ConfigError, EstimatorConfig, EstimatorSession,
                                   model_from_flat, Outcome)
 
 NODE_NAME = 'timescale_estimator'
+# the model's matrices, row-major flat lists (their shapes are inferred)
 MATRICES = ('A', 'B', 'C', 'D', 'G', 'Q', 'R', 'x0', 'P0')
-MATRIX_HELP = {
-    'A': 'x^Delta = A x + B u + G w: A, n x n row-major (model (3): [1.0])',
-    'B': 'input matrix, n x m row-major (u on the input topic, m <= 6); empty for none',
-    'C': 'y = C x + D + v: C, p x n row-major (model (3): [-637.35])',
-    'D': 'output offset, p entries; empty for 0 (model (3): [511.97])',
-    'G': 'process noise input, n x r row-major; empty for identity',
-    'Q': 'process noise intensity, r x r, symmetric positive semi-definite',
-    'R': 'measurement noise intensity, p x p, symmetric positive definite',
-    'x0': 'initial estimate, n entries',
-    'P0': 'initial covariance, n x n, symmetric positive semi-definite',
-}
-# name -> (default, description, (lo, hi))
-SCALARS = {
-    'period': (1.0, 'nominal sample period (s): sorts intervals into dense, discrete and '
-               'jumps (Cai IV-C)', (1e-6, 3600.0)),
-    'dense_fraction': (0.5, 'an interval shorter than dense_fraction * period is dense',
-                       (0.0, 1.0)),
-    'jump_factor': (1.5, 'an interval longer than jump_factor * period is a gap (a jump J)',
-                    (1.0, 1000.0)),
-    'max_gap': (5.0, 'a gap longer than this (s) sets the diagnostics level to WARN',
-                (0.0, 1e6)),
-    'history_window': (10.0, 'a late sample at most this much (s) older than the newest is '
-                       'inserted and the filter re-run', (0.0, 3600.0)),
-    'max_jump': (60.0, 'a stamp further ahead (s) of the last point re-initialises the '
-                 'filter', (1e-6, 1e6)),
-    'max_backward': (30.0, 'a stamp further behind (s) the last point re-initialises the '
-                     'filter (clock reset, looped bag); >= history_window', (0.0, 1e6)),
-    'max_future': (0.0, "a stamp further ahead (s) of this node's clock is rejected; 0: "
-                   'off (replayed or time-compressed streams)', (0.0, 1e6)),
-    'diagnostics_period': (1.0, 'seconds between /diagnostics messages', (0.01, 3600.0)),
-    'gate': (10.0, 'innovation gate: a measurement further than this many standard '
-             'deviations (Mahalanobis distance) from the prediction is rejected; 0: off',
-             (0.0, 1e6)),
-    'state_limit': (1e9, '|x_i| or sqrt(trace P) beyond this re-initialises the filter '
-                    '(diagnostics ERROR)', (1e-6, 1e300)),
-    'stale_timeout': (10.0, 's without any input (node clock): diagnostics ERROR; 0: off',
-                      (0.0, 1e6)),
-    'min_rate_fraction': (0.5, 'input rate below this fraction of 1 / period over '
-                          'rate_window: diagnostics WARN; 0: off', (0.0, 1.0)),
-    'rate_window': (10.0, 's over which the input rate is measured', (0.01, 3600.0)),
-}
-SMOOTHING_LAG_HELP = ('L > 0: publish the fixed-lag smoothed estimate x(t_k|t_{k+L}) on '
-                      'estimate/smoothed, L points (steps) behind the filter; 0: off')
-MEASUREMENT_RANGE_HELP = ('[lo, hi]: a physical reading outside is rejected (out_of_range); '
-                          'empty: any finite value')
-PARAMETERS = MATRICES + tuple(SCALARS) + (
-    'model_name', 'state_names', 'transition', 'history_size', 'queue_depth', 'frame_id',
-    'nonpositive_is_gap', 'measurement_range', 'gate_patience', 'use_message_variance',
-    'measurement_type')
-
 # topics, relative: resolved in the node's namespace
 MEASUREMENT_TOPIC = 'measurement'   # the estimator's y: neutral, remapped per application
 POWER_TOPIC = 'received_power'      # the OWC power meter's (the simulator's, the bags')
@@ -114,24 +65,20 @@ __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'BAG_POWER_TOPIC', 'BAG_TRUTH
            'DIAGNOSTICS_TYPE', 'diagnostics_message', 'ESTIMATE_TYPE', 'extractor',
            'INPUT_TOPIC', 'INPUT_TYPE', 'INPUT_TYPES', 'input_from_msg', 'InputType',
            'output_type',
-           'load_config', 'MATRICES', 'MATRIX_HELP', 'measurement_class',
-           'MEASUREMENT_RANGE_HELP', 'MEASUREMENT_TOPIC',
+           'load_config', 'MATRICES', 'measurement_class', 'MEASUREMENT_TOPIC',
            'NODE_NAME', 'NodeConfig',
            'outcome_messages', 'OutcomeMessages', 'output_key', 'OUTPUT_TOPICS', 'output_qos',
-           'PARAMETERS',
-           'parameters_to_config', 'ParamsError', 'POWER_TOPIC', 'SCALARS',
-           'SMOOTHING_LAG_HELP', 'estimate_mu', 'step_mus']
+           'parameters_to_config', 'ParamsError', 'POWER_TOPIC', 'estimate_mu', 'step_mus']
 
 
 def parameters_to_config(values: dict) -> NodeConfig:
     """Build the config from parameter values; raise ConfigError with the reason if bad."""
-    measurement_class(values.get('measurement_type', DEFAULT_MEASUREMENT_TYPE))
-    flat = {}
-    for key in MATRICES + ('measurement_range',):
-        v = values[key]
-        if isinstance(v, (str, bytes)) or any(isinstance(e, (bool, str)) for e in v):
-            raise ConfigError(f'{key} must be a list of numbers, got {v!r}')
-        flat[key] = [float(e) for e in v]
+    try:
+        values = load_schema(NODE_NAME).check(values)
+    except ParameterError as exc:
+        raise ConfigError(str(exc)) from None
+    measurement_class(values['measurement_type'])
+    flat = {key: values[key] for key in MATRICES + ('measurement_range',)}
     measurement_range = tuple(flat.pop('measurement_range'))
     model = model_from_flat(name=values['model_name'],
                             state_names=tuple(values['state_names']), **flat)
@@ -152,18 +99,8 @@ def parameters_to_config(values: dict) -> NodeConfig:
 
 
 def default_parameters() -> dict:
-    """Return the declared default of every parameter (the OWC model (3) of Cai et al.)."""
-    d = owc()
-    matrices = {'A': d.A, 'B': (), 'C': d.C, 'D': d.D, 'G': d.G, 'Q': d.Q, 'R': d.R,
-                'x0': d.x0, 'P0': d.P0}
-    values: dict = {key: [float(v) for v in np.ravel(matrices[key])] for key in MATRICES}
-    values.update({name: spec[0] for name, spec in SCALARS.items()})
-    values.update({'model_name': d.name, 'state_names': list(d.state_names),
-                   'transition': 'euler', 'history_size': 1000, 'queue_depth': 1000,
-                   'nonpositive_is_gap': True, 'frame_id': '', 'measurement_range': [],
-                   'gate_patience': 5, 'use_message_variance': False,
-                   'measurement_type': DEFAULT_MEASUREMENT_TYPE})
-    return values
+    """Return the default of every parameter (config/schema: the OWC model (3) of Cai et al.)."""
+    return load_schema(NODE_NAME).defaults()
 
 
 def load_config(params_file: Optional[Union[str, Path]] = None,
@@ -171,10 +108,11 @@ def load_config(params_file: Optional[Union[str, Path]] = None,
     """
     Build the node's config from a ROS parameter YAML file, as `--params-file` would.
 
-    The file's `timescale_estimator` (or `/**`) ros__parameters override the defaults.
+    The file's `timescale_estimator` (or `/**`) ros__parameters override the defaults, and
+    every value is checked against the node's schema (types, ranges) as the node checks it.
     Raises ParamsError naming the file and the problem.
     """
-    values = parameter_values(params_file, NODE_NAME, default_parameters(), overrides)
+    values = parameter_values(params_file, load_schema(NODE_NAME), overrides)
     try:
         return parameters_to_config(values)
     except (ValueError, TypeError, KeyError) as exc:

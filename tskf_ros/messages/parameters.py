@@ -1,17 +1,18 @@
-"""Parameters: descriptors, the config every node reads once, and the params-file reader."""
+"""Parameter files: the reader, the section that applies to a node, the config it makes."""
 
 from dataclasses import dataclass
 from pathlib import Path
 import re
-from typing import Any, Optional, Union
+from typing import Any, Optional, TYPE_CHECKING, Union
 
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
 
-from tskf_ros.core.dropouts import BLOCKAGES
-
 import yaml
 
-__all__ = ['BLOCKAGE_HELP', 'descriptor', 'float_range', 'IGNORED', 'NodeConfig',
+if TYPE_CHECKING:
+    from tskf_ros.messages.parameter_schema import ParameterSchema
+
+__all__ = ['descriptor', 'float_range', 'IGNORED', 'IGNORED_PREFIX', 'NodeConfig',
            'parameters_for_node', 'ParamsError', 'parameter_values', 'read_params_yaml',
            'section_applies']
 
@@ -29,17 +30,6 @@ _RclLoader.add_implicit_resolver(
 def read_params_yaml(text: str) -> Any:
     """Parse a parameter file's text as the node would read its numbers."""
     return yaml.load(text, Loader=_RclLoader)  # noqa: S506 - a SafeLoader subclass
-
-
-# descriptions and ranges of the dropout parameters both link simulators share
-BLOCKAGE_HELP = {
-    'blockage': ('link blockages: ' + ', '.join(BLOCKAGES), None),
-    'drop_probability': ('Bernoulli drop probability per sample', (0.0, 1.0)),
-    'ge_p_gb': ('Gilbert-Elliott P(good -> bad) per sample', (0.0, 1.0)),
-    'ge_p_bg': ('Gilbert-Elliott P(bad -> good) per sample', (0.0, 1.0)),
-    'ge_loss_good': ('Gilbert-Elliott loss probability in the good state', (0.0, 1.0)),
-    'ge_loss_bad': ('Gilbert-Elliott loss probability in the bad state', (0.0, 1.0)),
-}
 
 
 def float_range(lo: float, hi: float) -> dict:
@@ -65,24 +55,30 @@ class NodeConfig:
     queue_depth: int
 
 
-# parameters every node has that the offline adapters do not use
-IGNORED = frozenset({'use_sim_time'})
+# parameters every node has that the offline adapters do not use: rclpy's own, and the
+# QoS overrides of its publishers and subscriptions (qos_overrides./topic.publisher.depth)
+IGNORED = frozenset({'use_sim_time', 'start_type_description_service'})
+IGNORED_PREFIX = 'qos_overrides.'
 
 
 class ParamsError(ValueError):
     """A parameter file that cannot configure the filter."""
 
 
-def parameter_values(params_file: Optional[Union[str, Path]], node_name: str,
-                     defaults: dict, overrides: Optional[dict] = None) -> dict:
+def parameter_values(params_file: Optional[Union[str, Path]], schema: 'ParameterSchema',
+                     overrides: Optional[dict] = None) -> dict:
     """
-    Return the defaults overridden by the file's section for node_name, then by overrides.
+    Return a node's defaults overridden by the file's section for it, then by overrides.
 
-    The section is the first of `node_name`, `/node_name`, `/**/node_name` and `/**` that
-    has `ros__parameters`.  Raises ParamsError naming the file and the problem: unreadable,
-    no section, or a parameter the node does not have.
+    schema is the node's ParameterSchema (messages/parameter_schema.py); the section is
+    the first of `node`, `/node`, `/**/node` and `/**` that has `ros__parameters`.  Every
+    value is checked against the schema as the node checks it (type, range, choices).
+    Raises ParamsError naming the file and the problem: unreadable, no section, a
+    parameter the node does not have, or a value it refuses.
     """
-    values = dict(defaults)
+    node_name = schema.node
+    values = schema.defaults()
+    where = str(params_file) if params_file else 'parameters'
     if params_file:
         try:
             doc = read_params_yaml(Path(params_file).read_text()) or {}
@@ -97,12 +93,29 @@ def parameter_values(params_file: Optional[Union[str, Path]], node_name: str,
                 break
         if not isinstance(section, dict):
             raise ParamsError(f'{params_file}: no {node_name}: ros__parameters section')
-        unknown = sorted(set(section) - set(values) - IGNORED)
+        given = {name: value for name, value in _flat(section).items()
+                 if name not in IGNORED and not name.startswith(IGNORED_PREFIX)}
+        unknown = sorted(set(given) - set(values))
         if unknown:
             raise ParamsError(f'{params_file}: unknown parameter(s) {", ".join(unknown)}')
-        values.update({k: v for k, v in section.items() if k not in IGNORED})
+        values.update(given)
     values.update(overrides or {})
-    return values
+    try:
+        return schema.check(values)
+    except ValueError as exc:
+        raise ParamsError(f'{where}: {exc}') from None
+
+
+def _flat(parameters: dict, prefix: str = '') -> dict:
+    """Return a ros__parameters mapping with nested names dotted (a.b: 1 -> {'a.b': 1})."""
+    out = {}
+    for key, value in parameters.items():
+        name = prefix + str(key)
+        if isinstance(value, dict):
+            out.update(_flat(value, name + '.'))
+        else:
+            out[name] = value
+    return out
 
 
 def section_applies(key: str, node_fqn: str) -> bool:

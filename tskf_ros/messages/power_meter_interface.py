@@ -3,68 +3,20 @@
 from dataclasses import dataclass, fields
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import ParameterType
 from sensor_msgs.msg import Illuminance
 
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import POWER_TOPIC
-from tskf_ros.messages.parameters import descriptor
+from tskf_ros.messages.parameter_schema import load_schema, ParameterError
 from tskf_ros.messages.qos import SENSOR_OUTPUT_QOS
-from tskf_ros.owc.meter_settings import (MeterConfig, MeterError, Reading, ScpiCommands,
-                                         UNITS)
+from tskf_ros.owc.meter_settings import MeterConfig, MeterError, Reading, ScpiCommands
 from tskf_ros.owc.power_meter import PowerMeter
 
-__all__ = ['DriverConfig', 'declare_all', 'default_parameters', 'diagnostics_message',
-           'make_config', 'MeterError', 'NODE_NAME', 'PARAMETERS', 'POWER_TOPIC',
+__all__ = ['DriverConfig', 'default_parameters', 'diagnostics_message', 'make_config',
+           'MeterError', 'NODE_NAME', 'parameter_names', 'POWER_TOPIC',
            'reading_to_msg', 'SENSOR_OUTPUT_QOS']
 
 NODE_NAME = 'power_meter_driver'
-# name -> (description, (lo, hi) or None, read-only); defaults are MeterConfig's and below
-METER_HELP = {
-    'resource': ('VISA resource name: USB0::0x1313::0x8078::<serial>::INSTR (PM100D), '
-                 'TCPIP0::<host>::INSTR, ASRL/dev/ttyUSB0::INSTR', None, True),
-    'backend': ("pyvisa backend: '@py' (pyvisa-py, real devices), "
-                "'<path>/pm100_sim.yaml@sim' (pyvisa-sim)", None, True),
-    'unit': ('unit the meter is set to: ' + ' | '.join(UNITS) + ' (published in mW '
-             'whatever it is)', None, False),
-    'wavelength': ('nm: calibration wavelength of the sensor', (1.0, 1e6), False),
-    'averaging': ('samples the meter averages per reading (PM100: about 3 ms each)', None,
-                  False),
-    'timeout': ('s: one query; a reading that takes longer is skipped', (1e-3, 60.0), False),
-    'max_power': ('mW: a reading above is refused (over-range)', (1e-12, 1e12), False),
-    'max_timeouts': ('timeouts in a row that mean the device is gone (reconnect)', None,
-                     False),
-    'reconnect_initial': ('s: first retry after a failed connection; doubles per failure',
-                          (1e-3, 3600.0), False),
-    'reconnect_max': ('s: the cap of the retry delay', (1e-3, 3600.0), False),
-    'unit_check_every': ('query the unit before every n-th reading (1: each); 0: never',
-                         None, False),
-}
-COMMAND_HELP = {
-    'identify': 'identification query, logged and in diagnostics',
-    'clear_status': 'clear the status and error queue at connection',
-    'set_unit': 'set the unit; {unit} is W, MW or DBM',
-    'unit_query': 'query the unit (W, MW, UW, NW or DBM); empty: trust set_unit',
-    'set_wavelength': 'set the wavelength; {wavelength} is in nm',
-    'set_averaging': 'set the averaging count; {averaging}',
-    'configure': 'put the meter into power measurement',
-    'read': 'query one power reading',
-    'error_query': "read the error queue after configuring, until '0,...'",
-}
-NODE_HELP = {
-    'rate': ('Hz: readings per second (a steady-clock timer: the device runs in real time)',
-             (1e-3, 1e4), False),
-    'frame_id': ('header.frame_id of received_power (the simulator uses power_meter)', None,
-                 False),
-    'variance': ('mW^2: variance published with every reading; 0: unknown', (0.0, 1e12),
-                 False),
-    'diagnostics_period': ('s between /diagnostics messages', (0.01, 3600.0), False),
-}
-NODE_DEFAULTS = {'rate': 1.0, 'frame_id': 'power_meter', 'variance': 0.0,
-                 'diagnostics_period': 1.0}
-PARAMETERS = tuple(METER_HELP) + tuple(f'scpi_{c}' for c in COMMAND_HELP) + tuple(NODE_HELP)
-TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
-         float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
 
 
 @dataclass(frozen=True)
@@ -79,34 +31,24 @@ class DriverConfig:
 
 
 def default_parameters() -> dict:
-    """Return the default of every parameter."""
-    meter, commands = MeterConfig(), ScpiCommands()
-    values = {name: getattr(meter, name) for name in METER_HELP}
-    values.update({f'scpi_{c}': getattr(commands, c) for c in COMMAND_HELP})
-    values.update(NODE_DEFAULTS)
-    return values
+    """Return the default of every parameter (config/schema/power_meter_driver.yaml)."""
+    return load_schema(NODE_NAME).defaults()
 
 
-def declare_all(node) -> None:
-    """Declare every parameter of the driver on node, with its descriptor."""
-    help_ = {**METER_HELP, **NODE_HELP,
-             **{f'scpi_{c}': (f"SCPI: {text} ('': skip)", None, False)
-                for c, text in COMMAND_HELP.items()}}
-    help_['scpi_read'] = ('SCPI: ' + COMMAND_HELP['read'], None, False)
-    for name, value in default_parameters().items():
-        text, rng, read_only = help_[name]
-        node.declare_parameter(name, value, descriptor(text, rng, TYPES[type(value)],
-                                                       read_only=read_only))
+def parameter_names() -> tuple:
+    """Return the names of the driver's parameters, in the schema's order."""
+    return load_schema(NODE_NAME).names
 
 
 def make_config(values: dict) -> DriverConfig:
     """Build the config from parameter values; raise MeterError with the reason if bad."""
-    for name, default in default_parameters().items():
-        if type(values[name]) is not type(default):
-            raise MeterError(f'{name} must be a {type(default).__name__}, got '
-                             f'{values[name]!r}')
+    try:
+        values = load_schema(NODE_NAME).check(values)
+    except ParameterError as exc:
+        raise MeterError(str(exc)) from None
     commands = ScpiCommands(**{f.name: values[f'scpi_{f.name}'] for f in fields(ScpiCommands)})
-    meter = MeterConfig(commands=commands, **{name: values[name] for name in METER_HELP})
+    meter = MeterConfig(commands=commands, **{f.name: values[f.name] for f in fields(MeterConfig)
+                                              if f.name != 'commands'})
     if not values['rate'] > 0 or not values['diagnostics_period'] > 0 \
             or not values['variance'] >= 0:
         raise MeterError('rate and diagnostics_period must be > 0, variance >= 0')

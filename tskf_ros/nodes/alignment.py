@@ -4,7 +4,6 @@ from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistWithCovarianceStamped
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
@@ -12,13 +11,11 @@ from std_srvs.srv import SetBool
 from tskf_ros import led
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.messages import conversions
-from tskf_ros.messages.alignment_interface import (COMMAND_TYPE, default_parameters,
-                                                   diagnostics_message, INPUT_TOPIC, NODE_NAME,
-                                                   NodeConfig, outcome_messages, output_qos,
-                                                   OUTPUT_TOPICS, OUTPUT_TYPES, PARAMETERS,
-                                                   parameters_to_config, SESSION_PARAMETERS)
+from tskf_ros.messages.alignment_interface import (COMMAND_TYPE, diagnostics_message,
+                                                   INPUT_TOPIC, NODE_NAME, NodeConfig,
+                                                   outcome_messages, output_qos, OUTPUT_TOPICS,
+                                                   OUTPUT_TYPES, parameters_to_config)
 from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
-from tskf_ros.messages.parameters import float_range
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
 
@@ -26,7 +23,7 @@ from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
 class Alignment(ReconfigurableNode):
     """Node wrapping AlignmentSession: intensity in, base commands, estimates, diagnostics out."""
 
-    PARAMETERS = PARAMETERS
+    SCHEMA = NODE_NAME
     SESSION = AlignmentSession
     CONFIG_ERRORS = (led.AlignmentError, KeyError, TypeError, ValueError)
 
@@ -60,31 +57,6 @@ class Alignment(ReconfigurableNode):
             + f', base starting at {cfg.base_initial:g} deg')
 
     # -- parameters -----------------------------------------------------------------------
-
-    def _declare(self) -> None:
-        defaults = default_parameters()
-        for name, (type_, text, rng, read_only) in SESSION_PARAMETERS.items():
-            value = defaults[name]
-            d = ParameterDescriptor(description=text, type=type_, read_only=read_only,
-                                    **(float_range(*rng) if rng is not None else {}))
-            if value == []:     # an empty list would be typed as bytes: let it take numbers
-                d.type, d.dynamic_typing = ParameterType.PARAMETER_NOT_SET, True
-            if name == 'algorithm':
-                d.additional_constraints = 'one of ' + ', '.join(led.ALGORITHMS)
-            if name == 'controller':
-                d.additional_constraints = 'one of ' + ', '.join(led.CONTROLLERS)
-            self.declare_parameter(name, value, d)
-        self.declare_parameter('frame_id', defaults['frame_id'], ParameterDescriptor(
-            description='frame_id of the estimates', type=ParameterType.PARAMETER_STRING))
-        self.declare_parameter('diagnostics_period', defaults['diagnostics_period'],
-                               ParameterDescriptor(
-                                   description='seconds between /diagnostics messages',
-                                   type=ParameterType.PARAMETER_DOUBLE,
-                                   **float_range(0.01, 3600.0)))
-        self.declare_parameter('queue_depth', defaults['queue_depth'], ParameterDescriptor(
-            description='depth of the input and estimate queues', read_only=True,
-            type=ParameterType.PARAMETER_INTEGER,
-            integer_range=[IntegerRange(from_value=1, to_value=100_000)]))
 
     def make_config(self, values: dict) -> NodeConfig:
         """Build the node's config; raises with the reason if it makes no working aligner."""

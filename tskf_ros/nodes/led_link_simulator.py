@@ -4,40 +4,16 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.core.units import NS
 from tskf_ros.led.led_link import LedLink, LedLinkConfig, LedLinkError, LedSample, sample_offset_ns
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import COMMAND_TOPIC, INPUT_TOPIC
-from tskf_ros.messages.parameters import BLOCKAGE_HELP, descriptor
 from tskf_ros.messages.qos import DEFAULT_DEPTH
-from tskf_ros.nodes.node_base import (config_from_parameters, declare_config_fields,
-                                      LinkSimulatorNode, MAX_BATCH, run_node)
+from tskf_ros.nodes.node_base import link_config, LinkSimulatorNode, MAX_BATCH, run_node
 
 NODE_NAME = 'led_link_simulator'
-
-LINK_HELP = {
-    'beta': ('deg/s: rate of the transmitter revolving around the receiver (Fig. 8: 1.2)',
-             (-1e4, 1e4)),
-    'dt': ('s between samples (Section VI: about 50 ms per iteration)', (1e-6, 3600.0)),
-    'noise': ('V: standard deviation of the measurement noise v (R_sys = 0.04: 0.2)',
-              (0.0, 1e3)),
-    'max_intensity': ('V: the intensity at the peak of g at the start (Section V: 3)',
-                      (1e-9, 1e6)),
-    'phi0': ('deg: angle of incidence at sample 0', (-180.0, 180.0)),
-    'angle_noise': ('deg per sample: std of w2 of eq. (25) (Q_sys: 0.1)', (0.0, 180.0)),
-    'intensity_walk': ('V per sample: std of w1 of eq. (25) (Q_sys: 0.05)', (0.0, 1e3)),
-    'max_speed': ('deg/s the base turns at most; 0: it reaches each command within a sample',
-                  (0.0, 1e6)),
-    'units_per_degree': ('fit units of g (eq. (4)) per degree; 0: the unit for which '
-                         '+-15 deg is 20% of the peak (17.7); 1: the printed reading',
-                         (0.0, 1e4)),
-    'seed': ('seed of every random stream: same parameters, seed and commands, same samples',
-             None),
-    **BLOCKAGE_HELP,
-}
 
 
 @dataclass(frozen=True)
@@ -57,6 +33,7 @@ class LedSimulatorConfig:
 class LedLinkSimulator(LinkSimulatorNode):
     """Publish simulated intensity and truth; turn the base as commanded."""
 
+    SCHEMA = NODE_NAME
     SENSOR_TOPIC = INPUT_TOPIC
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
@@ -89,37 +66,12 @@ class LedLinkSimulator(LinkSimulatorNode):
         """Return the number of samples taken so far (published or dropped)."""
         return self.link.count
 
-    def _declare(self) -> None:
-        declare_config_fields(self, LedLinkConfig, LINK_HELP)
-        D = ParameterType.PARAMETER_DOUBLE
-        self.declare_parameter('time_factor', 1.0, descriptor(
-            'play this many times faster than the stamps advance; 0: as fast as the loop '
-            'goes (with lockstep)', (0.0, 1e6), D))
-        self.declare_parameter('lockstep', True, descriptor(
-            'hold each sample until the command answering the previous delivered one has '
-            'arrived (deterministic closed loop)', None, ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('command_timeout', 1.0, descriptor(
-            's (node clock) to wait for that command before going on without it',
-            (1e-3, 3600.0), D))
-        self.declare_parameter('duration', 0.0, descriptor(
-            'seconds of stamped data to publish, then stop; 0: forever', (0.0, 1e9), D))
-        self.declare_parameter('start_time', 0.0, descriptor(
-            'stamp (s) of sample 0; 0: the node clock at the first sample', (0.0, 1e10), D))
-        self.declare_parameter('wait_for_subscribers', 0, ParameterDescriptor(
-            description='hold sample 0 until intensity has this many subscribers (and, in '
-            'lockstep, the command topic a publisher)', type=ParameterType.PARAMETER_INTEGER,
-            read_only=True, integer_range=[IntegerRange(from_value=0, to_value=1000)]))
-        self.declare_parameter('frame_id', 'photodiode', descriptor(
-            'frame_id of intensity', None, ParameterType.PARAMETER_STRING))
-
-    def _read(self) -> LedSimulatorConfig:
-        link = config_from_parameters(self, LedLinkConfig, LedLinkError)
-        p = {name: self.get_parameter(name).value for name in (
-            'time_factor', 'lockstep', 'command_timeout', 'duration', 'start_time',
-            'wait_for_subscribers', 'frame_id')}
-        return LedSimulatorConfig(link, p['time_factor'], p['lockstep'], p['command_timeout'],
-                                  p['duration'], p['start_time'], p['wait_for_subscribers'],
-                                  p['frame_id'])
+    def _read(self, values: dict) -> LedSimulatorConfig:
+        link = link_config(LedLinkConfig, values, LedLinkError)
+        return LedSimulatorConfig(link, values['time_factor'], values['lockstep'],
+                                  values['command_timeout'], values['duration'],
+                                  values['start_time'], values['wait_for_subscribers'],
+                                  values['frame_id'])
 
     # -- the loop ---------------------------------------------------------------------------
 

@@ -3,11 +3,12 @@
 import argparse
 from dataclasses import fields
 import os
+import re
 import sys
 from typing import Any, Callable, Optional, Protocol, Sequence, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import ParameterType, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.clock import ClockChange, JumpThreshold, TimeJump
 from rclpy.duration import Duration
@@ -21,7 +22,9 @@ from sensor_msgs.msg import Illuminance, JointState
 from std_srvs.srv import Trigger
 
 from tskf_ros.core.units import NS
-from tskf_ros.messages.parameters import descriptor, parameters_for_node
+from tskf_ros.messages.parameter_schema import (load_schema, ParameterError, ParameterSchema,
+                                                SchemaFormatError)
+from tskf_ros.messages.parameters import parameters_for_node
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
 
 import yaml
@@ -31,20 +34,26 @@ MAX_BATCH = 10_000
 # the evaluation truth of both simulators (sensor_msgs/msg/JointState)
 TRUTH_TOPIC = 'true_angle'
 # The executors a node can run on (`--executor`, or TSKF_EXECUTOR in the environment).
-# 'single' is rclpy's SingleThreadedExecutor, which rebuilds its wait set on every spin;
-# 'events' is rclpy.experimental.EventsExecutor, which dispatches from callbacks of the
-# middleware (the README's benchmark section has both, measured).
+# 'single' is rclpy's SingleThreadedExecutor, Jazzy's stable executor, which rebuilds its
+# wait set on every spin; 'events' is rclpy.experimental.EventsExecutor, which dispatches
+# from callbacks of the middleware (doc/benchmarks.md has both, measured).
 EXECUTORS = {'single': SingleThreadedExecutor, 'events': EventsExecutor}
-DEFAULT_EXECUTOR = 'events'
+DEFAULT_EXECUTOR = 'single'
 EXECUTOR_VARIABLE = 'TSKF_EXECUTOR'
-# s: the longest spin_once between two checks of the context.  rclpy 7.1's
+# s: the longest EventsExecutor.spin_once between two checks of the context.  rclpy 7.1's
 # EventsExecutor.spin() (and its spin_once without a timeout) never returns after SIGINT
 # or SIGTERM, spinning a core; its spin_once with a timeout returns at once, raising
 # KeyboardInterrupt or ExternalShutdownException (test/nodes/test_node_base.py checks
-# both executors).
+# both executors).  SingleThreadedExecutor.spin() needs no such loop.
 SPIN_TIMEOUT = 1.0
-# a parameter override rclpy refuses at declaration (out of its range, wrong type): one line
-ROS_PARAMETER_ERRORS = (InvalidParameterTypeException, InvalidParameterValueException)
+# a parameter override refused at declaration (out of its range, wrong type), or a schema
+# that cannot be read (a broken installation): one line
+ROS_PARAMETER_ERRORS = (InvalidParameterTypeException, InvalidParameterValueException,
+                        ParameterError, SchemaFormatError)
+# exit status of a command line the node cannot parse (as argparse's usage errors)
+EXIT_USAGE = 2
+# rcl's source locations in its error strings (", at /project/src/parse.c:935")
+RCL_LOCATION = re.compile(r',? at \S+:\d+')
 # a link config dataclass of the core (OwcLinkConfig, LedLinkConfig)
 LinkConfig = TypeVar('LinkConfig')
 
@@ -91,21 +100,52 @@ def make_executor(kind: Optional[str] = None, *, context=None) -> Executor:
 
 
 def spin(executor: Executor, context=None) -> None:
-    """Spin executor until its context shuts down (SIGINT, SIGTERM, rclpy.shutdown)."""
+    """
+    Spin executor until its context shuts down (SIGINT, SIGTERM, rclpy.shutdown).
+
+    An rclpy Executor (SingleThreadedExecutor, the default) spins with its own spin(),
+    which returns on any of them; the EventsExecutor, which is no rclpy Executor, in a
+    loop of spin_once calls with a timeout (SPIN_TIMEOUT).
+    """
+    if isinstance(executor, Executor):
+        executor.spin()
+        return
     context = context or rclpy.get_default_context()
     while context.ok():
         executor.spin_once(timeout_sec=SPIN_TIMEOUT)
 
 
+def ros_arguments_error(exc: RuntimeError) -> str:
+    """Return rcl's refusal of the ROS arguments as one line, without its source locations."""
+    text = RCL_LOCATION.sub('', str(exc)).strip().removeprefix('Failed to parse ROS arguments: ')
+    if text.startswith('['):
+        return f'unknown ROS argument(s) {text}'
+    text = f'bad ROS argument: {text}'
+    if 'parameter override rule' in text:
+        text += (' (the value after := is YAML: quote a string YAML cannot read, e.g. '
+                 """-p 'backend:="@py"')""")
+    return text
+
+
 def parse_args(prog: str, description: str,
                argv: Optional[list] = None) -> argparse.Namespace:
-    """Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS)."""
+    """
+    Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS).
+
+    ROS arguments rcl cannot parse (a malformed `-p`, `-r` or `--params-file`, an unknown
+    `--ros-args` flag) end the process with one line and exit status EXIT_USAGE.
+    """
     parser = argparse.ArgumentParser(prog=prog, description=description)
     parser.add_argument('--executor', choices=sorted(EXECUTORS), default=None,
                         help=f'the rclpy executor to spin on (default: ${EXECUTOR_VARIABLE} '
                         f'if set, else {DEFAULT_EXECUTOR}): single = SingleThreadedExecutor, '
                         'events = rclpy.experimental.EventsExecutor')
-    args = remove_ros_args(sys.argv if argv is None else argv)[1:]
+    try:
+        # rcl's RCLInvalidROSArgsError and UnknownROSArgsError are RuntimeErrors
+        args = remove_ros_args(sys.argv if argv is None else argv)[1:]
+    except RuntimeError as exc:
+        print(f'{prog}: cannot start: {ros_arguments_error(exc)}', file=sys.stderr)
+        sys.exit(EXIT_USAGE)
     return parser.parse_known_args(args)[0]
 
 
@@ -168,17 +208,18 @@ class ReconfigurableNode(Node):
     """
     A filtering node: one config object validated whole, diagnostics, and clock-jump resets.
 
-    A subclass declares its parameters, names them in PARAMETERS, builds its config with
-    `make_config(values)` (raising one of CONFIG_ERRORS with the reason) and hands a new
-    config to its session in `reconfigure(config)`, which returns what happened.  A change
-    that does not make a working config is refused with the reason, and the node keeps
-    running on the old values.  `start_diagnostics()` publishes `diagnostics_message(now)`
-    on /diagnostics every `config.diagnostics_period`, retimed when that changes.
-    `watch_clock_jumps()` calls `restart(why)` when the clock jumps back or changes source
-    (use_sim_time with a looped bag).
+    A subclass names its parameter schema in SCHEMA (config/schema/<SCHEMA>.yaml: every
+    parameter is declared from it, see messages/parameter_schema.py), builds its config
+    with `make_config(values)` (raising one of CONFIG_ERRORS with the reason) and hands a
+    new config to its session in `reconfigure(config)`, which returns what happened.  A
+    change the schema refuses, or that does not make a working config, is refused with the
+    reason, and the node keeps running on the old values.  `start_diagnostics()` publishes
+    `diagnostics_message(now)` on /diagnostics every `config.diagnostics_period`, retimed
+    when that changes.  `watch_clock_jumps()` calls `restart(why)` when the clock jumps
+    back or changes source (use_sim_time with a looped bag).
     """
 
-    PARAMETERS: tuple = ()
+    SCHEMA = ''
     CONFIG_ERRORS: tuple = (KeyError, TypeError, ValueError)
     # the session class of the core, built from config.session
     SESSION: Callable[[Any], Any]
@@ -188,13 +229,11 @@ class ReconfigurableNode(Node):
                  cli_args: Optional[list] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides, cli_args=cli_args)
-        self._declare()
+        self.schema: ParameterSchema = load_schema(self.SCHEMA)
+        # the parameters given at start (a file, -p, a launch file, parameter_overrides)
+        self.parameters_given = self.schema.declare(self)
         self.config = self.start_watching_parameters()
         self.session = self.SESSION(self.config.session)
-
-    def _declare(self) -> None:
-        """Declare the node's parameters (subclasses)."""
-        raise NotImplementedError
 
     def start_watching_parameters(self) -> NodeSettings:
         """Build the config from the declared parameters and validate every later change."""
@@ -206,9 +245,7 @@ class ReconfigurableNode(Node):
 
     def parameter_values(self, changes: Sequence[Parameter] = ()) -> dict:
         """Return every parameter's value, with the proposed changes on top."""
-        values = {name: self.get_parameter(name).value for name in self.PARAMETERS}
-        values.update({p.name: p.value for p in changes})
-        return values
+        return parameter_values(self, self.schema, changes)
 
     def make_config(self, values: dict) -> NodeSettings:
         """Build the node's config from parameter values (subclasses)."""
@@ -267,6 +304,10 @@ class ReconfigurableNode(Node):
     def _validate(self, changes: list) -> SetParametersResult:
         if not self._own(changes):      # rclpy's own (qos_overrides.*, use_sim_time)
             return SetParametersResult(successful=True)
+        why = self.schema.refusal(changes)
+        if why:
+            self.get_logger().warning(f'parameter change refused: {why}')
+            return SetParametersResult(successful=False, reason=why)
         try:
             config = self.make_config(self.parameter_values(changes))
         except self.CONFIG_ERRORS as exc:
@@ -276,8 +317,8 @@ class ReconfigurableNode(Node):
         return SetParametersResult(successful=True)
 
     def _own(self, changes: list) -> bool:
-        """Tell whether a change touches a parameter of the node's config (PARAMETERS)."""
-        return any(p.name in self.PARAMETERS for p in changes)
+        """Tell whether a change touches a parameter of the node's schema."""
+        return any(p.name in self.schema.names for p in changes)
 
     def _apply(self, changes: list) -> None:
         if self._pending is None or not self._own(changes):
@@ -298,23 +339,19 @@ class ReconfigurableNode(Node):
         self.get_logger().info(f'parameters changed ({names}): {message}')
 
 
-def declare_config_fields(node: Node, config_cls: type, help_: dict) -> None:
-    """Declare one read-only parameter per field of a link config dataclass, typed by default."""
-    defaults = config_cls()
-    for f in fields(config_cls):
-        text, rng = help_[f.name]
-        value = getattr(defaults, f.name)
-        type_ = {int: ParameterType.PARAMETER_INTEGER, str: ParameterType.PARAMETER_STRING,
-                 float: ParameterType.PARAMETER_DOUBLE}[type(value)]
-        node.declare_parameter(f.name, value, descriptor(text, rng, type_))
+def parameter_values(node: Node, schema: ParameterSchema,
+                     changes: Sequence[Parameter] = ()) -> dict:
+    """Return the value of every parameter of schema on node, with the changes on top."""
+    values = {name: node.get_parameter(name).value for name in schema.names}
+    values.update({p.name: p.value for p in changes})
+    return values
 
 
-def config_from_parameters(node: Node, config_cls: type[LinkConfig],
-                           error: type[Exception]) -> LinkConfig:
-    """Build a link config dataclass from the node's parameters; raise `error` if bad."""
+def link_config(config_cls: type[LinkConfig], values: dict,
+                error: type[Exception]) -> LinkConfig:
+    """Build a link config dataclass from parameter values (its fields); raise `error` if bad."""
     try:
-        return config_cls(**{f.name: node.get_parameter(f.name).value
-                             for f in fields(config_cls)})
+        return config_cls(**{f.name: values[f.name] for f in fields(config_cls)})
     except error as exc:
         raise error(f'bad simulator parameters: {exc}') from None
 
@@ -323,29 +360,31 @@ class LinkSimulatorNode(Node):
     """
     A simulated link: a sensor topic, a truth topic, and a clock that starts on subscribers.
 
-    A subclass declares its parameters in `_declare()`, reads them in `_read()` into a
-    config with `.link`, `.start_time` (s; 0: the clock at the start) and
-    `.wait_for_subscribers`, and names its sensor topic in SENSOR_TOPIC.
+    A subclass names its parameter schema in SCHEMA (config/schema/<SCHEMA>.yaml), reads
+    the parameter values in `_read(values)` into a config with `.link`, `.start_time` (s;
+    0: the clock at the start) and `.wait_for_subscribers`, and names its sensor topic in
+    SENSOR_TOPIC.  A change the schema refuses is refused with the reason.
     """
 
+    SCHEMA = ''
     SENSOR_TOPIC = ''
 
     def __init__(self, node_name: str, *, context=None, namespace: Optional[str] = None,
                  parameter_overrides: Optional[list] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
-        self._declare()
-        self.config = self._read()
+        self.schema: ParameterSchema = load_schema(self.SCHEMA)
+        self.parameters_given = self.schema.declare(self)
+        self.config = self._read(parameter_values(self, self.schema))
+        self.add_on_set_parameters_callback(self.schema.validate)
         self.sensor_pub = self.create_publisher(Illuminance, self.SENSOR_TOPIC,
                                                 SENSOR_OUTPUT_QOS)
         self.truth_pub = self.create_publisher(JointState, TRUTH_TOPIC, TRUTH_QOS)
         self.start_ns: Optional[int] = None
         self.stamp0_ns = int(round(self.config.start_time * NS))
 
-    def _declare(self) -> None:
-        raise NotImplementedError
-
-    def _read(self) -> SimulatorSettings:
+    def _read(self, values: dict) -> SimulatorSettings:
+        """Build the node's config from its parameter values (subclasses)."""
         raise NotImplementedError
 
     def ready(self) -> bool:

@@ -16,7 +16,7 @@ from tskf_ros.owc.power_meter import Opener, PowerMeter
 class PowerMeterDriver(ReconfigurableNode):
     """Poll a VISA power meter at `rate`, publish its valid readings on received_power."""
 
-    PARAMETERS = interface.PARAMETERS
+    SCHEMA = NODE_NAME
     CONFIG_ERRORS = (MeterError, KeyError, TypeError)
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
@@ -40,9 +40,6 @@ class PowerMeterDriver(ReconfigurableNode):
 
     def _now(self) -> int:
         return self.get_clock().now().nanoseconds
-
-    def _declare(self) -> None:
-        interface.declare_all(self)
 
     def make_config(self, values: dict) -> DriverConfig:
         """Build the config from parameter values (MeterError if bad)."""

@@ -3,35 +3,15 @@
 from dataclasses import dataclass, replace
 from typing import Optional
 
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import POWER_TOPIC
-from tskf_ros.messages.parameters import BLOCKAGE_HELP, descriptor
-from tskf_ros.nodes.node_base import (config_from_parameters, declare_config_fields,
-                                      LinkSimulatorNode, MAX_BATCH, run_node)
+from tskf_ros.nodes.node_base import link_config, LinkSimulatorNode, MAX_BATCH, run_node
 from tskf_ros.owc.vibrating_link import OwcLink, OwcLinkConfig, OwcLinkError, Samples
 
 NODE_NAME = 'power_meter_simulator'
-
-LINK_HELP = {
-    'rate': ('samples per second (Cai IV-C: 1 Hz; 1 kHz works)', (1e-3, 10_000.0)),
-    'seed': ('seed of every random stream: same parameters and seed, same samples', None),
-    'vibration_frequency': ('Hz of the random vibration signal (Cai IV-A: 2 Hz)',
-                            (0.0, 1000.0)),
-    'phase_diffusion': ('rad^2/s: phase noise that makes the 2 Hz signal random',
-                        (0.0, 1e4)),
-    'rest_angle': ('rad: relative angle with the table at rest (0.4141: start of eq. (2))',
-                   (-1.6, 1.6)),
-    'knob_min': ('rad: smallest vibration amplitude the gain knob gives', (0.0, 3.0)),
-    'knob_max': ('rad: largest vibration amplitude the gain knob gives', (0.0, 3.0)),
-    'knob_initial': ('rad: vibration amplitude at the start', (0.0, 3.0)),
-    'knob_rate': ('random turns of the gain knob per second (Poisson)', (0.0, 1e3)),
-    'knob_step': ('rad: standard deviation of one knob turn', (0.0, 3.0)),
-    'noise_std': ('mW: power meter noise (system (3): v ~ N(0, 100))', (0.0, 1e3)),
-    **BLOCKAGE_HELP,
-}
 
 
 @dataclass(frozen=True)
@@ -51,6 +31,7 @@ class SimulatorConfig:
 class PowerMeterSimulator(LinkSimulatorNode):
     """Publish simulated received power and the true angle at `rate` (times time_factor)."""
 
+    SCHEMA = NODE_NAME
     SENSOR_TOPIC = POWER_TOPIC
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
@@ -69,38 +50,12 @@ class PowerMeterSimulator(LinkSimulatorNode):
             f'seed {link.seed}, blockage {link.blockage}'
             + (f', {self.total} samples' if self.total else ''))
 
-    def _declare(self) -> None:
-        declare_config_fields(self, OwcLinkConfig, LINK_HELP)
-        D = ParameterType.PARAMETER_DOUBLE
-        self.declare_parameter('time_factor', 1.0, descriptor(
-            'play the stream this many times faster than the stamps advance '
-            '(a 300 s run at 1 Hz with 30: 10 s)', (1e-3, 1e4), D))
-        self.declare_parameter('duration', 0.0, descriptor(
-            'seconds of stamped data to publish, then stop; 0: forever',
-            (0.0, 1e9), D))
-        self.declare_parameter('start_time', 0.0, descriptor(
-            'stamp (s) of sample 0; 0: the node clock at the first tick',
-            (0.0, 1e10), D))
-        self.declare_parameter('wait_for_subscribers', 0, ParameterDescriptor(
-            description='hold sample 0 until received_power has this many subscribers',
-            type=ParameterType.PARAMETER_INTEGER, read_only=True))
-        self.declare_parameter('publish_invalid', False, ParameterDescriptor(
-            description='publish readings <= 0 as they are (true) or leave a gap (false)',
-            type=ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('frame_id', 'power_meter', descriptor(
-            'frame_id of received_power', None, ParameterType.PARAMETER_STRING))
-        self.declare_parameter('angle_name', 'theta', descriptor(
-            'joint name of the angle on true_angle', None,
-            ParameterType.PARAMETER_STRING))
-
-    def _read(self) -> SimulatorConfig:
-        link = config_from_parameters(self, OwcLinkConfig, OwcLinkError)
-        p = {name: self.get_parameter(name).value for name in (
-            'time_factor', 'duration', 'start_time', 'publish_invalid', 'wait_for_subscribers',
-            'frame_id', 'angle_name')}
-        return SimulatorConfig(link, p['time_factor'], p['duration'], p['start_time'],
-                               p['publish_invalid'], p['wait_for_subscribers'], p['frame_id'],
-                               p['angle_name'])
+    def _read(self, values: dict) -> SimulatorConfig:
+        link = link_config(OwcLinkConfig, values, OwcLinkError)
+        return SimulatorConfig(link, values['time_factor'], values['duration'],
+                               values['start_time'], values['publish_invalid'],
+                               values['wait_for_subscribers'], values['frame_id'],
+                               values['angle_name'])
 
     def _validate(self, changes: list) -> SetParametersResult:
         """Only publish_invalid changes at run time; the seeded stream is fixed at start."""

@@ -4,22 +4,16 @@ from typing import Any, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
-from rclpy.parameter import Parameter
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from std_msgs.msg import Float64MultiArray
 
-from tskf_ros.core.timescale_kalman import FilterError, TRANSITIONS
-from tskf_ros.messages.estimator_interface import (ConfigError, default_parameters,
-                                                   diagnostics_message, extractor,
-                                                   input_from_msg, INPUT_TOPIC, INPUT_TYPES,
-                                                   MATRICES, MATRIX_HELP,
-                                                   measurement_class, MEASUREMENT_RANGE_HELP,
+from tskf_ros.core.timescale_kalman import FilterError
+from tskf_ros.messages.estimator_interface import (ConfigError, diagnostics_message,
+                                                   extractor, input_from_msg, INPUT_TOPIC,
+                                                   MATRICES, measurement_class,
                                                    MEASUREMENT_TOPIC, NODE_NAME, NodeConfig,
                                                    OutcomeMessages, output_qos, OUTPUT_TOPICS,
-                                                   PARAMETERS, parameters_to_config, SCALARS,
-                                                   SMOOTHING_LAG_HELP)
-from tskf_ros.messages.parameters import float_range
+                                                   parameters_to_config)
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
 from tskf_ros.owc.lagged_estimates import LaggedEstimate, LaggedEstimates
@@ -29,7 +23,7 @@ from tskf_ros.owc.session import EstimatorSession, Outcome
 class TimescaleEstimator(ReconfigurableNode):
     """Node wrapping EstimatorSession: received power in, estimates and diagnostics out."""
 
-    PARAMETERS = PARAMETERS
+    SCHEMA = NODE_NAME
     SESSION = EstimatorSession
     CONFIG_ERRORS = (ConfigError, FilterError, KeyError, TypeError, ValueError)
 
@@ -70,76 +64,10 @@ class TimescaleEstimator(ReconfigurableNode):
 
     # -- parameters -----------------------------------------------------------------------
 
-    def _declare(self) -> None:
-        defaults = default_parameters()
-        # declared without a value, a matrix takes the one given at start (a parameter
-        # file, -p, parameter_overrides) if any: that is how the node tells which were given
-        for key in MATRICES:
-            self.declare_parameter(key, None, ParameterDescriptor(
-                description=MATRIX_HELP[key], dynamic_typing=True))
-        self.matrices_given = tuple(
-            key for key in MATRICES if self.get_parameter(key).type_ != Parameter.Type.NOT_SET)
-        self.set_parameters([Parameter(key, value=defaults[key]) for key in MATRICES
-                             if key not in self.matrices_given])
-        self.declare_parameter('model_name', defaults['model_name'], ParameterDescriptor(
-            description="name of the model, used as the estimates' frame_id if that is empty",
-            type=ParameterType.PARAMETER_STRING))
-        self.declare_parameter('state_names', defaults['state_names'], ParameterDescriptor(
-            description='one name per state; the order of the estimate message slots',
-            type=ParameterType.PARAMETER_STRING_ARRAY))
-        self.declare_parameter('transition', defaults['transition'], ParameterDescriptor(
-            description="how a jump mu is discretised: euler = the paper's I + mu A; "
-            'exact = expm(A mu) with Van Loan process noise',
-            additional_constraints='one of ' + ', '.join(TRANSITIONS),
-            type=ParameterType.PARAMETER_STRING))
-        for name, (_, text, (lo, hi)) in SCALARS.items():
-            self.declare_parameter(name, defaults[name], ParameterDescriptor(
-                description=text, type=ParameterType.PARAMETER_DOUBLE, **float_range(lo, hi)))
-        self.declare_parameter('history_size', defaults['history_size'], ParameterDescriptor(
-            description='points (and filter states) kept for rewinding on a late sample',
-            type=ParameterType.PARAMETER_INTEGER,
-            integer_range=[IntegerRange(from_value=2, to_value=1_000_000)]))
-        self.declare_parameter('queue_depth', defaults['queue_depth'], ParameterDescriptor(
-            description=('depth of the input queues (1000: 0.5 s of a 2 kHz stream, the '
-                         'margin a loaded machine needs); the outputs keep 10, overridable '
-                         'by qos_overrides parameters'), read_only=True,
-            type=ParameterType.PARAMETER_INTEGER,
-            integer_range=[IntegerRange(from_value=1, to_value=100_000)]))
-        self.declare_parameter('smoothing_lag', 0, ParameterDescriptor(
-            description=SMOOTHING_LAG_HELP, read_only=True,
-            type=ParameterType.PARAMETER_INTEGER,
-            integer_range=[IntegerRange(from_value=0, to_value=100_000)]))
-        gap_help = ('a measurement <= 0 is an invalid reading, a gap (Cai IV-C: power); '
-                    'false for models whose output may be negative')
-        self.declare_parameter('nonpositive_is_gap', defaults['nonpositive_is_gap'],
-                               ParameterDescriptor(description=gap_help,
-                                                   type=ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('gate_patience', defaults['gate_patience'], ParameterDescriptor(
-            description='consecutive gated samples after which the next one that fails the '
-            'gate re-initialises the filter (an unstable model need not widen its gate)',
-            type=ParameterType.PARAMETER_INTEGER,
-            integer_range=[IntegerRange(from_value=0, to_value=1_000_000)]))
-        self.declare_parameter('measurement_type', defaults['measurement_type'],
-                               ParameterDescriptor(
-                                   description='the message type of the measurement topic: a '
-                                   'stamped scalar (the value and, where the type has one, '
-                                   'its variance); an unstamped std_msgs type is stamped '
-                                   'with its time of arrival', read_only=True,
-                                   additional_constraints='one of ' + ', '.join(INPUT_TYPES),
-                                   type=ParameterType.PARAMETER_STRING))
-        self.declare_parameter('use_message_variance', defaults['use_message_variance'],
-                               ParameterDescriptor(
-                                   description="a sample's own variance (> 0) is its "
-                                   'measurement noise R_d, as robot_localization uses the '
-                                   "message covariance; 0 or false: the model's R / mu",
-                                   type=ParameterType.PARAMETER_BOOL))
-        self.declare_parameter('measurement_range', defaults['measurement_range'],
-                               ParameterDescriptor(description=MEASUREMENT_RANGE_HELP,
-                                                   dynamic_typing=True))
-        self.declare_parameter('frame_id', defaults['frame_id'], ParameterDescriptor(
-            description='hardware_id of the /diagnostics status (the device or frame '
-            "estimated); empty: the node's name",
-            type=ParameterType.PARAMETER_STRING))
+    @property
+    def matrices_given(self) -> tuple:
+        """Return the model matrices given at start (the others hold model (3)'s values)."""
+        return tuple(key for key in MATRICES if key in self.parameters_given)
 
     def make_config(self, values: dict) -> NodeConfig:
         """Build the node's config; raises with the reason if it makes no working filter."""

@@ -119,7 +119,7 @@ def deep_outputs():
 def test_node_defaults_are_the_adapters(ros_context):
     node = TimescaleEstimator(context=ros_context)
     try:
-        live = {name: node.get_parameter(name).value for name in estimator_interface.PARAMETERS}
+        live = {name: node.get_parameter(name).value for name in node.schema.names}
     finally:
         node.destroy_node()
     mine = estimator_interface.default_parameters()
@@ -184,7 +184,7 @@ def test_live_replay_equals_offline_replay(ros_context):
 def test_alignment_node_defaults_are_the_adapters(ros_context):
     node = Alignment(context=ros_context)
     try:
-        live = {name: node.get_parameter(name).value for name in alignment_interface.PARAMETERS}
+        live = {name: node.get_parameter(name).value for name in node.schema.names}
     finally:
         node.destroy_node()
     mine = alignment_interface.default_parameters()

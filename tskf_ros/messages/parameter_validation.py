@@ -1,0 +1,72 @@
+"""generate_parameter_library's validation functions (bounds<>, one_of<>, ...) and their texts."""
+
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+__all__ = ['format_number', 'RANGES', 'Validator', 'VALIDATORS']
+
+
+def format_number(value: Any) -> str:
+    """Return a number as the docs and messages write it (1e-06 -> 1e-6, 3600.0 -> 3600)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return repr(value) if isinstance(value, str) else str(value)
+    text = f'{value:g}'
+    mantissa, _, exponent = text.partition('e')
+    return f'{mantissa}e{int(exponent)}' if exponent else text
+
+
+@dataclass(frozen=True)
+class Validator:
+    """One validation function of generate_parameter_library's YAML: its check and texts."""
+
+    check: Callable[..., bool]
+    doc: Callable[..., str]          # the rule as the node pages show it
+    must: Callable[..., str]         # the rule after 'must' in a refusal
+    arity: int
+
+
+def _among(options: Sequence) -> str:
+    return ', '.join(map(str, options))
+
+
+_n = format_number
+
+VALIDATORS = {
+    'bounds': Validator(lambda v, lo, hi: lo <= v <= hi,
+                        lambda lo, hi: f'{_n(lo)} to {_n(hi)}',
+                        lambda lo, hi: f'be within [{_n(lo)}, {_n(hi)}]', 2),
+    'gt': Validator(lambda v, x: v > x, lambda x: f'> {_n(x)}', lambda x: f'be > {_n(x)}', 1),
+    'gt_eq': Validator(lambda v, x: v >= x, lambda x: f'>= {_n(x)}',
+                       lambda x: f'be >= {_n(x)}', 1),
+    'lt': Validator(lambda v, x: v < x, lambda x: f'< {_n(x)}', lambda x: f'be < {_n(x)}', 1),
+    'lt_eq': Validator(lambda v, x: v <= x, lambda x: f'<= {_n(x)}',
+                       lambda x: f'be <= {_n(x)}', 1),
+    'one_of': Validator(lambda v, options: v in options,
+                        lambda options: f'one of {_among(options)}',
+                        lambda options: f'be one of {_among(options)}', 1),
+    'not_empty': Validator(lambda v: len(v) > 0, lambda: 'not empty', lambda: 'not be empty', 0),
+    'fixed_size': Validator(lambda v, n: len(v) == n, lambda n: f'{n} entries',
+                            lambda n: f'have {n} entries', 1),
+    'size_gt': Validator(lambda v, n: len(v) > n, lambda n: f'more than {n} entries',
+                         lambda n: f'have more than {n} entries', 1),
+    'size_lt': Validator(lambda v, n: len(v) < n, lambda n: f'fewer than {n} entries',
+                         lambda n: f'have fewer than {n} entries', 1),
+    'unique': Validator(lambda v: len(set(v)) == len(v), lambda: 'no duplicates',
+                        lambda: 'have no duplicates', 0),
+    'subset_of': Validator(lambda v, options: all(e in options for e in v),
+                           lambda options: f'each one of {_among(options)}',
+                           lambda options: f'have each entry one of {_among(options)}', 1),
+    'element_bounds': Validator(lambda v, lo, hi: all(lo <= e <= hi for e in v),
+                                lambda lo, hi: f'each {_n(lo)} to {_n(hi)}',
+                                lambda lo, hi: f'have each entry within [{_n(lo)}, {_n(hi)}]',
+                                2),
+    'lower_element_bounds': Validator(lambda v, lo: all(e >= lo for e in v),
+                                      lambda lo: f'each >= {_n(lo)}',
+                                      lambda lo: f'have each entry >= {_n(lo)}', 1),
+    'upper_element_bounds': Validator(lambda v, hi: all(e <= hi for e in v),
+                                      lambda hi: f'each <= {_n(hi)}',
+                                      lambda hi: f'have each entry <= {_n(hi)}', 1),
+}
+
+# the validations of a number's range (their refusals say 'out of range', as rclpy's do)
+RANGES = frozenset({'bounds', 'gt', 'gt_eq', 'lt', 'lt_eq'})
