@@ -13,7 +13,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance
 from std_srvs.srv import Trigger
 
-from tskf_ros.bag import keyboard, player
+from tskf_ros.bag import keyboard, play_options, player
 from tskf_ros.bag.player import Player, PlayerError
 from tskf_ros.bag.reader import EXIT_DAMAGED
 from tskf_ros.bag.writer import BagWriter
@@ -22,6 +22,9 @@ from tskf_ros.tools.demo_collector import wait_for
 
 from .helpers import BAGS, make_bag as make_power_bag, NS, T0, TIMEOUT, usage_error
 from .test_reader import corrupt_bag
+
+# s: the longest time of whole seconds in int64 ns
+INT64_S = (2 ** 63 - 1) // NS
 
 TOPICS = ('/a/power', '/a/angle', '/b/power')
 
@@ -40,9 +43,9 @@ def make_bag(path, n=10):
 
 def options(*argv):
     """Parse a play command line as the command does; return (bag, Player kwargs)."""
-    parser = player.build_parser()
+    parser = play_options.build_parser()
     opts = parser.parse_args(list(argv))
-    return opts.bag, player.player_options(parser, opts)
+    return opts.bag, play_options.player_options(parser, opts)
 
 
 def play(context, argv, *, until=None, controls=None):
@@ -312,7 +315,8 @@ def test_player_refuses_bad_options(ros_context):
 @pytest.mark.parametrize('args, text', [
     (['--rate', 'inf'], '--rate must be a finite number > 0, got inf'),
     (['--rate', '0'], '--rate must be a finite number > 0, got 0.0'),
-    (['--start-offset', 'nan'], '--start-offset must be a finite number >= 0, got nan'),
+    (['--start-offset', 'nan'], '--start-offset must be a finite number >= 0 and at most '
+     f'{INT64_S} s (int64 nanoseconds), got nan'),
     (['--clock', '-1'], '--clock must be a finite number >= 0, got -1.0'),
 ])
 def test_play_refuses_bad_values_before_starting(tmp_path, capsys, args, text):
