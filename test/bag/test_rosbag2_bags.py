@@ -22,7 +22,7 @@ SQLITE3 = ('talker', 'convert_a', 'convert_b')
 
 def stored(db3):
     """Return [(topic, type, timestamp, bytes)] of a .db3 file in log time order (sqlite3)."""
-    with sqlite3.connect(f'file:{db3}?mode=ro', uri=True) as db:
+    with sqlite3.connect(f'file:{db3}?immutable=1', uri=True) as db:
         return [(t, m, int(s), bytes(d)) for t, m, s, d in db.execute(
             'SELECT topics.name, topics.type, messages.timestamp, messages.data FROM messages '
             'JOIN topics ON messages.topic_id = topics.id ORDER BY messages.timestamp, '
