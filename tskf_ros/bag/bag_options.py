@@ -33,6 +33,26 @@ class OptionError(BagError):
     """A bad option value found after parsing (a QoS file, a regular expression)."""
 
 
+def split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
+    """
+    Split a command line into (the program's own arguments, its --ros-args segments).
+
+    rclpy's remove_ros_args would also take FROM:=TO, rcl's deprecated remap form, which is
+    the spelling of rosbag2's own `--remap FROM:=TO`; only --ros-args ... [--] is ROS's here.
+    """
+    own, ros, inside = [], [], False
+    for arg in argv:
+        if arg == '--ros-args':
+            inside = True
+            ros.append(arg)
+        elif inside and arg == '--':
+            inside = False
+            ros.append(arg)
+        else:
+            (ros if inside else own).append(arg)
+    return own, ros
+
+
 def seconds_ns(flag: str, seconds: float, *, low: float = 0.0, above: bool = False) -> int:
     """
     Return a time option in ns; raise OptionError unless finite, >= low and within int64.

@@ -9,16 +9,17 @@ from typing import Iterator, Optional, Sequence
 from builtin_interfaces.msg import Time
 import rclpy
 from rclpy.duration import Duration
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
-from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
 from tskf_ros.bag.bag_errors import check_exists
-from tskf_ros.bag.bag_options import load_qos_overrides, OptionError, seconds_ns, TopicFilter
+from tskf_ros.bag.bag_options import (load_qos_overrides, OptionError, seconds_ns,
+                                      split_ros_args, TopicFilter)
 from tskf_ros.bag.keyboard import HELP, KeyHandler, TerminalKeys
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_to_rclpy
 from tskf_ros.bag.play_options import build_parser, player_options, PlayerError
@@ -131,7 +132,10 @@ class Player(Node):
                 qos = QoSProfile(depth=qos_depth, reliability=ReliabilityPolicy.RELIABLE)
             name = remap.get(topic, topic)
             self.out_topic[topic] = name
-            self.pubs[topic] = self.create_publisher(cls, name, qos)
+            self.pubs[topic] = self.create_publisher(
+                cls, name, qos, event_callbacks=PublisherEventCallbacks(
+                    matched=lambda info, name=name: self.get_logger().info(
+                        f'{name}: {info.current_count} subscriber(s)')))
         if not self.pubs:
             raise PlayerError(f'{bag}: nothing to play (topics: '
                               f'{", ".join(sorted(self.reader.topics))})')
@@ -307,7 +311,8 @@ class Player(Node):
 
 def main(args: Optional[list] = None, stdin=None) -> int:
     """Play a bag; return the exit status (keys are read from stdin if it is a terminal)."""
-    argv = remove_ros_args(sys.argv if args is None else args)[1:]
+    argv, ros_args = split_ros_args(sys.argv if args is None else args)
+    argv = argv[1:]
     parser = build_parser()
     opts = parser.parse_args(argv)
     try:
@@ -321,7 +326,7 @@ def main(args: Optional[list] = None, stdin=None) -> int:
     except BagError as exc:
         print(f'play: error: {exc}', file=sys.stderr)
         return 1
-    rclpy.init(args=args)
+    rclpy.init(args=['play'] + ros_args)
     node = keys = None
     try:
         node = Player(opts.bag, **kwargs)
