@@ -47,7 +47,7 @@ setup(
     description='Kalman filtering on time scales for intermittent optical wireless links (ROS 2).',
     license='Apache-2.0',
     tests_require=['pytest'],
-    # One executable per line; test/test_colcon_build.py checks each of them.
+    # One executable per line; test/package/test_colcon_build.py checks each of them.
     entry_points={
         'console_scripts': [
             'reproduce = tskf_ros.experiments.reproduce:main',
@@ -66,5 +66,7 @@ setup(
             'sweep = tskf_ros.experiments.sweep:console_main',
             'foxglove_bridge = tskf_ros.tools.foxglove_bridge:main',
         ],
+        # the fixtures of tskf_ros.testing, for any pytest run where the package is installed
+        'pytest11': ['tskf_ros = tskf_ros.testing.plugin'],
     },
 )

@@ -26,9 +26,10 @@ import xml.etree.ElementTree as ElementTree
 
 REPO = Path(__file__).resolve().parent.parent
 # every test file that talks DDS, starts processes or records
-TESTS = ('test/test_pipeline_nodes.py', 'test/bag/replay/test_adapters.py',
-         'test/bag/test_recorder.py', 'test/test_alignment_node.py', 'test/test_estimator_node.py',
-         'test/bag/replay/test_cli.py', 'test/test_ros_env.py', 'test/test_colcon_build.py')
+TESTS = ('test/nodes/test_timescale_estimator_process.py', 'test/bag/replay/test_adapters.py',
+         'test/bag/test_recorder.py', 'test/nodes/test_alignment.py',
+         'test/nodes/test_timescale_estimator.py', 'test/bag/replay/test_cli.py',
+         'test/package/test_ros_env.py', 'test/package/test_colcon_build.py')
 # s: one pytest run that takes longer than this is killed and counted as failed (a hang)
 RUN_LIMIT = 900.0
 BUSY = 'while True:\n    pass\n'

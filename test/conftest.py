@@ -18,18 +18,7 @@ if not os.environ.get('ROS_DOMAIN_ID'):
     os.environ['ROS_DOMAIN_ID'] = str(os.getpid() % 100 + 1)
 
 
-@pytest.fixture
-def ros_context():
-    """Yield an initialized rclpy context of its own; shut it down afterwards."""
-    import rclpy
-    from rclpy.context import Context
-
-    context = Context()
-    rclpy.init(context=context)
-    try:
-        yield context
-    finally:
-        context.try_shutdown()
+# ros_context, ros_executor and start_node: the plugin tskf_ros.testing, which users get too
 
 
 @pytest.fixture(params=['single', 'events'])

@@ -54,7 +54,8 @@ def save_figure(fig, path: Path, dpi: int = 110) -> Path:
     """Save a matplotlib figure as PNG through a temporary file, then close it."""
     import matplotlib.pyplot as plt
     try:
-        return _replace_from_temp(path, lambda f: fig.savefig(f, format='png', dpi=dpi))
+        return _replace_from_temp(
+            path, lambda f: fig.savefig(f, format='png', dpi=dpi, bbox_inches='tight'))
     finally:
         plt.close(fig)
 

@@ -95,44 +95,54 @@ def estimator_figure(data: dict, measurement: list, C: float, D: float, title: s
     t_true = np.array([conversions.stamp_to_ns(m.header.stamp) for _, m in truth]) / NS
     x_true = np.array([m.position[0] for _, m in truth]) if truth else np.zeros(0)
     t0 = min(tp.min(), ty.min()) if ty.size else tp.min()
-    fig, axes = plt.subplots(3, 2, figsize=(14, 10), sharex='col')
+    fig, axes = plt.subplots(4, 2, figsize=(14, 12.5), sharex='col')
+    beside = {'fontsize': 7, 'loc': 'upper left', 'bbox_to_anchor': (1.01, 1.0)}
     for col, style in enumerate(('iteration', 'time scale')):
         def pos(t, stamps=tc):
             if style == 'time scale':
                 return t - t0
             return np.searchsorted(stamps, t, side='left')
-        ax = axes[0, col]
-        if t_true.size:
-            keep = (t_true >= tc.min()) & (t_true <= tc.max()) if style == 'iteration' \
-                else np.ones(t_true.size, bool)
-            ax.plot(pos(t_true[keep]), x_true[keep], 'k-', lw=1, label='true angle')
-        ax.plot(pos(ty), (y - D) / C, '.', color='0.6', ms=3,
-                label='implied by measurement (y - D) / C')
-        for t, x, v, color, name, _ in series:
-            s = 2 * np.sqrt(np.maximum(v, 0))
-            ax.plot(pos(t), x, '-', color=color, lw=1, label=name)
-            ax.fill_between(pos(t), x - s, x + s, color=color, alpha=0.2,
-                            label=f'{name} +-2 sigma')
-        lo, hi = np.percentile(np.concatenate([xc, x_true]) if x_true.size else xc, [1, 99])
-        pad = max(hi - lo, 1e-3)
-        ax.set_ylim(lo - pad, hi + pad)
-        ax.set_ylabel('angle (rad)')
-        ax.set_title(f'plot in {style}')
-        if col == 0:
-            ax.legend(fontsize=7, loc='upper right')
-        ax = axes[1, col]
+        # the estimates after the measurement (top), the predictor (its band spans
+        # radians after a gap) in a panel of its own, so that neither squeezes the other
+        for row, shown in ((0, series[1:]), (1, series[:1])):
+            ax = axes[row, col]
+            if t_true.size:
+                keep = (t_true >= tc.min()) & (t_true <= tc.max()) if style == 'iteration' \
+                    else np.ones(t_true.size, bool)
+                ax.plot(pos(t_true[keep]), x_true[keep], 'k-', lw=1, label='true angle')
+            if row == 0:    # on top of every line and band: none hides them
+                ax.plot(pos(ty), (y - D) / C, 'o', color='0.3', ms=2.5, zorder=5,
+                        label='implied by measurement (y - D) / C')
+            for t, x, v, color, name, _ in shown:
+                s = 2 * np.sqrt(np.maximum(v, 0))
+                ax.fill_between(pos(t), x - s, x + s, color=color, alpha=0.2,
+                                label=f'{name} +-2 sigma')
+                ax.plot(pos(t), x, '-', color=color, lw=1, label=name)
+            # the estimates and the truth in full (none runs off the axis); the band may
+            top = np.concatenate([x for _, x, _, _, _, _ in shown] + [x_true])
+            lo, hi = np.nanmin(top), np.nanmax(top)
+            pad = max(0.1 * (hi - lo), 1e-3)
+            ax.set_ylim(lo - pad, hi + pad)
+            ax.set_ylabel('angle (rad)')
+            if col == 1:    # beside the panels, over no data
+                ax.legend(**beside)
+        axes[0, col].set_title(f'plot in {style}')
+        ax = axes[2, col]
         if t_true.size:
             for t, x, v, color, _, name in series:
                 err = x - np.interp(t, t_true, x_true)
                 ax.plot(pos(t), err, '.-', color=color, lw=0.6, ms=2,
                         label=f'{name}: RMS {np.sqrt(np.mean(err ** 2)):.3g} rad')
-            ax.legend(fontsize=7)
+            if col == 1:
+                ax.legend(**beside)
         else:
             ax.text(0.5, 0.5, 'no true angle in the bag', ha='center',
                     transform=ax.transAxes)
         ax.set_ylabel('estimation error (rad)')
-        ax = axes[2, col]
-        ax.step(pos(tm), mu, where='post', color='C2')
+        ax = axes[3, col]
+        ax.step(pos(tm), mu, where='post', color='C2', label='mu: the time to the next point')
+        if col == 1:
+            ax.legend(**beside)
         ax.set_ylabel('mu (s)')
         ax.set_xlabel('iteration k' if style == 'iteration' else 'time t - t0 (s)')
     fig.suptitle(title)
@@ -187,16 +197,17 @@ def alignment_figure(data: dict, title: str, *, replayed: bool = False,
         if key in pos:
             ax.plot(tt - t0, tv[:, pos[key]] * scale, 'k-', lw=1, label=f'true {key}')
         ax.set_ylabel(f'{name} ({unit})')
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))
     if 'incidence' in pos:
-        axes[2].plot(tt - t0, np.rad2deg(tv[:, pos['incidence']]), 'k-', lw=1)
+        axes[2].plot(tt - t0, np.rad2deg(tv[:, pos['incidence']]), 'k-', lw=1,
+                     label='true angle of incidence')
     axes[2].axhspan(-15, 15, color='C2', alpha=0.1, label='tracking zone +-15 deg')
     axes[2].set_ylabel('true angle of incidence (deg)')
-    axes[2].legend(fontsize=7)
+    axes[2].legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))
     axes[3].plot(tz - t0, vz, '.', color='C0', ms=3, label='measured intensity V_d')
     axes[3].set_ylabel('intensity (V)')
     axes[3].set_xlabel('time (s)')
-    axes[3].legend(fontsize=7)
+    axes[3].legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))
     fig.suptitle(title)
     fig.tight_layout()
     return fig
@@ -282,7 +293,7 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
 def _save(fig, path: Path) -> Path:
     tmp = path.with_name(f'.{path.name}.partial.png')
     try:
-        fig.savefig(tmp, dpi=110)
+        fig.savefig(tmp, dpi=110, bbox_inches='tight')
         tmp.replace(path)
     except BaseException:       # an error or Ctrl-C: no half-written file
         tmp.unlink(missing_ok=True)

@@ -1,5 +1,7 @@
 """Theorem 2 of Fang & de Callafon 2011: the scalar peak-covariance bounds (22)-(25)."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -63,3 +65,18 @@ def test_peak_covariances_stay_within_theorem2_bounds(a, c, q, r, tau, eta, boun
             p_eta = peak_map(a, c, q, r, eta, p_eta)
             assert p_tau <= peak * (1 + 1e-12) and peak <= p_eta * (1 + 1e-12)
     assert (min(all_peaks), max(all_peaks)) == pytest.approx(seen, abs=tol * 1.01)
+
+
+def test_scalar_fixed_point_for_a_huge_interval_is_inf_not_an_overflow():
+    # closed form check for a small kappa, then the limit
+    a, c, q, r = 2.0, 1.0, 1.0, 1.0
+    X = ir.scalar_fixed_point(a, c, q, r, 3)
+    # X = f^3(g(X)) with g(X) = r X / (c^2 X + r), f(Y) = a^2 Y + q
+    Y = r * X / (c * c * X + r)
+    for _ in range(3):
+        Y = a * a * Y + q
+    assert Y == pytest.approx(X, rel=1e-12)
+    assert ir.scalar_fixed_point(a, c, q, r, 10**9) == math.inf
+    # |a| < 1: a^{2 kappa} -> 0, so X = f^kappa(g(X)) -> q / (1 - a^2)
+    assert ir.scalar_fixed_point(0.5, c, q, r, 10**9) == pytest.approx(
+        q / (1 - 0.25), rel=1e-12)

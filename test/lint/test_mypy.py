@@ -4,7 +4,7 @@ from pathlib import Path
 
 from mypy import api
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_mypy_is_clean_on_core_owc_and_led(monkeypatch):

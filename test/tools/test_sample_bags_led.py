@@ -21,7 +21,7 @@ from tskf_ros import led
 from tskf_ros.bag.message_types import message_class
 from tskf_ros.bag.reader import BagReader
 
-BAG = Path(__file__).resolve().parent.parent / 'bags' / 'led_alignment'
+BAG = Path(__file__).resolve().parents[2] / 'bags' / 'led_alignment'
 SEED = 2013                    # bags/README.md's command for led_alignment
 DROPOUT = 0.05                 # 5 % of the measurements missing
 STEP_NS = 50_000_000           # Table I: 50 ms

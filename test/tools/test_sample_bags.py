@@ -15,7 +15,7 @@ from tskf_ros.bag.replay.cli import main as offline_main
 from tskf_ros.tools import sample_bags
 from tskf_ros.tools.plot_bag import main as plot_main
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 BAGS = REPO / 'bags'
 
 

@@ -7,9 +7,10 @@ import shutil
 import subprocess
 import sys
 
+from entry_points import console_scripts
 import pytest
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = 'tskf_ros'
 NOT_COPIED = shutil.ignore_patterns(
     '.git', '.venv', '.pytest_cache', 'results', 'build', 'install', 'log', '__pycache__',
@@ -44,16 +45,6 @@ HELP_MUST_NAME = {
     'foxglove_bridge': ('--ros-args', 'ws://localhost:8765', 'port (8765)',
                         "topics (['*'])"),
 }
-
-
-def console_scripts():
-    """Return the executable names declared in setup.py's console_scripts entry points."""
-    tree = ast.parse((REPO_ROOT / 'setup.py').read_text())
-    for node in ast.walk(tree):
-        if isinstance(node, ast.keyword) and node.arg == 'entry_points':
-            specs = ast.literal_eval(node.value).get('console_scripts', [])
-            return [spec.split('=', 1)[0].strip() for spec in specs]
-    return []
 
 
 def in_sourced_workspace(install, *command, timeout=120):
@@ -145,7 +136,7 @@ def test_launch_files_are_installed_and_name_installed_executables(install):
 def test_readme_ros2_run_names_are_found_through_ament_index(install):
     # the `ros2 run tskf_ros NAME` commands of the README and doc/ (test_command_names
     # checks the venv's)
-    from test_command_names import documentation, named, placeholder, readme_commands
+    from documented_commands import documentation, named, placeholder, readme_commands
     ros2_run = {name for text in documentation().values()
                 for name in named(readme_commands(text))[1] if not placeholder(name)}
     assert {'record', 'play'} <= ros2_run

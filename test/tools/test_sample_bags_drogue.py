@@ -30,7 +30,7 @@ from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import load_config
 from tskf_ros.tools.sample_bags import DROGUE_TRUTH, NS, START_S
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 BAG = REPO / 'bags' / 'drogue'
 PARAMS = REPO / 'config' / 'drogue_estimator.yaml'
 SEED = 2013          # bags/README.md

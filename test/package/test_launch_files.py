@@ -14,13 +14,13 @@ import importlib.util
 import json
 from pathlib import Path
 
+from entry_points import console_scripts
 import pytest
-from test_colcon_build import console_scripts
 
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages import estimator_interface as estimator
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 LAUNCH = sorted((REPO / 'launch').glob('*.launch.py'))
 USUAL = {'namespace', 'params_file', 'use_sim_time', 'log_level'}
 

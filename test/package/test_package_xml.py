@@ -19,7 +19,7 @@ import xml.etree.ElementTree as ET
 import pytest
 import yaml
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 SNAPSHOT = REPO / 'test' / 'data' / 'rosdistro_keys.yaml'
 SHIPPED = REPO / 'config' / 'rosdep' / 'tskf_ros.yaml'
 ROSDEP_FILES = ('rosdep/base.yaml', 'rosdep/python.yaml')

@@ -9,7 +9,7 @@ import pytest
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import default_parameters
 
-URDF = Path(__file__).resolve().parent.parent / 'urdf' / 'scanning_base.urdf'
+URDF = Path(__file__).resolve().parents[2] / 'urdf' / 'scanning_base.urdf'
 
 
 def joints():

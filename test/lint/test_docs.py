@@ -5,9 +5,9 @@ import re
 import subprocess
 import sys
 
-from test_command_names import documentation
+from documented_commands import documentation
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 DOC = REPO_ROOT / 'doc'
 # the project rule: no user-facing text mentions issues (of a tracker or otherwise)
 ISSUE = re.compile(r'\bissues?\b', re.IGNORECASE)

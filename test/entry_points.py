@@ -1,0 +1,16 @@
+"""What the tests read from setup.py: the executables (console_scripts) it declares."""
+
+import ast
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
+
+def console_scripts():
+    """Return the executable names declared in setup.py's console_scripts entry points."""
+    tree = ast.parse((REPO_ROOT / 'setup.py').read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.keyword) and node.arg == 'entry_points':
+            specs = ast.literal_eval(node.value).get('console_scripts', [])
+            return [spec.split('=', 1)[0].strip() for spec in specs]
+    return []
