@@ -1,7 +1,9 @@
 """play's ros2 bag (Jazzy) options and controls, through the real parser, effects checked."""
 
+import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -13,7 +15,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance
 from std_srvs.srv import Trigger
 
-from tskf_ros.bag import keyboard, player
+from tskf_ros.bag import keyboard, play_options, player
 from tskf_ros.bag.player import Player, PlayerError
 from tskf_ros.bag.reader import EXIT_DAMAGED
 from tskf_ros.bag.writer import BagWriter
@@ -22,6 +24,9 @@ from tskf_ros.tools.demo_collector import wait_for
 
 from .helpers import BAGS, make_bag as make_power_bag, NS, T0, TIMEOUT, usage_error
 from .test_reader import corrupt_bag
+
+# s: the longest time of whole seconds in int64 ns
+INT64_S = (2 ** 63 - 1) // NS
 
 TOPICS = ('/a/power', '/a/angle', '/b/power')
 
@@ -40,9 +45,9 @@ def make_bag(path, n=10):
 
 def options(*argv):
     """Parse a play command line as the command does; return (bag, Player kwargs)."""
-    parser = player.build_parser()
+    parser = play_options.build_parser()
     opts = parser.parse_args(list(argv))
-    return opts.bag, player.player_options(parser, opts)
+    return opts.bag, play_options.player_options(parser, opts)
 
 
 def play(context, argv, *, until=None, controls=None):
@@ -309,10 +314,22 @@ def test_player_refuses_bad_options(ros_context):
         Player(BAGS / 'owc_cai_td_1hz', rate=0.0, context=ros_context)
 
 
+def test_a_remap_on_the_command_line_is_plays_not_rcls(tmp_path, capsys):
+    """FROM:=TO after -m is the player's (rclpy's remove_ros_args would take it)."""
+    bag = make_bag(tmp_path / 'b', n=3)
+    assert player.main(['play', str(bag), '-m', '/a/power:=/p', '--topics', '/a/power',
+                        '--playback-duration', '0', '--disable-keyboard-controls',
+                        '--wait-for-all-acked', '0', '--ros-args', '-r', '__node:=remapped',
+                        '--']) == 0
+    assert capsys.readouterr().err.splitlines()[-1] == 'play: published /p 0'
+    assert play_options.build_parser().parse_args([str(bag)]).remap == []
+
+
 @pytest.mark.parametrize('args, text', [
     (['--rate', 'inf'], '--rate must be a finite number > 0, got inf'),
     (['--rate', '0'], '--rate must be a finite number > 0, got 0.0'),
-    (['--start-offset', 'nan'], '--start-offset must be a finite number >= 0, got nan'),
+    (['--start-offset', 'nan'], '--start-offset must be a finite number >= 0 and at most '
+     f'{INT64_S} s (int64 nanoseconds), got nan'),
     (['--clock', '-1'], '--clock must be a finite number >= 0, got -1.0'),
 ])
 def test_play_refuses_bad_values_before_starting(tmp_path, capsys, args, text):
@@ -333,3 +350,72 @@ def test_play_reports_damage_when_no_message_could_be_read(tmp_path):
     assert len(lines) == 1
     assert lines[0].startswith('play: bag damaged, nothing could be played: ')
     assert 'chunk CRC mismatch' in lines[0] and 'the 0 message(s) before it' in lines[0]
+
+
+LISTENER = """
+import rclpy, sys
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Illuminance
+rclpy.init()
+node = rclpy.create_node('stalled_listener')
+def matched(info):
+    if info.current_count:
+        print('matched', flush=True)
+node.create_subscription(Illuminance, '/burst', lambda m: None, QoSProfile(
+    history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE),
+    event_callbacks=SubscriptionEventCallbacks(matched=matched))
+rclpy.spin(node)
+"""
+
+
+@pytest.mark.parametrize('wait', [None, '1500'])
+def test_play_waits_for_a_reliable_subscriber_that_does_not_acknowledge(tmp_path, ros_context,
+                                                                        wait):
+    """A subscriber stopped (SIGSTOP) acknowledges nothing: play waits, then names the topic."""
+    bag = tmp_path / 'burst'
+    with BagWriter(bag) as w:
+        w.add_topic('/burst', 'sensor_msgs/msg/Illuminance')
+        for k in range(50):
+            w.write('/burst', T0 + k * 1000, serialize_message(
+                conversions.power_to_msg(T0 + k * 1000, float(k), 1.0)))
+    node = rclpy.create_node('burst_control', context=ros_context)
+    resume = node.create_client(Trigger, '/player/resume')
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    listener = subprocess.Popen([sys.executable, '-c', LISTENER], stdout=subprocess.PIPE,
+                                text=True)
+    extra = [] if wait is None else ['--wait-for-all-acked', wait]
+    proc = subprocess.Popen([sys.executable, '-m', 'tskf_ros.bag.player', str(bag), '-p',
+                             '--disable-keyboard-controls'] + extra,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    err = []
+    reading = threading.Thread(target=lambda: err.extend(line.rstrip('\n') for line in
+                                                         proc.stderr))
+    reading.start()
+    try:
+        # both ends matched: the listener says so, and so does the player (its log)
+        assert listener.stdout.readline() == 'matched\n'
+        wait_for(executor, lambda: resume.service_is_ready() and any(
+            line.endswith('/burst: 1 subscriber(s)') for line in list(err)),
+            'the player to match the listener', TIMEOUT)
+        listener.send_signal(signal.SIGSTOP)
+        future = resume.call_async(Trigger.Request())
+        wait_for(executor, lambda: proc.poll() is not None and future.done(),
+                 'the player to finish', TIMEOUT)
+        reading.join()
+        assert proc.returncode == 0, err
+        ms = play_options.WAIT_ACKED_MS if wait is None else wait
+        assert f'play: not acknowledged by every subscriber within {ms} ms: /burst' in err
+        assert err[-1] == 'play: published /burst 50' and 'Traceback' not in err
+    finally:
+        for p in (proc, listener):
+            if p.poll() is None:
+                p.send_signal(signal.SIGCONT)
+                p.kill()
+            p.wait()
+        reading.join()
+        proc.stderr.close()
+        listener.stdout.close()
+        executor.shutdown()
+        node.destroy_node()

@@ -23,7 +23,7 @@ from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance, JointState
 
-from tskf_ros.bag import recorder
+from tskf_ros.bag import record_options, recorder
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.split_bag import MESSAGE_RECORD_OVERHEAD
 from tskf_ros.messages import conversions
@@ -33,16 +33,19 @@ import yaml
 
 from .helpers import NS, one_line, T0, TIMEOUT, usage_error
 
+# s: the longest time of whole seconds in int64 ns
+INT64_S = (2 ** 63 - 1) // NS
+
 RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                       reliability=ReliabilityPolicy.RELIABLE)
 
 
 def parsed(*argv):
     """Parse a record command line as the command does; return the Recorder's kwargs."""
-    parser = recorder.build_parser()
+    parser = record_options.build_parser()
     opts = parser.parse_args(list(argv))
-    recorder.check_options(parser, opts)
-    return recorder.recorder_options(opts)
+    record_options.check_options(parser, opts)
+    return record_options.recorder_options(opts)
 
 
 def powers(bag):
@@ -111,7 +114,7 @@ def check_split(bag, n):
 
 
 def test_default_output_is_rosbag2s_date_and_time_name():
-    assert recorder.default_output(datetime.datetime(2024, 5, 6, 7, 8, 9)) == \
+    assert record_options.default_output(datetime.datetime(2024, 5, 6, 7, 8, 9)) == \
         Path('rosbag2_2024_05_06-07_08_09')
 
 
@@ -333,10 +336,15 @@ def test_record_to_an_unwritable_path_is_one_line(tmp_path):
 
 @pytest.mark.parametrize('args, text', [
     (['--topics', '/x', '--flush-interval', '-1'],
-     '--flush-interval must be a finite number >= 0, got -1.0'),
+     f'--flush-interval must be a finite number >= 0 and at most {INT64_S} s (int64 '
+     'nanoseconds), got -1.0'),
+    (['--topics', '/x', '--flush-interval', '1e308'],
+     f'--flush-interval must be a finite number >= 0 and at most {INT64_S} s (int64 '
+     'nanoseconds), got 1e+308'),
     (['--topics', '/bad topic'], 'not a topic name: /bad topic'),
     (['--topics', '/x', '-b', '-1'], '--max-bag-size must be >= 0, got -1'),
-    (['--topics', '/x', '-d', '-2'], '--max-bag-duration must be >= 0, got -2'),
+    (['--topics', '/x', '-d', '-2'], f'--max-bag-duration must be a finite number >= 0 and '
+     f'at most {INT64_S} s (int64 nanoseconds), got -2'),
     (['--topics', '/x', '--compression-format', 'zstd'],
      '--compression-format needs --compression-mode file or message'),
     (['--topics', '/x', '--exclude-topics', '/y'], '--exclude-topics needs --all or --regex'),

@@ -1,10 +1,15 @@
 """reindex: a crashed recording (SIGKILL, power loss) becomes a bag rosbags and mcap read."""
 
 import os
+import zlib
 
+from mcap.reader import make_reader
+from mcap.records import Channel, DataEnd
+from mcap.stream_reader import StreamReader
 from rosbags.rosbag2 import Reader
 
 from tskf_ros.bag import reindex
+from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.replay import cli
 from tskf_ros.bag.writer import BagWriter
 
@@ -72,3 +77,54 @@ def test_reindex_refuses_a_missing_path_in_one_line(tmp_path, capsys):
     assert reindex.main([str(tmp_path / 'nope')]) == 1
     one_line(capsys.readouterr().err, 'reindex: error: ', 'no such directory')
     assert list(tmp_path.iterdir()) == []
+
+
+def data_end_crc(mcap):
+    """Return (DataEnd's data_section_crc, the CRC-32 of every byte before DataEnd)."""
+    data = mcap.read_bytes()
+    # a sealed file ends: DataEnd (9 + 4 bytes), Footer (9 + 20), magic (8)
+    at = len(data) - 8 - 29 - 13
+    assert data[at] == 0x0F                 # the DataEnd opcode
+    return int.from_bytes(data[at + 9:at + 13], 'little'), zlib.crc32(data[:at])
+
+
+def test_a_sealed_recording_carries_its_data_section_crc(tmp_path):
+    partial = crashed_recording(tmp_path, 25, 4)
+    assert reindex.main([str(partial), '-o', str(tmp_path / 'rec')]) == 0
+    mcap = tmp_path / 'rec' / 'rec.mcap'
+    stored, computed = data_end_crc(mcap)
+    assert stored == computed != 0
+    with mcap.open('rb') as f:              # the mcap package checks it and reads them all
+        records = list(StreamReader(f, validate_crcs=True).records)
+    assert sum(isinstance(r, DataEnd) for r in records) == 1
+    assert read_all(tmp_path / 'rec') == [T0 + k * NS for k in range(25)]
+
+
+def test_a_topic_without_messages_whose_channel_is_in_the_summary_only_is_kept(tmp_path):
+    bag = tmp_path / 'bag'
+    with BagWriter(bag) as w:
+        w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
+        for k in range(5):
+            w.write('/received_power', *sample(k))
+        w.flush()
+        # a topic subscribed at the end, which never published: its Channel goes into a
+        # chunk without messages, which the mcap Writer does not write
+        w.add_topic('/silent', 'std_msgs/msg/Float64')
+    mcap = bag / 'bag.mcap'
+    with mcap.open('rb') as f:
+        data_channels = set()
+        for record in StreamReader(f, emit_chunks=False).records:
+            if isinstance(record, DataEnd):
+                break
+            if isinstance(record, Channel):
+                data_channels.add(record.topic)
+        f.seek(0)
+        summary = {c.topic for c in make_reader(f).get_summary().channels.values()}
+    assert data_channels == {'/received_power'} and summary == {'/received_power', '/silent'}
+    (bag / 'metadata.yaml').unlink()
+    assert reindex.main([str(bag)]) == 0
+    with Reader(bag) as r:
+        assert {t: (i.msgtype, i.msgcount) for t, i in r.topics.items()} == {
+            '/received_power': ('sensor_msgs/msg/Illuminance', 5),
+            '/silent': ('std_msgs/msg/Float64', 0)}
+    assert set(BagReader(mcap).topics) == {'/received_power', '/silent'}

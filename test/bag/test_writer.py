@@ -2,6 +2,7 @@
 
 import errno
 import os
+import zlib
 
 from mcap.reader import make_reader
 import pytest
@@ -212,3 +213,22 @@ def test_a_full_disk_while_closing_keeps_every_message(tmp_path, monkeypatch):
     assert w.close() == bag
     assert isinstance(w.error, DiskFullError)
     assert read_all(bag) == [T0 + k * NS for k in range(30)]
+
+
+def test_a_bag_sealed_after_a_full_disk_carries_its_data_section_crc(tmp_path, monkeypatch):
+    install_quota(monkeypatch, 6000)
+    bag = tmp_path / 'full'
+    w = BagWriter(bag, chunk_size=100_000)
+    w.open()
+    w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
+    with pytest.raises(DiskFullError):
+        for k in range(1000):
+            w.write('/received_power', *sample(k))
+            if k % 10 == 9:
+                w.flush()
+    w.close()
+    data = mcap_file(bag).read_bytes()
+    at = len(data) - 8 - 29 - 13            # DataEnd, Footer (no summary), magic
+    assert data[at] == 0x0F
+    stored = int.from_bytes(data[at + 9:at + 13], 'little')
+    assert stored == zlib.crc32(data[:at]) != 0

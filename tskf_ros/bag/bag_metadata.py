@@ -2,7 +2,7 @@
 
 import os
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Sequence
 
 from rosbags.rosbag2.metadata import dump_qos_v9
 
@@ -10,8 +10,8 @@ from tskf_ros.bag.mcap_file import McapStats, scan_mcap
 
 import yaml
 
-__all__ = ['add_custom_data', 'METADATA_MARKER', 'METADATA_VERSION', 'write_metadata',
-           'write_yaml']
+__all__ = ['add_custom_data', 'file_metadata', 'merge_metadata', 'METADATA_MARKER',
+           'METADATA_VERSION', 'write_metadata', 'write_yaml']
 
 # custom_data key (and value) of every bag this package writes; overwrite needs it
 METADATA_MARKER = ('tskf_ros.writer', 'tskf_ros')
@@ -36,6 +36,14 @@ def write_metadata(bagdir: Path, path: Path, *, stats: Optional[McapStats] = Non
 
     stats: the file's topics, counts and log time span; read from the file if None.
     """
+    info = file_metadata(path, stats=stats, custom_data=custom_data)
+    write_yaml(bagdir / 'metadata.yaml', {'rosbag2_bagfile_information': info})
+    return info
+
+
+def file_metadata(path: Path, *, stats: Optional[McapStats] = None,
+                  custom_data: Optional[dict] = None) -> dict:
+    """Return the metadata (rosbag2_bagfile_information) of a bag of the one MCAP file."""
     stats = stats or scan_mcap(path)
     counts, lo, hi = stats.counts, stats.first, stats.last
     total = sum(counts.values())
@@ -64,7 +72,38 @@ def write_metadata(bagdir: Path, path: Path, *, stats: Optional[McapStats] = Non
         'custom_data': data,
         'ros_distro': 'jazzy',
     }
-    write_yaml(bagdir / 'metadata.yaml', {'rosbag2_bagfile_information': info})
+    return info
+
+
+def merge_metadata(infos: Sequence[dict], custom_data: Optional[dict] = None) -> dict:
+    """Merge the metadata of consecutive files of one bag into the bag's metadata."""
+    info = dict(infos[0])
+    info['relative_file_paths'] = [p for i in infos for p in i['relative_file_paths']]
+    files = [f for i in infos for f in i['files']]
+    info['files'] = files
+    topics: dict = {}
+    for i in infos:
+        for entry in i['topics_with_message_count']:
+            name = entry['topic_metadata']['name']
+            if name in topics:
+                topics[name]['message_count'] += entry['message_count']
+            else:
+                topics[name] = {'topic_metadata': entry['topic_metadata'],
+                                'message_count': entry['message_count']}
+    info['topics_with_message_count'] = list(topics.values())
+    info['message_count'] = sum(i['message_count'] for i in infos)
+    spans = [(f['starting_time']['nanoseconds_since_epoch'],
+              f['starting_time']['nanoseconds_since_epoch'] + f['duration']['nanoseconds'])
+             for f in files if f['message_count']]
+    start = min((s for s, _ in spans), default=0)
+    info['starting_time'] = {'nanoseconds_since_epoch': start}
+    info['duration'] = {'nanoseconds': max((e for _, e in spans), default=start) - start}
+    data: dict = {}
+    for i in infos:
+        data.update(i.get('custom_data') or {})
+    data.update(custom_data or {})
+    data[METADATA_MARKER[0]] = METADATA_MARKER[1]
+    info['custom_data'] = data
     return info
 
 

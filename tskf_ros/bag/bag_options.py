@@ -1,6 +1,7 @@
 """`ros2 bag` (Jazzy) topic selection and QoS override files, shared by record and play."""
 
 from dataclasses import dataclass, field
+import math
 from pathlib import Path
 import re
 from typing import Optional
@@ -9,10 +10,13 @@ from rclpy.duration import Duration
 from rclpy.qos import (QoSDurabilityPolicy, QoSHistoryPolicy, QoSLivelinessPolicy, QoSProfile,
                        QoSReliabilityPolicy)
 
-from tskf_ros.bag.reader import BagError
+from tskf_ros.bag.bag_errors import BagError
+from tskf_ros.core.units import NS
 
 import yaml
 
+# s: the longest time in int64 nanoseconds (rosbag2's and rcl's times), whole seconds
+MAX_SECONDS = float((2 ** 63 - 1) // NS)
 # the only storage this package writes (and, besides sqlite3 bags, reads)
 STORAGE_ID = 'mcap'
 _POLICIES = {
@@ -27,6 +31,45 @@ _VALUES = ('depth', 'avoid_ros_namespace_conventions')
 
 class OptionError(BagError):
     """A bad option value found after parsing (a QoS file, a regular expression)."""
+
+
+def split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
+    """
+    Split a command line into (the program's own arguments, its --ros-args segments).
+
+    rclpy's remove_ros_args would also take FROM:=TO, rcl's deprecated remap form, which is
+    the spelling of rosbag2's own `--remap FROM:=TO`; only --ros-args ... [--] is ROS's here.
+    """
+    own, ros, inside = [], [], False
+    for arg in argv:
+        if arg == '--ros-args':
+            inside = True
+            ros.append(arg)
+        elif inside and arg == '--':
+            inside = False
+            ros.append(arg)
+        else:
+            (ros if inside else own).append(arg)
+    return own, ros
+
+
+def seconds_ns(flag: str, seconds: float, *, low: float = 0.0, above: bool = False) -> int:
+    """
+    Return a time option in ns; raise OptionError unless finite, >= low and within int64.
+
+    above: the value must be > low, not only >= it.  rosbag2 holds times in int64 ns, so a
+    value of more than MAX_SECONDS (about 292 years) has no meaning there either.
+    """
+    try:
+        value = float(seconds)
+    except OverflowError:           # an int beyond any float
+        value = math.inf if seconds > 0 else -math.inf
+    bad = not math.isfinite(value) or (value <= low if above else value < low)
+    if bad or abs(value) > MAX_SECONDS:
+        sign = '>' if above else '>='
+        raise OptionError(f'{flag} must be a finite number {sign} {low:g} and at most '
+                          f'{MAX_SECONDS:.0f} s (int64 nanoseconds), got {seconds}')
+    return int(round(value * NS))
 
 
 def compile_regex(flag: str, pattern: str) -> Optional['re.Pattern']:

@@ -3,6 +3,7 @@
 import os
 from pathlib import Path
 from typing import NamedTuple, Optional
+import zlib
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
@@ -16,6 +17,8 @@ __all__ = ['McapStats', 'NO_HASH', 'OutputFile', 'scan_mcap', 'seal_mcap']
 NO_HASH = 'RIHS01_' + '0' * 64
 # bytes of a record's opcode and length
 _RECORD_HEAD = 9
+# bytes read at a time for the data section's CRC
+_CRC_BLOCK = 1 << 20
 
 
 class McapStats(NamedTuple):
@@ -81,7 +84,8 @@ def seal_mcap(path: Path) -> tuple[int, bool]:
 
     Walks the top-level records (headers only); the file is truncated after the last record
     that is wholly in it (before a DataEnd or Footer, if any) and DataEnd, a Footer without
-    summary and the magic are appended.  Returns (bytes kept of the original, whether bytes
+    summary and the magic are appended; DataEnd carries the data section's CRC-32 (as the
+    mcap Writer with data CRCs computes it).  Returns (bytes kept of the original, whether bytes
     were cut).  Raises BagError if it is not an MCAP file, OSError if it cannot be written.
     """
     size = path.stat().st_size
@@ -100,11 +104,14 @@ def seal_mcap(path: Path) -> tuple[int, bool]:
             pos += _RECORD_HEAD + length
             end = pos
             f.seek(pos)
-    builder = RecordBuilder()
-    DataEnd(data_section_crc=0).write(builder)
-    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
     with path.open('r+b') as f:
         f.truncate(end)
+        crc = 0         # the data section's CRC-32: every byte before DataEnd, magic included
+        while f.tell() < end:
+            crc = zlib.crc32(f.read(min(_CRC_BLOCK, end - f.tell())), crc)
+        builder = RecordBuilder()
+        DataEnd(data_section_crc=crc).write(builder)
+        Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
         f.seek(end)
         f.write(builder.end() + MCAP_MAGIC)
         f.flush()

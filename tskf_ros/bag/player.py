@@ -1,6 +1,5 @@
 """play: publish a bag at its recorded pace, with `ros2 bag play`'s (Jazzy) options."""
 
-import argparse
 import math
 from pathlib import Path
 import sys
@@ -9,40 +8,32 @@ from typing import Iterator, Optional, Sequence
 
 from builtin_interfaces.msg import Time
 import rclpy
+from rclpy.duration import Duration
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
-from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from tskf_ros.bag.bag_options import compile_regex, load_qos_overrides, TopicFilter
+from tskf_ros.bag.bag_errors import check_exists
+from tskf_ros.bag.bag_options import (load_qos_overrides, OptionError, seconds_ns,
+                                      split_ros_args, TopicFilter)
 from tskf_ros.bag.keyboard import HELP, KeyHandler, TerminalKeys
 from tskf_ros.bag.message_types import BagTypeError, message_class, qos_to_rclpy
+from tskf_ros.bag.play_options import build_parser, player_options, PlayerError
 from tskf_ros.bag.reader import BagError, BagReader, exit_status, RawMessage
-from tskf_ros.core.units import NS
+from tskf_ros.core.units import MAX_STAMP_NS, NS
 from tskf_ros.messages.qos import DEFAULT_DEPTH
 
-EPILOG = """examples:
-  play bags/owc_cai_td_1hz --rate 10 --clock
-  play bags/owc_cai_td_1hz --topics /received_power -m /received_power:=/power --loop
-  play bags/owc_ge_1khz --start-offset 30 --playback-duration 5 -p
-
-The stored bytes are published as they are, in storage (log time) order, at bag time =
-start + offset + rate x wall time (frozen while paused).  Keys when stdin is a terminal:
-space pause/resume, cursor right next message, cursor up/down rate +-0.1; services
-~/pause, ~/resume, ~/toggle_paused, ~/play_next."""
-
 NODE_NAME = 'player'
-# Hz: /clock rate of a bare --clock (rosbag2 Jazzy)
-CLOCK_HZ = 40.0
 # s: how often a terminal is read for keys
 KEY_PERIOD = 0.05
-
-
-class PlayerError(BagError):
-    """Bad options for a bag: an unknown topic, a bad remap, an offset past the end."""
+# s: the longest single wait for acknowledgements (Ctrl-C is seen in between)
+ACK_SLICE = 0.1
+# ns: the most bag time that one look at the wall clock advances (int64 range)
+MAX_ADVANCE_NS = float(2 ** 62)
 
 
 class PlayerDamageError(PlayerError):
@@ -53,18 +44,25 @@ class PlayerDamageError(PlayerError):
         self.damage = damage
 
 
-def until_ns(start_ns: int, playback_duration: float, playback_until_ns: int) -> int:
+def until_ns(start_ns: int, duration_ns: int, playback_until_ns: int) -> int:
     """
     Return the last log time to play, by rosbag2's rule (-1: no limit).
 
     A negative duration or time is no limit; with both, the later one wins; a duration of 0
     plays nothing (rosbag2: play_until 0).
     """
-    if playback_duration < 0 and playback_until_ns < 0:
+    if duration_ns < 0 and playback_until_ns < 0:
         return -1
-    from_duration = -1 if playback_duration < 0 else \
-        0 if playback_duration == 0 else start_ns + int(round(playback_duration * NS))
+    from_duration = -1 if duration_ns < 0 else 0 if duration_ns == 0 else start_ns + duration_ns
     return max(from_duration, playback_until_ns)
+
+
+def checked_ns(flag: str, seconds: float, *, above: bool = False) -> int:
+    """Return a time option of the Player in ns (seconds_ns); PlayerError if it is refused."""
+    try:
+        return seconds_ns(flag, seconds, above=above)
+    except OptionError as exc:
+        raise PlayerError(str(exc)) from None
 
 
 class Player(Node):
@@ -88,13 +86,14 @@ class Player(Node):
         super().__init__(node_name, context=context, parameter_overrides=parameter_overrides)
         if not (math.isfinite(rate) and rate > 0):
             raise PlayerError(f'--rate must be a finite number > 0, got {rate}')
-        if not (math.isfinite(start_offset) and start_offset >= 0):
-            raise PlayerError(f'--start-offset must be a finite number >= 0, got '
-                              f'{start_offset}')
+        self.offset_ns = checked_ns('--start-offset', start_offset)
+        delay_ns = checked_ns('--delay', delay)
         if not (math.isfinite(clock_hz) and clock_hz >= 0):
             raise PlayerError(f'--clock must be a finite number >= 0, got {clock_hz}')
-        if not math.isfinite(playback_duration):
-            raise PlayerError(f'--playback-duration must be finite, got {playback_duration}')
+        self.clock_period_ns = checked_ns('--clock period (1/HZ)', 1.0 / clock_hz,
+                                          above=True) if clock_hz > 0 else 0
+        self.duration_ns = -1 if playback_duration < 0 else \
+            checked_ns('--playback-duration', playback_duration)
         self.reader = BagReader(bag)
         if storage and storage != self.reader.storage:
             raise PlayerError(f'{bag}: the bag is {self.reader.storage}, not {storage} '
@@ -133,17 +132,17 @@ class Player(Node):
                 qos = QoSProfile(depth=qos_depth, reliability=ReliabilityPolicy.RELIABLE)
             name = remap.get(topic, topic)
             self.out_topic[topic] = name
-            self.pubs[topic] = self.create_publisher(cls, name, qos)
+            self.pubs[topic] = self.create_publisher(
+                cls, name, qos, event_callbacks=PublisherEventCallbacks(
+                    matched=lambda info, name=name: self.get_logger().info(
+                        f'{name}: {info.current_count} subscriber(s)')))
         if not self.pubs:
             raise PlayerError(f'{bag}: nothing to play (topics: '
                               f'{", ".join(sorted(self.reader.topics))})')
         self.published: dict = {self.out_topic[t]: 0 for t in self.pubs}
         self.clock_pub = (self.create_publisher(Clock, '/clock', DEFAULT_DEPTH)
                           if clock_hz > 0 else None)
-        self.clock_period_ns = int(NS / clock_hz) if clock_hz > 0 else 0
         self.last_clock_wall = 0
-        self.offset_ns = int(round(start_offset * NS))
-        self.playback_duration = float(playback_duration)
         self.playback_until_ns = int(playback_until_ns)
         self.damage = None
         self.loops = 0
@@ -151,7 +150,7 @@ class Player(Node):
         self.done = Future()
         self._start_pass()
         # --delay: let subscribers match before the first message (only before the first pass)
-        self.anchor_wall += int(max(delay, 0.0) * NS)
+        self.anchor_wall += delay_ns
         self.timer = self.create_timer(tick, self._tick)
         for name, call in (('pause', self.pause), ('resume', self.resume),
                            ('toggle_paused', self.toggle_paused),
@@ -177,8 +176,7 @@ class Player(Node):
             self._next = next(self._it, None)
         if self._next is None:
             raise PlayerError(f'{self.reader.path}: --start-offset is past the end of the bag')
-        self.until_ns = until_ns(self.bag_start, self.playback_duration,
-                                 self.playback_until_ns)
+        self.until_ns = until_ns(self.bag_start, self.duration_ns, self.playback_until_ns)
         self._stop_at_until()
         self.anchor_bag = self.bag_start
         self.anchor_wall = time.monotonic_ns()
@@ -196,8 +194,9 @@ class Player(Node):
         """Return the bag time that corresponds to now (frozen while paused)."""
         if self.paused:
             return self.anchor_bag
-        return self.anchor_bag + max(int((time.monotonic_ns() - self.anchor_wall) * self.rate),
-                                     0)
+        # at a rate of 1e308 the product is inf: bag time then runs to the end at once
+        advance = min((time.monotonic_ns() - self.anchor_wall) * self.rate, MAX_ADVANCE_NS)
+        return self.anchor_bag + max(int(advance), 0)
 
     def _reanchor(self) -> None:
         self.anchor_bag = self.bag_now()
@@ -246,6 +245,26 @@ class Player(Node):
             self._end_of_pass()
         return True
 
+    def wait_for_acks(self, timeout_ms: int) -> list[str]:
+        """
+        Wait until reliable subscribers acknowledged all; return the topics still not.
+
+        rosbag2's --wait-for-all-acked: at most timeout_ms (0: no limit).  It waits in short
+        slices, so that Ctrl-C or a shutdown of the context ends it.
+        """
+        deadline = None if timeout_ms == 0 else time.monotonic() + timeout_ms / 1000
+        late = []
+        for topic, pub in self.pubs.items():
+            while True:
+                left = ACK_SLICE if deadline is None else \
+                    min(ACK_SLICE, deadline - time.monotonic())
+                if pub.wait_for_all_acked(Duration(nanoseconds=max(int(left * NS), 0))):
+                    break
+                if left <= 0 or not self.context.ok():
+                    late.append(self.out_topic[topic])
+                    break
+        return late
+
     def _trigger(self, call):
         def serve(request, response):
             response.success = bool(call())
@@ -261,7 +280,7 @@ class Player(Node):
         if self.clock_pub is not None and (
                 force or wall - self.last_clock_wall >= self.clock_period_ns):
             self.last_clock_wall = wall
-            sec, nanosec = divmod(now, NS)
+            sec, nanosec = divmod(min(max(now, 0), MAX_STAMP_NS), NS)
             self.clock_pub.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
 
     def _tick(self) -> None:
@@ -290,93 +309,10 @@ class Player(Node):
                 self.done.set_result(self.published)
 
 
-def parse_remaps(specs: Sequence[str]) -> dict:
-    """Parse FROM:=TO remaps."""
-    out = {}
-    for spec in specs:
-        src, sep, dst = spec.partition(':=')
-        if not sep or not src or not dst:
-            raise PlayerError(f'bad remap {spec!r}: expected FROM:=TO')
-        out[src] = dst
-    return out
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """Return the command line: the spelling, defaults and short options of Jazzy's."""
-    parser = argparse.ArgumentParser(
-        prog='play', description='Publish a bag at its recorded pace, with the options of '
-        'ros2 bag play (Jazzy).', epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
-    parser.add_argument('-s', '--storage', default='', choices=['mcap', 'sqlite3'],
-                        help="the bag's storage (default: detected)")
-    parser.add_argument('-r', '--rate', type=float, default=1.0, help='speed factor (> 0)')
-    parser.add_argument('--topics', nargs='+', default=[], metavar='topic',
-                        help='play only these topics')
-    parser.add_argument('-e', '--regex', '--topics-regex', default='', dest='regex',
-                        help='play only topics whose whole name matches this regular '
-                        'expression (with --topics: either)')
-    parser.add_argument('-x', '--exclude-regex', default='',
-                        help='do not play topics whose whole name matches')
-    parser.add_argument('--exclude-topics', nargs='+', default=[], metavar='topic',
-                        help='topics not to play')
-    parser.add_argument('--qos-profile-overrides-path', type=Path, metavar='YAML',
-                        help="publisher QoS per topic (rosbag2's YAML format)")
-    parser.add_argument('-l', '--loop', action='store_true', help='play again at the end')
-    parser.add_argument('--remap', '-m', nargs='+', default=[], metavar='FROM:=TO',
-                        help='topic remaps')
-    parser.add_argument('--clock', type=float, nargs='?', const=CLOCK_HZ, default=0.0,
-                        metavar='HZ', help=f'publish /clock at HZ (bare: {CLOCK_HZ:g}; '
-                        'default: not published)')
-    parser.add_argument('-d', '--delay', type=float, default=0.0,
-                        help='seconds to wait before playing (lets subscribers match)')
-    parser.add_argument('--playback-duration', type=float, default=-1.0, metavar='S',
-                        help='play this many seconds of the bag (negative: all)')
-    until = parser.add_mutually_exclusive_group()
-    until.add_argument('--playback-until-sec', type=float, default=-1.0, metavar='T',
-                       help='play up to this log time, s since the epoch (negative: all)')
-    until.add_argument('--playback-until-nsec', type=int, default=-1, metavar='T',
-                       help='play up to this log time, ns since the epoch (negative: all)')
-    parser.add_argument('--disable-keyboard-controls', action='store_true',
-                        help='do not read keys from a terminal stdin')
-    parser.add_argument('-p', '--start-paused', action='store_true',
-                        help='start paused (resume with space or ~/resume)')
-    parser.add_argument('--start-offset', type=float, default=0.0,
-                        help='seconds into the bag to start from')
-    return parser
-
-
-def player_options(parser: argparse.ArgumentParser, opts: argparse.Namespace) -> dict:
-    """Check parsed options (usage error, exit 2) and return the Player's keyword arguments."""
-    for flag, value, low in (('--rate', opts.rate, None), ('--start-offset', opts.start_offset, 0),
-                             ('--delay', opts.delay, 0), ('--clock', opts.clock, 0)):
-        if not math.isfinite(value) or (value <= 0 if low is None else value < low):
-            parser.error(f'{flag} must be a finite number {"> 0" if low is None else ">= 0"}, '
-                         f'got {value}')
-    for flag, value in (('--playback-duration', opts.playback_duration),
-                        ('--playback-until-sec', opts.playback_until_sec)):
-        if not math.isfinite(value):
-            parser.error(f'{flag} must be a finite number, got {value}')
-    until = (int(round(opts.playback_until_sec * NS)) if opts.playback_until_sec >= 0
-             else opts.playback_until_nsec)
-    try:
-        topic_filter = TopicFilter(
-            topics=list(opts.topics), regex=compile_regex('--regex', opts.regex),
-            exclude_topics=list(opts.exclude_topics),
-            exclude_regex=compile_regex('--exclude-regex', opts.exclude_regex),
-            whole_name=True)
-    except BagError as exc:
-        parser.error(str(exc))
-    return {'rate': opts.rate, 'loop': opts.loop, 'start_offset': opts.start_offset,
-            'topic_filter': topic_filter, 'remap': parse_remaps(opts.remap),
-            'clock_hz': opts.clock, 'delay': opts.delay, 'start_paused': opts.start_paused,
-            'playback_duration': opts.playback_duration, 'playback_until_ns': until,
-            'storage': opts.storage}
-
-
 def main(args: Optional[list] = None, stdin=None) -> int:
     """Play a bag; return the exit status (keys are read from stdin if it is a terminal)."""
-    argv = remove_ros_args(sys.argv if args is None else args)[1:]
+    argv, ros_args = split_ros_args(sys.argv if args is None else args)
+    argv = argv[1:]
     parser = build_parser()
     opts = parser.parse_args(argv)
     try:
@@ -385,10 +321,12 @@ def main(args: Optional[list] = None, stdin=None) -> int:
     except BagError as exc:
         print(f'play: error: {exc}', file=sys.stderr)
         return 1
-    if not opts.bag.exists():
-        print(f'play: error: {opts.bag}: no such bag (file or directory)', file=sys.stderr)
+    try:
+        check_exists(opts.bag)
+    except BagError as exc:
+        print(f'play: error: {exc}', file=sys.stderr)
         return 1
-    rclpy.init(args=args)
+    rclpy.init(args=['play'] + ros_args)
     node = keys = None
     try:
         node = Player(opts.bag, **kwargs)
@@ -400,6 +338,11 @@ def main(args: Optional[list] = None, stdin=None) -> int:
             node.create_timer(KEY_PERIOD, lambda: handler.feed(keys.read()))
             node.get_logger().info(HELP)
         executor.spin_until_future_complete(node.done)
+        if node.done.done():
+            late = node.wait_for_acks(opts.wait_for_all_acked)
+            if late:
+                print(f'play: not acknowledged by every subscriber within '
+                      f'{opts.wait_for_all_acked} ms: {", ".join(late)}', file=sys.stderr)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except PlayerDamageError as exc:

@@ -5,27 +5,32 @@ from io import BytesIO
 import os
 from pathlib import Path
 import struct
-import sys
 from typing import Iterable, Iterator, NamedTuple, Optional, Union
 
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, McapError, RecordLengthLimitExceeded
 from mcap.opcode import Opcode
+from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
 from mcap.stream_reader import CRCValidationError, get_chunk_data_stream, StreamReader
-from rosbags.rosbag2 import Reader as Sqlite3Reader
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import parse_qos as rosbags_parse_qos
+
+from tskf_ros.bag.bag_errors import (BagEmptyError, BagError, BagFormatError,
+                                     BagNotFoundError, check_exists, Damage, error_exit,
+                                     EXIT_DAMAGED, exit_status, MetadataError, resolved)
+from tskf_ros.bag.sqlite3_storage import compression_mode, sqlite3_messages, StorageFileError
+
 import yaml
 import zstandard
 
+# the errors are bag_errors', here too for the modules that import them from the reader
 __all__ = ['BagEmptyError', 'BagError', 'BagFormatError', 'BagNotFoundError', 'BagReader',
-           'Damage', 'MetadataError', 'RawMessage', 'TopicInfo']
+           'check_exists', 'Damage', 'error_exit', 'EXIT_DAMAGED', 'exit_status',
+           'MetadataError', 'RawMessage', 'resolved', 'TopicInfo']
 
 PathLike = Union[str, os.PathLike]
 MCAP_MAGIC = b'\x89MCAP0\r\n'
-# exit status of a command whose input bag was damaged (what it could read was used)
-EXIT_DAMAGED = 3
 # what the mcap package raises on bytes that are not a valid MCAP record sequence
 # (CRCValidationError is a ValueError; lz4 raises RuntimeError on a bad frame)
 DAMAGE_ERRORS = (McapError, EOFError, struct.error, ValueError, UnicodeDecodeError,
@@ -36,45 +41,8 @@ _MESSAGE_HEAD = struct.Struct('<H4xQ')      # channel id, (sequence), log time
 MESSAGE = int(Opcode.MESSAGE)
 
 
-def error_exit(prog: str, exc: Exception, path: object = '') -> int:
-    """Print a command's error in one line (an OSError names its file) and return 1."""
-    if isinstance(exc, OSError):
-        print(f'{prog}: error: {exc.filename or path}: {exc.strerror or exc}', file=sys.stderr)
-    else:
-        print(f'{prog}: error: {exc}', file=sys.stderr)
-    return 1
-
-
-def exit_status(prog: str, damage: Optional['Damage'], what: str) -> int:
-    """Return 0, or print the damage in one line (prefixed by prog and what) and EXIT_DAMAGED."""
-    if damage is None:
-        return 0
-    print(f'{prog}: {what}: {damage}', file=sys.stderr)
-    return EXIT_DAMAGED
-
-
 def _int_or_none(value: object) -> Optional[int]:
     return None if value is None else int(value)
-
-
-class BagError(Exception):
-    """A bag that cannot be read; str() is one line naming the file and the problem."""
-
-
-class BagNotFoundError(BagError):
-    """The bag, or a file its metadata lists, does not exist."""
-
-
-class BagEmptyError(BagError):
-    """A storage file of zero bytes, or a bag without messages."""
-
-
-class MetadataError(BagError):
-    """metadata.yaml is missing or unreadable."""
-
-
-class BagFormatError(BagError):
-    """Not an MCAP or sqlite3 rosbag2 file, or a storage this reader does not know."""
 
 
 class RawMessage(NamedTuple):
@@ -96,21 +64,6 @@ class TopicInfo:
     qos: list = field(default_factory=list)
     msgdef: Optional[str] = None
     serialization_format: str = 'cdr'
-
-
-@dataclass(frozen=True)
-class Damage:
-    """Where reading stopped: the file, the byte offset, the problem, messages before."""
-
-    path: str
-    offset: int
-    problem: str
-    messages_before: int
-
-    def __str__(self) -> str:
-        """One line: file, problem, offset and what was read before."""
-        return (f'{self.path}: {self.problem} at byte {self.offset}; the '
-                f'{self.messages_before} message(s) before it were read')
 
 
 def parse_qos(value: object) -> list:
@@ -141,8 +94,7 @@ class BagReader:
         self.metadata: dict = {}
         self.message_count: Optional[int] = None
         self.start_ns: Optional[int] = None
-        if not self.path.exists():
-            raise BagNotFoundError(f'{self.path}: no such bag (file or directory)')
+        check_exists(self.path)
         if self.path.is_file():
             self._open_file()
         else:
@@ -202,15 +154,16 @@ class BagReader:
         self.files = [self.path / n for n in names]
         if not self.files:
             raise BagEmptyError(f'{meta}: lists no storage files')
-        top = self.path.resolve()
+        top = resolved(self.path)
         for name, f in zip(names, self.files):
             # confined: a name such as ../../x or /etc/x would read outside the bag
-            if not f.resolve().is_relative_to(top) or f.resolve() == top:
+            if not resolved(f).is_relative_to(top) or resolved(f) == top:
                 raise MetadataError(f'{meta}: storage file {name!r} is outside the bag '
                                     'directory; not reading it')
         for f in self.files:
+            check_exists(f, 'file, although metadata.yaml lists it')
             if not f.is_file():
-                raise BagNotFoundError(f'{f}: listed in metadata.yaml but missing')
+                raise BagFormatError(f'{f}: listed in metadata.yaml but not a file')
             if self.storage == 'mcap':
                 self._check_mcap(f)
             elif f.stat().st_size == 0:
@@ -236,33 +189,42 @@ class BagReader:
         """
         self.damage = None
         wanted = set(topics) if topics is not None else None
-        if self.storage == 'sqlite3':
-            yield from self._sqlite3(wanted)
-            return
         count = 0
-        for path in self.files:
-            for msg in self._mcap(path, wanted, count):
+        if self.storage == 'sqlite3':
+            for msg in self._sqlite3(wanted):
                 count += 1
                 yield msg
-            if self.damage is not None:
-                return
+        else:
+            for path in self.files:
+                for msg in self._mcap(path, wanted, count):
+                    count += 1
+                    yield msg
+                if self.damage is not None:
+                    return
+        if count == 0 and wanted is None and self.damage is None and self.message_count:
+            # never an empty bag where metadata.yaml lists messages
+            self.damage = Damage(str(self.files[0]), -1, f'holds no message, although '
+                                 f'metadata.yaml lists {self.message_count}', 0)
 
     def _sqlite3(self, wanted: Optional[set]) -> Iterator[RawMessage]:
+        """Yield the messages of the .db3 files (sqlite3_storage: each file's own topics)."""
         count = 0
-        try:
-            with Sqlite3Reader(self.path) as reader:
-                conns = [c for c in reader.connections
-                         if wanted is None or c.topic in wanted]
-                for c in reader.connections:
-                    info = self.topics.setdefault(c.topic, TopicInfo(c.topic, c.msgtype))
+
+        def seen(connections: list) -> None:
+            for c in connections:
+                info = self.topics.setdefault(c.topic, TopicInfo(c.topic, c.msgtype))
+                if c.msgdef.data and info.msgdef is None:
                     info.msgdef = c.msgdef.data
-                for conn, stamp, data in reader.messages(connections=conns):
-                    count += 1
-                    yield RawMessage(conn.topic, conn.msgtype, int(stamp), bytes(data))
-        except (ReaderError, OSError) as exc:
+        try:
+            for msg in sqlite3_messages(self.files, compression_mode(self.metadata),
+                                        wanted, seen):
+                count += 1
+                yield RawMessage(msg.connection.topic, msg.connection.msgtype,
+                                 msg.log_time_ns, msg.data)
+        except StorageFileError as exc:
             if count == 0:
-                raise BagFormatError(f'{self.files[0]}: {exc}') from None
-            self.damage = Damage(str(self.files[0]), -1, str(exc), count)
+                raise BagFormatError(str(exc)) from None
+            self.damage = Damage(str(exc.path), -1, exc.problem, count)
 
     def _mcap(self, path: Path, wanted: Optional[set], before: int) -> Iterator[RawMessage]:
         """
@@ -296,12 +258,35 @@ class BagReader:
                         schemas[record.id] = record
                     elif isinstance(record, Channel):
                         channels[record.id] = self._channel(record, schemas)
-                    elif isinstance(record, (DataEnd, Footer)):
+                    elif isinstance(record, DataEnd):
+                        break
+                    elif isinstance(record, Footer):
                         return
                     offset = f.tell()
             except DAMAGE_ERRORS as exc:
                 self.damage = Damage(str(path), offset, self._problem(exc, path, offset, size),
                                      before + count)
+                return
+            self._summary_channels(path, schemas)
+
+    def _summary_channels(self, path: Path, schemas: dict) -> None:
+        """
+        Add the topics whose Channel is in the summary section only (a topic without messages).
+
+        The mcap Writer writes no chunk without messages, so such a Channel is nowhere else.
+        The summary is only an index: if it is damaged, the messages read stand.
+        """
+        try:
+            with path.open('rb') as f:
+                summary = make_reader(f).get_summary()
+            if summary is None:
+                return
+            schemas = {**summary.schemas, **schemas}
+            for channel in summary.channels.values():
+                if channel.topic not in self.topics:
+                    self._channel(channel, schemas)
+        except Exception:  # noqa: B902 - the summary is an index: if it breaks, skip it
+            pass
 
     @staticmethod
     def _problem(exc: Exception, path: Path, offset: int, size: int) -> str:

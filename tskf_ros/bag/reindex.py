@@ -7,9 +7,10 @@ import re
 import sys
 from typing import Optional
 
-from tskf_ros.bag.bag_metadata import write_metadata
+from tskf_ros.bag.bag_errors import BagError, Damage, error_exit, EXIT_DAMAGED, resolved
+from tskf_ros.bag.bag_metadata import file_metadata, merge_metadata, write_yaml
 from tskf_ros.bag.mcap_file import scan_mcap, seal_mcap
-from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED, MCAP_MAGIC
+from tskf_ros.bag.reader import MCAP_MAGIC
 
 import yaml
 
@@ -18,10 +19,14 @@ EPILOG = """examples:
   reindex /tmp/.run1.partial-k3j9x1      # what `record -o /tmp/run1` left at a SIGKILL
   reindex /tmp/run1                      # a bag whose metadata.yaml is missing or stale
 
-The file is cut after its last whole record and sealed (DataEnd, Footer, magic); nothing
-readable is dropped.  Exit status: 0 done; 1 nothing to reindex; 2 usage; 3 the file is
+A file that was never closed is cut after its last whole record and sealed (DataEnd with
+the data section's CRC, Footer, magic); nothing readable is dropped.  A bag of several
+files (NAME_0.mcap, NAME_1.mcap, ..., as rosbag2 names them) gets one metadata.yaml that
+lists them in that order.  Exit status: 0 done; 1 nothing to reindex; 2 usage; 3 a file is
 damaged before its end (metadata.yaml lists the messages up to the damage)."""
 PARTIAL = re.compile(r'^\.(?P<name>.+)\.partial-[^/]+$')
+# a file of a bag of several, as rosbag2's reindexer matches them: NAME_<n>.<ext>
+NUMBERED = re.compile(r'.+_(\d+)\.mcap')
 
 
 class ReindexError(BagError):
@@ -48,16 +53,27 @@ def locate(path: Path) -> tuple[Path, Path]:
     return path, path
 
 
-def mcap_file(bagdir: Path) -> Path:
-    """Return the one MCAP file of a bag directory."""
-    files = sorted(p for p in bagdir.glob('*.mcap') if p.is_file() and not p.is_symlink())
-    if len(files) != 1:
-        raise ReindexError(f'{bagdir}: {"no" if not files else len(files)} MCAP files '
-                           '(reindex takes a bag with one)')
-    size = files[0].stat().st_size
-    if size == 0:
+def mcap_files(bagdir: Path) -> list[Path]:
+    """
+    Return the MCAP files of a bag directory in their order, as rosbag2's reindex finds them.
+
+    rosbag2 takes the files named NAME_<n>.<ext> in the order of n; a bag of one file may
+    also be NAME.mcap (as this package writes it).  Empty files are left out (they hold no
+    record), unless there is nothing else.
+    """
+    files = [p for p in bagdir.glob('*.mcap') if p.is_file() and not p.is_symlink()]
+    numbered = sorted((int(m[1]), p) for p in files if (m := NUMBERED.fullmatch(p.name)))
+    if numbered:
+        files = [p for _, p in numbered]
+    elif len(files) > 1:
+        raise ReindexError(f'{bagdir}: {len(files)} MCAP files not named NAME_<n>.mcap: '
+                           'their order is unknown')
+    if not files:
+        raise ReindexError(f'{bagdir}: no MCAP file')
+    kept = [p for p in files if p.stat().st_size > 0]
+    if not kept:
         raise ReindexError(f'{files[0]}: empty file (0 bytes): nothing was recorded')
-    return files[0]
+    return kept
 
 
 def is_closed(path: Path) -> bool:
@@ -72,37 +88,37 @@ def is_closed(path: Path) -> bool:
     return tail[-8:] == MCAP_MAGIC and tail[:9] == footer
 
 
-def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optional[object]]:
-    """Repair a crashed recording; return (the bag, messages in it, damage or None)."""
+def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optional[Damage]]:
+    """Repair a crashed recording; return (the bag, messages in it, the first damage or None)."""
     bagdir, target = locate(Path(path))
     if output is not None:
         target = Path(output)
-    mcap = mcap_file(bagdir)
-    if target.resolve() != bagdir.resolve() and (target.exists() or target.is_symlink()):
+    files = mcap_files(bagdir)
+    same = resolved(target) == resolved(bagdir)
+    if not same and (target.exists() or target.is_symlink()):
         raise ReindexError(f'{target}: exists already, not overwriting (give -o OUTPUT)')
     if not target.name or target.name in ('.', '..'):
         raise ReindexError(f'{target}: not a usable bag name')
-    custom = {}
-    meta = bagdir / 'metadata.yaml'
-    if meta.is_file():
-        try:
-            old = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
-            custom = {str(k): str(v) for k, v in (old.get('custom_data') or {}).items()}
-        except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError, ValueError):
-            custom = {}
-    note = 'metadata.yaml rewritten from the closed MCAP file'
-    if not is_closed(mcap):
-        size = mcap.stat().st_size
-        kept, cut = seal_mcap(mcap)
-        note = (f'sealed after {kept} bytes' + (f' (cut {size - kept} bytes of a record cut '
-                                                'short)' if cut else ''))
-    stats = scan_mcap(mcap)
-    damage = stats.damage
-    custom['tskf_ros.reindexed'] = note
+    custom = _old_custom_data(bagdir / 'metadata.yaml')
+    infos, notes, damage = [], [], None
+    for mcap in files:
+        note = 'rewritten from the closed file'
+        if not is_closed(mcap):
+            size = mcap.stat().st_size
+            kept, cut = seal_mcap(mcap)
+            note = (f'sealed after {kept} bytes' + (f' (cut {size - kept} bytes of a record '
+                                                    'cut short)' if cut else ''))
+        stats = scan_mcap(mcap)
+        damage = damage or stats.damage
+        infos.append(file_metadata(mcap, stats=stats))
+        notes.append(f'{mcap.name}: {note}')
+    custom['tskf_ros.reindexed'] = ('metadata.yaml rewritten from the MCAP files; '
+                                    + '; '.join(notes))
     if damage is not None:
         custom['tskf_ros.reindex_damage'] = str(damage)
-    write_metadata(bagdir, mcap, stats=stats, custom_data=custom)
-    if target.resolve() != bagdir.resolve():
+    info = merge_metadata(infos, custom)
+    write_yaml(bagdir / 'metadata.yaml', {'rosbag2_bagfile_information': info})
+    if not same:
         target.parent.mkdir(parents=True, exist_ok=True)
         os.replace(bagdir, target)
         partial = bagdir.parent
@@ -111,7 +127,18 @@ def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optio
                 partial.rmdir()     # only if empty: nothing else is ever deleted
             except OSError:
                 pass
-    return target, sum(stats.counts.values()), damage
+    return target, int(info['message_count']), damage
+
+
+def _old_custom_data(meta: Path) -> dict:
+    """Return the custom_data of an earlier metadata.yaml ({} if there is none readable)."""
+    if not meta.is_file():
+        return {}
+    try:
+        old = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
+        return {str(k): str(v) for k, v in (old.get('custom_data') or {}).items()}
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError, ValueError):
+        return {}
 
 
 def main(argv: Optional[list] = None) -> int:

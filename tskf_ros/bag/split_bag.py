@@ -8,7 +8,7 @@ from typing import Optional, Sequence, Union
 
 from rosbags.interfaces import Qos
 
-from tskf_ros.bag.bag_metadata import METADATA_MARKER, write_yaml
+from tskf_ros.bag.bag_metadata import merge_metadata, write_yaml
 from tskf_ros.bag.reader import BagError
 from tskf_ros.bag.writer import BagWriteError, BagWriter, check_replaceable, CHUNK_SIZE
 
@@ -18,38 +18,6 @@ PathLike = Union[str, os.PathLike]
 # bytes of an MCAP Message record besides its payload: opcode 1, length 8, channel 2,
 # sequence 4, log time 8, publish time 8
 MESSAGE_RECORD_OVERHEAD = 31
-
-
-def merge_metadata(infos: Sequence[dict], custom_data: Optional[dict] = None) -> dict:
-    """Merge the metadata of consecutive files of one bag into the bag's metadata."""
-    info = dict(infos[0])
-    info['relative_file_paths'] = [p for i in infos for p in i['relative_file_paths']]
-    files = [f for i in infos for f in i['files']]
-    info['files'] = files
-    topics: dict = {}
-    for i in infos:
-        for entry in i['topics_with_message_count']:
-            name = entry['topic_metadata']['name']
-            if name in topics:
-                topics[name]['message_count'] += entry['message_count']
-            else:
-                topics[name] = {'topic_metadata': entry['topic_metadata'],
-                                'message_count': entry['message_count']}
-    info['topics_with_message_count'] = list(topics.values())
-    info['message_count'] = sum(i['message_count'] for i in infos)
-    spans = [(f['starting_time']['nanoseconds_since_epoch'],
-              f['starting_time']['nanoseconds_since_epoch'] + f['duration']['nanoseconds'])
-             for f in files if f['message_count']]
-    start = min((s for s, _ in spans), default=0)
-    info['starting_time'] = {'nanoseconds_since_epoch': start}
-    info['duration'] = {'nanoseconds': max((e for _, e in spans), default=start) - start}
-    data: dict = {}
-    for i in infos:
-        data.update(i.get('custom_data') or {})
-    data.update(custom_data or {})
-    data[METADATA_MARKER[0]] = METADATA_MARKER[1]
-    info['custom_data'] = data
-    return info
 
 
 class SplitBagWriter:

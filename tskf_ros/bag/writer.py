@@ -17,7 +17,7 @@ from tskf_ros.bag.bag_metadata import (add_custom_data, METADATA_MARKER, METADAT
                                        write_metadata)
 from tskf_ros.bag.mcap_file import McapStats, NO_HASH, OutputFile, scan_mcap, seal_mcap
 from tskf_ros.bag.message_types import BagTypeError, typestore
-from tskf_ros.bag.reader import BagError, TopicInfo
+from tskf_ros.bag.reader import BagError, resolved, TopicInfo
 
 import yaml
 
@@ -132,7 +132,7 @@ class BagWriter:
     def check_target(self) -> None:
         """Raise a BagError if the output path cannot be used (before anything is made)."""
         name = self.path.name
-        if not name or name in ('.', '..') or self.path.resolve() == Path('/'):
+        if not name or name in ('.', '..') or resolved(self.path) == Path('/'):
             raise BagWriteError(f'{self.path}: not a usable bag name (give a directory '
                                 'name such as out/run1)')
         if self.path.exists() or self.path.is_symlink():

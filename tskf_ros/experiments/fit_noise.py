@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 import scipy.stats
 
+from tskf_ros.bag.bag_errors import EXIT_INTERRUPTED
 from tskf_ros.bag.message_types import BagTypeError
 from tskf_ros.bag.reader import BagError, error_exit, exit_status
 from tskf_ros.core.noise_fit import FitError, negative_log_likelihood, nis_summary
@@ -30,7 +31,6 @@ import yaml
 
 PROG = 'fit_noise'
 EXIT_NO_FIT = 4
-EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports Ctrl-C
 # a standard error of a log-parameter above this (a factor e) leaves it undetermined
 POORLY_DETERMINED = 1.0
 

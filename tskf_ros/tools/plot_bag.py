@@ -10,6 +10,7 @@ import matplotlib
 import numpy as np
 from rclpy.serialization import deserialize_message
 
+from tskf_ros.bag.bag_errors import check_exists, run_main
 from tskf_ros.bag.message_types import BagTypeError, DESERIALIZE_ERRORS, message_class
 from tskf_ros.bag.reader import BagError, BagReader, error_exit, exit_status
 from tskf_ros.bag.replay.loop import replay
@@ -290,9 +291,14 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
 
 def _save(fig, path: Path) -> Path:
     tmp = path.with_name(f'.{path.name}.partial.png')
-    fig.savefig(tmp, dpi=110, bbox_inches='tight')
-    plt.close(fig)
-    tmp.replace(path)
+    try:
+        fig.savefig(tmp, dpi=110, bbox_inches='tight')
+        tmp.replace(path)
+    except BaseException:       # an error or Ctrl-C: no half-written file
+        tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -323,8 +329,10 @@ def main(argv: Optional[list] = None) -> int:
 
 def _check_paths(bag: Path, out: Path, params: Optional[Path]) -> str:
     """Return a one-line problem with the paths, or ''."""
-    if not bag.exists():
-        return f'{bag}: no such bag (file or directory)'
+    try:
+        check_exists(bag)
+    except BagError as exc:
+        return str(exc)
     if params is not None and not params.is_file():
         return f'{params}: no such parameters file'
     if out.exists() and not out.is_dir():
@@ -340,8 +348,8 @@ def _check_paths(bag: Path, out: Path, params: Optional[Path]) -> str:
 
 
 def console_main() -> None:
-    """Entry point of the console script."""
-    sys.exit(main())
+    """Entry point of the console script (Ctrl-C: one line, exit 130)."""
+    sys.exit(run_main(PROG, main))
 
 
 if __name__ == '__main__':

@@ -12,6 +12,7 @@ from typing import Callable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
+from tskf_ros.bag.bag_errors import run_main
 from tskf_ros.bag.message_types import BagTypeError
 from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED, exit_status
 from tskf_ros.bag.replay.loop import FILTER_INPUT, FILTERS, replay, replay_arrays
@@ -159,8 +160,8 @@ def save_npz(path: Path, arrays: dict[str, NDArray]) -> None:
 
 
 def console_main() -> None:
-    """Entry point of the console script."""
-    sys.exit(main())
+    """Entry point of the console script (Ctrl-C: one line, exit 130)."""
+    sys.exit(run_main(PROG, main))
 
 
 if __name__ == '__main__':

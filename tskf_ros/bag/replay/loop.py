@@ -10,7 +10,7 @@ from typing import Callable, Iterator, Optional, Union
 from numpy.typing import NDArray
 
 from tskf_ros.bag.message_types import qos_from_rclpy, typestore
-from tskf_ros.bag.reader import BagReader, Damage
+from tskf_ros.bag.reader import BagReader, Damage, resolved
 from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
                                           UNDECODABLE)
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
@@ -177,7 +177,7 @@ def add_topics(writer: BagWriter, reader: BagReader, est: OfflineEstimator,
 
 def _check_output(bag: Path, output: Path, overwrite: bool) -> None:
     """Raise a BagError if `output` cannot be written (before anything is read or made)."""
-    out, src = output.resolve(), bag.resolve()
+    out, src = resolved(output), resolved(bag)
     if out == src or src.is_relative_to(out) or out.is_relative_to(src):
         raise BagExistsError(f'{output}: is (or holds, or is inside) the input bag {bag}; '
                              'give another output')
