@@ -345,7 +345,8 @@ def profile(ctx: dict) -> None:
     stats = pstats.Stats(prof)
     total = stats.total_tt
     print(f'\nprofile of replay -> bag ({total:.1f} s under cProfile): cumulative share')
-    wanted = [('session.py', 'add', 'session.add (the filter)'),
+    wanted = [('runs.py', 'add_many', 'session.add_many (the filter, in runs)'),
+              ('session.py', 'add', 'session.add (the samples a run stops at)'),
               ('adapters.py', 'encoded', 'encoding the outputs (EstimateEncoder)'),
               ('adapters.py', 'diagnostics_due', '/diagnostics (build + serialize)'),
               ('writer.py', 'write', 'BagWriter.write (mcap Writer.add_message)'),
