@@ -22,11 +22,14 @@ machine hits them all), every one over the whole bag:
 - replay -> bag, rosbags deserialize: the same with the measurements deserialized by
   rosbags instead of cdr.fixed_decoder;
 - replay -> arrays: replay_arrays, the analysis mode (--npz without the file);
+- replay -> bag / arrays, one sample at a time: the same with the session taking each
+  measurement by itself (EstimatorSession.add, as the live node) instead of in runs
+  (add_many): the replay before runs;
 - replay -> arrays, rclpy / rosbags deserialize: the same with the measurements
   deserialized by rclpy (the live node's deserializer) or rosbags instead of
   cdr.fixed_decoder;
 - session only: EstimatorSession.add (and add_input) over the bag's samples, already
-  decoded: the filter alone.
+  decoded: the filter alone; and the same in runs (add_many between the inputs).
 
 Each case: thread CPU time per message read (min and median over the repeats) and the
 wall rate (messages read / s, median).  Ratios are taken on the min CPU time per message
@@ -172,6 +175,16 @@ def replay_arrays(ctx):
     return ctx['count']
 
 
+def replay_arrays_one_by_one(ctx):
+    with Swapped(adapters.OfflineEstimator, 'batched', False):
+        return replay_arrays(ctx)
+
+
+def replay_bag_one_by_one(ctx):
+    with Swapped(adapters.OfflineEstimator, 'batched', False):
+        return replay_bag(ctx)
+
+
 def replay_arrays_rclpy(ctx):
     with Swapped(adapters, 'sample_reader', rclpy_sample_reader):
         return replay_arrays(ctx)
@@ -199,6 +212,17 @@ def session_only(ctx):
     return ctx['count']
 
 
+def session_runs(ctx):
+    """Run the filter alone in runs: add_many over the decoded samples between inputs."""
+    session = EstimatorSession(ctx['config'].session)
+    for kind, args in ctx['runs']:
+        if kind:
+            session.add_input(*args)
+        else:
+            session.add_many(*args)
+    return ctx['count']
+
+
 CASES = [('read (old)', read_only(LegacyReader)),
          ('read', read_only(BagReader)),
          ('read + deserialize', read_deserialize('rclpy')),
@@ -207,10 +231,13 @@ CASES = [('read (old)', read_only(LegacyReader)),
          ('replay -> bag', replay_bag),
          ('replay -> bag, rosbags serializer', replay_bag_library),
          ('replay -> bag, rosbags deserialize', replay_bag_rosbags),
+         ('replay -> bag, one sample at a time', replay_bag_one_by_one),
          ('replay -> arrays', replay_arrays),
+         ('replay -> arrays, one sample at a time', replay_arrays_one_by_one),
          ('replay -> arrays, rclpy deserialize', replay_arrays_rclpy),
          ('replay -> arrays, rosbags deserialize', replay_arrays_rosbags),
-         ('session only', session_only)]
+         ('session only', session_only),
+         ('session only, in runs (add_many)', session_runs)]
 
 
 def context(bag: Path, tmp: Path) -> dict:
@@ -239,8 +266,20 @@ def context(bag: Path, tmp: Path) -> dict:
         elif raw.topic == result.input_topic:
             msg = deserialize_message(raw.data, message_class(INPUT_TYPE))
             samples.append((1, input_from_msg(msg, est.session), raw.log_time_ns))
+    runs, stretch = [], []
+    for kind, args, log_ns in samples + [(1, None, 0)]:
+        if kind == 0:
+            stretch.append((*args, log_ns))
+            continue
+        if stretch:
+            runs.append((0, tuple(np.array(c, dtype=d) for c, d in zip(
+                zip(*stretch), (np.int64, float, float, np.int64)))))
+            stretch = []
+        if args is not None:
+            runs.append((1, args))
     return {'bag': bag, 'tmp': tmp, 'rclpy': rclpy_decoders, 'rosbags': rosbags_decoders,
-            'writes': writes, 'samples': samples, 'count': memory.read, 'config': est.config,
+            'writes': writes, 'samples': samples, 'runs': runs, 'count': memory.read,
+            'config': est.config,
             'written': sum(memory.written.values()), 'n_samples': memory.samples}
 
 
@@ -281,7 +320,8 @@ def profile(ctx: dict) -> None:
     stats = pstats.Stats(prof)
     total = stats.total_tt
     print(f'\nprofile of replay -> bag ({total:.1f} s under cProfile): cumulative share')
-    wanted = [('session.py', 'add', 'session.add (the filter)'),
+    wanted = [('runs.py', 'add_many', 'session.add_many (the filter, in runs)'),
+              ('session.py', 'add', 'session.add (the samples a run stops at)'),
               ('adapters.py', 'encoded', 'encoding the outputs (EstimateEncoder)'),
               ('adapters.py', 'diagnostics_due', '/diagnostics (build + serialize)'),
               ('writer.py', 'write', 'BagWriter.write (mcap Writer.add_message)'),
@@ -326,7 +366,11 @@ def report(runs: dict, ctx: dict, serial: dict) -> None:
          ratio('replay -> bag, rosbags deserialize'), None),
         ("  the writer's share of replay -> bag (write only / replay -> bag)",
          cpu['write only'] / cpu['replay -> bag'], None),
+        ('  the same, the session taking one sample at a time (add)',
+         ratio('replay -> bag, one sample at a time'), None),
         ('replay -> arrays / read + deserialize (>= 0.7)', ratio('replay -> arrays'), 0.7),
+        ('  the same, the session taking one sample at a time (add)',
+         ratio('replay -> arrays, one sample at a time'), None),
         ('  the same with rosbags deserializing the measurements (no fixed_decoder)',
          ratio('replay -> arrays, rosbags deserialize'), None),
         ('  the same with rclpy deserializing the measurements',
@@ -337,10 +381,12 @@ def report(runs: dict, ctx: dict, serial: dict) -> None:
         ('  EstimateEncoder vs rosbags serialize_cdr (times faster)',
          serial["rosbags' classes (reused) + serialize_cdr"]
          / serial['fixed layout (cdr.EstimateEncoder)'], None),
-        ("  the session's share of replay -> bag", cpu['session only'] / cpu['replay -> bag'],
-         None),
+        ("  the session's share of replay -> bag",
+         cpu['session only, in runs (add_many)'] / cpu['replay -> bag'], None),
         ("  the session's share of replay -> arrays",
-         cpu['session only'] / cpu['replay -> arrays'], None),
+         cpu['session only, in runs (add_many)'] / cpu['replay -> arrays'], None),
+        ('  session: add one at a time / add_many in runs (times faster)',
+         cpu['session only'] / cpu['session only, in runs (add_many)'], None),
     ]
     print('\ngoals (ratios on min CPU per message):')
     for text, value, goal in goals:

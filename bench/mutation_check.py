@@ -46,11 +46,14 @@ class Mutation:
         return list(self.tests) + (['-k', self.k] if self.k else [])
 
 
+KALMAN = 'tskf_ros/core/kalman.py'
 KF = 'tskf_ros/core/timescale_kalman.py'
-IRR = 'tskf_ros/core/irregular/theorem2.py'
+TRANSITIONS = 'tskf_ros/core/transitions.py'
+SWITCHING = 'tskf_ros/core/irregular/switching.py'
 INTERVALS = 'tskf_ros/owc/session/sampling_intervals.py'
 ADMISSION = 'tskf_ros/owc/session/admission.py'
 EKF = 'tskf_ros/led/scanning_ekf.py'
+CORE_TESTS = ('test/core/test_kalman.py', 'test/core/test_timescale_kalman.py')
 
 MUTATIONS = (
     Mutation('M6', 'Theorem 2 diagnostics with R instead of R / period', INTERVALS,
@@ -61,47 +64,47 @@ MUTATIONS = (
              "vscale = 1.0 / np.sqrt(mu_meas) if noise_scaling == 'theory' else "
              'np.ones(mu.size)',
              'vscale = np.ones(mu.size)',
-             ('test/test_reproduce.py',), 'cai_td'),
-    Mutation('M11', 'theorem1().stable ignores detectability (A1)', IRR,
+             ('test/experiments/test_reproduce.py',), 'cai_td'),
+    Mutation('M11', 'theorem1().stable ignores detectability (A1)',
+             'tskf_ros/core/irregular/theorem1.py',
              'return self.detectable and not self.degenerate', 'return not self.degenerate',
              ('test/core/irregular/test_theorem1.py',), 'theorem1'),
-    Mutation('K1', 'Table 3 innovation sign: y - C x + D (scalar form)', KF,
-             'e = y - c * x - d', 'e = y - c * x + d',
-             ('test/core/test_timescale_kalman.py',)),
+    Mutation('K1', 'innovation sign of the offset: y = z - (H x - d)', KALMAN,
+             'y = z - (_mv(H, x) + d)', 'y = z - (_mv(H, x) - d)', CORE_TESTS),
     Mutation('T2', "simulate_truth: measurement noise not scaled by 1 / mu ('theory')",
              'tskf_ros/core/linear_models.py',
              "vscale = 1.0 / np.sqrt(mu_meas) if noise_scaling == 'theory' else np.ones(N)",
              'vscale = np.ones(N)',
-             ('test/test_reproduce.py',), 'simulate_truth or example_320_readme'),
-    Mutation('K3', 'corrected gain without the mu of R / mu (n = 2 form)', KF,
-             'l0, l1 = mu * (h0 / RmuCPC), mu * (h1 / RmuCPC)',
-             'l0, l1 = h0 / RmuCPC, h1 / RmuCPC',
-             ('test/core/test_timescale_kalman.py',)),
-    Mutation('K4', 'Joseph form: L R_d L^T dropped from the corrected covariance (numpy form)',
-             KF, '(L.dot(S) - CP.T)', '(L.dot(S - R / mu) - CP.T)',
-             ('test/core/test_timescale_kalman.py',)),
-    Mutation('K5', 'Van Loan block with +A instead of -A', KF,
+             ('test/experiments/test_reproduce.py',), 'simulate_truth or example_320_readme'),
+    Mutation('K3', 'R_d = R instead of R / mu (the corrected gain without its mu)', KF,
+             'return R / mu', 'return R', CORE_TESTS),
+    Mutation('K4', 'Joseph form: K R K^T dropped from the updated covariance', KALMAN,
+             'KS = _mm(K, S)', 'KS = _mm(K, S - R)', CORE_TESTS),
+    Mutation('K5', 'Van Loan block with +A instead of -A', TRANSITIONS,
              'M[:n, :n] = -A', 'M[:n, :n] = A',
              ('test/core/test_transitions.py',), 'van_loan'),
     Mutation('T1', "simulate_truth: process noise scaled by mu instead of sqrt(mu) ('theory')",
              'tskf_ros/core/linear_models.py',
              "scale = np.sqrt(mu[k]) if noise_scaling == 'theory' else mu[k]",
              'scale = mu[k]',
-             ('test/test_reproduce.py',), 'simulate_truth'),
-    Mutation('I1', 'lifted filter: Phi = A^(kappa - 1) (off by one)', IRR,
+             ('test/experiments/test_reproduce.py',), 'simulate_truth'),
+    Mutation('I1', 'lifted filter: Phi = A^(kappa - 1) (off by one)', SWITCHING,
              'Phi = powers[kappa]', 'Phi = powers[kappa - 1]',
              ('test/core/irregular/test_switching.py',), 'lifted'),
-    Mutation('I2', 'pathological intervals stop one short (range off by one)', IRR,
+    Mutation('I2', 'pathological intervals stop one short (range off by one)',
+             'tskf_ros/core/irregular/intervals.py',
              'for kappa in range(2, max_interval + 1):', 'for kappa in range(2, max_interval):',
              ('test/core/irregular/test_intervals.py',), 'pathological or rotation or plus_minus'),
-    Mutation('I3', 'switching filter: K R K^T dropped from the Joseph form', IRR,
-             'P = I_KC @ P @ I_KC.T + K @ R @ K.T', 'P = I_KC @ P @ I_KC.T',
+    Mutation('I3', 'switching filter: time update without the process noise Q (eq. (14))',
+             SWITCHING, 'kalman.predict(self.x, self.P, self.A, self.Q,',
+             'kalman.predict(self.x, self.P, self.A, 0.0 * self.Q,',
              ('test/core/irregular/test_switching.py',
-              'test/core/irregular/test_theorem2.py'), 'lifted or theorem2'),
-    Mutation('I4', 'jump_covariance weighs the pre-jump measurement by R / h, not R / J', IRR,
+              'test/core/irregular/test_theorem2.py')),
+    Mutation('I4', 'jump_covariance weighs the pre-jump measurement by R / h, not R / J',
+             'tskf_ros/core/irregular/after_jump.py',
              'return _predict(_correct(P, C, R / J), F_J, Q_J)',
              'return _predict(_correct(P, C, R / period), F_J, Q_J)',
-             ('test/core/irregular/test_jump_covariance.py',), 'jump_covariance'),
+             ('test/core/irregular/test_after_jump.py',), 'jump_covariance'),
     Mutation('S1', 'session: sampling interval in periods off by one', INTERVALS,
              'return int(round(dt / self.period))', 'return int(round(dt / self.period)) + 1',
              ('test/owc/session/test_sampling_intervals.py',), 'sampling_intervals'),
@@ -111,15 +114,11 @@ MUTATIONS = (
     Mutation('E1', "scanning EKF: wrong sign of C_k,1,2 = x1 g'(x2 + psi_k)", EKF,
              'C[:, 0, 1] = x[:, 0] * dg(a1)', 'C[:, 0, 1] = -x[:, 0] * dg(a1)',
              ('test/led/test_scanning_ekf.py',)),
-    Mutation('E2', 'scanning EKF (one run): a row of K R K^T dropped from the Joseph form',
-             EKF, 'v00, v01 = k00 * r00 + k01 * r10, k00 * r01 + k01 * r11',
-             'v00, v01 = 0.0, 0.0',
+    Mutation('E2', 'scanning EKF: the measurement noise R left out of the update (eq. (19))',
+             EKF, 'y + hx, C, R, d)', 'y + hx, C, 0.0 * R, d)',
              ('test/led/test_scanning_ekf.py',)),
-    Mutation('E3', 'scanning EKF (one run): mu dropped from the prediction over a gap', EKF,
-             'x2 += self.u.item()\n            (q00, q01), (q10, q11) = self.Q.tolist()\n'
-             '            p00, p01, p10, p11 = p00 + mu * q00,',
-             'x2 += self.u.item()\n            (q00, q01), (q10, q11) = self.Q.tolist()\n'
-             '            p00, p01, p10, p11 = p00 + q00,',
+    Mutation('E3', 'scanning EKF: mu dropped from the prediction over a gap (eq. (14))', EKF,
+             'self.P = self.P + mu * self.Q', 'self.P = self.P + self.Q',
              ('test/led/test_scanning_ekf.py',)),
     Mutation('E4', "eq. (4)'s derivative with the wrong sign of its first mode",
              'tskf_ros/led/intensity_model.py',
@@ -128,6 +127,9 @@ MUTATIONS = (
     Mutation('E5', 'three-point averaging eq. (26) with V2 - V1', 'tskf_ros/led/baselines.py',
              'gamma_p = g * (v1 - v2) / total', 'gamma_p = g * (v2 - v1) / total',
              ('test/led/test_baselines.py',), 'three_point'),
+    Mutation('G1', 'session gate: d^2 compared with the gate, not its square', ADMISSION,
+             'if d2 < 0.0 or d2 <= gate * gate:', 'if d2 < 0.0 or d2 <= gate:',
+             ('test/owc/session/test_admission.py', 'test/owc/session/test_session.py')),
 )
 
 

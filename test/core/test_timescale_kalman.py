@@ -16,7 +16,8 @@ import pytest
 import scipy.linalg
 
 from tskf_ros.core.matrices import FilterError
-from tskf_ros.core.timescale_kalman import NonRegressiveError, TimeScaleKalmanFilter
+from tskf_ros.core.timescale_kalman import (InnovationTest, NonRegressiveError,
+                                            TimeScaleKalmanFilter)
 
 
 RTOL = 1e-12
@@ -457,3 +458,56 @@ def test_a_transition_switched_later_is_used():
                                   fresh.step(0.4, 1.0, [0.2]).P_predicted)
     with pytest.raises(FilterError, match='transition'):
         kf.transition = 'rk4'
+
+
+@pytest.mark.parametrize('n, p', [(1, 1), (2, 1), (3, 2), (6, 3)])
+@pytest.mark.parametrize('transition', ['euler', 'exact'])
+def test_a_run_equals_table_3_step_after_step(n, p, transition):
+    rng = np.random.default_rng(40 + n)
+    m = random_model(rng, n, p, 1)
+    kf = TimeScaleKalmanFilter(**m, transition=transition)
+    mus = rng.choice([0.01, 0.3, 1.0, 0.07], size=12)
+    ys = rng.normal(size=(12, p)) * 3
+    u = rng.normal(size=1)
+    x, P = kf.x.copy(), kf.P.copy()
+    res = kf.run(mus, ys, u)
+    assert res.steps == 12 and res.stopped == ''
+    for k in range(12):
+        sampled = kf.transition_matrices(mus[k]) if transition == 'exact' else None
+        x_c, P_c, x_n, P_n = table_3(m, x, P, mus[k], ys[k], u, transition, sampled)
+        assert close(res.x_corrected[k], x_c, x) and close(res.P_corrected[k], P_c, P), k
+        assert close(res.x_predicted[k], x_n, x) and close(res.P_predicted[k], P_n, P), k
+        x, P = res.x_predicted[k], res.P_predicted[k]
+    np.testing.assert_array_equal(kf.x, res.x_predicted[-1])
+    np.testing.assert_array_equal(kf.P_corrected, res.P_corrected[-1])
+
+
+@pytest.mark.parametrize('n, p', [(1, 1), (3, 2)])
+def test_a_run_stops_before_a_refused_step_or_a_failed_test(n, p):
+    rng = np.random.default_rng(9)
+    m = random_model(rng, n, p, 0)
+    m['A'] = -np.eye(n)                      # I + mu A singular at mu = 1
+    mus = np.array([0.1, 0.2, 0.1, 1.0, 0.1])
+    ys = rng.normal(size=(5, p))
+    kf = TimeScaleKalmanFilter(**m)
+    res = kf.run(mus, ys)
+    assert (res.steps, res.stopped) == (3, 'refused')
+    np.testing.assert_array_equal(kf.x, res.x_predicted[2])
+    ys[1, 0] = np.nan
+    res = TimeScaleKalmanFilter(**m).run(mus, ys)
+    assert (res.steps, res.stopped) == (1, 'refused')
+    # the test: d^2 = e^T S^-1 e of z[k] at step k's prediction, written out with numpy
+    z = rng.normal(size=(3, p))
+    R = np.eye(p) * 0.5
+    free = TimeScaleKalmanFilter(**m).run(mus[:3], ys[[0, 2, 3]])
+    d2 = []
+    for k in range(3):
+        x, P = free.x_predicted[k], free.P_predicted[k]
+        e = z[k] - m['C'] @ x - m['D']
+        d2.append(e @ np.linalg.solve(m['C'] @ P @ m['C'].T + R, e))
+    z[2] += 10.0 * np.sqrt(max(d2) + 1.0)
+    kf = TimeScaleKalmanFilter(**m)
+    res = kf.run(mus[:3], ys[[0, 2, 3]], test=InnovationTest(z, R, max(d2[:2]) * 1.001))
+    assert (res.steps, res.stopped) == (2, 'test')
+    np.testing.assert_array_equal(res.x_predicted, free.x_predicted[:2])
+    np.testing.assert_array_equal(kf.x, res.x_predicted[1])

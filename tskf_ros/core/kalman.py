@@ -12,7 +12,9 @@ Simon, Optimal State Estimation, Wiley 2006, eqs. 5.17-5.19):
 d is an offset of the predicted measurement: Cai et al.'s output offset D for a linear
 model, h(x) - H x for an extended filter linearised at x (so H x + d = h(x)).
 The time-scale filter, the switching and lifted filters and the scanning EKF all call
-these; `update_batch` and `predict_batch` run them over a leading axis of independent runs.
+these; `update_batch` and `predict_batch` run them over a leading axis of independent runs,
+`update_predict_run` over a sequence of steps of one filter.  The innovation test (a gate,
+as robot_localization's rejection threshold) is d^2 = y^T S^-1 y (`mahalanobis2`).
 """
 
 import numba
@@ -92,14 +94,42 @@ def predict(x: Vector, P: Matrix, F: Matrix, Q: Matrix, Bu: Vector) -> tuple[Vec
 
 
 @_jit
-def update(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
-           ) -> tuple[Vector, Matrix, Vector, Matrix, Matrix]:
-    """Measurement update; returns (x, P, y, S, K)."""
+def innovation(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
+               ) -> tuple[Vector, Matrix, Matrix]:
+    """Return the innovation y, its covariance S and P H^T."""
     # y = z - (H x + d)
     y = z - (_mv(H, x) + d)
     # S = H P H^T + R
     PHt = _mm(P, H.T)
     S = _mm(H, PHt) + R
+    return y, S, PHt
+
+
+@_jit
+def mahalanobis2(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
+                 ) -> tuple[float, Vector]:
+    """
+    Return (y^T S^-1 y, y): the squared Mahalanobis distance of z from the prediction.
+
+    -1 when S is singular (no distance); inf or NaN when an entry overflows.
+    """
+    y, S, _ = innovation(x, P, z, H, R, d)
+    p = S.shape[0]
+    if p == 1:
+        if S[0, 0] == 0.0:
+            return -1.0, y
+        return y[0] * y[0] / S[0, 0], y
+    det = np.linalg.det(np.ascontiguousarray(S))
+    if det == 0.0:
+        return -1.0, y
+    return float(y @ np.linalg.solve(np.ascontiguousarray(S), y)), y
+
+
+@_jit
+def update(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
+           ) -> tuple[Vector, Matrix, Vector, Matrix, Matrix]:
+    """Measurement update; returns (x, P, y, S, K)."""
+    y, S, PHt = innovation(x, P, z, H, R, d)
     # K = P H^T S^-1
     K = _mm(PHt, _inv(S))
     # x = x + K y
@@ -143,6 +173,43 @@ def update_predict(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vec
     return x_c, P_c, x_p, P_p, y, S, status
 
 
+STOPPED = 3     # what update_predict_run reports when the innovation test stops it
+
+
+@_jit
+def update_predict_run(x: Vector, P: Matrix, z: NDArray[np.float64], H: Matrix,
+                       R: NDArray[np.float64], d: Vector, F: NDArray[np.float64],
+                       Q: NDArray[np.float64], Bu: NDArray[np.float64], jump: NDArray[np.intp],
+                       z_test: NDArray[np.float64], R_test: Matrix, limit2: float
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                  NDArray[np.float64], NDArray[np.float64], int, int]:
+    """
+    Run `update_predict` for k = 0, 1, ... from the previous step's prediction (from x, P).
+
+    Step k: z[k], R[k], F[jump[k]], Q[jump[k]], Bu[jump[k]].  It stops before keeping
+    a step whose status is not OK, or (limit2 >= 0) whose prediction puts z_test[k] beyond
+    mahalanobis2 <= limit2 with R_test (the status is then STOPPED; NaN stops too).
+    Returns the rows (x(t|t), P(t|t), x(sigma), P(sigma)) of the steps kept, their number
+    and the status of the step that stopped the run (OK if none did).
+    """
+    K, n = z.shape[0], x.shape[0]
+    x_c, P_c = np.empty((K, n)), np.empty((K, n, n))
+    x_p, P_p = np.empty((K, n)), np.empty((K, n, n))
+    for k in range(K):
+        i = jump[k]
+        xc, Pc, xp, Pp, _, _, status = update_predict(x, P, z[k], H, R[k], d, F[i], Q[i],
+                                                      Bu[i])
+        if status != OK:
+            return x_c[:k], P_c[:k], x_p[:k], P_p[:k], k, status
+        if limit2 >= 0.0:
+            d2, _ = mahalanobis2(xp, Pp, z_test[k], H, R_test, d)
+            if not d2 <= limit2:
+                return x_c[:k], P_c[:k], x_p[:k], P_p[:k], k, STOPPED
+        x_c[k], P_c[k], x_p[k], P_p[k] = xc, Pc, xp, Pp
+        x, P = xp, Pp
+    return x_c, P_c, x_p, P_p, K, OK
+
+
 @_jit
 def update_batch(x: NDArray[np.float64], P: NDArray[np.float64], z: NDArray[np.float64],
                  H: NDArray[np.float64], R: NDArray[np.float64], d: NDArray[np.float64]
@@ -171,5 +238,9 @@ def warm_up() -> None:
     update_predict(x, P, z, H, R, z, F, P, x)
     predict(x, P, F, P, x)
     update(x, P, z, H, R, z)
+    mahalanobis2(x, P, z, H, R, z)
+    z2 = np.zeros((1, 1))
+    update_predict_run(x, P, z2, H, R[None], z, F[None], P[None], x[None],
+                       np.zeros(1, dtype=np.intp), z2, R, 1.0)
     update_batch(x[None], P[None], x[None], F[None], P[None], x[None])
     predict_batch(x[None], P[None], F, P, x[None])

@@ -40,7 +40,7 @@ can discretise a jump as a continuous plant sampled at irregular instants
 
 from dataclasses import dataclass
 import math
-from typing import Callable, Optional, overload, Union
+from typing import Callable, NamedTuple, Optional, overload, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -53,8 +53,8 @@ from tskf_ros.core.transitions import Transition, TransitionCache, TRANSITIONS
 Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
 
-__all__ = ['FilterError', 'NonRegressiveError', 'StepResult', 'TimeScaleKalmanFilter',
-           'TRANSITIONS']
+__all__ = ['FilterError', 'InnovationTest', 'NonRegressiveError', 'RunResult', 'StepResult',
+           'TimeScaleKalmanFilter', 'TRANSITIONS']
 
 _FLOAT = np.dtype(float)
 _INF = math.inf
@@ -75,6 +75,25 @@ class StepResult:
     P_predicted: Matrix
     innovation: Vector
     S: Matrix
+
+
+class InnovationTest(NamedTuple):
+    """Keep step k of a run only if y^T S^-1 y <= limit2 for z[k] at its prediction, R."""
+
+    z: Matrix           # K x p
+    R: Matrix           # p x p
+    limit2: float
+
+
+class RunResult(NamedTuple):
+    """What `run` kept: one row per step made, oldest first, and why it stopped ('' if not)."""
+
+    steps: int
+    x_corrected: Matrix     # steps x n
+    P_corrected: NDArray[np.float64]    # steps x n x n
+    x_predicted: Matrix
+    P_predicted: NDArray[np.float64]
+    stopped: str            # '' all made, 'refused' (step would raise), 'test' (failed it)
 
 
 def as_vector(value: ArrayLike, size: int, name: str) -> Vector:
@@ -281,6 +300,11 @@ class TimeScaleKalmanFilter:
             raise FilterError(f'R must have shape {(self.p, self.p)}, got {R_.shape}')
         return R_
 
+    @staticmethod
+    def _noise_over(mu: Union[float, NDArray[np.float64]], R: Matrix) -> NDArray[np.float64]:
+        """R_d = R / mu: white noise of intensity R seen through a point of measure mu."""
+        return R / mu
+
     def step(self, mu: float, y: Optional[ArrayLike], u: Optional[ArrayLike] = None, *,
              R: Optional[ArrayLike] = None) -> StepResult:
         """
@@ -311,7 +335,7 @@ class TimeScaleKalmanFilter:
             res = StepResult(mu, self.x, self.P, x_p, P_p, nan, np.full((self.p,) * 2, np.nan))
         else:
             z = as_vector(y, self.p, 'y')
-            Rd = (self._R if R is None else self._measurement_noise(R)) / mu
+            Rd = self._noise_over(mu, self._R if R is None else self._measurement_noise(R))
             x_c, P_c, x_p, P_p, e, S, status = kalman.update_predict(
                 self.x, self.P, z, self._C, Rd, self._D, jump.F, jump.Qd, Bu)
             if status == kalman.NOT_POSITIVE:
@@ -324,6 +348,50 @@ class TimeScaleKalmanFilter:
         self.x, self.P = res.x_predicted, res.P_predicted
         self.x_corrected, self.P_corrected = res.x_corrected, res.P_corrected
         return res
+
+    def run(self, mu: ArrayLike, y: ArrayLike, u: Optional[ArrayLike] = None, *,
+            test: Optional[InnovationTest] = None) -> RunResult:
+        """
+        Make step(mu[k], y[k], u) for k = 0, 1, ... in one compiled call (kalman's run).
+
+        The steps and their results are those of the loop over `step`; it stops before a
+        step that `step` would refuse (that step raises there, saying why), or, with a
+        test, before keeping a step whose prediction fails it.  x, P are left at the
+        prediction of the last step kept.
+        """
+        mus = np.asarray(mu, dtype=float).reshape(-1)
+        K, p = mus.size, self.p
+        z = np.asarray(y, dtype=float).reshape(K, p)
+        bad = ~((mus > 0.0) & (mus < _INF)) | ~np.isfinite(z).all(axis=1)
+        values, jump = np.unique(mus, return_inverse=True)
+        F, Q, Bu = [], [], []
+        Bu_of = u is not None and self._uses_B
+        uv = self._zero if u is None or not Bu_of else as_vector(u, self._B.shape[1], 'u')
+        for i, m in enumerate(values.tolist()):
+            if not 0.0 < m < _INF:
+                t = self._jumps[1.0]            # never used: the step before it stops
+            else:
+                t = self._jumps[m]
+                if not t.regressive and not self.allow_nonregressive:
+                    bad |= jump == i
+            F.append(t.F)
+            Q.append(t.Qd)
+            Bu.append(t.Bd @ uv if Bu_of else self._zero)
+        limit = int(np.argmax(bad)) if bad.any() else K
+        if test is None:
+            z_test, R_test, limit2 = z, self._R, -1.0
+        else:
+            z_test, R_test, limit2 = test.z, test.R, float(test.limit2)
+        x_c, P_c, x_p, P_p, count, status = kalman.update_predict_run(
+            self.x, self.P, z[:limit], self._C,
+            self._noise_over(mus[:limit, None, None], self._R),
+            self._D, np.array(F), np.array(Q), np.array(Bu), jump[:limit].astype(np.intp),
+            np.asarray(z_test, dtype=float), R_test, limit2)
+        if count:
+            self.x, self.P = x_p[count - 1], P_p[count - 1]
+            self.x_corrected, self.P_corrected = x_c[count - 1], P_c[count - 1]
+        stopped = '' if count == K else 'test' if status == kalman.STOPPED else 'refused'
+        return RunResult(count, x_c, P_c, x_p, P_p, stopped)
 
     def integrate(self, duration: float, y: Callable[[float], ArrayLike],
                   u: Optional[Callable[[float], ArrayLike]] = None, *,

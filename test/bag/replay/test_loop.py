@@ -62,7 +62,7 @@ def test_output_is_never_half_written(tmp_path, monkeypatch):
 
     def explode(*args, **kwargs):
         raise KeyboardInterrupt
-    monkeypatch.setattr(adapters.OfflineEstimator, 'process', explode)
+    monkeypatch.setattr(adapters.OfflineEstimator, 'encoded', explode)
     with pytest.raises(KeyboardInterrupt):
         replay(bag, tmp_path / 'out')
     assert sorted(p.name for p in tmp_path.iterdir()) == ['bag']
@@ -135,3 +135,21 @@ def test_a_replayed_bag_is_canonical_and_equals_the_in_memory_replay(tmp_path, b
     with mcap_file(tmp_path / 'est').open('rb') as f:
         assert sum(1 for _ in make_reader(f, decoder_factories=[DecoderFactory()])
                    .iter_decoded_messages()) == len(written)
+
+
+# -- the session in runs: the same outputs as one sample at a time -----------------------
+
+@pytest.mark.parametrize('bag', ['owc_ge_1khz', 'owc_cai_td_1hz'])
+def test_runs_give_the_outputs_of_one_sample_at_a_time(tmp_path, bag, monkeypatch):
+    # add_many against add (the live node's path): every array equal, and the bags written
+    # the same files byte for byte
+    arrays = replay_arrays(BAGS / bag, PARAMS)
+    replay(BAGS / bag, tmp_path / 'runs', params_file=PARAMS)
+    monkeypatch.setattr(adapters.OfflineEstimator, 'batched', False)
+    single = replay_arrays(BAGS / bag, PARAMS)
+    replay(BAGS / bag, tmp_path / 'single', params_file=PARAMS)
+    assert arrays.keys() == single.keys()
+    for key, value in arrays.items():
+        np.testing.assert_array_equal(value, single[key], err_msg=key)
+    runs, single_bag = (mcap_file(tmp_path / name).read_bytes() for name in ('runs', 'single'))
+    assert runs == single_bag

@@ -65,6 +65,7 @@ class OfflineEstimator:
 
     interface = estimator   # the node's module in tskf_ros.messages
     session_class: type = EstimatorSession
+    batched = True          # the replay loop may hand the session its samples in runs
 
     def __init__(self, config: AnyConfig, msgtype: str) -> None:
         self.config = config
@@ -135,6 +136,7 @@ class OfflineAligner(OfflineEstimator):
 
     interface = aligner
     session_class = AlignmentSession
+    batched = False
 
     def output_topics(self) -> list[tuple[str, str, QoSProfile]]:
         """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""

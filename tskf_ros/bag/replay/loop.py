@@ -13,6 +13,7 @@ from tskf_ros.bag.message_types import qos_from_rclpy, typestore
 from tskf_ros.bag.reader import BagReader, Damage, resolved
 from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
                                           UNDECODABLE)
+from tskf_ros.bag.replay.gathered import GATHER, Gathered
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.replay.sinks import (ArraySink, BagSink, Collector, ReplayResult, Sink,
                                        SMOOTHED_TOPIC)
@@ -186,32 +187,55 @@ def _check_output(bag: Path, output: Path, overwrite: bool) -> None:
 
 def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayResult,
          diagnostics: bool) -> Optional[Damage]:
-    """Read, estimate, hand the outputs to the sink; return the damage that stopped it."""
+    """
+    Read, estimate, hand the outputs to the sink; return the damage that stopped it.
+
+    The estimator's measurements are gathered up to the next input u, /diagnostics message
+    due or GATHER messages and taken by the session in runs (EstimatorSession.add_many);
+    the sink gets every message and outcome in storage order, as one at a time.
+    """
     topic, input_topic = result.topic, result.input_topic
-    process, process_input = est.process, est.process_input
+    process_input = est.process_input
     copy = sink.copy if sink.copies else None
     outcome = sink.outcome
     statuses = result.statuses
     # the log time from which est.diagnostics_due may have something (None: never)
     due_at = -1 if diagnostics else None
-    read = samples = 0          # result.read and result.samples, kept in locals
+    read = 0                    # result.read, kept in a local
+    gathered = Gathered(est.read_sample)
+    gather = est.batched
+
+    def flush() -> None:
+        if gathered.logs or gathered.held:
+            gathered.hand_over(est, sink, statuses)
     try:
         for raw in reader.messages():
             read += 1
             log_ns = raw.log_time_ns
             if due_at is not None and log_ns >= due_at:
+                flush()
                 for t, msg in est.diagnostics_due(log_ns):
                     sink.diagnostics(t, msg)
                 due_at = est.next_diag
+            name = raw.topic
+            if gather and name != input_topic:
+                try:
+                    gathered.add(raw, name == topic, copy is not None)
+                except UNDECODABLE as exc:
+                    flush()
+                    return _undecodable(reader, read, name, result.msgtype, exc)
+                if len(gathered.held) + len(gathered.logs) >= GATHER:
+                    flush()
+                continue
+            flush()
             if copy is not None:
                 copy(raw)
-            name = raw.topic
             if name == topic:
                 try:
-                    sample, out = process(raw.data, log_ns)
+                    sample, out = est.process(raw.data, log_ns)
                 except UNDECODABLE as exc:
                     return _undecodable(reader, read, name, result.msgtype, exc)
-                samples += 1
+                result.samples += 1
                 statuses[out.status] += 1
                 outcome(est, log_ns, sample, out, False)
             elif name == input_topic:
@@ -222,9 +246,10 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
                 result.inputs += 1
                 result.input_statuses[out.status] += 1
                 outcome(est, log_ns, sample, out, True)
+        flush()
     finally:
         result.read += read
-        result.samples += samples
+        result.samples += gathered.samples
     if result.samples == 0 and reader.damage is None:
         raise InputError(f'{reader.path}: no messages on {topic}')
     return reader.damage

@@ -5,6 +5,7 @@ The gate (as robot_localization's per-sensor rejection threshold) is the Mahalan
 distance of the innovation at the predictor (xhat, P) of the sample's own stamp:
 
     e = y - C xhat - D,   S = C P C^T + R_d,   d^2 = e^T S^-1 e > gate^2: rejected
+    (kalman.mahalanobis2; no verdict when S is singular)
 
 with R_d = R / period, or the sample's own variance (use_message_variance).
 """
@@ -14,6 +15,7 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
+from tskf_ros.core import kalman
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 from tskf_ros.core.units import MAX_STAMP_NS, NS
 from tskf_ros.owc.session.config import EstimatorConfig
@@ -96,43 +98,16 @@ class Gate:
         self.C, self.D = kf.C, kf.D
         self.R_period = kf.R / config.period
         self.p = kf.p
-        # p = 1: e and S are numbers, d^2 = e^2 / S on plain floats
-        self.c = self.C[0]
-        self.c1 = float(self.c[0])
-        self.d = float(self.D[0])
-        self.r_period = float(self.R_period[0, 0])
 
     def why(self, y: Reading, x: FloatArray, P: FloatArray, variance: float) -> str:
         """Return why y fails the gate at the predictor (x, P), or ''."""
         if not self.on:
             return ''
+        z = np.array((y,)) if isinstance(y, float) else y
+        Rd = np.eye(self.p) * variance if variance > 0 else self.R_period
+        d2, innovation = kalman.mahalanobis2(x, P, z, self.C, Rd, self.D)
         gate = self.gate
-        if isinstance(y, float):    # p = 1: e and S are numbers
-            rd = variance if variance > 0 else self.r_period
-            if x.size == 1:
-                c = self.c1
-                e = y - c * x.item() - self.d
-                S = c * P.item() * c + rd
-            else:
-                c_row = self.c
-                e = y - c_row.dot(x).item() - self.d
-                S = c_row.dot(P).dot(c_row).item() + rd
-            if S == 0.0:
-                return ''
-            d2 = e * e / S
-            if d2 <= gate * gate:
-                return ''
-            innovation: FloatArray = np.array((e,))
-        else:
-            innovation = y - self.C @ x - self.D
-            Rd = np.eye(self.p) * variance if variance > 0 else self.R_period
-            with np.errstate(all='ignore'):
-                try:
-                    d2 = float(innovation @ np.linalg.solve(self.C @ P @ self.C.T + Rd,
-                                                            innovation))
-                except np.linalg.LinAlgError:
-                    return ''
-        if d2 > gate * gate or not math.isfinite(d2):
-            return (f'innovation {innovation} is {math.sqrt(abs(d2)):.3g} standard deviations '
-                    f'from the prediction (gate {gate:g})')
-        return ''
+        if d2 < 0.0 or d2 <= gate * gate:      # d2 < 0: S is singular, no distance
+            return ''
+        return (f'innovation {innovation} is {math.sqrt(abs(d2)):.3g} standard deviations '
+                f'from the prediction (gate {gate:g})')

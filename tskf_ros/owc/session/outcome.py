@@ -59,6 +59,34 @@ class Outcome:
     jumps: list[Jump] = field(default_factory=list)
 
 
+@dataclass(slots=True)
+class Run:
+    """
+    Samples taken in one run (EstimatorSession.add_many): each accepted, appended in order.
+
+    Sample k stepped the filter from the point at previous_ns[k] (its corrected estimate,
+    x(t|t), P(t|t)) to its own stamp (the prediction): what add()'s Outcome holds as a
+    corrected and a predicted estimate and one jump.
+    """
+
+    count: int
+    stamps_ns: NDArray[np.int64]
+    previous_ns: NDArray[np.int64]
+    x_corrected: FloatArray         # count x n
+    P_corrected: FloatArray         # count x n x n
+    x_predicted: FloatArray
+    P_predicted: FloatArray
+
+    def outcomes(self) -> list[Outcome]:
+        """Return the Outcome add() gives for each sample."""
+        return [Outcome('accepted', '', '', [Estimate('corrected', t0, xc, Pc),
+                                             Estimate('predicted', t1, xp, Pp)],
+                        [Jump(t0, t1)])
+                for t0, t1, xc, Pc, xp, Pp in zip(
+                    self.previous_ns.tolist(), self.stamps_ns.tolist(), self.x_corrected,
+                    self.P_corrected, self.x_predicted, self.P_predicted)]
+
+
 class IntervalWarning(NamedTuple):
     """A sampling interval (in nominal periods) that breaks observability, and why."""
 

@@ -25,6 +25,7 @@ from tskf_ros.owc.session.diagnostics import Diagnostics, report, SessionState
 from tskf_ros.owc.session.health import checked, finite, StateLimitError
 from tskf_ros.owc.session.history import History, Point
 from tskf_ros.owc.session.outcome import Estimate, FloatArray, Jump, Outcome, Reading, Stats
+from tskf_ros.owc.session.runs import Runs
 from tskf_ros.owc.session.sampling_intervals import Intervals
 
 
@@ -34,7 +35,7 @@ def reading(value: ArrayLike) -> Reading:
     return y.item() if y.size == 1 else y
 
 
-class EstimatorSession:
+class EstimatorSession(Runs):
     """The filter fed from a stream of stamped samples; see the module docstring."""
 
     def __init__(self, config: EstimatorConfig) -> None:
