@@ -59,9 +59,11 @@ NODE_HELP = {
     'variance': ('mW^2: variance published with every reading; 0: unknown', (0.0, 1e12),
                  False),
     'diagnostics_period': ('s between /diagnostics messages', (0.01, 3600.0), False),
+    'autostart': ('configure and activate at start, and again after a lost device (no '
+                  'lifecycle manager needed); false: wait for ~/change_state', None, True),
 }
 NODE_DEFAULTS = {'rate': 1.0, 'frame_id': 'power_meter', 'variance': 0.0,
-                 'diagnostics_period': 1.0}
+                 'diagnostics_period': 1.0, 'autostart': True}
 PARAMETERS = tuple(METER_HELP) + tuple(f'scpi_{c}' for c in COMMAND_HELP) + tuple(NODE_HELP)
 TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
@@ -76,6 +78,7 @@ class DriverConfig:
     frame_id: str
     variance: float
     diagnostics_period: float
+    autostart: bool = True
 
 
 def default_parameters() -> dict:
@@ -111,7 +114,7 @@ def make_config(values: dict) -> DriverConfig:
             or not values['variance'] >= 0:
         raise MeterError('rate and diagnostics_period must be > 0, variance >= 0')
     return DriverConfig(meter, values['rate'], values['frame_id'], values['variance'],
-                        values['diagnostics_period'])
+                        values['diagnostics_period'], values['autostart'])
 
 
 def reading_to_msg(reading: Reading, config: DriverConfig) -> Illuminance:
