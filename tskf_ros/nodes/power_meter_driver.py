@@ -70,7 +70,8 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
             except Exception:  # noqa: B902 - see _guarded
                 if self.context.ok():
                     raise
-                raise KeyboardInterrupt from None   # Ctrl-C during the start: run_node's
+                # Ctrl-C during the start: run_node ends it as an interrupt (exit 0)
+                raise KeyboardInterrupt from None
         self.get_logger().info(
             f'driver of {self.config.session.resource} through {self.config.session.backend} '
             f'at {self.config.rate:g} Hz on {self.resolve_topic_name(POWER_TOPIC)}; '
