@@ -11,11 +11,18 @@ through which the test plays the light on the sensor and the meter's front panel
 pyvisa-sim has no way to produce: the device absent (open fails as a missing USB device
 does), a read query that times out once, the cable pulled (every I/O on an open resource
 fails with VI_ERROR_CONN_LOST, and opening fails) and plugged back.
+
+`run_hanging_driver(command)` is the main of a driver process whose meter blocks on one
+query until its timeout (a USB read that hangs): it prints HANG_MARK when the query
+starts, for a test that interrupts it there.
 """
 
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 import shutil
+import sys
+import time
 
 import pyvisa
 from pyvisa.constants import StatusCode
@@ -96,6 +103,7 @@ class FaultyOpener:
     """Open pyvisa-sim resources, or fail as a real bench does."""
 
     def __init__(self, backend: str, *, present: bool = True) -> None:
+        self.backend = backend
         self.inner = VisaOpener(backend)
         self.present = present
         self.timeouts = 0                   # the next n queries of timeout_command time out
@@ -109,6 +117,8 @@ class FaultyOpener:
         self.attempts += 1
         if not self.present:
             raise ValueError('No device found.')
+        if self.closed:                     # configured again after a cleanup
+            self.inner, self.closed = VisaOpener(self.backend), False
         self.resources.append(FaultyResource(self, self.inner.open_resource(resource,
                                                                             timeout_ms)))
         return self.resources[-1]
@@ -125,3 +135,59 @@ class FaultyOpener:
         """Close the backend."""
         self.closed = True
         self.inner.close()
+
+
+HANG_MARK = 'the query hangs now'
+# the answers of the hanging meter to what it does not hang on
+ANSWERS = {'*IDN?': 'Fake,Hanging,0,0', 'SENS:POW:UNIT?': 'W', 'SYST:ERR?': '0,"No error"',
+           'MEAS:POW?': '1.0E-03'}
+
+
+class HangingResource:
+    """A meter that answers, but blocks on one query until its timeout (a USB read)."""
+
+    def __init__(self, hang_on: str, timeout_ms: int) -> None:
+        self.hang_on, self.timeout_s = hang_on, timeout_ms / 1000
+
+    def write(self, message: str) -> int:
+        """Take any command."""
+        return len(message)
+
+    def query(self, message: str) -> str:
+        """Answer from ANSWERS; on hang_on, print HANG_MARK and time out (VI_ERROR_TMO)."""
+        if message != self.hang_on:
+            return ANSWERS[message]
+        print(HANG_MARK, flush=True)
+        deadline = time.monotonic() + self.timeout_s
+        while time.monotonic() < deadline:
+            time.sleep(0.01)
+        raise pyvisa.errors.VisaIOError(StatusCode.error_timeout)
+
+    def clear(self) -> None:
+        """Do nothing: the device does not answer."""
+
+    def close(self) -> None:
+        """Do nothing: there is nothing to release."""
+
+
+class HangingOpener:
+    """Open HangingResources."""
+
+    def __init__(self, hang_on: str) -> None:
+        self.hang_on = hang_on
+
+    def open_resource(self, resource: str, timeout_ms: int) -> HangingResource:
+        """Return a new hanging meter."""
+        return HangingResource(self.hang_on, timeout_ms)
+
+    def close(self) -> None:
+        """Do nothing: there is no backend."""
+
+
+def run_hanging_driver(hang_on: str) -> None:
+    """Run power_meter_driver (sys.argv: its arguments) on a meter that hangs on hang_on."""
+    from tskf_ros.nodes.node_base import run_node
+    from tskf_ros.nodes.power_meter_driver import DESCRIPTION, NODE_NAME, PowerMeterDriver
+    from tskf_ros.owc.meter_settings import MeterError
+    run_node(partial(PowerMeterDriver, opener=HangingOpener(hang_on)), name=NODE_NAME,
+             description=DESCRIPTION, startup_errors=(MeterError,), args=sys.argv)

@@ -36,6 +36,7 @@ KEYS = {
     'numba': 'python3-numba', 'mypy': 'python3-mypy', 'filterpy': 'python3-filterpy-pip',
     'pykalman': 'python3-pykalman-pip',
     'foxglove': 'python3-foxglove-sdk-pip', 'websockets': 'python3-websockets',
+    'threadpoolctl': 'python3-threadpoolctl-pip',
 }
 RUN = ('exec_depend', 'depend')
 TEST = RUN + ('test_depend',)

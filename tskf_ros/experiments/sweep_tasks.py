@@ -81,7 +81,10 @@ def parse_setting(text: str, defaults: dict) -> tuple[str, list]:
         raw = raw.strip()
         if not raw:
             raise ValueError(f'--set {text!r}: an empty value')
-        if isinstance(default, (list, tuple)):
+        if isinstance(default, (list, tuple)) and all(isinstance(v, str) for v in default) \
+                and default:
+            value = raw.split()                     # a list of names (state_names)
+        elif isinstance(default, (list, tuple)):
             try:
                 value = [float(v) for v in raw.split()]
             except ValueError:
@@ -94,7 +97,8 @@ def parse_setting(text: str, defaults: dict) -> tuple[str, list]:
             try:
                 value = type(default)(float(raw)) if isinstance(default, float) else int(raw)
             except ValueError:
-                raise ValueError(f'--set {name}: {raw!r} is not a number') from None
+                kind = 'a number' if isinstance(default, float) else 'an integer'
+                raise ValueError(f'--set {name}: {raw!r} is not {kind}') from None
         else:
             value = raw
         out.append(value)

@@ -28,6 +28,7 @@ class DriverConfig:
     frame_id: str
     variance: float
     diagnostics_period: float
+    autostart: bool = True
 
 
 def default_parameters() -> dict:
@@ -53,7 +54,7 @@ def make_config(values: dict) -> DriverConfig:
             or not values['variance'] >= 0:
         raise MeterError('rate and diagnostics_period must be > 0, variance >= 0')
     return DriverConfig(meter, values['rate'], values['frame_id'], values['variance'],
-                        values['diagnostics_period'])
+                        values['diagnostics_period'], values['autostart'])
 
 
 def reading_to_msg(reading: Reading, config: DriverConfig) -> Illuminance:

@@ -2,6 +2,8 @@
 
 from dataclasses import dataclass, field, fields
 import math
+import string
+import sys
 from typing import Optional
 
 from pyvisa import rname
@@ -16,8 +18,15 @@ UNITS = {'W': 'W', 'mW': 'MW', 'dBm': DBM}      # the unit parameter -> its SCPI
 SCPI_OVERFLOW = 9.9e37
 # why a reading was not published; 'no_clock': the stamping clock read 0 (a node on
 # use_sim_time before /clock arrives), a stamp the estimator would reject
-SKIP_REASONS = ('timeout', 'overflow', 'not_finite', 'negative', 'above_max', 'unparseable',
-                'wrong_unit', 'no_clock')
+# 'negative' includes -0.0 in W (a sign the meter gave); 'underflow': a positive reading so
+# small (-1e30 dBm, 1e-320 nW) that its mW is not a normal double (0.0 or subnormal)
+SKIP_REASONS = ('timeout', 'overflow', 'not_finite', 'negative', 'underflow', 'above_max',
+                'unparseable', 'wrong_unit', 'no_clock')
+# the fields a command template may name, whole ('{unit}', '{wavelength:g}'): no attribute
+# or index ('{unit.foo}', '{0[1]}'), no positional field
+TEMPLATE_FIELDS = ('unit', 'wavelength', 'averaging')
+# the longest width or precision a template's format spec may ask for
+MAX_FORMAT_DIGITS = 3
 # the error-queue reply that means 'empty' starts with this code
 NO_ERROR = '0'
 MAX_ERRORS_READ = 20
@@ -75,8 +84,8 @@ class MeterConfig:
                   'unit_check_every': self.unit_check_every >= 0}
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
-            raise MeterError(f'out of range: {", ".join(f"{n}={getattr(self, n)!r}" for n in bad)}'
-                             ' (reconnect_max must be >= reconnect_initial)')
+            raise MeterError('out of range: ' + ', '.join(
+                f'{n}={getattr(self, n)!r} ({RANGE_TEXT[n]})' for n in bad))
         if not self.commands.read:
             raise MeterError('the read command is empty')
         for f in fields(ScpiCommands):
@@ -86,11 +95,38 @@ class MeterConfig:
         """Return the command `name` with {unit}, {wavelength} and {averaging} filled in."""
         template = getattr(self.commands, name)
         try:
+            check_template(template)
             return template.format(unit=UNITS[self.unit], wavelength=self.wavelength,
                                    averaging=self.averaging)
-        except (KeyError, IndexError, ValueError) as exc:
-            raise MeterError(f'command {name} {template!r}: {exc!r} (fields: {{unit}}, '
+        except (ValueError, TypeError, LookupError, AttributeError) as exc:
+            raise MeterError(f'command scpi_{name} {template!r}: {exc} (fields: {{unit}}, '
                              '{wavelength}, {averaging})') from None
+
+
+RANGE_TEXT = {'wavelength': 'must be > 0', 'averaging': 'must be >= 1',
+              'timeout': 'must be > 0', 'max_power': 'must be > 0',
+              'max_timeouts': 'must be >= 1', 'reconnect_initial': 'must be > 0',
+              'reconnect_max': 'must be >= reconnect_initial',
+              'unit_check_every': 'must be >= 0'}
+
+
+def check_template(template: str) -> None:
+    """Raise ValueError unless every field of template is one of TEMPLATE_FIELDS, whole."""
+    for _, field_name, spec, _ in string.Formatter().parse(template):
+        if field_name is None:
+            continue
+        if field_name not in TEMPLATE_FIELDS:
+            raise ValueError(f'{{{field_name}}} is not a field (attributes, indexes and '
+                             'positions are not allowed)')
+        if spec and ('{' in spec or '}' in spec):
+            raise ValueError(f'the format spec {spec!r} of {{{field_name}}} has a field')
+        if any(len(digits) > MAX_FORMAT_DIGITS for digits in _digit_runs(spec or '')):
+            raise ValueError(f'the format spec {spec!r} of {{{field_name}}} asks for more '
+                             f'than {MAX_FORMAT_DIGITS} digits of width or precision')
+
+
+def _digit_runs(text: str) -> list[str]:
+    return ''.join(c if c.isdigit() else ' ' for c in text).split()
 
 
 @dataclass(frozen=True)
@@ -133,13 +169,18 @@ def to_milliwatts(reply: str, unit: Optional[str], max_power: float
     if unit is None:
         return None, 'wrong_unit', unit
     if unit == DBM:
-        # P [mW] = 10^(P [dBm] / 10): any finite dBm is a positive power
+        # P [mW] = 10^(P [dBm] / 10): a positive power, unless it underflows (-1e30 dBm)
         if value > 10 * math.log10(max_power):
             return None, 'above_max', unit
-        return 10.0 ** (value / 10.0), '', unit
-    if value < 0:
+        mw = 10.0 ** (value / 10.0)
+        if mw < sys.float_info.min:
+            return None, 'underflow', unit
+        return mw, '', unit
+    if math.copysign(1.0, value) < 0:           # -0.0 W too: the meter said negative
         return None, 'negative', unit
     mw = value * LINEAR_UNITS[unit]
+    if value > 0 and mw < sys.float_info.min:   # 1e-320 nW: not 0.0, not subnormal
+        return None, 'underflow', unit
     if mw > max_power:
         return None, 'above_max', unit
     return mw, '', unit

@@ -2,6 +2,7 @@
 
 from collections import deque
 from dataclasses import replace
+from pathlib import Path
 import time
 from typing import Callable, Optional, Protocol
 
@@ -13,6 +14,7 @@ from tskf_ros.core.units import NS
 from tskf_ros.owc.meter_settings import (MAX_ERRORS_READ, MeterConfig, MeterError, NO_ERROR,
                                          parse_unit, Reading, SKIP_REASONS, to_milliwatts,
                                          UNITS)
+import yaml
 
 __all__ = ['Opener', 'PowerMeter', 'Resource', 'VisaOpener']
 
@@ -43,12 +45,9 @@ class VisaOpener:
     def __init__(self, backend: str) -> None:
         try:
             self.manager = pyvisa.ResourceManager(backend)
-        except (OSError, ValueError, pyvisa.errors.Error) as exc:
-            # pyvisa-sim folds a whole traceback into its message, its newlines escaped:
-            # keep its last line (the cause)
-            text = str(exc).replace('\\n', '\n').replace("\\'", "'")
-            lines = [line.strip() for line in text.splitlines() if line.strip('\'" ')]
-            cause = lines[-1] if lines else type(exc).__name__
+        except Exception as exc:  # noqa: B902 - pyvisa-sim raises anything for a bad file
+            # (yaml's errors, KeyError, AttributeError, TypeError, Exception itself)
+            cause = yaml_problem(backend) or last_line(exc)
             raise MeterError(f'VISA backend {backend!r} cannot be loaded: {cause}') from None
 
     def open_resource(self, resource: str, timeout_ms: int) -> Resource:
@@ -296,6 +295,32 @@ class PowerMeter:
             return 'WARN', (f'{recent_skips} reading(s) skipped, {recent_converted} '
                             f'converted from {self.device_unit}; {self.last_error}'), values
         return 'OK', f'reading {self.identity or self.config.resource}', values
+
+
+def yaml_problem(backend: str) -> str:
+    """Return why the file of a 'path@sim' backend is not YAML, in one line ('' if it is)."""
+    path, _, kind = backend.rpartition('@')
+    if kind != 'sim' or not path:
+        return ''
+    try:
+        yaml.safe_load(Path(path).read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f', line {mark.line + 1}, column {mark.column + 1}' if mark else ''
+        return f'{path}{where} is not YAML: {getattr(exc, "problem", None) or exc}'
+    except (OSError, ValueError):
+        return ''           # pyvisa-sim says why it cannot read it
+    return ''
+
+
+def last_line(exc: BaseException) -> str:
+    """Return the last line of a message into which pyvisa-sim folded a traceback."""
+    text = str(exc)
+    for _ in range(3):      # its newlines and quotes come escaped, sometimes twice
+        text = text.replace('\\\\', '\\').replace('\\n', '\n').replace("\\'", "'")
+    lines = [line.strip().rstrip('\\').strip() for line in text.splitlines()
+             if line.strip(' \'"\\')]
+    return lines[-1][:200] if lines else type(exc).__name__
 
 
 def describe(exc: BaseException) -> str:

@@ -1,0 +1,23 @@
+"""What sweep's --set says about a value it cannot take: the kind the parameter wants."""
+
+import pytest
+
+from tskf_ros.experiments import sweep_tasks
+from tskf_ros.messages.estimator_interface import default_parameters
+
+
+@pytest.mark.parametrize('text, message', [
+    ('gate_patience=1e9', "--set gate_patience: '1e9' is not an integer"),
+    ('gate_patience=2.5', "--set gate_patience: '2.5' is not an integer"),
+    ('gate=abc', "--set gate: 'abc' is not a number"),
+    ('R=1 x', "--set R: '1 x' is not a list of numbers"),
+])
+def test_a_value_of_the_wrong_kind_is_named_with_the_kind_wanted(text, message):
+    with pytest.raises(ValueError) as info:
+        sweep_tasks.parse_setting(text, default_parameters())
+    assert str(info.value) == message
+
+
+def test_a_list_of_names_takes_names():
+    assert sweep_tasks.parse_setting('state_names=a,b c', default_parameters()) == (
+        'state_names', [['a'], ['b', 'c']])
