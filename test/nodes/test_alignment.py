@@ -182,7 +182,8 @@ def make(ros_context, executor_kind):
         # no periodic /diagnostics: a timer's message would take ('consume') the counters
         # the test asks for with Harness.values(), at a moment that depends on the load
         extra.setdefault('diagnostics_period', 3600.0)
-        # nor rate or staleness verdicts: they follow the wall clock (test/led/test_alignment_session_hardening.py has them)
+        # nor rate or staleness verdicts: they follow the wall clock
+        # (test/led/test_alignment_session_hardening.py has them)
         extra.setdefault('stale_timeout', 0.0)
         extra.setdefault('min_rate_fraction', 0.0)
         h = Harness(ros_context, yaml_parameters('alignment.yaml', '/**/alignment', **extra),
