@@ -4,6 +4,7 @@ import dataclasses
 import math
 from typing import Optional, Sequence
 
+from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
@@ -60,8 +61,10 @@ def _quantiles(values: Sequence[float]) -> tuple[Optional[float], Optional[float
     """Return (median, p90) of values (inf: never happened; None where inf or empty)."""
     if not len(values):
         return None, None
-    q = np.quantile(np.asarray(values, dtype=float), [0.5, 0.9])
-    return tuple(float(v) if math.isfinite(v) else None for v in q)
+    big = np.finfo(float).max                  # inf would make the interpolation NaN
+    v = np.asarray(values, dtype=float)
+    q = np.quantile(np.where(np.isfinite(v), v, big), [0.5, 0.9], method='lower')
+    return tuple(float(x) if x < big else None for x in q)
 
 
 def metrics(traj: led.Trajectory, states: Optional[np.ndarray],
@@ -143,5 +146,37 @@ def evaluate(name: str, runs: int, link: led.TrackingLinkConfig, rng: np.random.
     return angular, measure, m, traj, aligner
 
 
-__all__ = ['ACQUIRED_WITHIN', 'build_pat', 'empty_record', 'evaluate', 'metrics',
+def plot_pat_run(traj: led.Trajectory, record: Recorded, *, run: int = 0,
+                 title: str) -> Figure:
+    """One supervised run in time: angle of incidence and base, the state, the intensity."""
+    fig = Figure(figsize=(7.5, 6.5))
+    axes = fig.subplots(3, 1, sharex=True, gridspec_kw={'height_ratios': [3, 1, 2]})
+    t = traj.t
+    base = np.cumsum(np.r_[0.0, traj.command[:-1, run]])
+    states = np.array(record.states)[:, run]
+    declared = np.nonzero(np.array(record.declared)[:, run])[0]
+    axes[0].plot(t, traj.phi[:, run], 'k', lw=1.0, label=r'angle of incidence $\phi$')
+    axes[0].plot(t, base, color='tab:blue', lw=0.9, label='base angle (from its start)')
+    for s in (-led.TRACKING_ANGLE, led.TRACKING_ANGLE):
+        axes[0].axhline(s, color='tab:red', ls=':', lw=0.8)
+    for k in declared:
+        axes[0].axvline(t[k], color='tab:red', lw=0.8, alpha=0.6)
+    axes[0].set_ylabel('angle (deg)')
+    axes[1].step(t, states, where='post', color='tab:purple', lw=1.2)
+    axes[1].set_yticks(range(len(STATES)), STATES)
+    axes[1].set_ylabel('state')
+    axes[2].plot(t, traj.z[:, run], color='0.6', lw=0.7, label='measured')
+    axes[2].plot(t, traj.clean[:, run], 'k', lw=1.0, label='clean')
+    axes[2].set_ylabel('intensity (V)')
+    axes[2].set_xlabel('time (s)')
+    for ax in (axes[0], axes[2]):
+        ax.legend(fontsize=8, loc='upper right')
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].set_title(title + ' (red lines: declared losses)', fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+__all__ = ['plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'empty_record', 'evaluate', 'metrics',
            'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']

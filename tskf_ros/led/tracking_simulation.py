@@ -29,7 +29,8 @@ class TrackingLinkConfig:
     scan mean, or the orientation for the baselines) at x2_0 degrees, or (not in the
     paper: a cold start) uniform on x2_0 +- x2_0_spread, drawn after all other noise.
     dropout is the probability that a measurement is missing (Bernoulli, independent per
-    step and run).
+    step and run).  blocked: a time interval [start, stop) s in which no light arrives
+    (the clean intensity is 0), not in the paper.
     """
 
     beta: float = 1.2
@@ -41,6 +42,7 @@ class TrackingLinkConfig:
     x2_0: float = 5.0
     dropout: float = 0.0
     x2_0_spread: float = 0.0
+    blocked: tuple[float, ...] = ()     # s: [start, stop) with no light (not in the paper)
 
 
 @dataclass
@@ -92,6 +94,8 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
     drift = link.beta * link.dt
     for k in range(steps):
         clean = x1 * response.g(wrap_degrees(phi))
+        if link.blocked and link.blocked[0] <= t[k] < link.blocked[1]:
+            clean = np.zeros(n)
         # (8): V_d,k = x1 g(phi) + v_k
         z = np.where(missing[k], np.nan, clean + v[k])
         out.phi[k], out.x2[k], out.x1[k] = phi, phi - aligner.scan_offset, x1
