@@ -2,12 +2,9 @@
 
 import argparse
 import dataclasses
-import json
 import math
-import os
 from pathlib import Path
 import sys
-import tempfile
 import time
 from typing import Callable, Optional, Sequence
 
@@ -15,7 +12,7 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
-from tskf_ros.experiments import alignment_pat
+from tskf_ros.experiments import alignment_pat, output
 
 DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
 DEFAULT_DROPOUTS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
@@ -121,7 +118,8 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
 
 def _config_record(args: argparse.Namespace, response: led.IncidenceResponse) -> dict:
     return {'runs': args.runs, 'beta_deg_per_s': args.beta, 'steps': args.steps, 'dt_s': args.dt,
-            'seed': args.seed, 'x2_0_deg': args.x2_0, 'cold_start_deg': args.cold_start, 'max_intensity_v': led.MAX_INTENSITY,
+            'seed': args.seed, 'x2_0_deg': args.x2_0, 'cold_start_deg': args.cold_start,
+            'max_intensity_v': led.MAX_INTENSITY,
             'units_per_degree': response.units_per_degree, 'x1_floor': args.x1_floor,
             'clip_three_point': args.clip_three_point, 'controller': args.controller,
             'tracking': {'angle_deg': led.TRACKING_ANGLE,
@@ -132,33 +130,14 @@ def _config_record(args: argparse.Namespace, response: led.IncidenceResponse) ->
 # Output
 
 
-def _atomic(path: Path, write: Callable[[str], None]) -> None:
-    """Call write(temp_path) in path's directory, then os.replace it onto path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.', suffix=path.suffix)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def write_json(path: Path, data: dict) -> None:
-    """Write data as JSON, atomically."""
-    def dump(tmp: str) -> None:
-        with open(tmp, 'w', encoding='utf-8') as f:
-            json.dump(data, f, indent=1)
-            f.write('\n')
-    _atomic(path, dump)
+    """Write data as JSON, atomically (NaN and inf become null)."""
+    output.write_json(path, data)
 
 
 def save_figure(fig: Figure, path: Path) -> None:
     """Save a matplotlib figure as PNG, atomically."""
-    _atomic(path, lambda tmp: fig.savefig(tmp, format='png', dpi=120))
+    output.save_figure(fig, path, dpi=120)
 
 
 def plot_tracking(x: Sequence[float], results: dict, *, xlabel: str, title: str,
@@ -251,9 +230,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--x2-0', type=float, default=5.0, help='initial scan mean, deg (5)')
     p.add_argument('--cold-start', type=float, default=0.0, metavar='DEG',
                    help='initial angle uniform on +-DEG (x2_0 = 0; the supervised algorithms '
-                        'then start with a search); 0: the paper\'s known start (--x2-0)')
+                        'then start with a search); 0: the known start of the paper (--x2-0)')
     p.add_argument('--algorithms', type=lambda t: [a for a in t.split(',') if a], default=None,
-                   help='comma list of the comparison\'s algorithms (default: '
+                   help='comma list of the algorithms compared (default: '
                         + ','.join(led.ALGORITHMS + PAT_ALGORITHMS) + '; lqg: the plain ones)')
     units = p.add_mutually_exclusive_group()
     units.add_argument('--units-per-degree', type=float, default=None,

@@ -1,7 +1,6 @@
 """The supervised (acquire / track / re-acquire) algorithms of alignment_mc and their metrics."""
 
 import dataclasses
-import math
 from typing import Optional, Sequence
 
 from matplotlib.figure import Figure
