@@ -158,8 +158,9 @@ def plot_pat_run(traj: led.Trajectory, record: Recorded, *, run: int = 0,
     axes[0].plot(t, base, color='tab:blue', lw=0.9, label='base angle (from its start)')
     for s in (-led.TRACKING_ANGLE, led.TRACKING_ANGLE):
         axes[0].axhline(s, color='tab:red', ls=':', lw=0.8)
-    for k in declared:
-        axes[0].axvline(t[k], color='tab:red', lw=0.8, alpha=0.6)
+    for i, k in enumerate(declared):
+        axes[0].axvline(t[k], color='tab:red', lw=0.8, alpha=0.6,
+                        label='declared loss' if i == 0 else None)
     axes[0].set_ylabel('angle (deg)')
     axes[1].step(t, states, where='post', color='tab:purple', lw=1.2)
     axes[1].set_yticks(range(len(STATES)), STATES)
@@ -172,7 +173,7 @@ def plot_pat_run(traj: led.Trajectory, record: Recorded, *, run: int = 0,
         ax.legend(fontsize=8, loc='upper right')
     for ax in axes:
         ax.grid(alpha=0.3)
-    axes[0].set_title(title + ' (red lines: declared losses)', fontsize=10)
+    axes[0].set_title(title, fontsize=10)
     fig.tight_layout()
     return fig
 
