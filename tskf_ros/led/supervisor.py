@@ -164,6 +164,7 @@ class Supervisor:
         self.declared = lost
         if np.any(lost):
             self.losses[lost] += 1
+            self.tracked[lost] = 0          # good lock needs a full window again
             if cfg.reacquire:
                 self.state[lost] = LOST
                 self.sweep.start(lost, self.last_good)
