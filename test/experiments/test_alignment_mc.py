@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tskf_ros import led
-from tskf_ros.experiments import alignment_mc
+from tskf_ros.experiments import alignment_mc, alignment_pat
 
 
 def test_experiment_writes_the_schema(tmp_path, capsys):
@@ -44,3 +44,42 @@ def test_alignment_mc_records_the_controller(tmp_path, capsys):
     data = json.loads(out.read_text())
     assert data['config']['controller'] == 'lqg'
     assert set(data['results']) == set(led.ALGORITHMS)
+
+
+def test_supervised_algorithms_write_the_lock_fields(tmp_path, capsys):
+    out = tmp_path / 'a.json'
+    names = ('ekf',) + alignment_mc.PAT_ALGORITHMS
+    assert alignment_mc.main(['--runs', '6', '--steps', '60', '--noise-levels', '1.0',
+                              '--algorithms', ','.join(names), '--json', str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert set(data['results']) == set(names)
+    for name in names:
+        got = data['results'][name]
+        assert len(got['lost_at_end']) == 1 and 0.0 <= got['lost_at_end'][0] <= 1.0
+        assert set(got['reacquisition_s']) == {'median', 'p90', 'events'}
+        assert set(got['acquisition_s']) == {'median', 'p90'}
+    # the plain algorithms declare nothing: no false-alarm rate
+    assert data['results']['ekf']['false_alarms_per_1000s'] == [None]
+    assert data['results']['ekf_pat']['false_alarms_per_1000s'][0] is not None
+    assert 'ekf_pat' in capsys.readouterr().out
+
+
+def test_metrics_of_a_scripted_trajectory():
+    # 2 runs, 6 steps of 0.5 s: run 0 leaves the zone at step 2 (declared lost there) and
+    # is back, tracking, at step 4; run 1 never leaves and has one declared loss
+    phi = np.array([[0, 0], [5, 1], [30, 2], [40, 3], [10, 4], [0, 5]], dtype=float)
+    t = np.arange(6) * 0.5
+    traj = led.Trajectory(t=t, phi=phi, x2=phi, x1=np.ones_like(phi), clean=np.ones_like(phi),
+                          z=np.ones_like(phi), command=np.zeros_like(phi))
+    T, L = 1, 2
+    states = np.array([[T, T], [T, T], [L, T], [L, T], [T, T], [T, T]])
+    declared = np.zeros((6, 2), dtype=bool)
+    declared[2, 0] = declared[3, 1] = True
+    m = alignment_pat.metrics(traj, states, declared)
+    assert m['lost_at_end'] == 0.0
+    # run 0: lost at step 2, tracking in the zone at 4; run 1: its false alarm at 3 is
+    # 'tracking in the zone' at once (0 s)
+    np.testing.assert_allclose(sorted(m['reacquisition']), [0.0, 1.0])
+    # one declared loss in run 1's 3 s (6 steps of 0.5 s) never out of the zone
+    assert m['false_alarms_per_1000s'] == pytest.approx(1000.0 / 3.0)
+    np.testing.assert_allclose(m['acquisition'], [0.0, 0.0])

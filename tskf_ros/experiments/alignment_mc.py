@@ -2,12 +2,9 @@
 
 import argparse
 import dataclasses
-import json
 import math
-import os
 from pathlib import Path
 import sys
-import tempfile
 import time
 from typing import Callable, Optional, Sequence
 
@@ -15,15 +12,20 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
+from tskf_ros.experiments import alignment_pat, output
 
 DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
 DEFAULT_DROPOUTS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
 FAIL_BETA = 16.0        # deg/s: the EKF loses every run at 50 ms steps (8 deg/s still tracks)
 DROPOUT_BETA = 2.8      # deg/s: the disturbance of the paper's experiments (Fig. 14)
 LABELS = {'ekf': 'EKF', 'hill_climbing': 'Hill', 'three_point': '3Point',
-          'ekf_hold': 'EKF, last value held'}
+          'ekf_hold': 'EKF, last value held', 'ekf_pat': 'EKF+PAT', 'ekf_reset': 'EKF reset',
+          'hill_climbing_pat': 'Hill+PAT', 'three_point_pat': '3Point+PAT'}
 COLORS = {'ekf': 'tab:blue', 'hill_climbing': 'tab:orange', 'three_point': 'tab:green',
-          'ekf_hold': 'tab:purple'}
+          'ekf_hold': 'tab:purple', 'ekf_pat': 'navy', 'ekf_reset': 'tab:cyan',
+          'hill_climbing_pat': 'saddlebrown', 'three_point_pat': 'darkgreen'}
+# the supervised algorithms (acquire, track, detect loss, re-acquire): alignment_pat
+PAT_ALGORITHMS = tuple(alignment_pat.PAT_ALGORITHMS)
 Progress = Callable[[str], None]
 
 
@@ -72,8 +74,8 @@ def evaluate(name: str, runs: int, link: led.TrackingLinkConfig, rng: np.random.
 
 
 def _empty(algorithms: Sequence[str]) -> dict:
-    return {name: {metric: {'mean': [], 'std': []} for metric in ('angular', 'measure')}
-            for name in algorithms}
+    return {name: {**{metric: {'mean': [], 'std': []} for metric in ('angular', 'measure')},
+                   **alignment_pat.empty_record()} for name in algorithms}
 
 
 def _record(results: dict, name: str, angular: np.ndarray, measure: np.ndarray) -> None:
@@ -95,8 +97,17 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
         parts = []
         for name in algorithms:
             rng = np.random.default_rng(seed)     # common random numbers: the same draws
-            angular, measure = evaluate(name, runs, cfg, rng, response, ekf, clip, controller)
+            if name in PAT_ALGORITHMS:
+                angular, measure, m, _, _ = alignment_pat.evaluate(name, runs, cfg, rng,
+                                                                   response, ekf, clip)
+            else:
+                aligner = build(name, runs, cfg, response, ekf, clip, controller)
+                traj = led.simulate_tracking(aligner, cfg, rng, response)
+                angular, measure = led.tracking(
+                    traj, threshold=led.TRACKING_LEVEL * cfg.max_intensity)
+                m = alignment_pat.metrics(traj, None, None)
             _record(results, name, angular, measure)
+            alignment_pat.record(results[name], m)
             parts.append(f'{name} {np.mean(angular):5.1f}%')
         if progress is not None:
             progress(f'{parameter} {value:.2f} ({i + 1}/{len(values)}): ' + '  '.join(parts)
@@ -107,7 +118,8 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
 
 def _config_record(args: argparse.Namespace, response: led.IncidenceResponse) -> dict:
     return {'runs': args.runs, 'beta_deg_per_s': args.beta, 'steps': args.steps, 'dt_s': args.dt,
-            'seed': args.seed, 'x2_0_deg': args.x2_0, 'max_intensity_v': led.MAX_INTENSITY,
+            'seed': args.seed, 'x2_0_deg': args.x2_0, 'cold_start_deg': args.cold_start,
+            'max_intensity_v': led.MAX_INTENSITY,
             'units_per_degree': response.units_per_degree, 'x1_floor': args.x1_floor,
             'clip_three_point': args.clip_three_point, 'controller': args.controller,
             'tracking': {'angle_deg': led.TRACKING_ANGLE,
@@ -118,33 +130,14 @@ def _config_record(args: argparse.Namespace, response: led.IncidenceResponse) ->
 # Output
 
 
-def _atomic(path: Path, write: Callable[[str], None]) -> None:
-    """Call write(temp_path) in path's directory, then os.replace it onto path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.', suffix=path.suffix)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def write_json(path: Path, data: dict) -> None:
-    """Write data as JSON, atomically."""
-    def dump(tmp: str) -> None:
-        with open(tmp, 'w', encoding='utf-8') as f:
-            json.dump(data, f, indent=1)
-            f.write('\n')
-    _atomic(path, dump)
+    """Write data as JSON, atomically (NaN and inf become null)."""
+    output.write_json(path, data)
 
 
 def save_figure(fig: Figure, path: Path) -> None:
     """Save a matplotlib figure as PNG, atomically."""
-    _atomic(path, lambda tmp: fig.savefig(tmp, format='png', dpi=120))
+    output.save_figure(fig, path, dpi=120)
 
 
 def plot_tracking(x: Sequence[float], results: dict, *, xlabel: str, title: str,
@@ -235,6 +228,12 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--dropout', type=float, default=0.0,
                    help='probability that a measurement is missing (0)')
     p.add_argument('--x2-0', type=float, default=5.0, help='initial scan mean, deg (5)')
+    p.add_argument('--cold-start', type=float, default=0.0, metavar='DEG',
+                   help='initial angle uniform on +-DEG (x2_0 = 0; the supervised algorithms '
+                        'then start with a search); 0: the known start of the paper (--x2-0)')
+    p.add_argument('--algorithms', type=lambda t: [a for a in t.split(',') if a], default=None,
+                   help='comma list of the algorithms compared (default: '
+                        + ','.join(led.ALGORITHMS + PAT_ALGORITHMS) + '; lqg: the plain ones)')
     units = p.add_mutually_exclusive_group()
     units.add_argument('--units-per-degree', type=float, default=None,
                        help='fit units per degree of g (default: the 20%%-at-15-deg unit)')
@@ -252,6 +251,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--no-comparison', action='store_true', help='skip the noise-level sweep')
     p.add_argument('--fig8', type=Path, help='write the beta = --beta tracking run (Fig. 8)')
     p.add_argument('--fig9', type=Path, help='write the failing run (Fig. 9)')
+    p.add_argument('--pat-run', type=Path, help='write one ekf_pat run (--run-noise, '
+                   '--cold-start, blocked from 8 to 11 s): angle, state and intensity in time')
     p.add_argument('--fig9-beta', type=float, default=FAIL_BETA,
                    help=f'beta of the failing run, deg/s ({FAIL_BETA:g})')
     p.add_argument('--run-noise', type=float, default=math.sqrt(led.PAPER_R_SYS[0][0]),
@@ -285,8 +286,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except led.AlignmentError as exc:
         print(f'alignment_mc: {exc}', file=sys.stderr)
         return 2
-    link = led.TrackingLinkConfig(beta=args.beta, dt=args.dt, steps=args.steps, x2_0=args.x2_0,
-                                  dropout=args.dropout)
+    if not (math.isfinite(args.cold_start) and 0.0 <= args.cold_start <= 180.0):
+        parser().error('--cold-start must be in [0, 180] deg')
+    names = args.algorithms or (led.ALGORITHMS + PAT_ALGORITHMS if args.controller == 'p'
+                                else led.ALGORITHMS)
+    unknown = set(names) - set(led.ALGORITHMS + PAT_ALGORITHMS)
+    if unknown or (args.controller != 'p' and set(names) & set(PAT_ALGORITHMS)):
+        parser().error(f'--algorithms: unknown {sorted(unknown)} or supervised with '
+                       f'--controller {args.controller} (the supervisor steers the P controller)')
+    link = led.TrackingLinkConfig(beta=args.beta, dt=args.dt, steps=args.steps,
+                                  x2_0=0.0 if args.cold_start else args.x2_0,
+                                  x2_0_spread=args.cold_start, dropout=args.dropout)
     common = {'runs': args.runs, 'seed': args.seed, 'response': response, 'ekf': ekf,
               'clip': args.clip_three_point, 'controller': args.controller,
               'progress': progress}
@@ -294,7 +304,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
              f'deg/s; {args.steps} steps of {args.dt:g} s; {args.runs} runs per point')
 
     if not args.no_comparison:
-        out = sweep('noise', args.noise_levels, link=link, **common)
+        out = sweep('noise', args.noise_levels, link=link, algorithms=names, **common)
         progress(f'comparison done in {out["elapsed_s"]:.1f} s')
         data = {'noise_levels': list(args.noise_levels), 'results': out['results'],
                 'config': {**_config_record(args, response), 'dropout': args.dropout},
@@ -321,6 +331,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                              f'tracking {angular:.1f}% (angle), {measure:.1f}% (measure)')
         save_figure(fig, path)
         progress(f'wrote {path} (beta {beta:g} deg/s: tracking {angular:.1f}%)')
+
+    if args.pat_run:
+        plink = dataclasses.replace(link, noise=args.run_noise, blocked=(8.0, 11.0))
+        *_, traj, rec = alignment_pat.evaluate('ekf_pat', 1, plink,
+                                               np.random.default_rng(args.seed), response, ekf,
+                                               False)
+        save_figure(alignment_pat.plot_pat_run(traj, rec, title=(
+            f'ekf_pat, noise {args.run_noise:g} V, cold start within +-{args.cold_start:g} deg,'
+            ' light blocked 8-11 s')), args.pat_run)
+        progress(f'wrote {args.pat_run}')
 
     if args.dropout_png or args.dropout_json:
         names = (*led.ALGORITHMS, 'ekf_hold')

@@ -9,6 +9,7 @@ import math
 from typing import Optional, Union
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tskf_ros.led.intensity_model import AlignmentError, FloatArray, IncidenceResponse
 from tskf_ros.led.lqg_alignment import LQGAligner, LQGConfig
@@ -49,6 +50,11 @@ class HillClimbing(_SteppingAligner):
         self.direction = np.ones(self.runs)
         self.reference = np.full(self.runs, np.nan)
 
+    def restart_runs(self, mask: NDArray[np.bool_]) -> None:
+        """Start the runs in mask afresh: no reference, turning +gamma first."""
+        self.direction[mask] = 1.0
+        self.reference[mask] = np.nan
+
     def step(self, stamp: float, z: Measurement) -> FloatArray:
         """Compare z with the last measurement, reverse if it did not rise, return the turn."""
         z = as_measurement(z, self.runs)
@@ -79,6 +85,11 @@ class ThreePointAveraging(_SteppingAligner):
         self.phase = np.zeros(self.runs, dtype=int)   # 0: at origin, 1: at +gamma, 2: at -gamma
         self.v = np.zeros((self.runs, 3))             # V1, V2, V3 of the current cycle
         self.offset = np.zeros(self.runs)
+
+    def restart_runs(self, mask: NDArray[np.bool_]) -> None:
+        """Start the runs in mask afresh: a new cycle at the current orientation."""
+        self.phase[mask] = 0
+        self.v[mask] = 0.0
 
     def step(self, stamp: float, z: Measurement) -> FloatArray:
         """Record V for this phase, return the turn to the next phase's orientation."""

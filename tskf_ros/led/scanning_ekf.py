@@ -295,6 +295,21 @@ class ScanningEKF:
         self.u = self.u + delta
         self.since = self.since + delta
 
+    def restart_runs(self, mask: NDArray[np.bool_], x: FloatArray, P: FloatArray) -> None:
+        """
+        Start the runs in mask afresh from the forecast x (m, 2) and P (m, 2, 2).
+
+        Not in the paper: for a supervisor that hands over from a search or resets after a
+        loss; x and P are what the next step predicts from (its turn u is 0), and the
+        first update has no partner measurement.
+        """
+        self.x[mask] = x
+        self.P[mask] = P
+        self.u[mask] = 0.0
+        self.since[mask] = 0.0
+        self.z_prev[mask] = np.nan
+        self.psi_prev[mask] = 0.0
+
     def step(self, stamp: float, z: Measurement) -> FloatArray:
         """Run one iteration at `stamp` with z_k (NaN/None: missing); return the commands."""
         z = as_measurement(z, self.runs)

@@ -26,8 +26,11 @@ class TrackingLinkConfig:
     beta is the transmitter's angular rate in degrees per second, added as beta * dt per
     step; Q_sys is per step.  noise is the standard deviation of v in volts (R_sys = 0.04
     is noise 0.2).  x1 starts where the peak intensity is `max_intensity`, and x2 (the
-    scan mean, or the orientation for the baselines) at x2_0 degrees.  dropout is the
-    probability that a measurement is missing (Bernoulli, independent per step and run).
+    scan mean, or the orientation for the baselines) at x2_0 degrees, or (not in the
+    paper: a cold start) uniform on x2_0 +- x2_0_spread, drawn after all other noise.
+    dropout is the probability that a measurement is missing (Bernoulli, independent per
+    step and run).  blocked: a time interval [start, stop) s in which no light arrives
+    (the clean intensity is 0), not in the paper.
     """
 
     beta: float = 1.2
@@ -38,6 +41,8 @@ class TrackingLinkConfig:
     max_intensity: float = MAX_INTENSITY
     x2_0: float = 5.0
     dropout: float = 0.0
+    x2_0_spread: float = 0.0
+    blocked: tuple[float, ...] = ()     # s: [start, stop) with no light (not in the paper)
 
 
 @dataclass
@@ -74,6 +79,9 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
     w2 = rng.standard_normal((steps, n)) * math.sqrt(link.q_sys[1])
     v = rng.standard_normal((steps, n)) * link.noise
     missing = rng.random((steps, n)) < link.dropout
+    x2_0 = np.full(n, link.x2_0)
+    if link.x2_0_spread > 0.0:
+        x2_0 = x2_0 + rng.uniform(-link.x2_0_spread, link.x2_0_spread, n)
     t = np.arange(steps, dtype=float) * link.dt
     shape = (steps, n)
     ekf = aligner if isinstance(aligner, (ScanningEKF, LQGAligner)) else None
@@ -82,10 +90,12 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
                      clean=np.empty(shape), z=np.empty(shape), command=np.empty(shape),
                      estimate=estimate)
     x1 = np.full(n, link.max_intensity / response.peak)
-    phi = np.full(n, link.x2_0 + aligner.scan_offset)
+    phi = x2_0 + aligner.scan_offset
     drift = link.beta * link.dt
     for k in range(steps):
         clean = x1 * response.g(wrap_degrees(phi))
+        if link.blocked and link.blocked[0] <= t[k] < link.blocked[1]:
+            clean = np.zeros(n)
         # (8): V_d,k = x1 g(phi) + v_k
         z = np.where(missing[k], np.nan, clean + v[k])
         out.phi[k], out.x2[k], out.x1[k] = phi, phi - aligner.scan_offset, x1

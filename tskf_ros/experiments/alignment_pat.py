@@ -1,0 +1,182 @@
+"""The supervised (acquire / track / re-acquire) algorithms of alignment_mc and their metrics."""
+
+import dataclasses
+from typing import Optional, Sequence
+
+from matplotlib.figure import Figure
+import numpy as np
+
+from tskf_ros import led
+from tskf_ros.led.supervisor import STATES, Supervisor, SupervisorConfig, TRACKING
+
+# name -> (tracker of led.ALGORITHMS, supervisor mode): '_pat' searches, acquires and
+# re-acquires; ekf_reset only restarts the EKF from x0, P0 on a declared loss
+PAT_ALGORITHMS = {'ekf_pat': 'ekf', 'hill_climbing_pat': 'hill_climbing',
+                  'three_point_pat': 'three_point', 'ekf_reset': 'ekf'}
+ACQUIRED_WITHIN = 10.0       # s: the cold-start goal
+
+
+class Recorded:
+    """A Supervisor that keeps each step's states and declared losses for the metrics."""
+
+    def __init__(self, supervisor: Supervisor) -> None:
+        self.supervisor = supervisor
+        self.runs = supervisor.runs
+        self.states: list[np.ndarray] = []
+        self.declared: list[np.ndarray] = []
+
+    @property
+    def scan_offset(self) -> float:
+        """Return the supervisor's scan offset."""
+        return self.supervisor.scan_offset
+
+    def step(self, stamp: float, z: led.Measurement) -> np.ndarray:
+        """Step the supervisor; keep its states and declared losses."""
+        turn = self.supervisor.step(stamp, z)
+        self.states.append(self.supervisor.state.copy())
+        self.declared.append(self.supervisor.declared.copy())
+        return turn
+
+    def correct_last_turn(self, delta: np.ndarray) -> None:
+        """Pass a clamped turn on to the supervisor."""
+        self.supervisor.correct_last_turn(delta)
+
+
+def build_pat(name: str, runs: int, link: led.TrackingLinkConfig,
+              response: led.IncidenceResponse, ekf: led.EKFConfig, clip: bool,
+              config: Optional[SupervisorConfig] = None) -> Recorded:
+    """Build the supervised aligner `name` (one of PAT_ALGORITHMS) for `runs` runs."""
+    tracker = led.make_aligner(PAT_ALGORITHMS[name], runs=runs, dt=link.dt, response=response,
+                               ekf=ekf, clip=clip)
+    if config is None:
+        # a known prior (the paper's x2_0) starts in tracking; a cold start searches
+        config = SupervisorConfig(start='acquiring' if link.x2_0_spread > 0 else 'tracking')
+    if name == 'ekf_reset':
+        config = dataclasses.replace(config, reacquire=False, start='tracking')
+    return Recorded(Supervisor(tracker, config, response))
+
+
+def _quantiles(values: Sequence[float]) -> tuple[Optional[float], Optional[float]]:
+    """Return (median, p90) of values (inf: never happened; None where inf or empty)."""
+    if not len(values):
+        return None, None
+    big = np.finfo(float).max                  # inf would make the interpolation NaN
+    v = np.asarray(values, dtype=float)
+    q = np.quantile(np.where(np.isfinite(v), v, big), [0.5, 0.9], method='lower')
+    return tuple(float(x) if x < big else None for x in q)
+
+
+def metrics(traj: led.Trajectory, states: Optional[np.ndarray],
+            declared: Optional[np.ndarray], *, angle: float = led.TRACKING_ANGLE) -> dict:
+    """
+    Return the lock metrics of one simulation; states / declared (steps, runs) or None.
+
+    In lock: |phi| <= angle.  A run acquires at its first step tracking in lock (a plain
+    algorithm: in lock); a declared loss is re-acquired at the first later such step (inf
+    if never); false alarms are the declared losses of runs never out of lock.
+    """
+    dt = float(traj.t[1] - traj.t[0]) if traj.t.size > 1 else 1.0
+    steps, runs = traj.phi.shape
+    inside = np.abs(led.wrap_degrees(traj.phi)) <= angle
+    locked = inside if states is None else inside & (states == TRACKING)
+    first = np.where(locked.any(axis=0), np.argmax(locked, axis=0), -1)
+    acquisition = np.where(first >= 0, first * dt, np.inf)
+    out = {'lost_at_end': float(np.mean(~inside[-1])),
+           'acquisition': acquisition}
+    if declared is None:
+        out.update({'reacquisition': np.array([]), 'false_alarms_per_1000s': None})
+        return out
+    # the next locked step at or after each step: suffix minimum of locked step indices
+    index = np.where(locked, np.arange(steps)[:, None], steps)
+    nxt = np.minimum.accumulate(index[::-1], axis=0)[::-1]
+    k, r = np.nonzero(declared)
+    wait = nxt[k, r] - k
+    reacq = np.where(nxt[k, r] < steps, wait * dt, np.inf)
+    clean = inside.all(axis=0)
+    seconds = clean.sum() * steps * dt
+    alarms = declared[:, clean].sum()
+    out.update({'reacquisition': reacq,
+                'false_alarms_per_1000s': float(1000.0 * alarms / seconds) if seconds else None})
+    return out
+
+
+def empty_record() -> dict:
+    """Return the per-algorithm lists metrics() fills, one entry per noise level."""
+    return {'lost_at_end': [], 'reacquisition_s': {'median': [], 'p90': [], 'events': []},
+            'false_alarms_per_1000s': [], 'acquired_within_10s': [],
+            'acquisition_s': {'median': [], 'p90': []}}
+
+
+def record(entry: dict, m: dict) -> None:
+    """Append one noise level's metrics to an algorithm's entry."""
+    entry['lost_at_end'].append(m['lost_at_end'])
+    med, p90 = _quantiles(m['reacquisition'])
+    entry['reacquisition_s']['median'].append(med)
+    entry['reacquisition_s']['p90'].append(p90)
+    entry['reacquisition_s']['events'].append(int(m['reacquisition'].size))
+    entry['false_alarms_per_1000s'].append(m['false_alarms_per_1000s'])
+    entry['acquired_within_10s'].append(float(np.mean(m['acquisition'] <= ACQUIRED_WITHIN)))
+    med, p90 = _quantiles(m['acquisition'])
+    entry['acquisition_s']['median'].append(med)
+    entry['acquisition_s']['p90'].append(p90)
+
+
+def evaluate(name: str, runs: int, link: led.TrackingLinkConfig, rng: np.random.Generator,
+             response: led.IncidenceResponse, ekf: led.EKFConfig, clip: bool,
+             config: Optional[SupervisorConfig] = None
+             ) -> tuple[np.ndarray, np.ndarray, dict, led.Trajectory, Optional[Recorded]]:
+    """
+    Run one algorithm (supervised or of led.ALGORITHMS, P controller).
+
+    Return the tracking % per run (angular, measure), the metrics, the trajectory and the
+    supervisor's record (None for a plain algorithm).
+    """
+    if name in PAT_ALGORITHMS:
+        aligner: Optional[Recorded] = build_pat(name, runs, link, response, ekf, clip, config)
+        traj = led.simulate_tracking(aligner, link, rng, response)
+        m = metrics(traj, np.array(aligner.states), np.array(aligner.declared))
+    else:
+        aligner = None
+        traj = led.simulate_tracking(led.make_aligner(name, runs=runs, dt=link.dt,
+                                                      response=response, ekf=ekf, clip=clip),
+                                     link, rng, response)
+        m = metrics(traj, None, None)
+    angular, measure = led.tracking(traj, threshold=led.TRACKING_LEVEL * link.max_intensity)
+    return angular, measure, m, traj, aligner
+
+
+def plot_pat_run(traj: led.Trajectory, record: Recorded, *, run: int = 0,
+                 title: str) -> Figure:
+    """One supervised run in time: angle of incidence and base, the state, the intensity."""
+    fig = Figure(figsize=(7.5, 6.5))
+    axes = fig.subplots(3, 1, sharex=True, gridspec_kw={'height_ratios': [3, 1, 2]})
+    t = traj.t
+    base = np.cumsum(np.r_[0.0, traj.command[:-1, run]])
+    states = np.array(record.states)[:, run]
+    declared = np.nonzero(np.array(record.declared)[:, run])[0]
+    axes[0].plot(t, traj.phi[:, run], 'k', lw=1.0, label=r'angle of incidence $\phi$')
+    axes[0].plot(t, base, color='tab:blue', lw=0.9, label='base angle (from its start)')
+    for s in (-led.TRACKING_ANGLE, led.TRACKING_ANGLE):
+        axes[0].axhline(s, color='tab:red', ls=':', lw=0.8)
+    for i, k in enumerate(declared):
+        axes[0].axvline(t[k], color='tab:red', lw=0.8, alpha=0.6,
+                        label='declared loss' if i == 0 else None)
+    axes[0].set_ylabel('angle (deg)')
+    axes[1].step(t, states, where='post', color='tab:purple', lw=1.2)
+    axes[1].set_yticks(range(len(STATES)), STATES)
+    axes[1].set_ylabel('state')
+    axes[2].plot(t, traj.z[:, run], color='0.6', lw=0.7, label='measured')
+    axes[2].plot(t, traj.clean[:, run], 'k', lw=1.0, label='clean')
+    axes[2].set_ylabel('intensity (V)')
+    axes[2].set_xlabel('time (s)')
+    for ax in (axes[0], axes[2]):
+        ax.legend(fontsize=8, loc='upper right')
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].set_title(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+__all__ = ['plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'empty_record', 'evaluate', 'metrics',
+           'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']
