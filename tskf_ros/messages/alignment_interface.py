@@ -88,13 +88,13 @@ SESSION_PARAMETERS = {
                  (0.0, 1e6), False),
     'base_limits': (DA, 'deg: [lo, hi] joint limits of the base; commands are clamped',
                     None, False),
-    'stale_timeout': (D, 's without any intensity (node clock): diagnostics ERROR; 0: off',
-                      (0.0, 1e6), False),
-    'min_rate_fraction': (D, 'intensity rate below this fraction of 1 / dt over '
-                          'rate_window: diagnostics WARN; 0: off', (0.0, 1.0), False),
-    'rate_window': (D, 's over which the intensity rate is measured', (0.01, 3600.0), False),
+    'expected_rate': (D, 'Hz: the intensity rate the input frequency diagnostics expect '
+                      '(FrequencyStatus); 0: 1 / dt', (0.0, 1e6), False),
+    'rate_tolerance': (D, 'the input frequency is WARN outside expected_rate * (1 -/+ '
+                       'rate_tolerance) (FrequencyStatus tolerance)', (0.0, 1.0), False),
 }
-PARAMETERS = tuple(SESSION_PARAMETERS) + ('frame_id', 'diagnostics_period', 'queue_depth')
+PARAMETERS = tuple(SESSION_PARAMETERS) + ('frame_id', 'diagnostic_updater.period',
+                                          'queue_depth', 'status_period')
 
 __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'bag_outcome_messages', 'COMMAND_TOPIC',
            'COMMAND_TYPE', 'default_parameters', 'diagnostics_message', 'ESTIMATE_TYPE',
@@ -114,7 +114,8 @@ def parameters_to_config(values: dict) -> NodeConfig:
             v = tuple(float(e) for e in v)
         kwargs[f.name] = v
     return NodeConfig(AlignmentConfig(**kwargs), values['frame_id'],
-                      values['diagnostics_period'], values['queue_depth'])
+                      values['diagnostic_updater.period'], values['queue_depth'],
+                      values['status_period'])
 
 
 def default_parameters() -> dict:
@@ -124,7 +125,8 @@ def default_parameters() -> dict:
     for name, (type_, _, _, _) in SESSION_PARAMETERS.items():
         value = getattr(defaults, name)
         values[name] = [float(v) for v in value] if type_ == DA else value
-    values.update({'frame_id': 'receiver', 'diagnostics_period': 1.0, 'queue_depth': 100})
+    values.update({'frame_id': 'receiver', 'diagnostic_updater.period': 1.0,
+                   'queue_depth': 100, 'status_period': 10.0})
     return values
 
 
@@ -176,8 +178,7 @@ def bag_outcome_messages(out: AlignOutcome, config: NodeConfig) -> list[tuple[st
 def diagnostics_message(session: AlignmentSession, config: NodeConfig, stamp_ns: int, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""
-    # like the estimator's, but named after the aligner and its receiver frame
-    level, message, values = session.diagnostics(now_ns=stamp_ns)
-    return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: LED alignment', level,
-                                          message, values,
+    # like the estimator's, with its receiver frame as the hardware id
+    return conversions.diagnostics_to_msg(stamp_ns, node_name,
+                                          session.diagnostics(now_ns=stamp_ns),
                                           hardware_id=config.frame_id or node_name)

@@ -1,7 +1,7 @@
 """Messages to and from the core: the only place where ROS messages meet numpy arrays."""
 
 import math
-from typing import Mapping, Sequence
+from typing import Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -10,6 +10,7 @@ import numpy as np
 from sensor_msgs.msg import Illuminance, JointState, TimeReference
 from std_msgs.msg import Float64MultiArray
 
+from tskf_ros.core.diagnostic_status import Status
 from tskf_ros.core.units import NS
 
 SLOTS = 6
@@ -171,15 +172,14 @@ def msg_to_jump(msg: TimeReference) -> tuple[int, float]:
     return t, (stamp_to_ns(msg.time_ref) - t) / NS
 
 
-def diagnostics_to_msg(stamp_ns: int, name: str, level: str, message: str,
-                       values: Mapping[str, object], *,
+def diagnostics_to_msg(stamp_ns: int, node_name: str, statuses: Sequence[Status], *,
                        hardware_id: str = '') -> DiagnosticArray:
-    """Build a one-status DiagnosticArray; floats printed with repr precision."""
-    status = DiagnosticStatus(level=LEVELS[level], name=name, message=message,
-                              hardware_id=hardware_id)
-    status.values = [KeyValue(key=k, value=repr(v) if isinstance(v, float) else str(v))
-                     for k, v in values.items()]
-    msg = DiagnosticArray(status=[status])
+    """Build the DiagnosticArray of a node's tasks, each named '<node>: <task>'."""
+    msg = DiagnosticArray(status=[
+        DiagnosticStatus(level=bytes((s.level,)), name=f'{node_name}: {s.name}',
+                         message=s.message, hardware_id=hardware_id,
+                         values=[KeyValue(key=k, value=v) for k, v in s.values])
+        for s in statuses])
     msg.header.stamp = ns_to_stamp(stamp_ns)
     return msg
 

@@ -51,17 +51,19 @@ SCALARS = {
                      'filter (clock reset, looped bag); >= history_window', (0.0, 1e6)),
     'max_future': (0.0, "a stamp further ahead (s) of this node's clock is rejected; 0: "
                    'off (replayed or time-compressed streams)', (0.0, 1e6)),
-    'diagnostics_period': (1.0, 'seconds between /diagnostics messages', (0.01, 3600.0)),
+    'diagnostic_updater.period': (1.0, 'seconds between /diagnostics messages (as '
+                                  "diagnostic_updater's)", (0.01, 3600.0)),
     'gate': (10.0, 'innovation gate: a measurement further than this many standard '
              'deviations (Mahalanobis distance) from the prediction is rejected; 0: off',
              (0.0, 1e6)),
     'state_limit': (1e9, '|x_i| or sqrt(trace P) beyond this re-initialises the filter '
                     '(diagnostics ERROR)', (1e-6, 1e300)),
-    'stale_timeout': (10.0, 's without any input (node clock): diagnostics ERROR; 0: off',
+    'expected_rate': (0.0, 'Hz: the measurement rate the input frequency diagnostics '
+                      'expect (FrequencyStatus); 0: 1 / period', (0.0, 1e6)),
+    'rate_tolerance': (0.5, 'the input frequency is WARN outside expected_rate * (1 -/+ '
+                       'rate_tolerance) (FrequencyStatus tolerance)', (0.0, 1.0)),
+    'status_period': (10.0, 's between two INFO status lines in the log; 0: none',
                       (0.0, 1e6)),
-    'min_rate_fraction': (0.5, 'input rate below this fraction of 1 / period over '
-                          'rate_window: diagnostics WARN; 0: off', (0.0, 1.0)),
-    'rate_window': (10.0, 's over which the input rate is measured', (0.01, 3600.0)),
 }
 MEASUREMENT_RANGE_HELP = ('[lo, hi]: a physical reading outside is rejected (out_of_range); '
                           'empty: any finite value')
@@ -142,10 +144,9 @@ def parameters_to_config(values: dict) -> NodeConfig:
         gate_patience=values['gate_patience'],
         use_message_variance=values['use_message_variance'],
         measurement_range=measurement_range, state_limit=values['state_limit'],
-        stale_timeout=values['stale_timeout'],
-        min_rate_fraction=values['min_rate_fraction'], rate_window=values['rate_window'])
-    return NodeConfig(estimator, values['frame_id'], values['diagnostics_period'],
-                      values['queue_depth'])
+        expected_rate=values['expected_rate'], rate_tolerance=values['rate_tolerance'])
+    return NodeConfig(estimator, values['frame_id'], values['diagnostic_updater.period'],
+                      values['queue_depth'], values['status_period'])
 
 
 def default_parameters() -> dict:
@@ -254,9 +255,8 @@ def bag_outcome_messages(out: Outcome, config: NodeConfig) -> list[tuple[str, An
 def diagnostics_message(session: EstimatorSession, config: NodeConfig, stamp_ns: int, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""
-    level, message, values = session.diagnostics(now_ns=stamp_ns)
-    return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: time-scale filter', level,
-                                          message, values,
+    return conversions.diagnostics_to_msg(stamp_ns, node_name,
+                                          session.diagnostics(now_ns=stamp_ns),
                                           hardware_id=config.frame_id or node_name)
 
 

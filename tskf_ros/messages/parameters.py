@@ -11,9 +11,9 @@ from tskf_ros.core.dropouts import BLOCKAGES
 
 import yaml
 
-__all__ = ['BLOCKAGE_HELP', 'descriptor', 'float_range', 'IGNORED', 'NodeConfig',
-           'parameters_for_node', 'ParamsError', 'parameter_values', 'read_params_yaml',
-           'section_applies']
+__all__ = ['BLOCKAGE_HELP', 'descriptor', 'flat_parameters', 'float_range', 'IGNORED',
+           'NodeConfig', 'parameters_for_node', 'ParamsError', 'parameter_values',
+           'read_params_yaml', 'section_applies']
 
 
 class _RclLoader(yaml.SafeLoader):
@@ -61,8 +61,9 @@ class NodeConfig:
 
     session: Any                 # EstimatorConfig or AlignmentConfig
     frame_id: str
-    diagnostics_period: float
+    diagnostics_period: float    # the parameter diagnostic_updater.period
     queue_depth: int
+    status_period: float = 10.0  # s between two INFO status lines; 0: none
 
 
 # parameters every node has that the offline adapters do not use
@@ -97,12 +98,23 @@ def parameter_values(params_file: Optional[Union[str, Path]], node_name: str,
                 break
         if not isinstance(section, dict):
             raise ParamsError(f'{params_file}: no {node_name}: ros__parameters section')
+        section = flat_parameters(section)
         unknown = sorted(set(section) - set(values) - IGNORED)
         if unknown:
             raise ParamsError(f'{params_file}: unknown parameter(s) {", ".join(unknown)}')
         values.update({k: v for k, v in section.items() if k not in IGNORED})
     values.update(overrides or {})
     return values
+
+
+def flat_parameters(parameters: dict, prefix: str = '') -> dict:
+    """Return a ros__parameters mapping with nested namespaces as dotted names."""
+    out = {}
+    for key, value in parameters.items():
+        name = prefix + str(key)
+        out.update(flat_parameters(value, name + '.') if isinstance(value, dict)
+                   else {name: value})
+    return out
 
 
 def section_applies(key: str, node_fqn: str) -> bool:

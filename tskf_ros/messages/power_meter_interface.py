@@ -6,6 +6,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterType
 from sensor_msgs.msg import Illuminance
 
+from tskf_ros.core.diagnostic_status import (FrequencyParams, FrequencyStatus, LEVEL_NAMES,
+                                             Status)
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import POWER_TOPIC
 from tskf_ros.messages.parameters import descriptor
@@ -58,10 +60,15 @@ NODE_HELP = {
                  False),
     'variance': ('mW^2: variance published with every reading; 0: unknown', (0.0, 1e12),
                  False),
-    'diagnostics_period': ('s between /diagnostics messages', (0.01, 3600.0), False),
+    'diagnostic_updater.period': ("s between /diagnostics messages (as diagnostic_updater's)",
+                                  (0.01, 3600.0), False),
+    'status_period': ('s between two INFO status lines in the log; 0: none', (0.0, 1e6),
+                      False),
 }
 NODE_DEFAULTS = {'rate': 1.0, 'frame_id': 'power_meter', 'variance': 0.0,
-                 'diagnostics_period': 1.0}
+                 'diagnostic_updater.period': 1.0, 'status_period': 10.0}
+# the readings' frequency is WARN outside rate * (1 -/+ this)
+RATE_TOLERANCE = 0.5
 PARAMETERS = tuple(METER_HELP) + tuple(f'scpi_{c}' for c in COMMAND_HELP) + tuple(NODE_HELP)
 TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
@@ -75,7 +82,8 @@ class DriverConfig:
     rate: float
     frame_id: str
     variance: float
-    diagnostics_period: float
+    diagnostics_period: float        # the parameter diagnostic_updater.period
+    status_period: float = 10.0      # s between two INFO status lines; 0: none
 
 
 def default_parameters() -> dict:
@@ -107,11 +115,12 @@ def make_config(values: dict) -> DriverConfig:
                              f'{values[name]!r}')
     commands = ScpiCommands(**{f.name: values[f'scpi_{f.name}'] for f in fields(ScpiCommands)})
     meter = MeterConfig(commands=commands, **{name: values[name] for name in METER_HELP})
-    if not values['rate'] > 0 or not values['diagnostics_period'] > 0 \
-            or not values['variance'] >= 0:
-        raise MeterError('rate and diagnostics_period must be > 0, variance >= 0')
+    if not values['rate'] > 0 or not values['diagnostic_updater.period'] > 0 \
+            or not values['variance'] >= 0 or not values['status_period'] >= 0:
+        raise MeterError('rate and diagnostic_updater.period must be > 0, variance and '
+                         'status_period >= 0')
     return DriverConfig(meter, values['rate'], values['frame_id'], values['variance'],
-                        values['diagnostics_period'])
+                        values['diagnostic_updater.period'], values['status_period'])
 
 
 def reading_to_msg(reading: Reading, config: DriverConfig) -> Illuminance:
@@ -120,10 +129,28 @@ def reading_to_msg(reading: Reading, config: DriverConfig) -> Illuminance:
                                     frame_id=config.frame_id)
 
 
-def diagnostics_message(meter: PowerMeter, config: DriverConfig, stamp_ns: int, *,
+def readings_frequency(config: DriverConfig) -> FrequencyStatus:
+    """Return the FrequencyStatus of the readings published, expected at config.rate."""
+    return FrequencyStatus(FrequencyParams(config.rate, config.rate, RATE_TOLERANCE))
+
+
+def diagnostics_message(meter: PowerMeter, config: DriverConfig, stamp_ns: int,
+                        frequency: FrequencyStatus, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
-    """Return the /diagnostics message of the meter at stamp_ns (starts a new rate window)."""
+    """Return the /diagnostics message: 'output frequency' and 'power meter' at stamp_ns."""
     level, message, values = meter.diagnostics()
-    return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: power meter', level,
-                                          message, values,
-                                          hardware_id=config.session.resource)
+    frequency.count = meter.published
+    device = Status('power meter', LEVEL_NAMES.index(level), message)
+    for key, value in values.items():
+        device.add(key, value)
+    return conversions.diagnostics_to_msg(
+        stamp_ns, node_name, [frequency.run(Status('output frequency'), stamp_ns), device],
+        hardware_id=config.session.resource)
+
+
+def status_line(meter: PowerMeter, rate: float) -> str:
+    """Return the one-line status the node logs: readings per second, published, skipped."""
+    return (f'{rate:.3g} readings/s, {meter.published} published, '
+            f'{sum(meter.skipped.values())} skipped, '
+            f'{"connected" if meter.connected else "not connected"}'
+            + (f'; last error: {meter.last_error}' if meter.last_error else ''))

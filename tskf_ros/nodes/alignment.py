@@ -10,6 +10,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 
 from tskf_ros import led
+from tskf_ros.led.alignment_diagnostics import status_line
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import (COMMAND_TYPE, default_parameters,
@@ -76,11 +77,14 @@ class Alignment(ReconfigurableNode):
             self.declare_parameter(name, value, d)
         self.declare_parameter('frame_id', defaults['frame_id'], ParameterDescriptor(
             description='frame_id of the estimates', type=ParameterType.PARAMETER_STRING))
-        self.declare_parameter('diagnostics_period', defaults['diagnostics_period'],
-                               ParameterDescriptor(
-                                   description='seconds between /diagnostics messages',
-                                   type=ParameterType.PARAMETER_DOUBLE,
+        self.declare_parameter('diagnostic_updater.period',
+                               defaults['diagnostic_updater.period'], ParameterDescriptor(
+                                   description='seconds between /diagnostics messages (as '
+                                   "diagnostic_updater's)", type=ParameterType.PARAMETER_DOUBLE,
                                    **float_range(0.01, 3600.0)))
+        self.declare_parameter('status_period', defaults['status_period'], ParameterDescriptor(
+            description='s between two INFO status lines in the log; 0: none',
+            type=ParameterType.PARAMETER_DOUBLE, **float_range(0.0, 1e6)))
         self.declare_parameter('queue_depth', defaults['queue_depth'], ParameterDescriptor(
             description='depth of the input and estimate queues', read_only=True,
             type=ParameterType.PARAMETER_INTEGER,
@@ -97,11 +101,13 @@ class Alignment(ReconfigurableNode):
     # -- data -----------------------------------------------------------------------------
 
     def _on_intensity(self, msg: Illuminance) -> None:
+        stamp_ns, volts, _ = conversions.msg_to_intensity(msg)
+        now_ns = self.get_clock().now().nanoseconds
         if not self.enabled:
             self.paused += 1
+            self.session.skip(stamp_ns, now_ns)      # counted in diagnostics, not used
             return
-        stamp_ns, volts, _ = conversions.msg_to_intensity(msg)
-        out = self.session.add(stamp_ns, volts, now_ns=self.get_clock().now().nanoseconds)
+        out = self.session.add(stamp_ns, volts, now_ns=now_ns)
         self._report(out)
         self._publish(out)
 
@@ -129,6 +135,7 @@ class Alignment(ReconfigurableNode):
     def _on_enable(self, request: SetBool.Request,
                    response: SetBool.Response) -> SetBool.Response:
         was, self.enabled = self.enabled, bool(request.data)
+        self.session.paused = not self.enabled
         if self.enabled and not was:
             # the EKF predicts over the pause (mu = elapsed / dt): nothing to reset
             self.get_logger().info(f'alignment resumed after {self.paused} paused samples')
@@ -137,6 +144,12 @@ class Alignment(ReconfigurableNode):
         response.success = True
         response.message = 'enabled' if self.enabled else 'paused'
         return response
+
+    def status_line(self, rate: float) -> str:
+        """Return the INFO status line: rate, gaps, last command and estimate, restarts."""
+        s = self.session
+        return status_line(s.stats, rate, s.base, s.paused,
+                           None if s.ekf is None else s.ekf.x[0])
 
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""

@@ -31,6 +31,7 @@ class PowerMeterDriver(ReconfigurableNode):
         self.steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.poll_timer = self.create_timer(1.0 / self.config.rate, self._tick,
                                             clock=self.steady)
+        self.frequency = interface.readings_frequency(self.config)
         self.start_diagnostics()
         self.start_services()
         self._was_connected, self._failures_seen = False, 0
@@ -50,6 +51,7 @@ class PowerMeterDriver(ReconfigurableNode):
 
     def reconfigure(self, config: DriverConfig) -> str:
         """Retime the poll timer and hand the meter its new settings."""
+        self.frequency.params = interface.readings_frequency(config).params
         period_ns = int(round(1e9 / config.rate))
         if period_ns != self.poll_timer.timer_period_ns:
             self.poll_timer.timer_period_ns = period_ns
@@ -64,7 +66,15 @@ class PowerMeterDriver(ReconfigurableNode):
     def diagnostics_message(self, stamp_ns: int):
         """Return the meter's /diagnostics message."""
         return interface.diagnostics_message(self.session, self.config, stamp_ns,
-                                             node_name=self.get_name())
+                                             self.frequency, node_name=self.get_name())
+
+    def status_count(self) -> int:
+        """Return the readings published so far (the status line's rate counts them)."""
+        return self.session.published
+
+    def status_line(self, rate: float) -> str:
+        """Return the INFO status line: readings per second, published, skipped."""
+        return interface.status_line(self.session, rate)
 
     def _tick(self) -> None:
         reading = self.session.poll()

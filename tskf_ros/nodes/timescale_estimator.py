@@ -5,6 +5,7 @@ from typing import Any, Optional
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, TimeReference
 
@@ -23,6 +24,7 @@ from tskf_ros.messages.parameters import float_range
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
 from tskf_ros.owc.session import EstimatorSession, Outcome
+from tskf_ros.owc.session.diagnostics import status_line
 
 
 class TimescaleEstimator(ReconfigurableNode):
@@ -40,8 +42,9 @@ class TimescaleEstimator(ReconfigurableNode):
         qos_in = sensor_input_qos(self.config.queue_depth)
         msgtype = self.get_parameter('measurement_type').value
         self.extract = extractor(msgtype)
-        self.sub = self.create_subscription(measurement_class(msgtype), MEASUREMENT_TOPIC,
-                                            self._on_measurement, qos_in)
+        self.sub = self.create_subscription(
+            measurement_class(msgtype), MEASUREMENT_TOPIC, self._on_measurement, qos_in,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
         self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
                                                   qos_in)
         qos_out = output_qos(self.config)
@@ -149,6 +152,11 @@ class TimescaleEstimator(ReconfigurableNode):
         self._report(out)
         self._publish(out)
 
+    def _on_lost(self, info: QoSMessageLostInfo) -> None:
+        # the middleware's count of measurements lost in transport (diagnostics: filter
+        # health); a queue overflow is not reported here
+        self.session.stats.messages_lost = info.total_count
+
     def _on_input(self, msg: AccelStamped) -> None:
         out = self.session.add_input(*input_from_msg(msg, self.session))
         self._report(out)
@@ -180,6 +188,10 @@ class TimescaleEstimator(ReconfigurableNode):
             return
         out = self.session.reset(reason, why)
         self.get_logger().warning(f'filter re-initialised: {out.message}')
+
+    def status_line(self, rate: float) -> str:
+        """Return the INFO status line: rate, gaps, last estimate, resets."""
+        return status_line(self.session.stats, rate, self.session.kf.x)
 
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""
