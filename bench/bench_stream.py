@@ -113,7 +113,7 @@ def main() -> None:
     node = subprocess.Popen(
         [sys.executable, '-m', 'tskf_ros.nodes.timescale_estimator', '--executor',
          args.executor, '--ros-args', '-r', f'__ns:={namespace}',
-         '-p', f'period:={1.0 / args.rate!r}', '-p', 'diagnostics_period:=0.5',
+         '-p', f'period:={1.0 / args.rate!r}', '-p', 'diagnostic_updater.period:=0.5',
          '-p', f'queue_depth:={args.queue_depth}',
          # every estimate is counted: the outputs keep as many as the input queue
          *[arg for topic in ('predicted', 'corrected') for arg in (
@@ -137,8 +137,8 @@ def main() -> None:
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for name, values in conversions.msg_to_diagnostics(msg).items():
-            if name.startswith('timescale_estimator'):
-                received.append(int(values['received']))
+            if name == 'timescale_estimator: filter health':
+                received.append(int(values['Samples received']))
     monitor.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics,
                                 QoSProfile(depth=100))
     others = {}

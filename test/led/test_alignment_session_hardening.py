@@ -42,7 +42,7 @@ def test_alignment_commands_are_clamped_and_the_ekf_told():
     cmds = [o.command for o in outs]
     assert all(-3.0 - 1e-12 <= c <= 3.0 + 1e-12 for c in cmds)
     assert max(abs(b - c) for b, c in zip([0.0] + cmds, cmds)) <= 1.0 + 1e-12
-    assert a.diagnostics()[2]['commands_clamped'] > 0
+    assert int(a.diagnostics()[0].as_dict()['Commands clamped']) > 0
     with pytest.raises(ValueError, match='base_initial'):
         AlignmentConfig(base_initial=10.0, base_limits=(-3.0, 3.0))
 
@@ -57,5 +57,6 @@ def test_alignment_restarts_itself_on_an_absurd_state_and_reports_error():
     outs = [a.add(T0 + k * NS // 20, 2.0) for k in range(3)]
     outs.append(a.add(T0 + 3 * NS // 20, 1e200))
     assert outs[-1].reason == 'filter_error' and 'state_limit' in outs[-1].message
-    level, message, values = a.diagnostics()
-    assert level == 'ERROR' and values['resets_state_health'] == 1
+    aligner_status = a.diagnostics()[0]
+    assert aligner_status.level == 2
+    assert aligner_status.as_dict()['Resets (state_health)'] == '1'

@@ -23,6 +23,7 @@ from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession, NS
 from tskf_ros.led.led_link import closed_loop
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import COMMAND_TOPIC
+from tskf_ros.messages.parameters import flat_parameters
 from tskf_ros.nodes.alignment import Alignment
 from tskf_ros.nodes.led_link_simulator import LedLinkSimulator
 from tskf_ros.nodes.node_base import make_executor
@@ -42,7 +43,7 @@ CONVERGED = 40      # samples (2 s) after which |phi| must stay in the tracking 
 
 def yaml_parameters(name, node, **extra):
     """Parameter overrides from a config/ YAML file, plus extra ones."""
-    data = yaml.safe_load((CONFIG / name).read_text())[node]['ros__parameters']
+    data = flat_parameters(yaml.safe_load((CONFIG / name).read_text())[node]['ros__parameters'])
     data.update(extra)
     return [Parameter(k, value=v) for k, v in data.items()]
 
@@ -158,13 +159,14 @@ class Harness:
         self.spin_until(lambda: len(self.commands) == n and (
             not self.node.session.is_ekf or len(self.corrected) == n), f'{n} outputs')
 
-    def values(self):
-        """Publish diagnostics now; return the status values as strings."""
+    def values(self, task='time scale'):
+        """Publish the diagnostics now; return one task's level and its key values."""
         self.node.publish_diagnostics()
         n = len(self.diagnostics)
         self.spin_until(lambda: len(self.diagnostics) > n, '/diagnostics')
         msg = self.diagnostics[-1]
-        return msg.status[0].level, conversions.msg_to_diagnostics(msg)[msg.status[0].name]
+        (status,) = [s for s in msg.status if s.name == f'{self.node.get_name()}: {task}']
+        return status.level, conversions.msg_to_diagnostics(msg)[status.name]
 
     def close(self):
         """Destroy the nodes and the executor."""
@@ -181,11 +183,7 @@ def make(ros_context, executor_kind):
     def factory(**extra):
         # no periodic /diagnostics: a timer's message would take ('consume') the counters
         # the test asks for with Harness.values(), at a moment that depends on the load
-        extra.setdefault('diagnostics_period', 3600.0)
-        # nor rate or staleness verdicts: they follow the wall clock
-        # (test/led/test_alignment_session_hardening.py has them)
-        extra.setdefault('stale_timeout', 0.0)
-        extra.setdefault('min_rate_fraction', 0.0)
+        extra.setdefault('diagnostic_updater.period', 3600.0)
         h = Harness(ros_context, yaml_parameters('alignment.yaml', '/**/alignment', **extra),
                     executor_kind)
         made.append(h)
@@ -242,8 +240,8 @@ def test_bad_intensity_is_a_missing_sample(make, bad, reason):
     # at the bad sample there is no update: the posterior is the prior
     prior = conversions.msg_to_alignment_estimate(h.predicted[3])
     np.testing.assert_allclose(est[3][1], prior[1], rtol=0, atol=1e-12)
-    _, values = h.values()
-    assert values[f'missing_{reason}'] == '1'
+    _, values = h.values('aligner')
+    assert values[f'Missing ({reason})'] == '1'
 
 
 def test_negative_intensity_used_when_asked(make):
@@ -271,7 +269,7 @@ def test_long_gap_warns(make):
     h = make(max_gap=1.0)
     h.run([(at(0), 2.9), (at(1), 2.8), (at(40), 2.7)])
     level, values = h.values()
-    assert level == conversions.LEVELS['WARN'] and values['gaps'] == '1'
+    assert level == conversions.LEVELS['WARN'] and values['Gaps'] == '1'
     level, _ = h.values()                         # reported once
     assert level == conversions.LEVELS['OK']
 
@@ -288,8 +286,8 @@ def test_bad_stamp_is_dropped(make, bad_stamp, reason):
     stamps = [conversions.stamp_to_ns(m.header.stamp) for m in h.corrected]
     assert stamps == [at(k) for k in range(4)]
     assert h.node.session.stats.rejected[reason] == 1
-    _, values = h.values()
-    assert values[f'rejected_{reason}'] == '1'
+    _, values = h.values('aligner')
+    assert values[f'Rejected ({reason})'] == '1'
 
 
 def test_backward_jump_restarts(make):
@@ -367,7 +365,8 @@ def test_enable_service_pauses_and_resumes_the_alignment_commands(loop, ros_cont
     enable = client.create_client(SetBool, '/alignment/enable')
     assert call(executor, enable, SetBool.Request(data=False)).message == 'paused'
     node._on_intensity(conversions.intensity_to_msg(T0, 2.0))
-    assert node.paused == 1 and node.session.stats.received == 0
+    stats = node.session.stats
+    assert node.paused == stats.paused == stats.received == 1 and stats.commands == 0
     assert call(executor, enable, SetBool.Request(data=True)).message == 'enabled'
     node._on_intensity(conversions.intensity_to_msg(T0 + NS, 2.0))
     assert node.session.stats.commands == 1

@@ -46,7 +46,7 @@ def from_estimator(diagnostics):
 
 def test_timer_and_parameter_services(ros_context, executor_kind):
     node = TimescaleEstimator(context=ros_context, parameter_overrides=[
-        Parameter('diagnostics_period', value=0.05)])
+        Parameter('diagnostic_updater.period', value=0.05)])
     client = rclpy.create_node('parameter_client', context=ros_context)
     diagnostics = []
     client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append,
@@ -81,7 +81,7 @@ def start(args, log, env=None):
     """Start the estimator as a process (output to the log file)."""
     return subprocess.Popen(
         [sys.executable, '-m', 'tskf_ros.nodes.timescale_estimator', *args, '--ros-args',
-         '-p', 'diagnostics_period:=0.1'], cwd=REPO, env=env or dict(os.environ),
+         '-p', 'diagnostic_updater.period:=0.1'], cwd=REPO, env=env or dict(os.environ),
         stdout=log, stderr=subprocess.STDOUT, text=True)
 
 

@@ -27,6 +27,7 @@ from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import DEFAULT_MEASUREMENT_TYPE, extractor, \
     POWER_TOPIC
+from tskf_ros.messages.parameters import flat_parameters
 from tskf_ros.messages.power_meter_interface import default_parameters, parameter_names
 from tskf_ros.messages.qos import sensor_input_qos, SENSOR_OUTPUT_QOS
 from tskf_ros.nodes.power_meter_driver import PowerMeterDriver
@@ -56,7 +57,7 @@ class Loop:
         self.nodes = [self.listener]
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
-        self.diagnostics += [s for s in msg.status if s.name.startswith('power_meter_driver')]
+        self.diagnostics += [s for s in msg.status if s.name == 'power_meter_driver: power meter']
 
     def add(self, node):
         self.nodes.append(node)
@@ -64,7 +65,7 @@ class Loop:
         return node
 
     def driver(self, b, *, opener=None, **params):
-        params = {'backend': b.backend, 'rate': 50.0, 'diagnostics_period': 0.05,
+        params = {'backend': b.backend, 'rate': 50.0, 'diagnostic_updater.period': 0.05,
                   'reconnect_initial': 0.05, 'reconnect_max': 0.2, **params}
         return self.add(PowerMeterDriver(context=self.context, opener=opener,
                                          parameter_overrides=[Parameter(k, value=v)
@@ -104,7 +105,8 @@ def values(status):
 def test_the_parameter_file_sets_every_parameter_to_its_default():
     doc = yaml.safe_load((REPO / 'config' / 'power_meter_driver.yaml').read_text())
     assert list(doc) == ['/**/power_meter_driver']
-    assert doc['/**/power_meter_driver']['ros__parameters'] == default_parameters()
+    assert flat_parameters(doc['/**/power_meter_driver']['ros__parameters']) == \
+        default_parameters()
     assert set(default_parameters()) == set(parameter_names())
 
 

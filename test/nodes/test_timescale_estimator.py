@@ -19,6 +19,7 @@ from tskf_ros.core.linear_models import owc, run_filter, spring_mass
 from tskf_ros.core.time_scales import discrete
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
+from tskf_ros.messages.parameters import flat_parameters
 from tskf_ros.nodes.node_base import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 
@@ -38,8 +39,8 @@ TIMEOUT = 60.0      # s: only a bound on waiting for DDS; no assertion depends o
 
 def yaml_parameters(name, **extra):
     """Parameter overrides from a config/ YAML file, plus extra ones."""
-    data = yaml.safe_load((CONFIG / name).read_text())['/**/timescale_estimator'][
-        'ros__parameters']
+    data = flat_parameters(yaml.safe_load((CONFIG / name).read_text())[
+        '/**/timescale_estimator']['ros__parameters'])
     data.update(extra)
     return [Parameter(k, value=v) for k, v in data.items()]
 
@@ -114,10 +115,8 @@ def make(ros_context, executor_kind):
 
     def factory(overrides=None, **kwargs):
         # no periodic /diagnostics (it would consume the counters a test reads, at a moment
-        # that depends on the load), and no wall-clock rate or staleness verdicts
-        quiet = [Parameter('diagnostics_period', value=3600.0),
-                 Parameter('stale_timeout', value=0.0),
-                 Parameter('min_rate_fraction', value=0.0)]
+        # that depends on the load)
+        quiet = [Parameter('diagnostic_updater.period', value=3600.0)]
         given = overrides or yaml_parameters('owc_estimator.yaml')
         names = {p.name for p in given}
         h = Harness(ros_context, given + [p for p in quiet if p.name not in names],
@@ -202,8 +201,8 @@ def test_nonpositive_power_is_a_gap(make):
     h.expect(mu=2)
     assert h.got['mu'][-1] == (2 * NS, 3.0)      # J = 3
     assert rejected(h, 'invalid_power') == 2
-    _, _, values = h.node.session.diagnostics()
-    assert values['gaps'] == 1 and values['gap_max_s'] == 3.0
+    times = h.node.session.diagnostics()[1].as_dict()
+    assert times['Gaps'] == '1' and times['Longest gap J (s)'] == '3.0'
 
 
 def test_duplicate_stamp_is_dropped(make):
@@ -367,12 +366,15 @@ def test_diagnostics_warn_on_long_gap(make):
     n = len(h.diagnostics)
     h.node.publish_diagnostics()
     h.spin_until(lambda: len(h.diagnostics) > n, '/diagnostics')
-    (status,) = h.diagnostics[-1].status
-    values = conversions.msg_to_diagnostics(h.diagnostics[-1])[status.name]
-    assert status.level == conversions.LEVELS['WARN']
-    assert values['gaps'] == '1' and float(values['gap_max_s']) == 8.0
-    assert values['rejected_duplicate'] == '1' and float(values['mu_max_s']) == 8.0
-    assert float(values['covariance_trace']) > 0
+    statuses = conversions.msg_to_diagnostics(h.diagnostics[-1])
+    node = h.node.get_name()
+    assert sorted(statuses) == sorted(f'{node}: {task}' for task in (
+        'input frequency', 'timestamp delay', 'filter health', 'time scale'))
+    times, health = statuses[f'{node}: time scale'], statuses[f'{node}: filter health']
+    assert times['level'] == conversions.LEVELS['WARN'][0]
+    assert times['Gaps'] == '1' and float(times['Longest gap J (s)']) == 8.0
+    assert float(times['mu max (s)']) == 8.0
+    assert health['Rejected (duplicate)'] == '1' and float(health['Covariance trace']) > 0
 
 
 def test_best_effort_publisher_is_matched(make):

@@ -34,7 +34,7 @@ def test_estimator_in_another_process(ros_context, executor_kind, tmp_path):
     # /diagnostics every 0.1 s: its arrival tells that the node has matched our readers
     proc = node_process('timescale_estimator', '--executor', executor_kind, '--ros-args',
                         '--params-file', str(REPO / 'config' / 'owc_estimator.yaml'),
-                        '-p', 'diagnostics_period:=0.1',
+                        '-p', 'diagnostic_updater.period:=0.1',
                         '-r', 'measurement:=received_power', log=log)
     client = rclpy.create_node('client', context=ros_context)
     collector = Collector(context=ros_context)

@@ -193,7 +193,7 @@ def start_alignment(args: argparse.Namespace) -> dict:
     samples = int(round(args.led_duration / LED_DT))
     procs = [subprocess.Popen(node_command(
         'alignment', cfg / 'alignment.yaml', algorithm=args.led_algorithm,
-        diagnostics_period=0.25) + ns, env=dict(os.environ))]
+        **{'diagnostic_updater.period': 0.25}) + ns, env=dict(os.environ))]
     out: dict = {'procs': procs, 'args': args, 'samples': samples}
 
     def start_simulator() -> None:
@@ -243,7 +243,7 @@ def format_alignment(s: AlignmentSummary, args: argparse.Namespace) -> str:
             f'{s.tracking:.1f}% of {s.samples} samples (|phi| <= {TRACKING_ANGLE:g} deg), '
             f'{s.tracking_converged:.1f}% from 2 s on (max |phi| {s.worst:.1f} deg); '
             f'{s.delivered} intensities, {s.commands} base commands, '
-            f'gaps {d.get("gaps", "?")}, largest mu {float(d.get("mu_max", "nan")):g}')
+            f'gaps {d.get("Gaps", "?")}, largest mu {float(d.get("mu max", "nan")):g}')
 
 
 def _stop(procs: list) -> None:

@@ -20,7 +20,8 @@ import yaml
 FIT_COLUMNS = ['fit_Q', 'fit_R', 'fit_Q_stderr', 'fit_R_stderr', 'fit_log_likelihood',
                'fit_nis_mean', 'fit_error']
 # parameters a --set may not change: they do not affect an offline evaluation
-NOT_SETTABLE = ('queue_depth', 'diagnostics_period', 'frame_id', 'measurement_type')
+NOT_SETTABLE = ('queue_depth', 'diagnostic_updater.period', 'status_period', 'frame_id',
+                'measurement_type')
 # one value of a --set: typed as the parameter's default (a matrix: a list of floats)
 SettingValue = Union[bool, int, float, str, list]
 

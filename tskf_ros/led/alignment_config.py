@@ -17,7 +17,7 @@ from tskf_ros.led.intensity_model import FloatArray
 # parameters that change in place; any other change restarts the aligner
 TUNABLE = ('gain', 'Q', 'R', 'x1_floor', 'gamma', 'clip', 'negative_is_missing', 'max_gap',
            'max_backward', 'gate', 'intensity_range', 'state_limit', 'max_step',
-           'base_limits', 'stale_timeout', 'min_rate_fraction', 'rate_window')
+           'base_limits', 'expected_rate', 'rate_tolerance')
 
 
 def _matrix(values: Sequence[float], name: str, *, definite: bool) -> FloatArray:
@@ -63,9 +63,8 @@ class AlignmentConfig:
     state_limit: float = 1e6                     # |x_i| or sqrt(trace P) beyond: restart
     max_step: float = 45.0                       # deg a command may turn the base; 0: any
     base_limits: tuple[float, ...] = (-360.0, 360.0)     # deg: the joint limits of the base
-    stale_timeout: float = 5.0                   # s without input: diagnostics ERROR; 0 off
-    min_rate_fraction: float = 0.5               # rate below this * 1 / dt: WARN; 0 off
-    rate_window: float = 5.0                     # s over which the input rate is measured
+    expected_rate: float = 0.0                   # Hz of the input (FrequencyStatus); 0: 1/dt
+    rate_tolerance: float = 0.5                  # FrequencyStatus's tolerance around it
 
     def __post_init__(self) -> None:
         """Check that the settings make a working aligner; raise AlignmentError if not."""
@@ -77,7 +76,7 @@ class AlignmentConfig:
                                      f'got {self.controller!r}')
         for name in ('dt', 'gain', 'x1_floor', 'gamma', 'units_per_degree', 'base_initial',
                      'max_gap', 'max_backward', 'gate', 'state_limit', 'max_step',
-                     'stale_timeout', 'min_rate_fraction', 'rate_window'):
+                     'expected_rate', 'rate_tolerance'):
             value = getattr(self, name)
             if not math.isfinite(value):
                 raise led.AlignmentError(f'{name} must be finite, got {value}')
@@ -85,11 +84,11 @@ class AlignmentConfig:
             if not getattr(self, name) > 0:
                 raise led.AlignmentError(f'{name} must be > 0, got {getattr(self, name)}')
         for name in ('x1_floor', 'units_per_degree', 'max_gap', 'max_backward', 'gate',
-                     'max_step', 'stale_timeout', 'min_rate_fraction', 'rate_window'):
+                     'max_step', 'expected_rate', 'rate_tolerance'):
             if getattr(self, name) < 0:
                 raise led.AlignmentError(f'{name} must be >= 0, got {getattr(self, name)}')
-        if not self.state_limit > 0 or not self.rate_window > 0:
-            raise led.AlignmentError('state_limit and rate_window must be > 0')
+        if not self.state_limit > 0:
+            raise led.AlignmentError('state_limit must be > 0')
         for name in ('intensity_range', 'base_limits'):
             r = tuple(getattr(self, name))
             if r and (len(r) != 2 or not all(math.isfinite(v) for v in r) or not r[0] < r[1]):

@@ -15,9 +15,11 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from tskf_ros import led
-from tskf_ros.core.input_rate import DiagnosticValue, InputRate, report_head, worst
+from tskf_ros.core.diagnostic_status import (expected_frequency, FrequencyParams, InputStream,
+                                             Status)
 from tskf_ros.core.units import MAX_STAMP_NS, NS
 from tskf_ros.led.alignment_config import AlignmentConfig, TUNABLE
+from tskf_ros.led.alignment_diagnostics import aligner_status, time_scale
 from tskf_ros.led.intensity_model import FloatArray
 
 GAP_FACTOR = 1.5        # an interval longer than this many dt is a gap (samples missing)
@@ -54,6 +56,7 @@ class AlignStats:
 
     # alike in shape to the estimator session's Stats, but other counters
     received: int = 0
+    paused: int = 0                      # received while the loop was paused
     used: int = 0
     commands: int = 0
     missing: Counter[str] = field(default_factory=Counter)
@@ -79,7 +82,8 @@ class AlignmentSession:
         self.stats = AlignStats()
         self.base = float(config.base_initial)
         self.health_error = ''          # why the aligner restarted itself
-        self.input_rate = InputRate.for_config(config.dt, config)
+        self.paused = False             # the node's ~/enable false: samples are not used
+        self.input = InputStream(_frequency(config))
         self._restart()
 
     def _restart(self) -> None:
@@ -103,9 +107,9 @@ class AlignmentSession:
         """Take one sample (stamp in ns, intensity in V; receiver clock now); say what it did."""
         st, cfg = self.stats, self.config
         st.received += 1
-        if now_ns is not None:
-            self.input_rate.note(now_ns)
         stamp_ns = int(stamp_ns)
+        if now_ns is not None:
+            self.input.note(stamp_ns, now_ns)
         if stamp_ns <= 0:
             return self._reject('zero_stamp', stamp_ns, 'the header stamp is unset (0)')
         if stamp_ns > MAX_STAMP_NS:
@@ -201,7 +205,7 @@ class AlignmentSession:
     def reconfigure(self, config: AlignmentConfig) -> str:
         """Switch to a new (validated) config; in place if only TUNABLE fields changed."""
         old, self.config = self.config, config
-        self.input_rate = InputRate.for_config(config.dt, config)
+        self.input.configure(_frequency(config))
         changed = {f.name for f in fields(config)
                    if getattr(config, f.name) != getattr(old, f.name)}
         if changed - set(TUNABLE):
@@ -218,51 +222,34 @@ class AlignmentSession:
                 a.clip = bool(config.clip)
         return 'new parameters in use'
 
-    def diagnostics(self, *, consume: bool = True, now_ns: Optional[int] = None
-                    ) -> tuple[str, str, dict[str, DiagnosticValue]]:
-        """
-        Return (level 'OK', 'WARN' or 'ERROR', message, values) for a diagnostics status.
+    def skip(self, stamp_ns: int, now_ns: Optional[int] = None) -> None:
+        """Count a sample received while the loop is paused: not used, but an input."""
+        self.stats.received += 1
+        self.stats.paused += 1
+        if now_ns is not None:
+            self.input.note(int(stamp_ns), now_ns)
 
-        consume=True resets the since-last-report counters (long gaps, bad samples, a
-        self restart).  With now_ns (receiver clock) the input rate and staleness count.
+    def diagnostics(self, *, consume: bool = True,
+                    now_ns: Optional[int] = None) -> list[Status]:
         """
-        st, cfg = self.stats, self.config
-        level, msgs, values = report_head(
-            self.input_rate, now_ns,
-            self.health_error and f'aligner restarted itself: {self.health_error}')
-        if st.gaps_over_bound:
-            level = worst(level, 'WARN')
-            msgs.append(f'{st.gaps_over_bound} gap(s) longer than max_gap = {cfg.max_gap} s')
-        if st.bad_since:
-            msgs.append(f'{st.bad_since} sample(s) missing or rejected')
-        values.update({
-            'algorithm': cfg.algorithm, 'received': st.received,
-            'used': st.used, 'commands': st.commands, 'commands_clamped': st.clamped,
-            'base_command_deg': self.base,
-            'gaps': st.gaps, 'gap_max_s': st.gap_max,
-            'mu_current': st.mu_current, 'mu_max': st.mu_max,
-            'last_stamp_s': st.last_stamp_ns / NS,
-        })
-        for reason in MISSING_REASONS:
-            values[f'missing_{reason}'] = st.missing[reason]
-        for reason in REJECT_REASONS:
-            values[f'rejected_{reason}'] = st.rejected[reason]
-        for reason in RESET_REASONS:
-            values[f'resets_{reason}'] = st.resets[reason]
+        Return the statuses of the session's diagnostic tasks (see doc/diagnostics.md).
+
+        'aligner' and 'time scale'; with now_ns (receiver clock) first the input's
+        'input frequency' and 'timestamp delay'.  consume=True resets the
+        since-last-update counters (long gaps, bad samples, a self restart).
+        """
+        st = self.stats
         ekf = self.ekf
-        if ekf is not None:
-            x, P = ekf.x[0], ekf.P[0]
-            values.update({'x1_hat_V': float(x[0]), 'x2_hat_deg': float(x[1]),
-                           'covariance_trace': float(np.trace(P)),
-                           'singular_updates': st.singular})
-            if st.used and not x[0] > 0:
-                level = worst(level, 'WARN')
-                msgs.append(f'x1hat = {x[0]:.3g} <= 0: the EKF has lost the transmitter')
+        out = self.input.run(now_ns) if now_ns is not None else []
+        out += [aligner_status(st, self.config, self.base, self.health_error,
+                               None if ekf is None else (ekf.x[0], ekf.P[0]), self.paused,
+                               (MISSING_REASONS, REJECT_REASONS, RESET_REASONS)),
+                time_scale(st, self.config)]
         if consume:
             st.gaps_over_bound = 0
             st.bad_since = 0
             self.health_error = ''
-        return level, '; '.join(msgs) or 'ok', values
+        return out
 
     # -- internals ------------------------------------------------------------------------
 
@@ -286,6 +273,11 @@ class AlignmentSession:
             st.gap_max = max(st.gap_max, interval)
             if interval > cfg.max_gap:
                 st.gaps_over_bound += 1
+
+
+def _frequency(config: AlignmentConfig) -> FrequencyParams:
+    """Return the FrequencyStatus params of a config's intensity input."""
+    return expected_frequency(config.expected_rate, config.rate_tolerance, config.dt)
 
 
 def _sym(P: FloatArray) -> FloatArray:

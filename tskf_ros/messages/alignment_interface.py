@@ -55,7 +55,8 @@ def parameters_to_config(values: dict) -> NodeConfig:
     session = {f.name: values[f.name] for f in fields(AlignmentConfig)}
     arrays = {k: tuple(v) for k, v in session.items() if isinstance(v, list)}
     return NodeConfig(AlignmentConfig(**{**session, **arrays}), values['frame_id'],
-                      values['diagnostics_period'], values['queue_depth'])
+                      values['diagnostic_updater.period'], values['queue_depth'],
+                      values['status_period'])
 
 
 def default_parameters() -> dict:
@@ -112,8 +113,7 @@ def bag_outcome_messages(out: AlignOutcome, config: NodeConfig) -> list[tuple[st
 def diagnostics_message(session: AlignmentSession, config: NodeConfig, stamp_ns: int, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""
-    # like the estimator's, but named after the aligner and its receiver frame
-    level, message, values = session.diagnostics(now_ns=stamp_ns)
-    return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: LED alignment', level,
-                                          message, values,
+    # like the estimator's, with its receiver frame as the hardware id
+    return conversions.diagnostics_to_msg(stamp_ns, node_name,
+                                          session.diagnostics(now_ns=stamp_ns),
                                           hardware_id=config.frame_id or node_name)

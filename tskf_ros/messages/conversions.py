@@ -1,6 +1,6 @@
 """Messages to and from the core: the only place where ROS messages meet numpy arrays."""
 
-from typing import Mapping, NamedTuple, Sequence
+from typing import NamedTuple, Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -9,6 +9,7 @@ import numpy as np
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
+from tskf_ros.core.diagnostic_status import Status
 from tskf_ros.core.units import NS
 
 SLOTS = 6
@@ -177,15 +178,14 @@ def msg_to_state_estimate(msg: Float64MultiArray) -> StateEstimate:
                          data[offset + n:].reshape(n, n), names)
 
 
-def diagnostics_to_msg(stamp_ns: int, name: str, level: str, message: str,
-                       values: Mapping[str, object], *,
+def diagnostics_to_msg(stamp_ns: int, node_name: str, statuses: Sequence[Status], *,
                        hardware_id: str = '') -> DiagnosticArray:
-    """Build a one-status DiagnosticArray; floats printed with repr precision."""
-    status = DiagnosticStatus(level=LEVELS[level], name=name, message=message,
-                              hardware_id=hardware_id)
-    status.values = [KeyValue(key=k, value=repr(v) if isinstance(v, float) else str(v))
-                     for k, v in values.items()]
-    msg = DiagnosticArray(status=[status])
+    """Build the DiagnosticArray of a node's tasks, each named '<node>: <task>'."""
+    msg = DiagnosticArray(status=[
+        DiagnosticStatus(level=bytes((s.level,)), name=f'{node_name}: {s.name}',
+                         message=s.message, hardware_id=hardware_id,
+                         values=[KeyValue(key=k, value=v) for k, v in s.values])
+        for s in statuses])
     msg.header.stamp = ns_to_stamp(stamp_ns)
     return msg
 

@@ -92,10 +92,9 @@ def parameters_to_config(values: dict) -> NodeConfig:
         gate_patience=values['gate_patience'],
         use_message_variance=values['use_message_variance'],
         measurement_range=measurement_range, state_limit=values['state_limit'],
-        stale_timeout=values['stale_timeout'],
-        min_rate_fraction=values['min_rate_fraction'], rate_window=values['rate_window'])
-    return NodeConfig(estimator, values['frame_id'], values['diagnostics_period'],
-                      values['queue_depth'])
+        expected_rate=values['expected_rate'], rate_tolerance=values['rate_tolerance'])
+    return NodeConfig(estimator, values['frame_id'], values['diagnostic_updater.period'],
+                      values['queue_depth'], values['status_period'])
 
 
 def default_parameters() -> dict:
@@ -206,9 +205,8 @@ def bag_outcome_messages(out: Outcome, config: NodeConfig) -> list[tuple[str, An
 def diagnostics_message(session: EstimatorSession, config: NodeConfig, stamp_ns: int, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""
-    level, message, values = session.diagnostics(now_ns=stamp_ns)
-    return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: time-scale filter', level,
-                                          message, values,
+    return conversions.diagnostics_to_msg(stamp_ns, node_name,
+                                          session.diagnostics(now_ns=stamp_ns),
                                           hardware_id=config.frame_id or node_name)
 
 

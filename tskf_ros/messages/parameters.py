@@ -51,8 +51,9 @@ class NodeConfig:
 
     session: Any                 # EstimatorConfig or AlignmentConfig
     frame_id: str
-    diagnostics_period: float
+    diagnostics_period: float    # the parameter diagnostic_updater.period
     queue_depth: int
+    status_period: float = 10.0  # s between two INFO status lines; 0: none
 
 
 # parameters every node has that the offline adapters do not use: rclpy's own, and the
@@ -115,6 +116,16 @@ def _flat(parameters: dict, prefix: str = '') -> dict:
             out.update(_flat(value, name + '.'))
         else:
             out[name] = value
+    return out
+
+
+def flat_parameters(parameters: dict, prefix: str = '') -> dict:
+    """Return a ros__parameters mapping with nested namespaces as dotted names."""
+    out = {}
+    for key, value in parameters.items():
+        name = prefix + str(key)
+        out.update(flat_parameters(value, name + '.') if isinstance(value, dict)
+                   else {name: value})
     return out
 
 

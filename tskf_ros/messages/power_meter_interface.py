@@ -5,6 +5,8 @@ from dataclasses import dataclass, fields
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import Illuminance
 
+from tskf_ros.core.diagnostic_status import (FrequencyParams, FrequencyStatus, LEVEL_NAMES,
+                                             Status)
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import POWER_TOPIC
 from tskf_ros.messages.parameter_schema import load_schema, ParameterError
@@ -17,6 +19,8 @@ __all__ = ['DriverConfig', 'default_parameters', 'diagnostics_message', 'make_co
            'reading_to_msg', 'SENSOR_OUTPUT_QOS']
 
 NODE_NAME = 'power_meter_driver'
+# the readings' frequency is WARN outside rate * (1 -/+ this)
+RATE_TOLERANCE = 0.5
 
 
 @dataclass(frozen=True)
@@ -27,7 +31,8 @@ class DriverConfig:
     rate: float
     frame_id: str
     variance: float
-    diagnostics_period: float
+    diagnostics_period: float        # the parameter diagnostic_updater.period
+    status_period: float = 10.0      # s between two INFO status lines; 0: none
     autostart: bool = True
 
 
@@ -50,11 +55,13 @@ def make_config(values: dict) -> DriverConfig:
     commands = ScpiCommands(**{f.name: values[f'scpi_{f.name}'] for f in fields(ScpiCommands)})
     meter = MeterConfig(commands=commands, **{f.name: values[f.name] for f in fields(MeterConfig)
                                               if f.name != 'commands'})
-    if not values['rate'] > 0 or not values['diagnostics_period'] > 0 \
-            or not values['variance'] >= 0:
-        raise MeterError('rate and diagnostics_period must be > 0, variance >= 0')
+    if not values['rate'] > 0 or not values['diagnostic_updater.period'] > 0 \
+            or not values['variance'] >= 0 or not values['status_period'] >= 0:
+        raise MeterError('rate and diagnostic_updater.period must be > 0, variance and '
+                         'status_period >= 0')
     return DriverConfig(meter, values['rate'], values['frame_id'], values['variance'],
-                        values['diagnostics_period'], values['autostart'])
+                        values['diagnostic_updater.period'], values['status_period'],
+                        values['autostart'])
 
 
 def reading_to_msg(reading: Reading, config: DriverConfig) -> Illuminance:
@@ -63,10 +70,28 @@ def reading_to_msg(reading: Reading, config: DriverConfig) -> Illuminance:
                                     frame_id=config.frame_id)
 
 
-def diagnostics_message(meter: PowerMeter, config: DriverConfig, stamp_ns: int, *,
+def readings_frequency(config: DriverConfig) -> FrequencyStatus:
+    """Return the FrequencyStatus of the readings published, expected at config.rate."""
+    return FrequencyStatus(FrequencyParams(config.rate, config.rate, RATE_TOLERANCE))
+
+
+def diagnostics_message(meter: PowerMeter, config: DriverConfig, stamp_ns: int,
+                        frequency: FrequencyStatus, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
-    """Return the /diagnostics message of the meter at stamp_ns (starts a new rate window)."""
+    """Return the /diagnostics message: 'output frequency' and 'power meter' at stamp_ns."""
     level, message, values = meter.diagnostics()
-    return conversions.diagnostics_to_msg(stamp_ns, f'{node_name}: power meter', level,
-                                          message, values,
-                                          hardware_id=config.session.resource)
+    frequency.count = meter.published
+    device = Status('power meter', LEVEL_NAMES.index(level), message)
+    for key, value in values.items():
+        device.add(key, value)
+    return conversions.diagnostics_to_msg(
+        stamp_ns, node_name, [frequency.run(Status('output frequency'), stamp_ns), device],
+        hardware_id=config.session.resource)
+
+
+def status_line(meter: PowerMeter, rate: float) -> str:
+    """Return the one-line status the node logs: readings per second, published, skipped."""
+    return (f'{rate:.3g} readings/s, {meter.published} published, '
+            f'{sum(meter.skipped.values())} skipped, '
+            f'{"connected" if meter.connected else "not connected"}'
+            + (f'; last error: {meter.last_error}' if meter.last_error else ''))

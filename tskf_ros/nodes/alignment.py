@@ -9,6 +9,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 
 from tskf_ros import led
+from tskf_ros.led.alignment_diagnostics import status_line
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import (COMMAND_TYPE, diagnostics_message,
@@ -69,11 +70,13 @@ class Alignment(ReconfigurableNode):
     # -- data -----------------------------------------------------------------------------
 
     def _on_intensity(self, msg: Illuminance) -> None:
+        stamp_ns, volts, _ = conversions.msg_to_intensity(msg)
+        now_ns = self.get_clock().now().nanoseconds
         if not self.enabled:
             self.paused += 1
+            self.session.skip(stamp_ns, now_ns)      # counted in diagnostics, not used
             return
-        stamp_ns, volts, _ = conversions.msg_to_intensity(msg)
-        out = self.session.add(stamp_ns, volts, now_ns=self.get_clock().now().nanoseconds)
+        out = self.session.add(stamp_ns, volts, now_ns=now_ns)
         self._report(out)
         self._publish(out)
 
@@ -101,6 +104,7 @@ class Alignment(ReconfigurableNode):
     def _on_enable(self, request: SetBool.Request,
                    response: SetBool.Response) -> SetBool.Response:
         was, self.enabled = self.enabled, bool(request.data)
+        self.session.paused = not self.enabled
         if self.enabled and not was:
             # the EKF predicts over the pause (mu = elapsed / dt): nothing to reset
             self.get_logger().info(f'alignment resumed after {self.paused} paused samples')
@@ -109,6 +113,12 @@ class Alignment(ReconfigurableNode):
         response.success = True
         response.message = 'enabled' if self.enabled else 'paused'
         return response
+
+    def status_line(self, rate: float) -> str:
+        """Return the INFO status line: rate, gaps, last command and estimate, restarts."""
+        s = self.session
+        return status_line(s.stats, rate, s.base, s.paused,
+                           None if s.ekf is None else s.ekf.x[0])
 
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""

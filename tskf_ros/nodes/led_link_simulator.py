@@ -55,6 +55,8 @@ class LedLinkSimulator(LinkSimulatorNode):
         factor = self.config.time_factor
         period = max(link.dt / factor, 1e-3) if factor > 0 else 0.01
         self.timer = self.create_timer(period, self._tick)
+        lockstep = self.config.lockstep or factor <= 0
+        self.start_diagnostics(0.0 if lockstep else factor / link.dt, lambda: self.taken)
         self.get_logger().info(
             f'simulating the LED link: beta {link.beta:g} deg/s, noise {link.noise:g} V, '
             f'dt {link.dt:g} s x {factor:g}{" (lockstep)" if self.config.lockstep else ""}, '

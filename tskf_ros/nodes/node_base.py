@@ -2,6 +2,7 @@
 
 import argparse
 from dataclasses import fields
+import math
 import os
 import re
 import sys
@@ -22,16 +23,21 @@ from sensor_msgs.msg import Illuminance, JointState
 from std_srvs.srv import Trigger
 from threadpoolctl import threadpool_limits
 
+from tskf_ros.core.diagnostic_status import FrequencyParams, FrequencyStatus, Status
 from tskf_ros.core.units import NS
+from tskf_ros.messages import conversions
 from tskf_ros.messages.parameter_schema import (load_schema, ParameterError, ParameterSchema,
                                                 SchemaFormatError)
 from tskf_ros.messages.parameters import parameters_for_node
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
+from tskf_ros.nodes.status_line import StatusLine
 
 import yaml
 
 # a simulator takes at most this many samples per callback when catching up
 MAX_BATCH = 10_000
+# its output frequency is WARN outside rate * (1 -/+ this): it catches up in batches
+SIMULATOR_RATE_TOLERANCE = 0.5
 # the evaluation truth of both simulators (sensor_msgs/msg/JointState)
 TRUTH_TOPIC = 'true_angle'
 # The executors a node can run on (`--executor`, or TSKF_EXECUTOR in the environment).
@@ -69,6 +75,10 @@ class NodeSettings(Protocol):
     @property
     def diagnostics_period(self) -> float:
         """Return the seconds between two /diagnostics messages."""
+
+    @property
+    def status_period(self) -> float:
+        """Return the seconds between two INFO status lines (0: none)."""
 
 
 class SimulatorSettings(Protocol):
@@ -225,9 +235,10 @@ class ReconfigurableNode(Node):
     new config to its session in `reconfigure(config)`, which returns what happened.  A
     change the schema refuses, or that does not make a working config, is refused with the
     reason, and the node keeps running on the old values.  `start_diagnostics()` publishes
-    `diagnostics_message(now)` on /diagnostics every `config.diagnostics_period`, retimed
-    when that changes.  `watch_clock_jumps()` calls `restart(why)` when the clock jumps
-    back or changes source (use_sim_time with a looped bag).
+    `diagnostics_message(now)` on /diagnostics every `config.diagnostics_period`
+    (diagnostic_updater.period) and logs `status_line(rate)` every `config.status_period`,
+    both retimed when they change.  `watch_clock_jumps()` calls `restart(why)` when the
+    clock jumps back or changes source (use_sim_time with a looped bag).
     """
 
     SCHEMA = ''
@@ -274,6 +285,14 @@ class ReconfigurableNode(Node):
         """Restart the session (after a clock jump, by default), saying why (subclasses)."""
         raise NotImplementedError
 
+    def status_count(self) -> int:
+        """Return the samples received so far (the status line's rate counts them)."""
+        return self.session.stats.received
+
+    def status_line(self, rate: float) -> str:
+        """Return the INFO status line, rate = status_count() per second (subclasses)."""
+        raise NotImplementedError
+
     def start_services(self) -> None:
         """Offer ~/reset (std_srvs/srv/Trigger): restart the session from its initial state."""
         self.reset_service = self.create_service(Trigger, '~/reset', self._on_reset)
@@ -285,11 +304,13 @@ class ReconfigurableNode(Node):
         return response
 
     def start_diagnostics(self) -> None:
-        """Publish the session's diagnostics every config.diagnostics_period seconds."""
+        """Publish diagnostics every diagnostics_period s, log a status every status_period."""
         self.diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC,
                                               DEFAULT_DEPTH)
         self.diag_timer = self.create_timer(self.config.diagnostics_period,
                                             self.publish_diagnostics)
+        self.status = StatusLine(self, self.config.status_period, self.status_count,
+                                 self.status_line)
 
     def publish_diagnostics(self) -> DiagnosticArray:
         """Publish (and return) the session's counters on /diagnostics."""
@@ -338,6 +359,8 @@ class ReconfigurableNode(Node):
         if config.diagnostics_period != self.config.diagnostics_period:
             self.diag_timer.timer_period_ns = int(config.diagnostics_period * 1e9)
             self.diag_timer.reset()
+        if config.status_period != self.config.status_period:
+            self.status.retime(config.status_period)
         self.config = config
         names = ', '.join(p.name for p in changes)
         try:
@@ -397,6 +420,37 @@ class LinkSimulatorNode(Node):
     def _read(self, values: dict) -> SimulatorSettings:
         """Build the node's config from its parameter values (subclasses)."""
         raise NotImplementedError
+
+    def start_diagnostics(self, rate: float, count: Callable[[], int]) -> None:
+        """
+        Publish the 'output frequency' task and log a status line of count() samples taken.
+
+        rate: the samples per second expected (0: any, the lockstep simulator).
+        """
+        params = (FrequencyParams(rate, rate, SIMULATOR_RATE_TOLERANCE) if rate > 0
+                  else FrequencyParams(0.0, math.inf))
+        self.frequency, self.count = FrequencyStatus(params), count
+        self.diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC,
+                                              DEFAULT_DEPTH)
+        self.diag_timer = self.create_timer(
+            self.get_parameter('diagnostic_updater.period').value, self.publish_diagnostics)
+        self.status = StatusLine(self, self.get_parameter('status_period').value, count,
+                                 self.status_line)
+
+    def publish_diagnostics(self) -> DiagnosticArray:
+        """Publish (and return) the 'output frequency' of the samples taken."""
+        now = self.get_clock().now().nanoseconds
+        self.frequency.count = self.count()
+        stat = self.frequency.run(Status('output frequency'), now)
+        msg = conversions.diagnostics_to_msg(now, self.get_name(), [stat],
+                                             hardware_id=self.get_name())
+        self.diag_pub.publish(msg)
+        return msg
+
+    def status_line(self, rate: float) -> str:
+        """Return the INFO status line: samples per second and taken, the next stamp."""
+        return (f'{rate:.3g} samples/s out, {self.count()} taken'
+                + ('' if self.start_ns is not None else ', waiting for subscribers'))
 
     def ready(self) -> bool:
         """Return whether sample 0 may go (subclasses may add conditions)."""

@@ -7,6 +7,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import Illuminance
 
+from tskf_ros.core.diagnostic_status import KeyValue, Status, WARN
 from tskf_ros.messages import conversions
 from tskf_ros.messages import power_meter_interface as interface
 from tskf_ros.messages.power_meter_interface import (DriverConfig, MeterError, NODE_NAME,
@@ -62,6 +63,7 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
         self.recovery_timer = self.create_timer(self.config.session.reconnect_initial,
                                                 self._recover, clock=self.steady)
         self.recovery_timer.cancel()
+        self.frequency = interface.readings_frequency(self.config)
         self.start_diagnostics()
         self.start_services()
         if self.config.autostart:       # a backend that cannot load ends the start here
@@ -241,6 +243,7 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
 
     def reconfigure(self, config: DriverConfig) -> str:
         """Retime the poll timer and hand the meter its new settings."""
+        self.frequency.params = interface.readings_frequency(config).params
         period_ns = int(round(1e9 / config.rate))
         if period_ns != self.poll_timer.timer_period_ns:
             self.poll_timer.timer_period_ns = period_ns
@@ -259,16 +262,26 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
     def diagnostics_message(self, stamp_ns: int):
         """Return the meter's /diagnostics message, its lifecycle state in the message."""
         if self.session is None:
-            return conversions.diagnostics_to_msg(
-                stamp_ns, f'{self.get_name()}: power meter', 'WARN',
-                f'{self.state}: not reading', {'lifecycle_state': self.state},
-                hardware_id=self.config.session.resource)
+            idle = Status('power meter', WARN, f'{self.state}: not reading',
+                          [KeyValue('Lifecycle state', self.state)])
+            return conversions.diagnostics_to_msg(stamp_ns, self.get_name(), [idle],
+                                                  hardware_id=self.config.session.resource)
         msg = interface.diagnostics_message(self.session, self.config, stamp_ns,
-                                            node_name=self.get_name())
+                                            self.frequency, node_name=self.get_name())
         if self.state != 'active':
             for status in msg.status:
                 status.message = f'{self.state}: {status.message}'
         return msg
+
+    def status_count(self) -> int:
+        """Return the readings published so far (the status line's rate counts them)."""
+        return self.session.published if self.session is not None else 0
+
+    def status_line(self, rate: float) -> str:
+        """Return the INFO status line: readings per second, published, skipped."""
+        if self.session is None:
+            return f'{self.state}: not reading'
+        return interface.status_line(self.session, rate)
 
     def destroy_node(self) -> None:
         """Close the VISA resource and backend, then the node."""

@@ -45,6 +45,7 @@ class PowerMeterSimulator(LinkSimulatorNode):
         self.published = 0
         period = max(1.0 / (link.rate * self.config.time_factor), 1e-3)
         self.timer = self.create_timer(period, self._tick)
+        self.start_diagnostics(link.rate * self.config.time_factor, lambda: self.published)
         self.get_logger().info(
             f'simulating the OWC link at {link.rate:g} Hz x {self.config.time_factor:g}, '
             f'seed {link.seed}, blockage {link.blockage}'

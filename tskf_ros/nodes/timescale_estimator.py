@@ -4,6 +4,7 @@ from typing import Any, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
+from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from std_msgs.msg import Float64MultiArray
 
@@ -18,6 +19,7 @@ from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
 from tskf_ros.owc.lagged_estimates import LaggedEstimate, LaggedEstimates
 from tskf_ros.owc.session import EstimatorSession, Outcome
+from tskf_ros.owc.session.diagnostics import status_line
 
 
 class TimescaleEstimator(ReconfigurableNode):
@@ -35,8 +37,9 @@ class TimescaleEstimator(ReconfigurableNode):
         qos_in = sensor_input_qos(self.config.queue_depth)
         msgtype = self.get_parameter('measurement_type').value
         self.extract = extractor(msgtype)
-        self.sub = self.create_subscription(measurement_class(msgtype), MEASUREMENT_TOPIC,
-                                            self._on_measurement, qos_in)
+        self.sub = self.create_subscription(
+            measurement_class(msgtype), MEASUREMENT_TOPIC, self._on_measurement, qos_in,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
         self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
                                                   qos_in)
         # reliable, depth 10, each overridable by qos_overrides.<topic>.publisher.* parameters
@@ -92,6 +95,11 @@ class TimescaleEstimator(ReconfigurableNode):
         self._report(out)
         self._publish(out)
 
+    def _on_lost(self, info: QoSMessageLostInfo) -> None:
+        # the middleware's count of measurements lost in transport (diagnostics: filter
+        # health); a queue overflow is not reported here
+        self.session.stats.messages_lost = info.total_count
+
     def _on_input(self, msg: AccelStamped) -> None:
         out = self.session.add_input(*input_from_msg(msg, self.session))
         self._report(out)
@@ -132,6 +140,10 @@ class TimescaleEstimator(ReconfigurableNode):
         self.get_logger().warning(f'filter re-initialised: {out.message}')
         if self.lagged is not None:
             self._publish_smoothed(self.lagged.outcome(out))
+
+    def status_line(self, rate: float) -> str:
+        """Return the INFO status line: rate, gaps, last estimate, resets."""
+        return status_line(self.session.stats, rate, self.session.kf.x)
 
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""

@@ -55,9 +55,12 @@ class AlignmentMonitor(Node):
         self.record.commands += 1
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
-        for name, values in conversions.msg_to_diagnostics(msg).items():
-            if name.endswith(': LED alignment'):
-                self.record.diagnostics = values
+        statuses = conversions.msg_to_diagnostics(msg)
+        aligner = [name for name in statuses if name.endswith(': aligner')]
+        if aligner:     # the aligner's task and its time scale's, in one dict
+            node = aligner[0][:-len('aligner')]
+            self.record.diagnostics = {**statuses.get(node + 'time scale', {}),
+                                       **statuses[aligner[0]]}
 
     def peers_ready(self) -> bool:
         """Tell whether the alignment node's command publisher is discovered."""
@@ -81,7 +84,7 @@ def monitor(samples: int, *, namespace: str, timeout: float, on_ready: Callable[
                                f'{timeout} s (saw {len(node.record.phi)})')
         # the answer to the last sample, and a diagnostics report after it
         spin_until(executor, lambda: node.record.commands >= len(node.record.intensity)
-                   and node.record.diagnostics.get('received') == str(
+                   and node.record.diagnostics.get('Samples received') == str(
                        len(node.record.intensity)), 3.0)
         return node.record
     finally:

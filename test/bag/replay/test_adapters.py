@@ -22,6 +22,7 @@ from tskf_ros.messages import alignment_interface, estimator_interface
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import (extractor, INPUT_TYPE, INPUT_TYPES,
                                                    load_config)
+from tskf_ros.messages.parameters import flat_parameters
 from tskf_ros.nodes.alignment import Alignment
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.tools.demo_collector import wait_for
@@ -96,7 +97,7 @@ class Flusher:
 
 def yaml_overrides(path, key='/**/timescale_estimator'):
     """Return the node's parameters in a YAML file as Parameter overrides."""
-    section = yaml.safe_load(path.read_text())[key]['ros__parameters']
+    section = flat_parameters(yaml.safe_load(path.read_text())[key]['ros__parameters'])
     return [Parameter(k, value=v) for k, v in section.items()]
 
 

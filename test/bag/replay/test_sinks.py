@@ -46,7 +46,13 @@ def test_replay_arrays_hold_what_the_output_bag_holds(tmp_path, capsys):
     np.testing.assert_allclose(arrays['estimate/mu.mu'], [mu for _, mu in steps], rtol=1e-15)
     diag = by_topic['/diagnostics']
     assert arrays['diagnostics.log_ns'].tolist() == [t for t, _ in diag]
-    assert arrays['diagnostics.message'].tolist() == [m.status[0].message for _, m in diag]
+    # per message the worst task, the first at that level
+
+    def level(s):
+        return s.level[0] if isinstance(s.level, bytes) else int(s.level)
+    worst = [sorted(m.status, key=lambda s: -level(s))[0] for _, m in diag]
+    assert arrays['diagnostics.level'].tolist() == [level(s) for s in worst]
+    assert arrays['diagnostics.message'].tolist() == [f'{s.name}: {s.message}' for s in worst]
     power = by_topic['/received_power']
     assert arrays['sample.value'].tolist() == [m.illuminance for _, m in power]
     assert set(arrays['sample.status'].tolist()) <= {'accepted', 'inserted', 'gap',

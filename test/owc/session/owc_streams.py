@@ -49,3 +49,13 @@ def collect(outcomes, kind, revised=False):
     est = [e for o in outcomes for e in o.estimates if e.kind == kind and e.revised == revised]
     return np.array([e.stamp_ns / NS for e in est]), np.array([e.x for e in est]), \
         np.array([e.P for e in est])
+
+
+def task(session, name, now_ns=None):
+    """Return the status of one diagnostic task of the session (an update: it consumes)."""
+    return next(s for s in session.diagnostics(now_ns=now_ns) if s.name == name)
+
+
+def values(session, name='filter health', now_ns=None):
+    """Return the key values of one diagnostic task of the session, as printed."""
+    return task(session, name, now_ns).as_dict()

@@ -8,10 +8,11 @@ sample where the reference's predictor crosses it.
 from dataclasses import replace
 
 import numpy as np
-from owc_streams import T0
+from owc_streams import T0, task
 import pytest
 from scalar_reference import C, check_step, D, P0, Reference, scalar_session, X0
 
+from tskf_ros.core.diagnostic_status import ERROR
 from tskf_ros.core.linear_models import spring_mass
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session import EstimatorConfig, EstimatorSession, model_from_flat
@@ -35,7 +36,7 @@ def test_the_state_limit_reinitialises_at_the_sample_the_reference_crosses_it():
     (start,) = out.estimates
     assert (start.kind, start.stamp_ns, start.x[0], start.P[0, 0]) == (
         'predicted', T0 + j * NS, X0, P0)
-    assert s.diagnostics()[0] == 'ERROR'
+    assert task(s, 'filter health').level == ERROR
     # and it goes on from x0, P0 at that sample
     again = Reference()
     check_step(s.add(T0 + (j + 1) * NS, ys[j]), T0 + j * NS, T0 + (j + 1) * NS,
@@ -73,12 +74,12 @@ def test_an_absurd_step_reinitialises_the_filter_and_the_diagnostics_say_error()
     out = s.add(T0 + 33 * NS, 1.0)
     assert (out.status, out.reason) == ('reset', 'state_health')
     assert 'state_limit' in out.message
-    level, message, values = s.diagnostics()
-    assert level == 'ERROR' and 're-initialised itself' in message
-    assert values['resets_state_health'] == 1
+    health = task(s, 'filter health')
+    assert health.level == ERROR and 're-initialised itself' in health.message
+    assert health.as_dict()['Resets (state_health)'] == '1'
     # the filter goes on from the sample that triggered it
     assert s.add(T0 + 34 * NS, 1.0).status == 'accepted'
-    assert s.diagnostics()[0] != 'ERROR'       # consumed by the report above
+    assert task(s, 'filter health').level != ERROR     # consumed by the update above
 
 
 def test_outputs_stay_finite_and_psd_under_hostile_input():

@@ -37,4 +37,4 @@ def test_a_measurement_of_the_wrong_size_is_bad_size():
     session = EstimatorSession(EstimatorConfig(owc()))
     out = session.add(T0, [300.0, 301.0])
     assert (out.status, out.reason) == ('rejected', 'bad_size')
-    assert session.diagnostics()[2]['rejected_bad_size'] == 1
+    assert session.diagnostics()[0].as_dict()['Rejected (bad_size)'] == '1'

@@ -12,6 +12,7 @@ from owc_streams import feed_seconds, owc_session, power, T0, THETA
 import pytest
 
 from tskf_ros.core import irregular
+from tskf_ros.core.diagnostic_status import WARN
 from tskf_ros.core.linear_models import LinearModel, owc, OWC_SLOPE
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session import EstimatorConfig, EstimatorSession, model_from_flat
@@ -44,16 +45,16 @@ def test_sampling_intervals_are_checked_against_fang_section_iii(period):
     for dt in (1, 1, 3, 1, 4, 2):
         t += int(round(dt * period * NS))
         s.add(t, 200.0)
-    level, _, values = s.diagnostics()
-    assert values['intervals_seen_periods'] == '1 2 3 4'
-    assert values['interval_warnings'] == ''
+    values = s.diagnostics()[1].as_dict()
+    assert values['Intervals seen (periods)'] == '1 2 3 4'
+    assert values['Interval warnings'] == ''
     # Fang's discrete system of one nominal period h (Euler: a = 1 + h, q = h G Q G^T = h)
     # measured with R / h at every sample (Table 3's R_d at mu = h): Theorem 2 for 1 and 4
     a, q, r = 1.0 + period, period, 100.0 / period
     lo = fang_scalar_fixed_point(a, OWC_SLOPE, q, r, 1)
     hi = fang_scalar_fixed_point(a, OWC_SLOPE, q, r, 4)
-    assert values['theorem2_peak_bound_low'] == pytest.approx(lo, rel=1e-9)
-    assert values['theorem2_peak_bound_high'] == pytest.approx(hi, rel=1e-9)
+    assert float(values['Theorem 2 peak bound (low)']) == pytest.approx(lo, rel=1e-9)
+    assert float(values['Theorem 2 peak bound (high)']) == pytest.approx(hi, rel=1e-9)
     if period == 1.0:
         # a = 2, q = 1, r = 100, kappa = 1: X = 4 r X / (c^2 X + r) + 1, that is
         # c^2 X^2 - (3 r + c^2) X - r = 0
@@ -69,9 +70,9 @@ def test_sampling_intervals_are_checked_against_fang_section_iii(period):
     for dt in (1, 1, 2, 1):
         t += dt * NS
         s.add(t, 0.5)
-    level, message, values = s.diagnostics()
-    assert level == 'WARN' and 'interval(s) 2' in message
-    assert values['interval_warnings'].startswith('2: degenerate')
+    times = s.diagnostics()[1]
+    assert times.level == WARN and 'interval(s) 2' in times.message
+    assert times.as_dict()['Interval warnings'].startswith('2: degenerate')
 
 
 def test_a_600_s_gap_with_max_jump_1000_does_not_overflow():
@@ -84,9 +85,10 @@ def test_a_600_s_gap_with_max_jump_1000_does_not_overflow():
     s = owc_session(max_jump=1000.0, gate=0.0)
     feed_seconds(s, range(5))
     assert s.add(T0 + 605 * NS, power(THETA)).status == 'accepted'
-    level, message, values = s.diagnostics()
-    assert values['theorem2_peak_bound_high'] == math.inf   # (1 + 1)^1200: no finite bound
-    assert math.isfinite(values['theorem2_peak_bound_low'])
+    values = s.diagnostics()[1].as_dict()
+    # (1 + 1)^1200: no finite bound
+    assert float(values['Theorem 2 peak bound (high)']) == math.inf
+    assert math.isfinite(float(values['Theorem 2 peak bound (low)']))
 
 
 def test_interval_checks_cost_does_not_grow_with_the_interval(monkeypatch):

@@ -12,6 +12,7 @@ from owc_streams import collect, feed, measurements, OWC, power, STAMPS, T0, THE
 import pytest
 from scalar_reference import C, check_step, close, D, P0, Reference, scalar_session, X0
 
+from tskf_ros.core.diagnostic_status import ERROR, OK, WARN
 from tskf_ros.core.linear_models import owc, run_filter, spring_mass
 from tskf_ros.core.time_scales import discrete
 from tskf_ros.core.units import MAX_STAMP_NS, NS
@@ -40,11 +41,13 @@ def test_session_equals_offline_run(model, transition):
     np.testing.assert_allclose(P, ref.P_corr[:-1], rtol=0, atol=1e-9)
     mus = [j.mu for o in out for j in o.jumps]
     np.testing.assert_allclose(mus, np.diff(stamps), rtol=0, atol=1e-12)
-    level, _, values = session.diagnostics()
-    assert values['gaps'] == 2
-    assert values['gap_lengths_s'] == f'{3 * scale:g} {4 * scale:g}'
-    assert values['mu_max_s'] == 4.0 * scale and values['accepted'] == stamps.size
-    assert level == 'OK'
+    health, scale_status = session.diagnostics()
+    times = scale_status.as_dict()
+    assert times['Gaps'] == '2'
+    assert times['Last gaps J (s)'] == f'{3 * scale:g} {4 * scale:g}'
+    assert float(times['mu max (s)']) == 4.0 * scale
+    assert health.as_dict()['Samples accepted'] == str(stamps.size)
+    assert health.level == scale_status.level == OK
 
 
 @pytest.mark.parametrize('transition', ['euler', 'exact'])
@@ -71,11 +74,12 @@ def test_in_order_samples_equal_a_textbook_scalar_filter(transition, message_var
         close(out.jumps[0].mu, mu)
     close(s.kf.x[0], ref.x)
     close(s.kf.P[0, 0], ref.P)
-    _, _, values = s.diagnostics()
-    assert values['accepted'] == len(stamps) and values['received'] == len(stamps)
-    close(values['covariance_trace'], ref.P)
-    close(values['mu_max_s'], max((b - a) / NS for a, b in zip(stamps, stamps[1:])))
-    assert values['gaps'] == sum(1 for a, b in zip(stamps, stamps[1:]) if b - a > 1.5 * NS)
+    health, times = (status.as_dict() for status in s.diagnostics())
+    assert health['Samples accepted'] == health['Samples received'] == str(len(stamps))
+    close(float(health['Covariance trace']), ref.P)
+    close(float(times['mu max (s)']), max((b - a) / NS for a, b in zip(stamps, stamps[1:])))
+    assert times['Gaps'] == str(sum(1 for a, b in zip(stamps, stamps[1:])
+                                    if b - a > 1.5 * NS))
 
 
 def test_non_regressive_step_is_refused_and_the_filter_goes_on():
@@ -120,8 +124,8 @@ def test_the_session_survives_anything_and_recovers(ops):
     for stamp, value in zip(stamps_of([m for m, _ in ops]), [v for _, v in ops]):
         out = session.add(stamp, value, now_ns=T0)
         check_estimator_outcome(out, limit)
-    level, message, diag = session.diagnostics(now_ns=T0)
-    assert level in ('OK', 'WARN', 'ERROR') and isinstance(message, str)
+    for status in session.diagnostics(now_ns=T0):
+        assert status.level in (OK, WARN, ERROR) and isinstance(status.message, str)
     # ordinary samples, 1 s apart, from well after anything that was sent
     start = MAX_STAMP_NS - 100 * NS
     outs = [session.add(start + k * NS, good, now_ns=T0) for k in range(12)]
@@ -204,10 +208,10 @@ def test_inputs_are_held_over_a_gap_like_input_only_points(transition):
     # 'corrected' only at measurements; the time scale (mu) has the input points too
     assert sorted(by_stamp(out, 'corrected')) == measured[:-1]
     assert len([j for o in out for j in o.jumps]) == len(points) - 1
-    _, _, values = session.diagnostics()
-    assert values['inputs_received'] == values['inputs_accepted'] == len(inputs)
-    assert values['accepted'] == len(measured) and values['gap_lengths_s'] == '17'
-    assert values['mu_max_s'] == 2.5
+    health, times = (status.as_dict() for status in session.diagnostics())
+    assert health['Inputs received'] == health['Inputs accepted'] == str(len(inputs))
+    assert health['Samples accepted'] == str(len(measured))
+    assert times['Last gaps J (s)'] == '17' and times['mu max (s)'] == '2.5'
 
 
 def test_late_measurement_merges_into_an_input_point_or_takes_the_held_input():
@@ -251,9 +255,10 @@ def test_bad_inputs_are_rejected_without_touching_the_state():
         assert (out.status, out.reason) == ('rejected', reason) and not out.estimates
     assert session.kf.x is x_before and session.kf.P is P_before
     np.testing.assert_array_equal(session.u, [0.1])
-    _, _, values = session.diagnostics()
-    assert values['rejected_input_non_finite'] == 2 and values['rejected_input_late'] == 1
-    assert values['inputs_received'] == 7 and values['inputs_accepted'] == 1
+    health = session.diagnostics()[0].as_dict()
+    assert health['Rejected (input_non_finite)'] == '2'
+    assert health['Rejected (input_late)'] == '1'
+    assert health['Inputs received'] == '7' and health['Inputs accepted'] == '1'
     # far ahead: a restart that keeps the input in force for the new time scale
     out = session.add_input(100 * NS, [0.7])
     assert (out.status, out.reason) == ('reset', 'forward_jump')
@@ -261,4 +266,4 @@ def test_bad_inputs_are_rejected_without_touching_the_state():
     # a model without B ignores inputs, counted
     plain = EstimatorSession(EstimatorConfig(owc()))
     assert plain.add_input(1 * NS, [1.0]).reason == 'no_input_matrix'
-    assert plain.diagnostics()[2]['rejected_no_input_matrix'] == 1
+    assert plain.diagnostics()[0].as_dict()['Rejected (no_input_matrix)'] == '1'

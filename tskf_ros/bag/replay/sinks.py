@@ -154,7 +154,8 @@ class ArraySink:
       estimate/revised);
     - estimate/mu.{log_ns, stamp_ns, sigma_ns, mu} (mu in s) and estimate/revised/mu: the
       steps t -> sigma(t) the filter took (the mu the estimate messages carry);
-    - diagnostics.{log_ns, level, message} (level 0 OK .. 3 STALE);
+    - diagnostics.{log_ns, level, message}: per message, its worst task's level (0 OK ..
+      3 STALE) and '<node>: <task>: <message>' (the first task at that level);
     - meta.{topic, input_topic, damage, assumptions}: strings;
     - with a smoother (replay_offline --smooth): estimate/smoothed.{stamp_ns, x, P,
       segment}, the RTS estimates x(t|T) at every stepped point, and the segment (0 first,
@@ -191,11 +192,12 @@ class ArraySink:
             rows['mu', j.revised].append((log_ns, j.stamp_ns, j.sigma_ns))
 
     def diagnostics(self, stamp_ns: int, msg: Any) -> None:
-        """Keep a row of the /diagnostics message: its level and message."""
-        status = msg.status[0]
-        level = status.level
-        self.diag.append((stamp_ns, level[0] if isinstance(level, bytes) else int(level),
-                          status.message))
+        """Keep a row of the /diagnostics message: the level and message of its worst task."""
+        levels = [s.level[0] if isinstance(s.level, bytes) else int(s.level)
+                  for s in msg.status]
+        worst = max(range(len(levels)), key=levels.__getitem__)
+        self.diag.append((stamp_ns, levels[worst],
+                          f'{msg.status[worst].name}: {msg.status[worst].message}'))
 
     def arrays(self, result: ReplayResult) -> dict[str, NDArray]:
         """Return the dict of numpy arrays, keys as the class doc says."""

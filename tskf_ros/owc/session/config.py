@@ -76,7 +76,7 @@ def model_from_flat(*, A: Sequence[float], C: Sequence[float], Q: Sequence[float
 # the bounds that must be finite and >= 0
 _NON_NEGATIVE = ('period', 'dense_fraction', 'jump_factor', 'max_gap', 'history_window',
                  'max_jump', 'max_backward', 'max_future', 'gate', 'state_limit',
-                 'stale_timeout', 'min_rate_fraction', 'rate_window')
+                 'expected_rate', 'rate_tolerance')
 
 
 @dataclass(frozen=True)
@@ -100,9 +100,8 @@ class EstimatorConfig:
     use_message_variance: bool = False  # R_d = the sample's own variance when it is > 0
     measurement_range: tuple[float, ...] = ()  # (lo, hi) of a physical reading; (): any
     state_limit: float = 1e9        # |x_i| or sqrt(trace P) beyond this: re-initialise
-    stale_timeout: float = 10.0     # s without input: diagnostics ERROR (0: off)
-    min_rate_fraction: float = 0.0  # input rate below this * 1 / period: WARN (0: off)
-    rate_window: float = 10.0       # s over which the input rate is measured
+    expected_rate: float = 0.0      # Hz of the input (FrequencyStatus); 0: 1 / period
+    rate_tolerance: float = 0.5     # FrequencyStatus's tolerance around expected_rate
 
     def __post_init__(self) -> None:
         """Check the bounds and that the model makes a filter; raise ConfigError if not."""

@@ -1,32 +1,24 @@
 """
-The estimator session's diagnostics: a level, one message and the counters as key values.
+The estimator session's diagnostic tasks besides its input's: filter health and time scale.
 
-ERROR: the filter re-initialised itself, or the input went silent (InputRate); WARN: a gap
-longer than max_gap, a sampling interval that breaks observability (Fang & de Callafon
-Section III), or an input rate too low; OK otherwise.
+filter health: ERROR when the filter re-initialised itself (state_health) since the last
+update, else OK; the samples, rejections and resets by reason.  time scale: WARN on a gap
+longer than max_gap or a sampling interval that breaks observability (Fang & de Callafon
+Section III) since the last update, else OK; gaps, J, mu and the intervals seen.
 """
 
-from typing import NamedTuple, Optional, Union
+from typing import NamedTuple
 
-from tskf_ros.core.input_rate import InputRate, report_head, worst
+from tskf_ros.core.diagnostic_status import ERROR, OK, Status, TIME_SCALE, WARN
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session.config import EstimatorConfig
 from tskf_ros.owc.session.outcome import FloatArray, REJECT_REASONS, RESET_REASONS, Stats
 
-# diagnostics list at most this many of the sampling intervals seen
+# the time scale task lists at most this many of the sampling intervals seen
 INTERVALS_SHOWN = 20
 # and this many of the gap lengths
 GAPS_SHOWN = 20
-
-Value = Union[int, float, str]
-
-
-class Diagnostics(NamedTuple):
-    """A diagnostics status: level 'OK', 'WARN' or 'ERROR', message, key values."""
-
-    level: str
-    message: str
-    values: dict[str, Value]
+FILTER_HEALTH = 'filter health'
 
 
 class SessionState(NamedTuple):
@@ -38,20 +30,43 @@ class SessionState(NamedTuple):
     health_error: str           # why the filter re-initialised itself since the last report
 
 
-def report(st: Stats, cfg: EstimatorConfig, rate: InputRate, state: SessionState,
-           now_ns: Optional[int]) -> Diagnostics:
-    """Return the diagnostics of a session; with now_ns the input rate is judged too."""
-    level, msgs, values = report_head(
-        rate, now_ns, state.health_error and
-        f'filter re-initialised itself: {state.health_error}')
+def filter_health(st: Stats, state: SessionState) -> Status:
+    """Return the 'filter health' status: samples, rejections and resets by reason."""
+    stat = Status(FILTER_HEALTH)
+    if state.health_error:
+        stat.summary(ERROR, f'filter re-initialised itself: {state.health_error}')
+    elif st.rejected_since:
+        stat.summary(OK, f'{st.rejected_since} sample(s) rejected since the last update')
+    else:
+        stat.summary(OK, 'ok')
+    for key, value in (('Samples received', st.received),
+                       ('Messages lost (transport)', st.messages_lost),
+                       ('Samples accepted', st.accepted),
+                       ('Samples inserted late', st.inserted),
+                       ('Inputs received', st.inputs_received),
+                       ('Inputs accepted', st.inputs_accepted),
+                       ('Input in force', ' '.join(f'{v:g}' for v in state.u)),
+                       ('Points in history', state.points),
+                       ('Covariance trace', st.covariance_trace),
+                       ('Rejections', sum(st.rejected.values())),
+                       ('Resets', sum(st.resets.values()))):
+        stat.add(key, value)
+    for reason in REJECT_REASONS:
+        stat.add(f'Rejected ({reason})', st.rejected[reason])
+    for reason in RESET_REASONS:
+        stat.add(f'Resets ({reason})', st.resets[reason])
+    return stat
+
+
+def time_scale(st: Stats, cfg: EstimatorConfig, P: FloatArray) -> Status:
+    """Return the 'time scale' status: gaps, J, mu and the sampling intervals seen."""
+    stat = Status(TIME_SCALE)
+    stat.summary(OK, 'ok')
     if st.gaps_over_bound:
-        level = worst(level, 'WARN')
-        msgs.append(f'{st.gaps_over_bound} gap(s) longer than max_gap = {cfg.max_gap} s')
-    if st.rejected_since:
-        msgs.append(f'{st.rejected_since} sample(s) rejected')
+        stat.merge_summary(WARN, f'{st.gaps_over_bound} gap(s) longer than max_gap = '
+                           f'{cfg.max_gap:g} s')
     if st.interval_warnings:
-        level = worst(level, 'WARN')
-        msgs.append('sampling interval(s) ' + ', '.join(
+        stat.merge_summary(WARN, 'sampling interval(s) ' + ', '.join(
             str(w.kappa) for w in st.interval_warnings) + ' break observability (Fang & '
             'de Callafon Section III)')
     lengths = list(st.gaps.values())
@@ -59,29 +74,30 @@ def report(st: Stats, cfg: EstimatorConfig, rate: InputRate, state: SessionState
     shown = seen if len(seen) <= INTERVALS_SHOWN else (
         seen[:INTERVALS_SHOWN // 2] + ['...'] + seen[-INTERVALS_SHOWN // 2:])
     warnings = st.interval_warnings[:INTERVALS_SHOWN]
-    values.update({
-        'received': st.received, 'accepted': st.accepted, 'inserted_late': st.inserted,
-        'inputs_received': st.inputs_received, 'inputs_accepted': st.inputs_accepted,
-        'input_in_force': ' '.join(f'{v:g}' for v in state.u),
-        'points_in_history': state.points,
-        'mu_current_s': st.mu_current, 'mu_max_s': st.mu_max,
-        'gaps': st.gaps_total,
-        'gap_max_s': max(lengths) if lengths else 0.0,
-        'gap_lengths_s': ' '.join(f'{j:g}' for j in lengths[-GAPS_SHOWN:]),
-        'covariance_trace': st.covariance_trace,
-        'last_stamp_s': st.last_stamp_ns / NS,
-        'transition': cfg.transition,
-        'intervals_seen_periods': ' '.join(shown),
-        'intervals_seen_count': len(seen),
-        'interval_warnings': ' | '.join(f'{w.kappa}: {w.why}' for w in warnings),
-    })
+    for key, value in (('Gaps', st.gaps_total),
+                       ('Longest gap J (s)', max(lengths) if lengths else 0.0),
+                       ('Last gaps J (s)', ' '.join(f'{j:g}' for j in lengths[-GAPS_SHOWN:])),
+                       ('mu current (s)', st.mu_current), ('mu max (s)', st.mu_max),
+                       ('Last stamp (s)', st.last_stamp_ns / NS),
+                       ('Transition', cfg.transition),
+                       ('Intervals seen (periods)', ' '.join(shown)),
+                       ('Intervals seen (count)', len(seen)),
+                       ('Interval warnings', ' | '.join(f'{w.kappa}: {w.why}'
+                                                        for w in warnings))):
+        stat.add(key, value)
     if st.peak_bounds is not None:
         # Theorem 2 next to the covariance the filter runs (scalar models only)
-        values['theorem2_peak_bound_low'] = st.peak_bounds.low
-        values['theorem2_peak_bound_high'] = st.peak_bounds.high
-        values['covariance'] = float(state.P[0, 0])
-    for reason in REJECT_REASONS:
-        values[f'rejected_{reason}'] = st.rejected[reason]
-    for reason in RESET_REASONS:
-        values[f'resets_{reason}'] = st.resets[reason]
-    return Diagnostics(level, '; '.join(msgs) or 'ok', values)
+        stat.add('Theorem 2 peak bound (low)', st.peak_bounds.low)
+        stat.add('Theorem 2 peak bound (high)', st.peak_bounds.high)
+        stat.add('Covariance', float(P[0, 0]))
+    return stat
+
+
+def status_line(st: Stats, frequency_hz: float, x: FloatArray) -> str:
+    """Return the one-line status the node logs: rate, gaps, last estimate, resets."""
+    resets = sum(st.resets.values())
+    estimate = ' '.join(f'{v:.4g}' for v in x.ravel().tolist())
+    return (f'{frequency_hz:.3g} Hz in, {st.received} received, {st.accepted} accepted, '
+            f'{sum(st.rejected.values())} rejected; {st.gaps_total} gap(s) (longest '
+            f'{max(st.gaps.values(), default=0.0):g} s); last estimate [{estimate}] at '
+            f'{st.last_stamp_ns / NS:.3f} s; {resets} reset(s)')

@@ -127,3 +127,6 @@ class Stats:
     inputs_received: int = 0
     inputs_accepted: int = 0
     last_measurement_ns: int = 0
+    # measurements the middleware reported lost before they reached the node (the live
+    # node's message_lost event: a gap in the publisher's sequence, not a queue overflow)
+    messages_lost: int = 0

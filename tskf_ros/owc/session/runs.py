@@ -12,7 +12,7 @@ from typing import Optional, Union
 import numpy as np
 from numpy.typing import NDArray
 
-from tskf_ros.core.input_rate import InputRate
+from tskf_ros.core.diagnostic_status import InputStream
 from tskf_ros.core.timescale_kalman import (FilterError, InnovationTest, StepResult,
                                             TimeScaleKalmanFilter)
 from tskf_ros.core.units import NS
@@ -32,7 +32,7 @@ class Runs:
     gate: Gate
     stats: Stats
     intervals: Intervals
-    input_rate: InputRate
+    input: InputStream   # noqa: A003 - the session's own name for it
     u: FloatArray
     gated_in_a_row: int
     _use_variance: bool
@@ -120,8 +120,8 @@ class Runs:
             points.append(Point(t, y, x_p[k], P_p[k], self.u, False, 0.0))
             self.intervals.measured(t)
         if count:
-            for now in nows[:count]:
-                self.input_rate.note(now)
+            for t, now in zip(stamps[:count].tolist(), nows[:count]):
+                self.input.note(t, now)
             st.received += count
             st.accepted += count
             self.gated_in_a_row = 0

@@ -16,17 +16,27 @@ from typing import Optional, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from tskf_ros.core.input_rate import InputRate
+from tskf_ros.core.diagnostic_status import (expected_frequency, FrequencyParams,
+                                             InputStream, Status)
 from tskf_ros.core.timescale_kalman import FilterError, NonRegressiveError
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session.admission import Admission, Gate, stamp_rejection
 from tskf_ros.owc.session.config import EstimatorConfig
-from tskf_ros.owc.session.diagnostics import Diagnostics, report, SessionState
+from tskf_ros.owc.session.diagnostics import filter_health, SessionState, time_scale
 from tskf_ros.owc.session.health import checked, finite, StateLimitError
 from tskf_ros.owc.session.history import History, Point
 from tskf_ros.owc.session.outcome import Estimate, FloatArray, Jump, Outcome, Reading, Stats
 from tskf_ros.owc.session.runs import Runs
 from tskf_ros.owc.session.sampling_intervals import Intervals
+
+
+# restarts after which the interval since the last measurement point is still an interval
+GAP_RESETS = ('forward_jump', 'gate_lockout')
+
+
+def _frequency(config: EstimatorConfig) -> FrequencyParams:
+    """Return the FrequencyStatus params of a config's measurement input."""
+    return expected_frequency(config.expected_rate, config.rate_tolerance, config.period)
 
 
 def reading(value: ArrayLike) -> Reading:
@@ -48,8 +58,8 @@ class EstimatorSession(Runs):
         self._variance = 0.0                        # of the sample being added
         self.history = History(config.history_size, config.history_window * NS)
         self.intervals = Intervals(self.stats, config)
+        self.input = InputStream(_frequency(config))
         self._use(config)
-        self.input_rate = InputRate.for_config(config.period, config)
 
     def _use(self, config: EstimatorConfig) -> None:
         """Derive what the checks need from a config (and the filter of its model)."""
@@ -58,6 +68,7 @@ class EstimatorSession(Runs):
         self.gate = Gate(config, self.kf)
         self.history.resize(config.history_size, config.history_window * NS)
         self.intervals.configure(config)
+        self.input.configure(_frequency(config))
         self._max_jump_ns = config.max_jump * NS
         self._state_limit = config.state_limit
         self._use_variance = config.use_message_variance
@@ -74,10 +85,10 @@ class EstimatorSession(Runs):
             now_ns: Optional[int] = None) -> Outcome:
         """Take one sample (stamp in ns, measurement, its variance); say what it did."""
         self.stats.received += 1
-        if now_ns is not None:
-            self.input_rate.note(now_ns)
         if type(stamp_ns) is not int:
             stamp_ns = int(stamp_ns)
+        if now_ns is not None:
+            self.input.note(stamp_ns, now_ns)
         y = power if type(power) is float else reading(power)
         refused = self.admission.check(stamp_ns, y, variance, now_ns)
         if refused is not None:
@@ -173,7 +184,6 @@ class EstimatorSession(Runs):
             return self.reset('set_state', 'x0 / P0 changed: the estimate starts again from '
                               'them at the next sample')
         self.kf.x, self.kf.P = old.x, old.P
-        self.input_rate = InputRate.for_config(config.period, config)
         self.intervals.recheck()        # the same intervals may mean something else now
         return Outcome('accepted', 'reconfigured', 'new parameters in use')
 
@@ -183,18 +193,21 @@ class EstimatorSession(Runs):
         return points[-1].stamp_ns if points else None
 
     def diagnostics(self, *, consume: bool = True,
-                    now_ns: Optional[int] = None) -> Diagnostics:
+                    now_ns: Optional[int] = None) -> list[Status]:
         """
-        Return the diagnostics status (level, message, values) of the session.
+        Return the statuses of the session's diagnostic tasks (see doc/diagnostics.md).
 
-        consume=True resets the since-last-report counters (gaps over the bound, rejects,
-        a self re-initialisation).  With now_ns (the receiver clock) the input rate and
-        staleness are judged too (InputRate).
+        'filter health' and 'time scale'; with now_ns (the receiver clock) first the
+        input's 'input frequency' and 'timestamp delay' (diagnostic_updater's
+        FrequencyStatus and TimeStampStatus, which start a new update).  consume=True
+        resets the since-last-update counters (gaps over the bound, rejects, a self
+        re-initialisation).
         """
         st = self.stats
-        out = report(st, self.config, self.input_rate,
-                     SessionState(len(self.history.points), self.u, self.kf.P,
-                                  self.health_error), now_ns)
+        out = self.input.run(now_ns) if now_ns is not None else []
+        out += [filter_health(st, SessionState(len(self.history.points), self.u, self.kf.P,
+                                               self.health_error)),
+                time_scale(st, self.config, self.kf.P)]
         if consume:
             st.gaps_over_bound = 0
             st.rejected_since = 0
@@ -259,6 +272,10 @@ class EstimatorSession(Runs):
         return Outcome('accepted', 'merged', 'measurement merged into an input point')
 
     def _restart(self, reason: str, stamp_ns: int, y: Reading, message: str) -> Outcome:
+        last = self.stats.last_measurement_ns
+        if reason in GAP_RESETS and 0 < last < stamp_ns:
+            # the time scale had no measurement point from last to here: a gap J
+            self.intervals.record(last, stamp_ns)
         self.reset(reason)
         out = self._start(stamp_ns, y)
         out.status, out.reason, out.message = 'reset', reason, message + '; re-initialised'
