@@ -75,7 +75,9 @@ def resolved(path: PathLike) -> Path:
     """Return the absolute path without symlinks; a symlink loop is a BagNotFoundError."""
     try:
         return Path(path).resolve()
-    except (RuntimeError, OSError) as exc:     # RuntimeError: Python < 3.13's symlink loop
+    except RuntimeError:        # Python < 3.13's symlink loop
+        raise BagNotFoundError(f'{path}: {_LOOP}') from None
+    except OSError as exc:      # a loop that resolve() reports as ELOOP
         raise BagNotFoundError(f'{path}: {_LOOP} ({one_line(exc)})') from None
 
 
