@@ -9,6 +9,7 @@ from typing import Optional
 
 from tskf_ros.bag.bag_metadata import write_metadata
 from tskf_ros.bag.mcap_file import scan_mcap, seal_mcap
+from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED, MCAP_MAGIC
 
 import yaml
@@ -77,6 +78,8 @@ def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optio
     bagdir, target = locate(Path(path))
     if output is not None:
         target = Path(output)
+        if target.resolve() != bagdir.resolve():
+            check_outputs([target], [bagdir])
     mcap = mcap_file(bagdir)
     if target.resolve() != bagdir.resolve() and (target.exists() or target.is_symlink()):
         raise ReindexError(f'{target}: exists already, not overwriting (give -o OUTPUT)')

@@ -19,6 +19,7 @@ from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsErr
 from tskf_ros.messages.qos import DIAGNOSTICS_TOPIC, reliable_qos
 from tskf_ros.owc.session import (ConfigError, EstimatorConfig, EstimatorSession,
                                   model_from_flat, Outcome)
+from tskf_ros.owc.session.config import check_ranges
 
 NODE_NAME = 'timescale_estimator'
 MATRICES = ('A', 'B', 'C', 'D', 'G', 'Q', 'R', 'x0', 'P0')
@@ -123,6 +124,7 @@ __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'BAG_POWER_TOPIC', 'BAG_TRUTH
 def parameters_to_config(values: dict) -> NodeConfig:
     """Build the config from parameter values; raise ConfigError with the reason if bad."""
     measurement_class(values.get('measurement_type', DEFAULT_MEASUREMENT_TYPE))
+    check_ranges(values, {name: spec[2] for name, spec in SCALARS.items()})
     flat = {}
     for key in MATRICES + ('measurement_range',):
         v = values[key]
