@@ -68,7 +68,7 @@ def params_with(directory: Path, name: str, value: float) -> Path:
 
 def check(capsys, code: int, name: str, value: float) -> None:
     """Assert a documented status, at most one line on stderr, and no traceback."""
-    err = capsys.readouterr().err
+    err = capsys.readouterr().err       # (stdout: what the tool did, free)
     lines = [line for line in err.splitlines() if line.strip()]
     assert code in STATUSES and len(lines) <= 1 and 'Traceback' not in err, (
         name, value, code, err)
@@ -101,7 +101,6 @@ def test_sweep_any_set_value(small, tmp_path, capsys, name, value):
     code = sweep.main(['--bags', str(small / 'bag'), '--set', f'{name}={value!r}',
                        '--workers', '0', '--out', str(tmp_path / 't.csv'), '--no-resume',
                        '--no-progress'])
-    capsys.readouterr().out
     check(capsys, code, name, value)
 
 
@@ -126,5 +125,4 @@ def test_plot_bag_any_parameter_value(small, tmp_path, capsys, name, value):
     params = params_with(tmp_path, name, value)
     code = plot_bag.main([str(small / 'bag'), '--out', str(tmp_path / 'plots'),
                           '--params-file', str(params)])
-    capsys.readouterr().out
     check(capsys, code, name, value)
