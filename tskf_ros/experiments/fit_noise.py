@@ -43,6 +43,11 @@ class NoFitError(FitError):
     """A fit whose maximum cannot be used (at a bound, or a singular Hessian)."""
 
 
+def entry(name: str) -> tuple[str, int]:
+    """Return the matrix ('Q' or 'R') and diagonal index i of a parameter name 'Q[i,i]'."""
+    return name[0], int(name[2:].split(',')[0])
+
+
 def undetermined(res: FitResult) -> list[str]:
     """Return the parameters the data do not determine: at a bound, or a large stderr."""
     return [name for name, se in zip(res.names, res.theta_stderr)
@@ -53,7 +58,7 @@ def kept_values(config: EstimatorConfig, res: FitResult) -> tuple[np.ndarray, np
     """Return (Q, R) to write: the fit, with each undetermined entry the configured one."""
     Q, R = np.array(res.Q, dtype=float), np.array(res.R, dtype=float)
     for name in undetermined(res):
-        which, i = name[0], int(name[2:].split(',')[0])
+        which, i = entry(name)
         target, source = (Q, config.model.Q) if which == 'Q' else (R, config.model.R)
         target[i, i] = source[i, i]
     return Q, R
@@ -75,7 +80,7 @@ def fit_events(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
     k = len(res.names)
     st = run.stats
     for name, t, se in zip(res.names, res.theta, res.theta_stderr):
-        which, i = name[0], int(name[2:].split(',')[0])
+        which, i = entry(name)
         kept = (config.model.Q if which == 'Q' else config.model.R)[i, i]
         keep = f"the parameter file's value {kept:.6g} is kept (fix it with --fix {which})"
         if name in res.at_bound:
