@@ -208,19 +208,20 @@ def test_standard_errors_match_the_spread_over_seeds(tmp_path):
                   < 3 * np.mean(se, axis=0) / np.sqrt(6) + 0.05)
 
 
-def test_a_message_that_does_not_deserialize_is_damage(sim, tmp_path, capsys):
-    # 30 good samples, then bytes that are not an Illuminance: fitted on what came before
-    d = sim[0]
+def test_a_message_that_does_not_deserialize_is_damage(tmp_path, capsys):
+    # 300 good samples, then bytes that are not an Illuminance: fitted on what came before
     bag = tmp_path / 'bad'
-    t, y = simulate(tmp_path / 'good', 30, seed=2)
+    t, y = simulate(tmp_path / 'good', 300, seed=2)
     write_samples(bag, t, y, tail=b'\x00\x01\x00\x00garbage')
     out = tmp_path / 'f.json'
-    rc = fit_noise.main([str(bag), '--params-file', str(d / 'params.yaml'), '--json',
+    # Q at its true value, fixed: R is determined by 300 samples
+    (tmp_path / 'q.yaml').write_text(PARAMS.replace('Q: [1.0]', f'Q: [{Q_TRUE}]'))
+    rc = fit_noise.main([str(bag), '--params-file', str(tmp_path / 'q.yaml'), '--json',
                          str(out), '--fix', 'Q', '-q'])
     err = capsys.readouterr().err
     assert rc == 3 and 'does not deserialize' in err and len(err.strip().splitlines()) == 1
     fit = json.loads(out.read_text())
-    assert fit['samples'] == 30 and 'does not deserialize' in fit['damage']
+    assert fit['samples'] == 300 and 'does not deserialize' in fit['damage']
 
 
 def test_absurd_readings_are_left_to_the_gate(tmp_path):
@@ -270,3 +271,195 @@ def test_ctrl_c_is_one_line_and_writes_nothing(sim, tmp_path, capsys, monkeypatc
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 130 and len(err) == 1 and 'interrupted' in err[0], err
     assert list(tmp_path.iterdir()) == []
+
+
+def one_line(capsys, *words):
+    """Return stderr after asserting it is one line holding every word."""
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and 'Traceback' not in err, err
+    assert all(w in lines[0] for w in words), lines[0]
+    return lines[0]
+
+
+def test_no_output_may_be_a_file_of_the_input_bag(sim, tmp_path, capsys):
+    # --json BAG/BAG.mcap would replace the recording with JSON
+    d = sim[0]
+    bag = tmp_path / 'bag'
+    simulate(bag, 40, seed=3)
+    before = {p.name: p.read_bytes() for p in bag.iterdir()}
+    mcap = next(bag.glob('*.mcap'))
+    (tmp_path / 'link.json').symlink_to(mcap)
+    for option, target in (('--json', mcap), ('--out', bag / 'metadata.yaml'),
+                           ('--json', bag), ('--json', bag / 'new.json'),
+                           ('--out', tmp_path / 'link.json'), ('--json', tmp_path)):
+        rc = fit_noise.main([str(bag), '--params-file', str(d / 'params.yaml'), option,
+                             str(target), '--fix', 'R'])
+        assert rc == 1, target
+        one_line(capsys, 'input bag')
+        assert {p.name: p.read_bytes() for p in bag.iterdir()} == before
+    # the bag given as its .mcap file: its directory is protected all the same
+    rc = fit_noise.main([str(mcap), '--params-file', str(d / 'params.yaml'), '--json',
+                         str(bag / 'fit.json'), '--fix', 'R'])
+    assert rc == 1 and not (bag / 'fit.json').exists()
+    one_line(capsys, 'input bag')
+    with pytest.raises(SystemExit) as exit_:
+        fit_noise.main([str(bag), '--out', str(tmp_path / 'a'), '--json', str(tmp_path / 'a')])
+    assert exit_.value.code == 2 and 'same file' in capsys.readouterr().err
+
+
+def test_ctrl_c_while_reading_is_an_interrupt_not_damage(sim, tmp_path, capsys, monkeypatch):
+    # rclpy's deserialize_message turns a KeyboardInterrupt raised inside it into its own
+    # error; the partial bag must not be fitted and written as a damaged one
+    import signal
+    from tskf_ros.experiments import bag_analysis
+    d = sim[0]
+    real, calls = bag_analysis.deserialize_message, []
+
+    def interrupted_inside(data, cls):
+        calls.append(1)
+        if len(calls) == 50:
+            try:
+                signal.raise_signal(signal.SIGINT)
+            except KeyboardInterrupt:
+                pass                # swallowed by the extension...
+            raise RuntimeError('Failed to deserialize ROS message')    # ...which says this
+        return real(data, cls)
+
+    monkeypatch.setattr(bag_analysis, 'deserialize_message', interrupted_inside)
+    out = tmp_path / 'o'
+    handler = signal.getsignal(signal.SIGINT)
+    rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                         '--out', str(out / 'f.yaml'), '--json', str(out / 'f.json')])
+    assert rc == 130
+    one_line(capsys, 'interrupted', 'nothing written')
+    assert not out.exists()
+    assert signal.getsignal(signal.SIGINT) is handler
+
+
+def test_ctrl_c_while_writing_writes_nothing(sim, tmp_path, capsys, monkeypatch):
+    d = sim[0]
+    import tskf_ros.experiments.output as output
+    real = output.os.replace
+    done = []
+
+    def interrupted_replace(src, dst):
+        if done:
+            raise KeyboardInterrupt
+        done.append(dst)
+        return real(src, dst)
+    monkeypatch.setattr(output.os, 'replace', interrupted_replace)
+    rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'), '--fix', 'R',
+                         '--out', str(tmp_path / 'f.yaml'), '--json', str(tmp_path / 'f.json')])
+    assert rc == 130
+    one_line(capsys, 'interrupted')
+    # the first file was renamed into place before the interrupt: removed again
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_bad_out_writes_no_json(sim, tmp_path, capsys):
+    d = sim[0]
+    (tmp_path / 'file').write_text('')
+    js = tmp_path / 'f.json'
+    for bad in (tmp_path / 'file' / 'f.yaml', tmp_path):     # under a file; a directory
+        rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                             '--fix', 'R', '--json', str(js), '--out', str(bad)])
+        assert rc == 1
+        one_line(capsys)
+        assert not js.exists() and not list(tmp_path.glob('.*part'))
+
+
+def test_a_start_far_from_the_truth_is_found(sim, tmp_path):
+    # e^30 from the truth: beyond the first search window of e^+-25 around the start
+    d, *_, truth_fit = sim
+    far = PARAMS.replace('Q: [1.0]', f'Q: [{float(Q_TRUE * np.exp(30.0))!r}]').replace(
+        'R: [1.0]', f'R: [{float(R_TRUE * np.exp(-30.0))!r}]')
+    (tmp_path / 'far.yaml').write_text(far)
+    assert fit_noise.main([str(d / 'bag'), '--params-file', str(tmp_path / 'far.yaml'),
+                           '--json', str(tmp_path / 'f.json'), '-q']) == 0
+    fit = json.loads((tmp_path / 'f.json').read_text())
+    assert fit['undetermined'] == [] and fit['optimizer']['at_bound'] == []
+    np.testing.assert_allclose(fit['log_parameters'], truth_fit['log_parameters'], atol=1e-3)
+
+
+def test_an_undetermined_parameter_keeps_the_configured_value(tmp_path, capsys):
+    # at 1 Hz with model (3), R is flat towards 0: not written, said, marked in the JSON
+    params = REPO / 'config' / 'owc_estimator.yaml'
+    configured = load_config(params).session.model
+    rc = fit_noise.main([str(REPO / 'bags' / 'owc_cai_td_1hz'), '--params-file', str(params),
+                         '--out', str(tmp_path / 'f.yaml'), '--json', str(tmp_path / 'f.json')])
+    out = capsys.readouterr().out
+    assert rc == 0
+    fit = json.loads((tmp_path / 'f.json').read_text())
+    assert fit['undetermined'] == ['R[0,0]']
+    assert fit['written']['R'] == [[configured.R[0, 0]]]
+    assert fit['written']['Q'] == fit['Q'] and fit['Q'][0][0] != configured.Q[0, 0]
+    written = load_config(tmp_path / 'f.yaml').session.model
+    assert written.R[0, 0] == configured.R[0, 0]
+    assert written.Q[0, 0] == pytest.approx(fit['Q'][0][0], rel=1e-12)
+    assert 'R[0,0] is not determined' in out and 'is kept' in out
+    assert 'not written' in out
+
+
+def test_the_node_ranges_refuse_a_params_file(sim, tmp_path, capsys):
+    d = sim[0]
+    for line, name in (('period: 1.0e-300', 'period'), ('jump_factor: 0.0', 'jump_factor'),
+                       ('dense_fraction: 7.0', 'dense_fraction'),
+                       ('max_jump: 1.0e+308', 'max_jump')):
+        (tmp_path / 'p.yaml').write_text(PARAMS + f'    {line}\n')
+        rc = fit_noise.main([str(d / 'bag'), '--params-file', str(tmp_path / 'p.yaml'),
+                             '--json', str(tmp_path / 'f.json')])
+        assert rc == 1
+        one_line(capsys, name, 'outside its range')
+        assert not (tmp_path / 'f.json').exists()
+
+
+def test_a_bag_of_another_model_is_refused(capsys):
+    # the drogue bag has inputs and truth of displacement and velocity: not model (3)
+    rc = fit_noise.main([str(REPO / 'bags' / 'drogue'), '--params-file',
+                         str(REPO / 'config' / 'owc_estimator.yaml')])
+    assert rc == 1
+    one_line(capsys, 'another model', '/input')
+    rc = fit_noise.main([str(REPO / 'bags' / 'led_alignment'), '--params-file',
+                         str(REPO / 'config' / 'owc_estimator.yaml')])
+    assert rc == 1
+    one_line(capsys, 'another model', '/alignment/truth')
+
+
+def test_the_likelihood_is_shown_as_it_improves(sim, monkeypatch, capsys):
+    d, *_ = sim
+    seen = []
+    config = load_config(d / 'params.yaml').session
+    events = read_stream(d / 'bag', config).events
+    sf, report = fit_noise.fit_events(config, events, fit_R=False,
+                                      progress=lambda k, ll: seen.append((k, ll)))
+    assert [k for k, _ in seen] == list(range(1, len(seen) + 1))
+    lls = [ll for _, ll in seen]
+    assert all(b >= a for a, b in zip(lls, lls[1:]))
+    # the last evaluations are the Hessian's, around the maximum
+    assert lls[-1] == pytest.approx(sf.result.log_likelihood, rel=1e-9)
+
+    class Terminal:
+        """stderr as a terminal (tqdm draws only there)."""
+
+        def __init__(self):
+            self.text = []
+
+        def isatty(self):
+            return True
+
+        def write(self, s):
+            self.text.append(s)
+
+        def flush(self):
+            pass
+    term = Terminal()
+    monkeypatch.setattr('sys.stderr', term)
+    assert fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                           '--fix', 'R']) == 0
+    shown = ''.join(term.text)
+    assert 'reading' in shown and 'fitting' in shown and 'log L -' in shown
+    term.text.clear()
+    assert fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                           '--fix', 'R', '-q']) == 0
+    assert ''.join(term.text) == ''

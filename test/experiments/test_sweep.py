@@ -2,8 +2,13 @@
 
 import csv
 import math
+import os
 from pathlib import Path
 import shutil
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
 
@@ -15,6 +20,8 @@ REPO = Path(__file__).resolve().parents[2]
 SAMPLE = REPO / 'bags' / 'owc_cai_td_1hz'
 PARAMS = REPO / 'config' / 'owc_estimator.yaml'
 SETS = [('R', [[1.0], [100.0]]), ('transition', ['euler', 'exact'])]
+# s: a bound on waiting for a subprocess, never an assertion about timing
+TIMEOUT = 120.0
 
 
 @pytest.fixture(scope='module')
@@ -90,6 +97,9 @@ def test_two_workers_give_the_sequential_rows_and_a_damaged_bag_is_reported(bags
         if name == 'damaged':
             assert row['error'].startswith('damaged:') and 'byte' in row['error']
             assert int(row['n_messages']) < 288   # what came before the damage
+        elif name == 'drogue':
+            # a bag of another model (inputs, truth of other states): an error row
+            assert 'another model' in row['error'] and row['n_messages'] == ''
         else:
             assert row['error'] == '', row['error']
         if name in ('a', 'b'):
@@ -98,7 +108,7 @@ def test_two_workers_give_the_sequential_rows_and_a_damaged_bag_is_reported(bags
             assert row['truth_topic'] == '/true_angle' and int(row['truth_points']) == 287
             assert 0 < float(row['rms_corrected']) < 0.1
             assert float(row['nis_band_lo']) < 1 < float(row['nis_band_hi'])
-    assert seq.errors == par.errors == 4
+    assert seq.errors == par.errors == 8
     # the copies of one bag give the same numbers under each setting
     for R in ('1.0', '100.0'):
         for tr in ('euler', 'exact'):
@@ -214,3 +224,129 @@ def test_an_existing_scheduler_runs_the_same_sweep(bags, tmp_path):
         assert len(cluster.scheduler.workers) == 1
     assert len(remote.evaluated) == 2
     assert_same({r['key']: r for r in seq.rows}, {r['key']: r for r in remote.rows})
+
+
+def one_line(capsys, *words):
+    """Return stderr after asserting it is one line holding every word."""
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and 'Traceback' not in err, err
+    assert all(w in lines[0] for w in words), lines[0]
+    return lines[0]
+
+
+@pytest.mark.parametrize('workers', [0, 2])
+def test_a_bag_by_path_and_by_symlink_is_one_row(bags, tmp_path, workers):
+    real = bags / 'terminal' / 'a'
+    (tmp_path / 'link').symlink_to(real)
+    found = sweep_tasks.find_bags([str(real), str(tmp_path / 'link')])
+    assert found == [str(real)]
+    # given to sweep() directly, both spellings still make one task and one row
+    res = sweep.sweep([str(tmp_path / 'link'), str(real)], out=tmp_path / 't.csv',
+                      params_file=PARAMS, sets=SETS[:1], workers=workers)
+    assert len(res.evaluated) == len(res.rows) == 2
+    assert len({r['key'] for r in res.rows}) == 2
+    assert all(int(r['n_messages']) == 288 for r in res.rows)
+
+
+def test_the_node_ranges_refuse_a_setting_in_one_line(bags, tmp_path, capsys):
+    base = ['--bags', str(bags / 'terminal' / 'a'), '--params-file', str(PARAMS),
+            '--workers', '0', '--out', str(tmp_path / 't.csv'), '--no-progress']
+    for setting, name in (('period=1e-300', 'period'), ('jump_factor=0', 'jump_factor'),
+                          ('dense_fraction=7', 'dense_fraction'),
+                          ('max_jump=1e308', 'max_jump'), ('gate=nan', 'gate'),
+                          ('period=inf', 'period')):
+        assert sweep.main(base + ['--set', setting]) == 1
+        one_line(capsys, name, 'outside its range')
+    assert not (tmp_path / 't.csv').exists()
+
+
+def test_settings_are_typed_with_the_right_words():
+    d = default_parameters()
+    assert sweep_tasks.parse_setting('history_size=1e3', d) == ('history_size', [1000])
+    assert sweep_tasks.parse_setting('state_names=a', d) == ('state_names', [['a']])
+    with pytest.raises(ValueError, match='not a whole number'):
+        sweep_tasks.parse_setting('history_size=2.5', d)
+
+
+def test_no_output_may_be_a_file_of_an_input_bag(bags, tmp_path, capsys):
+    a = tmp_path / 'a'
+    shutil.copytree(bags / 'terminal' / 'a', a)
+    before = {p.name: p.read_bytes() for p in a.iterdir()}
+    for extra in (['--out', str(a / 'owc_cai_td_1hz.mcap')],
+                  ['--out', str(tmp_path / 't.csv'), '--png', str(a / 'metadata.yaml')],
+                  ['--out', str(a / 'new.csv')]):
+        assert sweep.main(['--bags', str(a), '--workers', '0', '--no-progress',
+                           '--params-file', str(PARAMS)] + extra) == 1
+        one_line(capsys, 'input bag')
+        assert {p.name: p.read_bytes() for p in a.iterdir()} == before
+
+
+def test_bags_of_other_models_are_error_rows(tmp_path):
+    found = [str(REPO / 'bags' / n) for n in ('owc_cai_td_1hz', 'led_alignment', 'drogue')]
+    res = sweep.sweep(found, out=tmp_path / 't.csv', params_file=PARAMS, workers=0)
+    rows = {Path(r['bag']).name: r for r in res.rows}
+    assert rows['owc_cai_td_1hz']['error'] == ''
+    for name, why in (('led_alignment', '/alignment/truth'), ('drogue', '/input')):
+        assert 'another model' in rows[name]['error'] and why in rows[name]['error']
+        assert rows[name]['nis_mean'] == ''
+
+
+def test_the_figure_says_which_dot_is_which_bag(bags, tmp_path, monkeypatch):
+    found = sweep_tasks.find_bags([str(bags)])
+    res = sweep.sweep(found, out=tmp_path / 't.csv', params_file=PARAMS, sets=SETS[:1],
+                      workers=0)
+    figures = []
+    monkeypatch.setattr(sweep, 'save_figure', lambda fig, path: figures.append(fig) or path)
+    sweep.plot(res.rows, SETS[:1], tmp_path / 's.png')
+    fig = figures[0]
+    axes = fig.axes
+    # no gated sample in any row: no panel of zeros, a note instead
+    assert len(axes) == 2
+    notes = ' '.join(t.get_text() for t in fig.texts)
+    assert 'no sample was rejected by the innovation gate' in notes
+    assert 'damaged' in notes and 'drogue' in notes       # the error rows, named
+    legend = [t.get_text() for t in axes[0].get_legend().get_texts()]
+    assert legend == ['a', 'b']
+    assert [t.get_text() for t in axes[1].get_legend().get_texts()] == [
+        '95% band of the mean NIS']
+    # the band: one bar per drawn row, from nis_band_lo to nis_band_hi
+    bands = [c for c in axes[1].collections if c.get_label().startswith('95%')]
+    segments = [s for c in axes[1].collections for s in c.get_segments()]
+    good = [r for r in res.rows if not r['error']]
+    assert bands and len(segments) == len(good)
+    assert sorted(round(s[0][1], 9) for s in segments) == sorted(
+        round(float(r['nis_band_lo']), 9) for r in good)
+    for ax in axes:
+        assert ax.get_yscale() == 'log' and ax.get_ylabel()
+        fig.canvas.draw()
+        lo, hi = ax.get_ylim()
+        shown = [t for t in ax.get_yticklabels() if t.get_text() and lo <= t.get_position()[1]
+                 <= hi]
+        assert len(shown) >= 3, [t.get_text() for t in shown]
+
+
+def test_ctrl_c_in_a_dask_sweep_is_one_line_without_worker_tracebacks(bags, tmp_path):
+    # a terminal's Ctrl-C goes to the whole foreground process group: the workers too
+    out = tmp_path / 'd.csv'
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'tskf_ros.experiments.sweep', '--bags', str(bags / 'terminal'),
+         '--params-file', str(PARAMS), '--set', 'R=' + ','.join(str(r) for r in range(1, 40)),
+         '--workers', '2', '--out', str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env=dict(os.environ, OPENBLAS_NUM_THREADS='1'))
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while not (out.exists() and len(out.read_text().splitlines()) >= 3):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, 'the sweep never finished a row'
+            time.sleep(0.05)            # polling a condition, with a deadline
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=TIMEOUT)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert proc.returncode == 130 and len(lines) == 1, err
+    assert 'interrupted' in lines[0] and 'Traceback' not in err

@@ -10,6 +10,7 @@ from typing import Optional
 from tskf_ros.bag.bag_errors import BagError, Damage, error_exit, EXIT_DAMAGED, resolved
 from tskf_ros.bag.bag_metadata import file_metadata, merge_metadata, write_yaml
 from tskf_ros.bag.mcap_file import scan_mcap, seal_mcap
+from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.reader import MCAP_MAGIC
 
 import yaml
@@ -95,6 +96,8 @@ def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optio
         target = Path(output)
     files = mcap_files(bagdir)
     same = resolved(target) == resolved(bagdir)
+    if output is not None and not same:
+        check_outputs([target], [bagdir])
     if not same and (target.exists() or target.is_symlink()):
         raise ReindexError(f'{target}: exists already, not overwriting (give -o OUTPUT)')
     if not target.name or target.name in ('.', '..'):

@@ -29,12 +29,19 @@ LOG_SEARCH_RADIUS = 25.0
 HESSIAN_STEP = 1e-2
 # a parameter within this of its search bound has run to the bound
 AT_BOUND = 1e-3
+# a parameter that ends at its bound is searched again around there, at most this often
+# (so up to e^(+-25 x 4) from the start: a start far from the data's scale is found)
+RECENTRES = 3
 # the coarse search before the optimiser: these offsets of each log-parameter (e^-12..e^6)
 COARSE_OFFSETS = (-12.0, -9.0, -6.0, -3.0, 0.0, 3.0, 6.0)
+# and these around the data's own scale (data_scale: all the spread on Q, or all on R)
+DATA_OFFSETS = (-9.0, -6.0, -3.0, 0.0, 3.0)
 
 FloatArray = NDArray[np.float64]
 # the log-likelihood as a function of the log-parameters theta
 Objective = Callable[[FloatArray], float]
+# told (evaluations so far, the best log-likelihood so far) after each evaluation
+FitProgress = Callable[[int, float], None]
 
 
 @dataclass(frozen=True)
@@ -252,30 +259,95 @@ class FitError(ValueError):
     """The likelihood could not be maximised (the message says why)."""
 
 
-def coarse_start(f: Objective, theta0: ArrayLike) -> FloatArray:
+def coarse_start(f: Objective, theta0: ArrayLike,
+                 offsets: Sequence[float] = COARSE_OFFSETS) -> tuple[FloatArray, float]:
     """
-    Return the best point of a coarse search around theta0, to start the optimiser from.
+    Return the best point of a coarse search around theta0 and its value.
 
     The likelihood can have a valley that runs to a bound (at 1 kHz, model (3) with Q near
     the paper's 1 improves as R -> 0), where a gradient method started at the file's
-    values ends.  So each log-parameter is first tried at theta0 + COARSE_OFFSETS: the full
+    values ends.  So each log-parameter is first tried at theta0 + offsets: the full
     grid for up to two parameters, one coordinate at a time (keeping the best) for more.
     """
     theta0 = np.asarray(theta0, dtype=float)
-    offsets = np.asarray(COARSE_OFFSETS, dtype=float)
+    steps = np.asarray(offsets, dtype=float)
     if theta0.size <= 2:
-        grid = [theta0 + np.array(c) for c in _product(offsets, theta0.size)]
+        grid = [theta0 + np.array(c) for c in _product(steps, theta0.size)]
         values = [f(t) for t in grid]
-        return grid[int(np.argmin(values))]
+        i = int(np.argmin(values))
+        return grid[i], float(values[i])
     best, best_value = theta0.copy(), f(theta0)
     for i in range(theta0.size):
-        for d in offsets:
+        for d in steps:
             t = best.copy()
             t[i] = theta0[i] + d
             v = f(t)
             if v < best_value:
                 best, best_value = t, v
-    return best
+    return best, float(best_value)
+
+
+def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
+               par: NoiseParameters, theta0: FloatArray) -> FloatArray:
+    """
+    Return log-parameters at the data's own scale (theta0 where the data say nothing).
+
+    From the differences of successive measurements, dy over dt: their robust variance
+    v_i = median(dy_i^2) / 0.455 (the median of chi2(1)) put all on the measurement noise,
+    R_ii = v_i dt / 2 (R / mu per sample, twice per difference), or all on the process
+    noise, Q_jj = mean(v) / (dt |(C G)_j|^2), with dt the median spacing.
+    """
+    dys, dts = [], []
+    for segment in segments:
+        t, last = 0.0, None
+        for rec in segment:
+            if rec.y is not None:
+                y = np.asarray(rec.y, dtype=float).reshape(-1)
+                if last is not None and t > last[0]:
+                    dys.append(y - last[1])
+                    dts.append(t - last[0])
+                last = (t, y)
+            t += rec.mu
+    theta = np.array(theta0, dtype=float)
+    if len(dys) < 2:
+        return theta
+    with np.errstate(all='ignore'):
+        v = np.median(np.square(dys), axis=0) / 0.455
+        dt = float(np.median(dts))
+        G = model.G if model.G is not None else np.eye(model.A.shape[0])
+        cg = np.sum(np.square(model.C @ G), axis=0)
+        k = 0
+        if par.fit_Q:
+            q = np.mean(v) / (dt * cg)
+            theta[:par.r] = np.where(np.isfinite(q) & (q > 0), np.log(q), theta[:par.r])
+            k = par.r
+        if par.fit_R:
+            r = v * dt / 2.0
+            theta[k:k + par.p] = np.where(np.isfinite(r) & (r > 0), np.log(r),
+                                          theta[k:k + par.p])
+    return theta
+
+
+def _search(f: Objective, start: FloatArray, centre: FloatArray
+            ) -> tuple[FloatArray, FloatArray, FloatArray, str, bool]:
+    """
+    Minimise f from start within centre +- LOG_SEARCH_RADIUS (L-BFGS-B, then Nelder-Mead).
+
+    Return (theta, lower bounds, upper bounds, the optimiser's message, success).
+    """
+    lo, hi = centre - LOG_SEARCH_RADIUS, centre + LOG_SEARCH_RADIUS
+    bounds = list(zip(lo, hi))
+    start = np.clip(start, lo, hi)
+    res = scipy.optimize.minimize(f, start, method='L-BFGS-B', bounds=bounds,
+                                  options={'maxiter': 500, 'ftol': 1e-13, 'gtol': 1e-7})
+    theta, message, success = res.x, str(res.message), bool(res.success)
+    if not success:
+        nm = scipy.optimize.minimize(f, theta, method='Nelder-Mead', bounds=bounds,
+                                     options={'xatol': 1e-6, 'fatol': 1e-9, 'maxiter': 2000})
+        if nm.fun <= res.fun:
+            theta, success = nm.x, bool(nm.success)
+            message = f'L-BFGS-B: {res.message}; Nelder-Mead: {nm.message}'
+    return np.asarray(theta, dtype=float), lo, hi, message, success
 
 
 def _product(offsets: FloatArray, k: int) -> list[list[float]]:
@@ -285,13 +357,18 @@ def _product(offsets: FloatArray, k: int) -> list[list[float]]:
 
 
 def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRecord]], *,
-        fit_Q: bool = True, fit_R: bool = True) -> FitResult:
+        fit_Q: bool = True, fit_R: bool = True,
+        progress: Optional[FitProgress] = None) -> FitResult:
     """
     Maximise the innovation likelihood over log diag(Q) and log diag(R) from the model's.
 
     Raises FitError when the likelihood is not finite at the start or the optimiser does
-    not converge.  A parameter that runs to its search bound (e^{+-25} times the start) is
-    listed in `at_bound` and its standard error is NaN.
+    not converge.  The search starts from the best point of a coarse grid around the
+    model's values and around the data's own scale (data_scale).  A parameter that runs to
+    its search bound (e^{+-25} around that start) is searched again around that bound, up
+    to RECENTRES times; one still at its bound then (the likelihood rises without a
+    maximum towards 0 or infinity) is listed in `at_bound` and its standard error is NaN.
+    progress(evaluations, best log-likelihood) is called after each evaluation.
     """
     r = model.Q.shape[0]
     p = model.C.shape[0]
@@ -300,11 +377,16 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
     par = NoiseParameters(r, p, fit_Q, fit_R)
     theta0 = par.start(model.Q, model.R)
     calls = [0]
+    best_seen = [float('inf')]
 
     def nll(theta: FloatArray) -> float:
         calls[0] += 1
         Q, R = par.matrices(theta, model.Q, model.R)
-        return negative_log_likelihood(with_noise(model, Q, R), transition, segments)
+        value = negative_log_likelihood(with_noise(model, Q, R), transition, segments)
+        best_seen[0] = min(best_seen[0], value)
+        if progress is not None:
+            progress(calls[0], -best_seen[0])
+        return value
 
     if not np.isfinite(nll(theta0)):
         raise FitError("the likelihood is not finite at the parameter file's Q and R")
@@ -314,24 +396,24 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
         value = nll(theta)
         return value if np.isfinite(value) else big
 
-    bounds = [(t - LOG_SEARCH_RADIUS, t + LOG_SEARCH_RADIUS) for t in theta0]
-    start = coarse_start(bounded, theta0)
-    res = scipy.optimize.minimize(bounded, start, method='L-BFGS-B', bounds=bounds,
-                                  options={'maxiter': 500, 'ftol': 1e-13, 'gtol': 1e-7})
-    theta, message, success = res.x, str(res.message), bool(res.success)
-    if not success:
-        nm = scipy.optimize.minimize(bounded, theta, method='Nelder-Mead', bounds=bounds,
-                                     options={'xatol': 1e-6, 'fatol': 1e-9, 'maxiter': 2000})
-        if nm.fun <= res.fun:
-            theta, success = nm.x, bool(nm.success)
-            message = f'L-BFGS-B: {res.message}; Nelder-Mead: {nm.message}'
+    # the coarse search around the file's values and around the data's own scale: a
+    # start far from the data (e^30) can sit on a plateau where no gradient leads back
+    theta, value = coarse_start(bounded, theta0)
+    scaled, scaled_value = coarse_start(bounded, data_scale(model, segments, par, theta0),
+                                        DATA_OFFSETS)
+    if scaled_value < value:
+        theta = scaled
+    centre = np.array(theta, dtype=float)
+    for _ in range(RECENTRES + 1):
+        theta, lo, hi, message, success = _search(bounded, theta, centre)
+        edge = (theta - lo < AT_BOUND) | (hi - theta < AT_BOUND)
+        if not (success and np.any(edge)):
+            break
+        centre = np.where(edge, theta, centre)      # search again around the bound
     best = nll(theta)
     if not success or not np.isfinite(best):
         raise FitError(f'the optimiser did not converge ({message})')
-    lo = np.array([b[0] for b in bounds])
-    hi = np.array([b[1] for b in bounds])
-    at_bound = [name for name, t, a, b in zip(par.names, theta, lo, hi)
-                if t - a < AT_BOUND or b - t < AT_BOUND]
+    at_bound = [name for name, e in zip(par.names, edge) if e]
     H = numerical_hessian(nll, theta)
     hessian_ok = bool(np.all(np.isfinite(H)))
     cov = np.full_like(H, np.nan)

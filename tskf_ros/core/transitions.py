@@ -8,6 +8,7 @@ B_d = int_0^mu e^{A s} ds B.
 """
 
 from typing import NamedTuple
+import warnings
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,7 +40,7 @@ def van_loan(A: Matrix, GQGt: Matrix, mu: float) -> tuple[Matrix, Matrix]:
     M[:n, :n] = -A
     M[:n, n:] = GQGt
     M[n:, n:] = A.T
-    E = scipy.linalg.expm(M * h)
+    E = _expm(M * h)
     F = E[n:, n:].T
     Qd = F @ E[:n, n:]
     with np.errstate(over='ignore', invalid='ignore'):
@@ -56,7 +57,20 @@ def exact_input_matrix(A: Matrix, B: Matrix, mu: float) -> Matrix:
     M = np.zeros((n + m, n + m))
     M[:n, :n] = A
     M[:n, n:] = B
-    return scipy.linalg.expm(M * mu)[:n, n:]
+    return _expm(M * mu)[:n, n:]
+
+
+def _expm(M: Matrix) -> Matrix:
+    """
+    Return scipy's expm(M), an overflow left in it (inf or nan), not printed as a warning.
+
+    An exponential that overflows (e^{A mu} of an unstable A over a long jump) is a
+    non-finite F that the filter refuses and the session counts as a reset; scipy's
+    RuntimeWarning would only add two raw lines to a node's log.
+    """
+    with np.errstate(all='ignore'), warnings.catch_warnings():
+        warnings.simplefilter('ignore', RuntimeWarning)
+        return np.asarray(scipy.linalg.expm(M), dtype=float)
 
 
 class Transition(NamedTuple):

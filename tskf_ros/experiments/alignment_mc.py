@@ -12,6 +12,7 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
+from tskf_ros.bag.progress import bar
 from tskf_ros.experiments import alignment_pat, output
 
 DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
@@ -91,6 +92,9 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
     """Run every algorithm at each value of a LinkConfig field ('noise' or 'dropout')."""
     results = _empty(algorithms)
     start = time.perf_counter()
+    # a progress bar over values x algorithms (stderr, a terminal only)
+    tick = bar(len(values) * len(algorithms), f'alignment_mc {parameter}', 'point',
+               progress is not None)
     for i, value in enumerate(values):
         tic = time.perf_counter()
         cfg = dataclasses.replace(link, **{parameter: float(value)})
@@ -109,9 +113,11 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
             _record(results, name, angular, measure)
             alignment_pat.record(results[name], m)
             parts.append(f'{name} {np.mean(angular):5.1f}%')
+            tick.update(1)
         if progress is not None:
             progress(f'{parameter} {value:.2f} ({i + 1}/{len(values)}): ' + '  '.join(parts)
                      + f'  [{runs} runs, {time.perf_counter() - tic:.1f} s]')
+    tick.close()
     elapsed = time.perf_counter() - start
     return {'results': results, 'elapsed_s': elapsed}
 

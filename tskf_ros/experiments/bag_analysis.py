@@ -10,7 +10,9 @@ import numpy as np
 from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.message_types import DESERIALIZE_ERRORS, message_class
+from tskf_ros.bag.progress import wrap
 from tskf_ros.bag.reader import BagReader, Damage
+from tskf_ros.bag.replay.model_check import check_model
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic
 from tskf_ros.core.noise_fit import nis_summary
@@ -49,18 +51,22 @@ class Stream:
 
 
 def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[str] = None,
-                input_topic: Optional[str] = None, truth: bool = True) -> Stream:
+                input_topic: Optional[str] = None, truth: bool = True,
+                progress: bool = False) -> Stream:
     """
     Read a bag's measurements, inputs and (with truth) JointState topics in storage order.
 
     The measurement topic defaults to /received_power, the input topic to /input if the
     bag has it.
-    Raises BagError / BagTypeError (one line) if the bag or its topics cannot be used;
-    damage met while reading stops it, and `Stream.damage` says where.
+    Raises BagError / BagTypeError (one line) if the bag or its topics cannot be used, or
+    WrongModelError if the bag is one of another model (bag/replay/model_check); damage
+    met while reading stops it, and `Stream.damage` says where.  progress: a bar of the
+    messages read (on a terminal).
     """
     reader = BagReader(bag)
     topic, msgtype, notes = choose_topic(reader, topic)
     in_topic, more = choose_input_topic(reader, input_topic)
+    check_model(reader, in_topic, config.model)
     stream = Stream(str(bag), topic, msgtype, in_topic, assumptions=notes + more)
     cls, extract = message_class(msgtype), extractor(msgtype)
     m = config.model.B.shape[1] if config.model.B is not None else 1
@@ -70,7 +76,10 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
     js_cls = message_class(STATES_TYPE) if truth_topics else None
     values: dict = defaultdict(lambda: defaultdict(dict))
     wanted = [topic] + ([in_topic] if in_topic else []) + sorted(truth_topics)
-    for count, raw in enumerate(reader.messages(wanted)):
+    counts = [reader.topics[t].count for t in wanted]
+    total = sum(c for c in counts if c) if all(c is not None for c in counts) else None
+    messages = wrap(reader.messages(wanted), total, 'reading', 'msg', progress)
+    for count, raw in enumerate(messages):
         try:
             if raw.topic == topic:
                 stamp, value, variance = extract(deserialize_message(raw.data, cls),
@@ -89,6 +98,7 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
             stream.damage = Damage(str(reader.path), -1, f'message {count + 1} on {raw.topic} '
                                    f'does not deserialize as {raw.msgtype} ({exc})', count)
             break
+    messages.close()
     stream.truth = {t: dict(v) for t, v in values.items()}
     stream.damage = stream.damage or reader.damage
     return stream

@@ -16,12 +16,16 @@ from typing import Optional
 import numpy as np
 import scipy.stats
 
+from tskf_ros.bag import progress
 from tskf_ros.bag.bag_errors import EXIT_INTERRUPTED
 from tskf_ros.bag.message_types import BagTypeError
+from tskf_ros.bag.outputs import check_outputs
+from tskf_ros.bag.progress import Interrupts
 from tskf_ros.bag.reader import BagError, error_exit, exit_status
-from tskf_ros.core.noise_fit import FitError, negative_log_likelihood, nis_summary
+from tskf_ros.core.noise_fit import (FitError, FitProgress, FitResult, LOG_SEARCH_RADIUS,
+                                     negative_log_likelihood, nis_summary, RECENTRES)
 from tskf_ros.experiments.bag_analysis import read_stream
-from tskf_ros.experiments.output import write_json, write_text
+from tskf_ros.experiments.output import json_bytes, write_all
 from tskf_ros.messages.estimator_interface import load_config, NODE_NAME, ParamsError
 from tskf_ros.messages.parameters import read_params_yaml
 from tskf_ros.owc.innovation_trace import fit_stream, Measurement, run_stream, StreamFit
@@ -39,10 +43,32 @@ class NoFitError(FitError):
     """A fit whose maximum cannot be used (at a bound, or a singular Hessian)."""
 
 
+def entry(name: str) -> tuple[str, int]:
+    """Return the matrix ('Q' or 'R') and diagonal index i of a parameter name 'Q[i,i]'."""
+    return name[0], int(name[2:].split(',')[0])
+
+
+def undetermined(res: FitResult) -> list[str]:
+    """Return the parameters the data do not determine: at a bound, or a large stderr."""
+    return [name for name, se in zip(res.names, res.theta_stderr)
+            if name in res.at_bound or not se <= POORLY_DETERMINED]
+
+
+def kept_values(config: EstimatorConfig, res: FitResult) -> tuple[np.ndarray, np.ndarray]:
+    """Return (Q, R) to write: the fit, with each undetermined entry the configured one."""
+    Q, R = np.array(res.Q, dtype=float), np.array(res.R, dtype=float)
+    for name in undetermined(res):
+        which, i = entry(name)
+        target, source = (Q, config.model.Q) if which == 'Q' else (R, config.model.R)
+        target[i, i] = source[i, i]
+    return Q, R
+
+
 def fit_events(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
-               fit_R: bool = True) -> tuple[StreamFit, dict]:
+               fit_R: bool = True, progress: Optional[FitProgress] = None
+               ) -> tuple[StreamFit, dict]:
     """Fit Q and R to a stream; return the fit and its JSON-ready report."""
-    sf = fit_stream(config, events, fit_Q=fit_Q, fit_R=fit_R)
+    sf = fit_stream(config, events, fit_Q=fit_Q, fit_R=fit_R, progress=progress)
     res, run = sf.result, sf.run
     p = config.model.C.shape[0]
     # the parameter file's own Q and R on the same steps, for a likelihood-ratio test
@@ -53,10 +79,19 @@ def fit_events(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
     lr = 2.0 * (res.log_likelihood - ll0)
     k = len(res.names)
     st = run.stats
-    for name, se in zip(res.names, res.theta_stderr):
-        if se > POORLY_DETERMINED:
+    for name, t, se in zip(res.names, res.theta, res.theta_stderr):
+        which, i = entry(name)
+        kept = (config.model.Q if which == 'Q' else config.model.R)[i, i]
+        keep = f"the parameter file's value {kept:.6g} is kept (fix it with --fix {which})"
+        if name in res.at_bound:
+            sf.notes.append(f'{name} is not determined by this bag: the likelihood still rises '
+                            f'towards {"0" if t < 0 else "infinity"} at {np.exp(t):.3g}, '
+                            f'e^{abs(t - (np.log(kept) if kept > 0 else 0.0)):.0f} from '
+                            f'the start, with no maximum; {keep}')
+        elif not se <= POORLY_DETERMINED:
             sf.notes.append(f'{name} is not determined by this bag: the standard error of its '
-                            f'log is {se:.3g} (a factor e^{se:.3g}); consider --fix')
+                            f'log is {se:.3g} (a factor e^{se:.3g}); {keep}')
+    Q_out, R_out = kept_values(config, res)
     report = {
         'Q': res.Q, 'R': res.R, 'Q_stderr': res.Q_stderr, 'R_stderr': res.R_stderr,
         'log_likelihood': run.innovations.log_likelihood(),
@@ -77,6 +112,8 @@ def fit_events(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
                       'evaluations': res.evaluations, 'at_bound': res.at_bound,
                       'hessian_positive_definite': res.hessian_ok, 'gate_rounds': sf.rounds,
                       'gate_stable': sf.gate_stable},
+        'undetermined': undetermined(res),
+        'written': {'Q': Q_out, 'R': R_out},
         'notes': sf.notes,
     }
     return sf, report
@@ -102,21 +139,32 @@ def fitted_parameters(params_file: Optional[Path], Q: np.ndarray, R: np.ndarray,
 
 
 def check_usable(sf: StreamFit) -> None:
-    """Raise NoFitError if a parameter ran to its bound or the Hessian is singular."""
+    """Raise NoFitError if the data determine none of the parameters fitted."""
     res = sf.result
-    if res.at_bound:
-        raise NoFitError(f'{", ".join(res.at_bound)} ran to the search bound (e^+-25 times '
-                         'the start): the data do not determine it; fix it with --fix')
+    if len(undetermined(res)) < len(res.names):
+        return
+    if res.at_bound and len(res.at_bound) == len(res.names):
+        raise NoFitError(f'{", ".join(res.at_bound)}: the likelihood keeps rising towards a '
+                         f'bound (searched e^{LOG_SEARCH_RADIUS * (RECENTRES + 1):.0f} '
+                         'around the start) with no maximum: the data do not determine '
+                         'them; fix one with --fix')
     if not res.hessian_ok:
         raise NoFitError('the Hessian of the likelihood is not positive definite at the '
                          'optimum: Q and R are not both identifiable from this bag (try --fix)')
+    spread = ', '.join(f'{n}: {se:.3g}' for n, se in zip(res.names, res.theta_stderr))
+    raise NoFitError(f'this bag determines none of {", ".join(res.names)} (the standard '
+                     f'errors of their logs, {spread}, exceed {POORLY_DETERMINED:g}): nothing '
+                     'fitted; try --fix')
 
 
 def main(argv: Optional[list] = None) -> int:
     """Run the command line; return the exit status."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Fit the noise intensities Q and R of the estimator model to a '
-        "bag by maximum likelihood over the time-scale filter's innovations.")
+        "bag by maximum likelihood over the time-scale filter's innovations.",
+        epilog='exit status: 0 fitted; 1 the bag, the parameters or an output could not be '
+        'used; 3 the input was damaged (fitted on what came before); 4 no usable fit; 130 '
+        'interrupted.  Nothing is written unless every output can be written.')
     parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
     parser.add_argument('--params-file', type=Path,
                         help='estimator parameters (the model and the start of the search), '
@@ -128,59 +176,91 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--json', type=Path, help='write the fit report (JSON) here')
     parser.add_argument('--fix', choices=('Q', 'R'), action='append', default=[],
                         help="keep Q (or R) at the parameter file's value; fit the other")
-    parser.add_argument('-q', '--quiet', action='store_true', help='only errors')
+    parser.add_argument('-q', '--quiet', action='store_true',
+                        help='only errors (no progress bars, no results)')
     args = parser.parse_args(argv)
-    if args.out and args.params_file and args.out.resolve() == args.params_file.resolve():
-        parser.error('--out is the parameter file: write the fit to another file')
+    outputs = [p for p in (args.out, args.json) if p is not None]
+    if args.out and args.json and args.out.resolve() == args.json.resolve():
+        parser.error('--out and --json are the same file')
+    if args.params_file and any(p.resolve() == args.params_file.resolve() for p in outputs):
+        parser.error('an output is the parameter file: write the fit to another file')
+    with Interrupts() as interrupts:
+        try:
+            return _run(args, outputs, interrupts)
+        except KeyboardInterrupt:
+            print(f'{PROG}: interrupted; nothing written', file=sys.stderr)
+            return EXIT_INTERRUPTED
+
+
+def _run(args: argparse.Namespace, outputs: list, interrupts: Interrupts) -> int:
+    """Read, fit and write (all or nothing); Ctrl-C in any phase raises KeyboardInterrupt."""
+    show = not args.quiet
     try:
+        check_outputs(outputs, [args.bag])
         config = load_config(args.params_file).session
         stream = read_stream(args.bag, config, topic=args.topic, input_topic=args.input_topic,
-                             truth=False)
+                             truth=False, progress=show)
+        interrupts.check()
         if stream.measurements == 0:
             raise FitError(f'{args.bag}: no messages on {stream.topic}'
                            + (f' ({stream.damage})' if stream.damage is not None else ''))
-        sf, report = fit_events(config, stream.events, fit_Q='Q' not in args.fix,
-                                fit_R='R' not in args.fix)
-    except (BagError, BagTypeError, ParamsError, OSError) as exc:
-        return error_exit(PROG, exc, args.bag)
-    except FitError as exc:
-        print(f'{PROG}: error: {exc}', file=sys.stderr)
-        return EXIT_NO_FIT if 'converge' in str(exc) else 1
-    except ValueError as exc:       # a config the fitted Q, R make unusable (ConfigError)
-        print(f'{PROG}: error: {exc}', file=sys.stderr)
-        return EXIT_NO_FIT
-    except KeyboardInterrupt:
-        print(f'{PROG}: interrupted; nothing written', file=sys.stderr)
-        return EXIT_INTERRUPTED
-    try:
+        bar = progress.bar(None, 'fitting Q, R', 'eval', show)
+
+        def improved(evaluations: int, log_likelihood: float) -> None:
+            bar.update(1)
+            bar.set_postfix_str(f'log L {log_likelihood:.4f}', refresh=False)
+        try:
+            sf, report = fit_events(config, stream.events, fit_Q='Q' not in args.fix,
+                                    fit_R='R' not in args.fix, progress=improved)
+        finally:
+            bar.close()
+        interrupts.check()
         check_usable(sf)
-    except NoFitError as exc:
+    except (BagError, BagTypeError, ParamsError, OSError) as exc:
+        interrupts.check()
+        return error_exit(PROG, exc, args.bag)
+    except FitError as exc:         # NoFitError too
+        interrupts.check()
+        print(f'{PROG}: error: {exc}', file=sys.stderr)
+        return EXIT_NO_FIT if 'converge' in str(exc) or isinstance(exc, NoFitError) else 1
+    except ValueError as exc:       # a config the fitted Q, R make unusable (ConfigError)
+        interrupts.check()
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return EXIT_NO_FIT
     report['bag'] = str(args.bag)
     report['topic'] = stream.topic
     report['damage'] = str(stream.damage) if stream.damage is not None else None
+    files = []
+    if args.json:
+        files.append((args.json, json_bytes(report)))
+    if args.out:
+        Q, R = report['written']['Q'], report['written']['R']
+        files.append((args.out, fitted_parameters(
+            args.params_file, Q, R, bool(sf.notes and config.use_message_variance)).encode()))
     try:
-        if args.json:
-            write_json(args.json, report)
-        if args.out:
-            write_text(args.out, fitted_parameters(args.params_file, sf.result.Q, sf.result.R,
-                                                   bool(sf.notes and config.use_message_variance)))
+        write_all(files)
     except OSError as exc:
-        return error_exit(PROG, exc, args.out)
-    if not args.quiet:
-        res, nis = sf.result, report['nis']
-        for name, t, se in zip(res.names, res.theta, res.theta_stderr):
-            print(f'{name} = {np.exp(t):.6g} (stderr {np.exp(t) * se:.3g}; log {t:.4f} +- '
-                  f'{se:.4f})')
-        print(f'log-likelihood {report["log_likelihood"]:.3f} over {report["n"]} steps '
-              f'(the parameter file\'s Q, R: {report["params_file"]["log_likelihood"]:.3f}); '
-              f'NIS mean {nis["mean"]:.4f}, 95% band [{nis["band"][0]:.4f}, '
-              f'{nis["band"][1]:.4f}] ({"consistent" if nis["consistent"] else "outside"}); '
-              f'{report["gaps"]} gaps, {report["excluded_by_gate"]} gated')
-        for note in sf.notes:
-            print(f'{PROG}: note: {note}')
+        interrupts.check()
+        return error_exit(PROG, exc, args.out or args.json)
+    if show:
+        print_results(sf, report)
     return exit_status(PROG, stream.damage, 'input damaged; fitted on the messages before it')
+
+
+def print_results(sf: StreamFit, report: dict) -> None:
+    """Print the fitted values, the likelihoods, the NIS check and the notes."""
+    res, nis = sf.result, report['nis']
+    for name, t, se in zip(res.names, res.theta, res.theta_stderr):
+        kept = ' (not determined: not written)' if name in report['undetermined'] else ''
+        print(f'{name} = {np.exp(t):.6g} (stderr {np.exp(t) * se:.3g}; log {t:.4f} +- '
+              f'{se:.4f}){kept}')
+    print(f'log-likelihood {report["log_likelihood"]:.3f} over {report["n"]} steps '
+          f'(the parameter file\'s Q, R: {report["params_file"]["log_likelihood"]:.3f}); '
+          f'NIS mean {nis["mean"]:.4f}, 95% band [{nis["band"][0]:.4f}, '
+          f'{nis["band"][1]:.4f}] ({"consistent" if nis["consistent"] else "outside"}); '
+          f'{report["gaps"]} gaps, {report["excluded_by_gate"]} gated')
+    for note in sf.notes:
+        print(f'{PROG}: note: {note}')
 
 
 def console_main() -> None:

@@ -4,7 +4,7 @@ import json
 import os
 from pathlib import Path
 import tempfile
-from typing import Any
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -39,15 +39,71 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
+def json_bytes(data: Any) -> bytes:
+    """Return data as indented JSON (numpy values converted; NaN/inf become null)."""
+    return (json.dumps(_jsonable(data), indent=2, allow_nan=False) + '\n').encode()
+
+
 def write_json(path: Path, data: Any) -> Path:
     """Write data as indented JSON (numpy values converted; NaN/inf become null)."""
-    text = json.dumps(_jsonable(data), indent=2, allow_nan=False) + '\n'
-    return _replace_from_temp(path, lambda f: f.write(text.encode()))
+    text = json_bytes(data)
+    return _replace_from_temp(path, lambda f: f.write(text))
 
 
 def write_text(path: Path, text: str) -> Path:
     """Write text (UTF-8) through a temporary file renamed into place."""
     return _replace_from_temp(path, lambda f: f.write(text.encode()))
+
+
+def write_all(files: Sequence[tuple[Path, bytes]]) -> None:
+    """
+    Write several files all or none: each staged as a temporary file, then renamed.
+
+    A target that is a directory, or whose directory cannot be made or written, fails
+    before any target is replaced.  If anything fails (Ctrl-C too) after some targets
+    were replaced, those are put back as they were (a new one removed, an old one restored
+    from a hard link kept until the end); a directory made for a target is removed again.
+    """
+    staged: list[tuple[str, Path]] = []
+    made: list[Path] = []
+    done: list[tuple[Path, Optional[str]]] = []     # replaced targets, their backups
+    try:
+        for path, data in files:
+            path = Path(path)
+            if path.is_dir():
+                raise IsADirectoryError(21, 'Is a directory', str(path))
+            missing = [p for p in [path.parent, *path.parent.parents] if not p.exists()]
+            path.parent.mkdir(parents=True, exist_ok=True)
+            made += reversed(missing)
+            fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.part', dir=path.parent)
+            staged.append((tmp, path))
+            with os.fdopen(fd, 'wb') as f:
+                f.write(data)
+            os.chmod(tmp, 0o644)
+        for tmp, path in staged:
+            backup = None
+            if path.exists():
+                backup = f'{tmp}.old'
+                os.link(path, backup)
+            done.append((path, backup))
+            os.replace(tmp, path)
+    except BaseException:
+        for path, backup in reversed(done):
+            if backup is not None:
+                os.replace(backup, path)
+            else:
+                path.unlink(missing_ok=True)
+        for tmp, _ in staged:
+            Path(tmp).unlink(missing_ok=True)
+        for d in reversed(made):
+            try:
+                d.rmdir()
+            except OSError:
+                pass
+        raise
+    for _, backup in done:
+        if backup is not None:
+            Path(backup).unlink(missing_ok=True)
 
 
 def save_figure(fig, path: Path, dpi: int = 110) -> Path:

@@ -6,11 +6,15 @@ from dataclasses import dataclass, field
 import logging
 import os
 from pathlib import Path
+import signal
 import sys
+import threading
 from typing import Optional
 
 import numpy as np
 
+from tskf_ros.bag.outputs import check_outputs
+from tskf_ros.bag.reader import BagError, error_exit
 from tskf_ros.experiments.bag_analysis import METRICS
 from tskf_ros.experiments.fit_noise import EXIT_INTERRUPTED
 from tskf_ros.experiments.output import save_figure
@@ -64,12 +68,10 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
             for t in todo:
                 record(run_task(t))
             return result
-        from dask.distributed import as_completed, Client, LocalCluster
+        from dask.distributed import as_completed, Client
         cluster = None
         if scheduler is None:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   host='127.0.0.1', dashboard_address=None,
-                                   silence_logs=logging.ERROR)
+            cluster = local_cluster(workers)
             client = Client(cluster)
         else:
             client = Client(scheduler)
@@ -85,6 +87,10 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
                     row.update({name: setting_text(v) for name, v in t.setting.items()})
                 record(row)
                 fut.release()
+        except KeyboardInterrupt:
+            # the workers are stopped now: what they log while going is not for the user
+            quiet_dask()
+            raise
         finally:
             client.close()
             if cluster is not None:
@@ -92,6 +98,32 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
     finally:
         bar.close()
     return result
+
+
+def local_cluster(workers: int):
+    """
+    Start a LocalCluster of `workers` processes that do not take SIGINT themselves.
+
+    Ctrl-C in a terminal goes to every process of the foreground group: each worker would
+    print its own KeyboardInterrupt traceback.  The workers start with SIGINT ignored (a
+    disposition a new process keeps); this process takes Ctrl-C and stops them.
+    """
+    from dask.distributed import LocalCluster
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                            host='127.0.0.1', dashboard_address=None,
+                            silence_logs=logging.ERROR)
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
+
+
+def quiet_dask() -> None:
+    """Silence distributed's loggers (a shutdown after Ctrl-C logs lost connections)."""
+    for name in ('distributed', 'tornado', 'asyncio'):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
 def sweep(bags: list, *, out: Path, params_file: Optional[Path] = None, sets: list = (),
@@ -112,35 +144,104 @@ def sweep(bags: list, *, out: Path, params_file: Optional[Path] = None, sets: li
     return result
 
 
+def bag_labels(bags: list) -> dict:
+    """Return {bag: short label}: the bag's name, with its parent if two bags share it."""
+    names = [Path(b).name for b in bags]
+    return {b: (str(Path(*Path(b).parts[-2:])) if names.count(Path(b).name) > 1
+                else Path(b).name) for b in bags}
+
+
 def plot(rows: list, sets: list, path: Path) -> Path:
-    """Draw the table: per setting, the RMS error and mean NIS of every bag (Agg)."""
+    """
+    Draw the table: per setting, each bag's RMS error, mean NIS (95% band) and gated count.
+
+    One colour and marker per bag (the legend); rows with an error are not drawn, and the
+    footnote names them.  The gate panel is left out when no row gated a sample.
+    """
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter
     names = [n for n, _ in sets]
-    labels = sorted({', '.join(f'{n}={r[n]}' for n in names) or 'parameter file'
-                     for r in rows})
-    metrics = [('rms_corrected', 'RMS error, corrected estimate'),
-               ('nis_mean', 'mean NIS (1 per measurement dimension when consistent)'),
-               ('rejected_gated', 'samples rejected by the gate')]
-    fig, axes = plt.subplots(len(metrics), 1, figsize=(max(6, 1.2 * len(labels) + 3), 9),
-                             squeeze=False)
-    for ax, (col, title) in zip(axes[:, 0], metrics):
-        for i, label in enumerate(labels):
-            ys = [float(r[col]) for r in rows
-                  if (', '.join(f'{n}={r[n]}' for n in names) or 'parameter file') == label
-                  and r.get(col) not in ('', None)]
-            if ys:
-                ax.plot(np.full(len(ys), i), ys, 'o', alpha=0.6)
-                ax.plot([i - 0.3, i + 0.3], [np.median(ys)] * 2, 'k-')
+
+    def label_of(r: dict) -> str:
+        return ', '.join(f'{n}={r[n]}' for n in names) or 'parameter file'
+
+    def number(r: dict, col: str) -> float:
+        try:
+            return float(r.get(col, ''))
+        except (TypeError, ValueError):
+            return float('nan')
+
+    good = [r for r in rows if not r.get('error')]
+    failed = sorted({r['bag'] for r in rows if r.get('error')})
+    labels = sorted({label_of(r) for r in rows})
+    bags = sorted({r['bag'] for r in good})
+    short = bag_labels(sorted({r['bag'] for r in rows}))
+    gated = any(number(r, 'rejected_gated') > 0 for r in good)
+    panels = [('rms_corrected', 'RMS error of the corrected estimate against the truth',
+               'RMS error (state units)'),
+              ('nis_mean', 'mean NIS, with the 95% band of each bag (chi-square)',
+               'mean NIS')]
+    if gated:
+        panels.append(('rejected_gated', 'samples rejected by the innovation gate',
+                       'samples'))
+    fig, axes = plt.subplots(len(panels), 1, squeeze=False, sharex=True,
+                             figsize=(max(7.0, 1.3 * len(labels) + 4.0), 3.2 * len(panels)))
+    markers = 'osD^v<>pP*Xh'
+    width = 0.4
+    offsets = np.linspace(-width / 2, width / 2, len(bags)) if len(bags) > 1 else [0.0]
+    for ax, (col, title, ylabel) in zip(axes[:, 0], panels):
+        for b, (bag, dx) in enumerate(zip(bags, offsets)):
+            colour = plt.cm.tab10(b % 10)
+            pts = [(labels.index(label_of(r)) + dx, number(r, col), r) for r in good
+                   if r['bag'] == bag and np.isfinite(number(r, col))]
+            if not pts:
+                continue
+            xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+            if col == 'nis_mean':
+                lo = [number(p[2], 'nis_band_lo') for p in pts]
+                hi = [number(p[2], 'nis_band_hi') for p in pts]
+                ax.vlines(xs, lo, hi, colors=[colour], alpha=0.35, linewidth=9,
+                          label='95% band of the mean NIS' if b == 0 else None)
+            ax.plot(xs, ys, linestyle='none', marker=markers[b % len(markers)],
+                    color=colour, label=short[bag])
         ax.set_title(title, fontsize=9)
-        ax.set_xticks(range(len(labels)))
-        ax.set_xticklabels(labels, rotation=20, fontsize=8)
-        if col == 'rms_corrected' and ax.has_data():
+        ax.set_ylabel(ylabel, fontsize=8)
+        if col in ('rms_corrected', 'nis_mean') and ax.has_data():
             ax.set_yscale('log')
-    fig.suptitle(f'sweep: {len(rows)} rows (bags x settings); line: median over bags',
-                 fontsize=10)
-    fig.tight_layout()
+            lo, hi = ax.get_ylim()
+            # over decades: 1-2-5 ticks; within about one: evenly spaced numbers
+            ax.yaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0))
+                                       if hi > 30 * lo else MaxNLocator(nbins=6))
+            ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f'{v:g}'))
+            ax.yaxis.set_minor_formatter(NullFormatter())
+        elif ax.has_data():
+            ax.set_ylim(bottom=0)
+            ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.grid(True, which='major', axis='y', alpha=0.3)
+    axes[-1, 0].set_xticks(range(len(labels)))
+    axes[-1, 0].set_xticklabels(labels, rotation=20, ha='right', fontsize=8)
+    axes[-1, 0].set_xlabel('setting (--set)' if names else 'the parameter file')
+    if bags:
+        axes[0, 0].legend(fontsize=7, loc='center left', bbox_to_anchor=(1.01, 0.5),
+                          title='bag', title_fontsize=7)
+        handles, texts = axes[1, 0].get_legend_handles_labels()
+        band = [(h, t) for h, t in zip(handles, texts) if t.startswith('95%')]
+        if band:
+            axes[1, 0].legend(*zip(*band), fontsize=7, loc='center left',
+                              bbox_to_anchor=(1.01, 0.5))
+    notes = []
+    if not gated:
+        notes.append('no sample was rejected by the innovation gate in any row')
+    if failed:
+        notes.append('not drawn (error rows, see the CSV): '
+                     + ', '.join(short[b] for b in failed))
+    fig.suptitle(f'sweep: {len(rows)} rows ({len(bags) + len(failed)} bags x '
+                 f'{len(labels)} settings)', fontsize=10)
+    if notes:
+        fig.text(0.01, 0.005, '; '.join(notes), fontsize=7, va='bottom')
+    fig.tight_layout(rect=(0, 0.03 if notes else 0, 1, 0.97))
     return save_figure(fig, path)
 
 
@@ -182,12 +283,17 @@ def main(argv: Optional[list] = None) -> int:
         bags = find_bags(args.bags)
         if not bags:
             raise ValueError(f'no bags found in {" ".join(args.bags)}')
+        if args.png and args.png.resolve() == args.out.resolve():
+            raise ValueError('--png and --out are the same file')
+        check_outputs([args.out, args.png], bags)
         res = sweep(bags, out=args.out, params_file=args.params_file, sets=sets,
                     workers=args.workers, scheduler=args.scheduler, topic=args.topic,
                     fit=args.fit, resume=args.resume, progress=args.progress)
-    except (ValueError, ParamsError, OSError) as exc:
+    except (ValueError, ParamsError, BagError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return 1
+    except OSError as exc:
+        return error_exit(PROG, exc, args.out)
     except KeyboardInterrupt:
         try:
             with open(args.out, newline='') as f:

@@ -45,7 +45,7 @@ def find_bags(patterns: Iterable[str]) -> list:
     An argument is a bag (a directory with metadata.yaml, or a .mcap file), a directory
     holding bags (searched recursively), or a glob pattern ('**' recursive).
     """
-    found = set()
+    found: set = set()
 
     def is_bag(p: Path) -> bool:
         return (p.is_dir() and (p / 'metadata.yaml').is_file()) or (
@@ -61,7 +61,22 @@ def find_bags(patterns: Iterable[str]) -> list:
                 found.update(str(m.parent) for m in p.rglob('metadata.yaml'))
                 found.update(str(m) for m in p.rglob('*.mcap')
                              if not (m.parent / 'metadata.yaml').is_file())
-    return sorted(found)
+    return unique_bags(found)
+
+
+def unique_bags(bags: Iterable[str]) -> list:
+    """
+    Return the bags sorted, one spelling per bag: its real path if given, else the first.
+
+    A bag given by its path and through a symlink (or twice through links) is one bag
+    (its resolved path): evaluated once, one row.
+    """
+    by_real: dict = {}
+    for bag in sorted(bags):
+        real = str(Path(bag).resolve())
+        if real not in by_real or bag == real:
+            by_real[real] = bag
+    return sorted(by_real.values())
 
 
 def parse_setting(text: str, defaults: dict) -> tuple[str, list]:
@@ -94,12 +109,19 @@ def parse_setting(text: str, defaults: dict) -> tuple[str, list]:
             value = yaml.safe_load(raw)
             if not isinstance(value, bool):
                 raise ValueError(f'--set {name}: {raw!r} is not true or false')
-        elif isinstance(default, (int, float)):
+        elif isinstance(default, float):
             try:
-                value = type(default)(float(raw)) if isinstance(default, float) else int(raw)
+                value = float(raw)
             except ValueError:
-                kind = 'a number' if isinstance(default, float) else 'an integer'
-                raise ValueError(f'--set {name}: {raw!r} is not {kind}') from None
+                raise ValueError(f'--set {name}: {raw!r} is not a number') from None
+        elif isinstance(default, int):
+            try:
+                number = float(raw)
+            except ValueError:
+                raise ValueError(f'--set {name}: {raw!r} is not a number') from None
+            if not number.is_integer():
+                raise ValueError(f'--set {name}: {raw!r} is not a whole number')
+            value = int(number)
         else:
             value = raw
         out.append(value)
@@ -117,7 +139,7 @@ def settings_product(sets: list) -> list:
 def setting_text(value: SettingValue) -> str:
     """Return a setting's value as the CSV shows it."""
     if isinstance(value, list):
-        return ' '.join(repr(float(v)) for v in value)
+        return ' '.join(v if isinstance(v, str) else repr(float(v)) for v in value)
     return str(value)
 
 
@@ -186,10 +208,11 @@ def build_tasks(bags: list, params_file: Optional[Path], sets: list, *,
                 topic: Optional[str] = None, fit: bool = False) -> list:
     """Return one Task per bag x setting; raise ParamsError for a setting the node refuses."""
     params_text = Path(params_file).read_text() if params_file else ''
-    tasks = []
+    tasks: dict = {}
     for setting in settings_product(sets):
         config = load_config(params_file, setting)
         for bag in bags:
-            tasks.append(Task(task_key(bag, params_text, setting, topic, fit), bag, setting,
-                              config, topic, fit))
-    return tasks
+            key = task_key(bag, params_text, setting, topic, fit)
+            # one key, one task: the same bag twice (a symlink) is evaluated once
+            tasks.setdefault(key, Task(key, bag, setting, config, topic, fit))
+    return list(tasks.values())

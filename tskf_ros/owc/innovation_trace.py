@@ -25,8 +25,8 @@ from typing import Callable, Iterable, Optional, Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tskf_ros.core.noise_fit import (fit, FitError, FitResult, innovation_terms, Innovations,
-                                     StepRecord, with_noise)
+from tskf_ros.core.noise_fit import (fit, FitError, FitProgress, FitResult, innovation_terms,
+                                     Innovations, StepRecord, with_noise)
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session import EstimatorConfig, EstimatorSession, Outcome, Stats
 
@@ -219,7 +219,8 @@ class StreamFit:
 
 
 def fit_stream(config: EstimatorConfig, events: list[Union[Measurement, Input]], *,
-               fit_Q: bool = True, fit_R: bool = True) -> StreamFit:
+               fit_Q: bool = True, fit_R: bool = True,
+               progress: Optional[FitProgress] = None) -> StreamFit:
     """
     Fit Q and R by maximum likelihood over the innovations of the session's steps.
 
@@ -230,7 +231,8 @@ def fit_stream(config: EstimatorConfig, events: list[Union[Measurement, Input]],
     longer changes (at most GATE_ROUNDS).  Every other rejection, the transition, gap
     handling and resets are the session's.  use_message_variance is turned off (with it R
     would not be used).
-    Raises FitError with the reason (too few samples, no convergence).
+    Raises FitError with the reason (too few samples, no convergence).  progress: see
+    noise_fit.fit.
     """
     notes = []
     if config.use_message_variance:
@@ -250,7 +252,8 @@ def fit_stream(config: EstimatorConfig, events: list[Union[Measurement, Input]],
         if n < MIN_STEPS_PER_PARAMETER * max(k, 1):
             raise FitError(f'too few samples: {n} measurement steps for {k} parameters '
                            f'(at least {MIN_STEPS_PER_PARAMETER * max(k, 1)} needed)')
-        result = fit(base.model, base.transition, trace.segments, fit_Q=fit_Q, fit_R=fit_R)
+        result = fit(base.model, base.transition, trace.segments, fit_Q=fit_Q, fit_R=fit_R,
+                     progress=progress)
         fitted = replace(config, model=with_noise(config.model, result.Q, result.R))
         run = run_stream(fitted, events)
         stable = run.gated_stamps == excluded

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from tskf_ros.bag.bag_errors import run_main
 from tskf_ros.bag.message_types import BagTypeError
+from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED, exit_status
 from tskf_ros.bag.replay.loop import FILTER_INPUT, FILTERS, replay, replay_arrays
 from tskf_ros.bag.writer import BagExistsError
@@ -79,7 +80,8 @@ def main(argv: Optional[list[str]] = None) -> int:
                         '(the whole stream, each segment between resets on its own): on '
                         '/estimate/smoothed, or as estimate/smoothed.* arrays; the estimator '
                         'only')
-    parser.add_argument('-q', '--quiet', action='store_true', help='only errors')
+    parser.add_argument('-q', '--quiet', action='store_true',
+                        help='only errors (no progress bar)')
     args = parser.parse_args(argv)
     if args.npz is not None and (args.output is not None or args.filter != 'estimator'
                                  or args.compress):
@@ -102,7 +104,8 @@ def main(argv: Optional[list[str]] = None) -> int:
         res = replay(args.bag, output, params_file=args.params_file, topic=args.topic,
                      overwrite=args.overwrite, compress=args.compress,
                      diagnostics=not args.no_diagnostics, log=log, filter=args.filter,
-                     input_topic=args.input_topic, smooth=args.smooth)
+                     input_topic=args.input_topic, smooth=args.smooth,
+                     progress=not args.quiet)
     except (BagError, ParamsError, BagTypeError, OSError) as exc:
         return error_exit(PROG, exc, args.bag)
     rate = res.read / res.seconds if res.seconds else float('nan')
@@ -121,12 +124,13 @@ def _npz_main(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     path = args.npz if args.npz.suffix == '.npz' else args.npz.with_name(args.npz.name + '.npz')
     t0 = time.perf_counter()
     try:
+        check_outputs([path], [args.bag])
         if path.exists() and not args.overwrite:
             raise BagExistsError(f'{path}: exists already, not overwriting (use --overwrite)')
         arrays = replay_arrays(args.bag, args.params_file, topic=args.topic,
                                input_topic=args.input_topic,
                                diagnostics=not args.no_diagnostics, log=log,
-                               smooth=args.smooth)
+                               smooth=args.smooth, progress=not args.quiet)
         save_npz(path, arrays)
     except (BagError, ParamsError, BagTypeError, OSError) as exc:
         return error_exit(PROG, exc, path)

@@ -10,15 +10,18 @@ from typing import Callable, Iterator, Optional, Union
 from numpy.typing import NDArray
 
 from tskf_ros.bag.message_types import qos_from_rclpy, typestore
-from tskf_ros.bag.reader import BagReader, Damage, resolved
+from tskf_ros.bag.outputs import check_outputs
+from tskf_ros.bag.progress import wrap
+from tskf_ros.bag.reader import BagReader, Damage
 from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
                                           UNDECODABLE)
 from tskf_ros.bag.replay.gathered import GATHER, Gathered
+from tskf_ros.bag.replay.model_check import check_model
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.replay.sinks import (ArraySink, BagSink, Collector, ReplayResult, Sink,
                                        SMOOTHED_TOPIC)
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic, InputError
-from tskf_ros.bag.writer import BagExistsError, BagWriter
+from tskf_ros.bag.writer import BagWriter
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages import estimator_interface as estimator
 from tskf_ros.messages.estimator_interface import (BAG_POWER_TOPIC, DIAGNOSTICS_TOPIC,
@@ -56,6 +59,7 @@ def prepare(bag: PathLike, config: Union[AnyConfig, PathLike, None], topic: Opti
     else:
         result.input_topic, notes = choose_input_topic(reader, input_topic)
         result.assumptions += notes
+        check_model(reader, result.input_topic, config.session.model)
     for line in result.assumptions:
         log(line)
     est = (OfflineAligner if aligning else OfflineEstimator)(config, result.msgtype)
@@ -67,7 +71,8 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
            overwrite: bool = False, compress: bool = False, diagnostics: bool = True,
            log: Log = _quiet,
            filter: str = 'estimator',  # noqa: A002 (the CLI's --filter)
-           input_topic: Optional[str] = None, smooth: bool = False) -> ReplayResult:
+           input_topic: Optional[str] = None, smooth: bool = False,
+           progress: bool = False) -> ReplayResult:
     """
     Run the estimator over `bag`; write `output` (a new bag) or, if None, collect in memory.
 
@@ -78,7 +83,7 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
     do not move the recorded receiver).
     input_topic: the estimator's input u (default /input if present; see choose_input_topic).
     In memory, `result.outputs` holds (topic, log time, rclpy message or the input's
-    RawMessage) in order.
+    RawMessage) in order.  progress: a bar of the messages read (on a terminal).
 
     Raises BagError / ParamsError / BagTypeError before anything is written if the bag or
     the parameters cannot be used.  Damage met while reading stops the replay; what came
@@ -91,7 +96,7 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
         raise ValueError('smoothing is for the estimator written into a bag (or arrays)')
     reader, est, result = prepare(bag, params_file, topic, filter, input_topic, log)
     if output is None:
-        result.damage = _run(reader, est, Collector(result), result, diagnostics)
+        result.damage = _run(reader, est, Collector(result), result, diagnostics, progress)
         result.seconds = time.perf_counter() - t0
         return result
     writer = BagWriter(output, overwrite=overwrite, compress=compress)
@@ -107,7 +112,7 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
                              qos=[qos_from_rclpy(est.output_topics()[0][2])])
         sink = BagSink(writer, result, smoother)
         with _gc_paused(filter == 'estimator'):
-            result.damage = _run(reader, est, sink, result, diagnostics)
+            result.damage = _run(reader, est, sink, result, diagnostics, progress)
             sink.finish(est)
         if result.damage is not None:
             writer.set_custom_data('tskf_ros.input_damage', str(result.damage))
@@ -122,7 +127,7 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
 def replay_arrays(bag: PathLike, config: Union[AnyConfig, PathLike, None] = None, *,
                   topic: Optional[str] = None, input_topic: Optional[str] = None,
                   diagnostics: bool = True, log: Log = _quiet,
-                  smooth: bool = False) -> dict[str, NDArray]:
+                  smooth: bool = False, progress: bool = False) -> dict[str, NDArray]:
     """
     Run the estimator over `bag` and return its outputs as numpy arrays; write nothing.
 
@@ -135,7 +140,7 @@ def replay_arrays(bag: PathLike, config: Union[AnyConfig, PathLike, None] = None
     reader, est, result = prepare(bag, config, topic, 'estimator', input_topic, log)
     sink = ArraySink(est, SmoothingRecorder(est.config.session) if smooth else None)
     with _gc_paused():
-        result.damage = _run(reader, est, sink, result, diagnostics)
+        result.damage = _run(reader, est, sink, result, diagnostics, progress)
         arrays = sink.arrays(result)
         del sink            # its rows go now, before the collector would scan them
     return arrays
@@ -178,21 +183,19 @@ def add_topics(writer: BagWriter, reader: BagReader, est: OfflineEstimator,
 
 def _check_output(bag: Path, output: Path, overwrite: bool) -> None:
     """Raise a BagError if `output` cannot be written (before anything is read or made)."""
-    out, src = resolved(output), resolved(bag)
-    if out == src or src.is_relative_to(out) or out.is_relative_to(src):
-        raise BagExistsError(f'{output}: is (or holds, or is inside) the input bag {bag}; '
-                             'give another output')
+    check_outputs([output], [bag])
     BagWriter(output, overwrite=overwrite).check_target()
 
 
 def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayResult,
-         diagnostics: bool) -> Optional[Damage]:
+         diagnostics: bool, progress: bool = False) -> Optional[Damage]:
     """
     Read, estimate, hand the outputs to the sink; return the damage that stopped it.
 
     The estimator's measurements are gathered up to the next input u, /diagnostics message
     due or GATHER messages and taken by the session in runs (EstimatorSession.add_many);
-    the sink gets every message and outcome in storage order, as one at a time.
+    the sink gets every message and outcome in storage order, as one at a time.  progress:
+    a bar of the messages read (a terminal only).
     """
     topic, input_topic = result.topic, result.input_topic
     process_input = est.process_input
@@ -204,12 +207,17 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
     read = 0                    # result.read, kept in a local
     gathered = Gathered(est.read_sample)
     gather = est.batched
+    messages = reader.messages()
+    if progress:
+        counts = [i.count for i in reader.topics.values()]
+        total = sum(counts) if all(c is not None for c in counts) else None
+        messages = wrap(messages, total, 'replaying', 'msg')
 
     def flush() -> None:
         if gathered.logs or gathered.held:
             gathered.hand_over(est, sink, statuses)
     try:
-        for raw in reader.messages():
+        for raw in messages:
             read += 1
             log_ns = raw.log_time_ns
             if due_at is not None and log_ns >= due_at:
@@ -248,6 +256,7 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
                 outcome(est, log_ns, sample, out, True)
         flush()
     finally:
+        messages.close()
         result.read += read
         result.samples += gathered.samples
     if result.samples == 0 and reader.damage is None:

@@ -1,0 +1,67 @@
+"""Progress bars (tqdm, on stderr, only on a terminal) and Ctrl-C caught in any phase."""
+
+import signal
+import sys
+import threading
+from types import FrameType, TracebackType
+from typing import Generator, Iterable, Optional, TypeVar
+
+from tqdm import tqdm
+
+__all__ = ['bar', 'Interrupts', 'wrap']
+
+T = TypeVar('T')
+
+
+def bar(total: Optional[int], desc: str, unit: str, enabled: bool = True) -> tqdm:
+    """Return a tqdm bar on stderr; off when not wanted or stderr is not a terminal."""
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, leave=False,
+                dynamic_ncols=True, disable=not (enabled and sys.stderr.isatty()))
+
+
+def wrap(items: Iterable[T], total: Optional[int], desc: str, unit: str,
+         enabled: bool = True) -> Generator[T, None, None]:
+    """Yield items while a bar counts them (closed at the end, on an error or a break)."""
+    b = bar(total, desc, unit, enabled)
+    try:
+        for item in items:
+            yield item
+            b.update(1)
+    finally:
+        b.close()
+
+
+class Interrupts:
+    """
+    Notice a SIGINT even when a library turns its KeyboardInterrupt into another error.
+
+    While active (in the main thread), SIGINT sets `seen` and raises KeyboardInterrupt as
+    Python's default handler does.  A C extension that calls back into Python (rclpy's
+    deserialize_message) may swallow that KeyboardInterrupt and raise its own error
+    (RuntimeError: "does not deserialize"); `seen` still says that the cause was Ctrl-C.
+    """
+
+    def __init__(self) -> None:
+        self.seen = False
+        self._previous: object = None
+
+    def _handler(self, signum: int, frame: Optional[FrameType]) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def __enter__(self) -> 'Interrupts':
+        """Install the handler (the main thread only; elsewhere only `check` is a no-op)."""
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, kind: Optional[type], exc: Optional[BaseException],
+                 tb: Optional[TracebackType]) -> None:
+        """Restore the previous handler."""
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+    def check(self) -> None:
+        """Raise KeyboardInterrupt if a SIGINT came (whatever became of its exception)."""
+        if self.seen:
+            raise KeyboardInterrupt
