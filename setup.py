@@ -30,6 +30,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', _files('config/*.yaml') + _files('config/*.json')),
         ('share/' + package_name + '/config/rosdep', _files('config/rosdep/*.yaml')),
+        ('share/' + package_name + '/config/schema', _files('config/schema/*.yaml')),
         ('share/' + package_name + '/launch', _files('launch/*.launch.py')),
         ('share/' + package_name + '/urdf', _files('urdf/*.urdf')),
     ] + _tree('bags'),

@@ -19,10 +19,15 @@ from tskf_ros.bag.replay import cli as replay_cli
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.experiments import fit_noise, sweep
 from tskf_ros.messages import conversions
-from tskf_ros.messages.estimator_interface import SCALARS
+from tskf_ros.messages.estimator_interface import NODE_NAME
+from tskf_ros.messages.parameter_schema import load_schema
 from tskf_ros.tools import plot_bag
 
-NAMES = sorted(SCALARS)
+# the estimator's double parameters with a range, from its schema (what the node declares)
+RANGES = {spec.name: spec.closed_range() for spec in load_schema(NODE_NAME).parameters.values()
+          if spec.type_name == 'double' and spec.closed_range() is not None
+          and not spec.read_only}
+NAMES = sorted(RANGES)
 SPECIAL = [float('nan'), float('inf'), -float('inf'), 1e308, -1e308, 0.0, -0.0, 5e-324,
            -1.0, 1e-300]
 VALUES = st.one_of(st.sampled_from(SPECIAL), st.floats(allow_nan=True, allow_infinity=True))
@@ -72,7 +77,7 @@ def check(capsys, code: int, name: str, value: float) -> None:
     lines = [line for line in err.splitlines() if line.strip()]
     assert code in STATUSES and len(lines) <= 1 and 'Traceback' not in err, (
         name, value, code, err)
-    lo, hi = SCALARS[name][2]
+    lo, hi = RANGES[name]
     if not lo <= value <= hi:
         assert code == 1 and name in lines[0], (name, value, lines)
 

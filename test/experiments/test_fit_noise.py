@@ -410,7 +410,7 @@ def test_the_node_ranges_refuse_a_params_file(sim, tmp_path, capsys):
         rc = fit_noise.main([str(d / 'bag'), '--params-file', str(tmp_path / 'p.yaml'),
                              '--json', str(tmp_path / 'f.json')])
         assert rc == 1
-        one_line(capsys, name, 'outside its range')
+        one_line(capsys, name, 'range')
         assert not (tmp_path / 'f.json').exists()
 
 

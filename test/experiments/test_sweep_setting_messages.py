@@ -7,7 +7,7 @@ from tskf_ros.messages.estimator_interface import default_parameters
 
 
 @pytest.mark.parametrize('text, message', [
-    ('gate_patience=1e9', "--set gate_patience: '1e9' is not an integer"),
+    ('gate_patience=x', "--set gate_patience: 'x' is not an integer"),
     ('gate_patience=2.5', "--set gate_patience: '2.5' is not an integer"),
     ('gate=abc', "--set gate: 'abc' is not a number"),
     ('R=1 x', "--set R: '1 x' is not a list of numbers"),

@@ -118,9 +118,9 @@ def parse_setting(text: str, defaults: dict) -> tuple[str, list]:
             try:
                 number = float(raw)
             except ValueError:
-                raise ValueError(f'--set {name}: {raw!r} is not a number') from None
-            if not number.is_integer():
-                raise ValueError(f'--set {name}: {raw!r} is not a whole number')
+                raise ValueError(f'--set {name}: {raw!r} is not an integer') from None
+            if not number.is_integer():     # 1e3 is one (1000), 2.5 and inf are not
+                raise ValueError(f'--set {name}: {raw!r} is not an integer')
             value = int(number)
         else:
             value = raw
