@@ -9,6 +9,7 @@ from tskf_ros.bag import player
 from tskf_ros.bag.bag_errors import BagNotFoundError, EXIT_INTERRUPTED, resolved
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.replay import adapters, cli
+from tskf_ros.bag.replay.gathered import Gathered
 from tskf_ros.tools import plot_bag
 
 from .helpers import BAGS, mcap_file, one_line
@@ -58,16 +59,20 @@ def test_the_tools_say_symlink_loop_in_one_line(tmp_path, capsys, which):
 
 
 def interrupt_after(monkeypatch, calls):
-    """Make the offline estimator's n-th sample raise KeyboardInterrupt (a Ctrl-C)."""
-    real = adapters.OfflineEstimator.process
+    """Make the offline estimator's n-th message raise KeyboardInterrupt (a Ctrl-C)."""
     count = [0]
 
-    def process(self, data, log_ns):
-        count[0] += 1
-        if count[0] == calls:
-            raise KeyboardInterrupt
-        return real(self, data, log_ns)
-    monkeypatch.setattr(adapters.OfflineEstimator, 'process', process)
+    def counted(real):
+        def call(self, *args):
+            count[0] += 1
+            if count[0] == calls:
+                raise KeyboardInterrupt
+            return real(self, *args)
+        return call
+    # one sample at a time, or gathered into runs (the estimator's replay)
+    monkeypatch.setattr(adapters.OfflineEstimator, 'process',
+                        counted(adapters.OfflineEstimator.process))
+    monkeypatch.setattr(Gathered, 'add', counted(Gathered.add))
 
 
 def console(module):

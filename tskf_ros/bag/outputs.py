@@ -4,6 +4,7 @@ import os
 from pathlib import Path
 from typing import Iterable, Optional, Union
 
+from tskf_ros.bag.bag_errors import resolved
 from tskf_ros.bag.writer import BagExistsError
 
 __all__ = ['check_outputs', 'OutputInBagError', 'output_conflict']
@@ -17,7 +18,7 @@ class OutputInBagError(BagExistsError):
 
 def _bag_root(bag: Path) -> Path:
     """Return the directory of a bag (a bare .mcap file inside a bag directory: that one)."""
-    bag = bag.resolve()
+    bag = resolved(bag)
     if bag.is_file() and (bag.parent / 'metadata.yaml').is_file():
         return bag.parent
     return bag
@@ -39,7 +40,7 @@ def output_conflict(output: PathLike, bag: PathLike) -> Optional[str]:
     inside the bag's directory, a directory holding the bag (an --overwrite would delete
     it), or, through a hard link, one of the bag's files.  Symlinks are resolved.
     """
-    out, root = Path(output).resolve(), _bag_root(Path(bag))
+    out, root = resolved(output), _bag_root(Path(bag))
     if out == root or out.is_relative_to(root) or root.is_relative_to(out):
         return f'{output}: is (or holds, or is inside) the input bag {bag}; give another output'
     if out.is_file():

@@ -310,6 +310,10 @@ def main(argv: Optional[list] = None) -> int:
     print(f'demo: {args.duration:g} s at {args.rate:g} Hz played in about '
           f'{args.duration * args.duration_scale:g} s, ROS_DOMAIN_ID='
           f'{os.environ["ROS_DOMAIN_ID"]}, seed {args.seed}', flush=True)
+    print(f'demo: to watch it live in Foxglove (no ROS installation needed), run '
+          f'`ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]} ./run shell -c tskf_foxglove_bridge` '
+          'in another terminal and open ws://localhost:8765 in Foxglove with the layout '
+          'config/foxglove_owc_live.json', flush=True)
     led = None if args.no_alignment else start_alignment(args)
     summary = run_processes(args)
     print(format_summary(summary), flush=True)
