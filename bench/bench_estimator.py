@@ -5,7 +5,7 @@ Benchmark: the estimator node against a relay that publishes the same messages.
                                     [--cases relay node stub]
 
 Each case runs in a process of its own (this script with `worker`), spinning as
-`python -m tskf_ros.nodes.timescale_estimator --executor ...` does (node_base.spin):
+`python -m tskf_ros.nodes.timescale_estimator --executor ...` does (node_runner.spin):
 
 - node: TimescaleEstimator on the OWC model (3), period 1 ms;
 - relay: a node with the same entities (measurement and input subscriptions, the same
@@ -63,7 +63,7 @@ from tskf_ros.messages.estimator_interface import (load_config, outcome_messages
                                                    OutcomeMessages, output_qos,
                                                    OUTPUT_TOPICS)
 from tskf_ros.messages.qos import DEFAULT_DEPTH, sensor_input_qos  # noqa: E402
-from tskf_ros.nodes.node_base import make_executor, spin  # noqa: E402
+from tskf_ros.nodes.node_runner import make_executor, spin  # noqa: E402
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator  # noqa: E402
 from tskf_ros.owc.session import Estimate, EstimatorSession, Jump, Outcome  # noqa: E402
 

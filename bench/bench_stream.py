@@ -40,7 +40,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from tskf_ros.messages import conversions  # noqa: E402
 from tskf_ros.messages.estimator_interface import default_parameters  # noqa: E402
-from tskf_ros.nodes.node_base import make_executor  # noqa: E402
+from tskf_ros.nodes.node_runner import make_executor  # noqa: E402
 
 from bench_estimator import OUTPUTS  # noqa: E402, I100 - bench/, next to this script
 

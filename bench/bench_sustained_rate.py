@@ -43,7 +43,7 @@ from rclpy.context import Context  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
 
 from tskf_ros.messages import conversions  # noqa: E402
-from tskf_ros.nodes.node_base import make_executor  # noqa: E402
+from tskf_ros.nodes.node_runner import make_executor  # noqa: E402
 
 from bench_stream import cpu_seconds  # noqa: E402, I100 - bench/, next to this script
 

@@ -23,7 +23,7 @@ if not os.environ.get('ROS_DOMAIN_ID'):
 
 @pytest.fixture(params=['single', 'events'])
 def executor_kind(request):
-    """Return each executor a node can run on (tskf_ros.nodes.node_base.EXECUTORS) in turn."""
+    """Return each executor a node can run on (tskf_ros.nodes.node_runner.EXECUTORS) in turn."""
     return request.param
 
 

@@ -186,7 +186,7 @@ class HangingOpener:
 
 def run_hanging_driver(hang_on: str) -> None:
     """Run power_meter_driver (sys.argv: its arguments) on a meter that hangs on hang_on."""
-    from tskf_ros.nodes.node_base import run_node
+    from tskf_ros.nodes.node_runner import run_node
     from tskf_ros.nodes.power_meter_driver import DESCRIPTION, NODE_NAME, PowerMeterDriver
     from tskf_ros.owc.meter_settings import MeterError
     run_node(partial(PowerMeterDriver, opener=HangingOpener(hang_on)), name=NODE_NAME,

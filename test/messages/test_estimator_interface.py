@@ -16,7 +16,7 @@ from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import (load_config, outcome_messages,
                                                    OutcomeMessages, output_qos, OUTPUT_TOPICS)
-from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.owc.session import Estimate, EstimatorSession, Jump, Outcome
 

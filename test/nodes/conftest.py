@@ -3,7 +3,7 @@
 import pytest
 import rclpy
 
-from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes.node_runner import make_executor
 
 
 @pytest.fixture

@@ -26,7 +26,7 @@ from tskf_ros.messages.alignment_interface import COMMAND_TOPIC
 from tskf_ros.messages.parameters import flat_parameters
 from tskf_ros.nodes.alignment import Alignment
 from tskf_ros.nodes.led_link_simulator import LedLinkSimulator
-from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.tools.demo_collector import wait_for
 
 import yaml

@@ -13,7 +13,7 @@ import json
 import rclpy
 from rclpy.node import Node
 from threadpoolctl import threadpool_info
-from tskf_ros.nodes.node_base import run_node
+from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.nodes import timescale_estimator  # noqa: the estimator's libraries
 
 

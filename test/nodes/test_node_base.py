@@ -22,8 +22,8 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile
 
-from tskf_ros.nodes import node_base
-from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes import node_runner
+from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 
 REPO = Path(__file__).resolve().parents[2]
@@ -90,11 +90,11 @@ def start(args, log, env=None):
 def test_the_node_process_stops_cleanly(ros_context, tmp_path, executor_kind, sig, how):
     log = (tmp_path / 'node.log').open('w+')
     env = dict(os.environ)
-    env.pop(node_base.EXECUTOR_VARIABLE, None)
+    env.pop(node_runner.EXECUTOR_VARIABLE, None)
     if how == 'flag':
         proc = start(['--executor', executor_kind], log, env)
     else:
-        env[node_base.EXECUTOR_VARIABLE] = executor_kind
+        env[node_runner.EXECUTOR_VARIABLE] = executor_kind
         proc = start([], log, env)
     client = rclpy.create_node('watcher', context=ros_context)
     diagnostics = []
@@ -117,7 +117,7 @@ def test_the_node_process_stops_cleanly(ros_context, tmp_path, executor_kind, si
 
 def test_an_unknown_executor_is_refused_in_one_line():
     env = dict(os.environ)
-    env[node_base.EXECUTOR_VARIABLE] = 'threads'
+    env[node_runner.EXECUTOR_VARIABLE] = 'threads'
     proc = subprocess.run([sys.executable, '-m', 'tskf_ros.nodes.timescale_estimator'],
                           cwd=REPO, env=env, capture_output=True, text=True, timeout=TIMEOUT)
     assert proc.returncode == 1
@@ -126,11 +126,11 @@ def test_an_unknown_executor_is_refused_in_one_line():
 
 
 def test_the_default_executor_and_the_environment(monkeypatch):
-    monkeypatch.delenv(node_base.EXECUTOR_VARIABLE, raising=False)
-    assert node_base.executor_kind() == node_base.DEFAULT_EXECUTOR
-    monkeypatch.setenv(node_base.EXECUTOR_VARIABLE, 'single')
-    assert node_base.executor_kind() == 'single'
-    assert node_base.executor_kind('events') == 'events'     # the flag wins
+    monkeypatch.delenv(node_runner.EXECUTOR_VARIABLE, raising=False)
+    assert node_runner.executor_kind() == node_runner.DEFAULT_EXECUTOR
+    monkeypatch.setenv(node_runner.EXECUTOR_VARIABLE, 'single')
+    assert node_runner.executor_kind() == 'single'
+    assert node_runner.executor_kind('events') == 'events'     # the flag wins
 
 
 @pytest.mark.parametrize('module', ['timescale_estimator', 'power_meter_simulator'])
@@ -140,7 +140,7 @@ def test_help_exits_0_without_ros(module):
 
 
 def test_a_parameter_file_that_sets_nothing_is_said_loudly(tmp_path):
-    from tskf_ros.nodes.node_base import unused_parameter_file
+    from tskf_ros.nodes.node_runner import unused_parameter_file
     wrong = tmp_path / 'wrong.yaml'
     wrong.write_text('some_other_node:\n  ros__parameters:\n    period: 2.0\n')
     for path, expect_warning in ((wrong, True), (CONFIG / 'owc_estimator.yaml', False)):
@@ -162,9 +162,9 @@ def test_a_parameter_file_that_sets_nothing_is_said_loudly(tmp_path):
 
 def test_the_default_executor_spins_without_a_polling_loop(monkeypatch, ros_context):
     # SingleThreadedExecutor.spin() returns on SIGINT and SIGTERM by itself; only the
-    # EventsExecutor needs node_base.spin's loop of spin_once calls with a timeout
-    monkeypatch.delenv(node_base.EXECUTOR_VARIABLE, raising=False)
-    assert node_base.DEFAULT_EXECUTOR == 'single'
+    # EventsExecutor needs node_runner.spin's loop of spin_once calls with a timeout
+    monkeypatch.delenv(node_runner.EXECUTOR_VARIABLE, raising=False)
+    assert node_runner.DEFAULT_EXECUTOR == 'single'
     calls = []
 
     class Recorder(rclpy.executors.SingleThreadedExecutor):
@@ -176,7 +176,7 @@ def test_the_default_executor_spins_without_a_polling_loop(monkeypatch, ros_cont
 
     executor = Recorder(context=ros_context)
     try:
-        node_base.spin(executor, ros_context)
+        node_runner.spin(executor, ros_context)
     finally:
         executor.shutdown()
     assert calls == ['spin']
@@ -209,7 +209,7 @@ def test_a_malformed_ros_argument_is_one_line_and_exit_2(module, ros_args, named
                            *ros_args], cwd=REPO, env=dict(os.environ), capture_output=True,
                           text=True, timeout=TIMEOUT)
     lines = proc.stderr.strip().splitlines()
-    assert proc.returncode == node_base.EXIT_USAGE == 2, proc.stderr
+    assert proc.returncode == node_runner.EXIT_USAGE == 2, proc.stderr
     assert len(lines) == 1 and 'Traceback' not in proc.stderr + proc.stdout, proc.stderr
     assert lines[0].startswith(f'{module}: cannot start: '), lines[0]
     assert named in lines[0] and '.c:' not in lines[0], lines[0]

@@ -9,7 +9,7 @@ from sensor_msgs.msg import Illuminance, JointState
 
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
-from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.nodes.power_meter_simulator import PowerMeterSimulator
 from tskf_ros.owc.vibrating_link import OwcLinkConfig, simulate_link
 from tskf_ros.tools.demo_collector import wait_for

@@ -20,7 +20,7 @@ from tskf_ros.core.time_scales import discrete
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.parameters import flat_parameters
-from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 
 import yaml

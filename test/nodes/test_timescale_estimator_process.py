@@ -14,7 +14,7 @@ from tskf_ros.core.linear_models import owc, run_filter
 from tskf_ros.core.time_scales import discrete
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
-from tskf_ros.nodes.node_base import make_executor
+from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.tools import demo_collector
 from tskf_ros.tools.demo_collector import arrays, Collector, wait_for
 

@@ -18,7 +18,8 @@ from tskf_ros.messages.alignment_interface import (COMMAND_TYPE, diagnostics_mes
                                                    OUTPUT_TYPES, parameters_to_config)
 from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
 from tskf_ros.messages.qos import sensor_input_qos
-from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
+from tskf_ros.nodes.node_base import ReconfigurableNode
+from tskf_ros.nodes.node_runner import run_node
 
 
 class Alignment(ReconfigurableNode):

@@ -11,7 +11,8 @@ from tskf_ros.led.led_link import LedLink, LedLinkConfig, LedLinkError, LedSampl
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import COMMAND_TOPIC, INPUT_TOPIC
 from tskf_ros.messages.qos import DEFAULT_DEPTH
-from tskf_ros.nodes.node_base import link_config, LinkSimulatorNode, MAX_BATCH, run_node
+from tskf_ros.nodes.node_base import link_config, LinkSimulatorNode, MAX_BATCH
+from tskf_ros.nodes.node_runner import run_node
 
 NODE_NAME = 'led_link_simulator'
 

@@ -1,38 +1,24 @@
-"""What the nodes share: `--help` without ROS, the Jazzy main loop, validated parameters."""
+"""What the nodes share: parameters from their schema, diagnostics, the simulators' clock."""
 
-import argparse
 from dataclasses import fields
 import math
-import os
-import re
-import sys
 from typing import Any, Callable, Optional, Protocol, Sequence, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.clock import ClockChange, JumpThreshold, TimeJump
 from rclpy.duration import Duration
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
-from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import Illuminance, JointState
 from std_srvs.srv import Trigger
-from threadpoolctl import threadpool_limits
 
 from tskf_ros.core.diagnostic_status import FrequencyParams, FrequencyStatus, Status
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
-from tskf_ros.messages.parameter_schema import (load_schema, ParameterError, ParameterSchema,
-                                                SchemaFormatError)
-from tskf_ros.messages.parameters import parameters_for_node
+from tskf_ros.messages.parameter_schema import load_schema, ParameterSchema
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
 from tskf_ros.nodes.status_line import StatusLine
-
-import yaml
 
 # a simulator takes at most this many samples per callback when catching up
 MAX_BATCH = 10_000
@@ -40,27 +26,6 @@ MAX_BATCH = 10_000
 SIMULATOR_RATE_TOLERANCE = 0.5
 # the evaluation truth of both simulators (sensor_msgs/msg/JointState)
 TRUTH_TOPIC = 'true_angle'
-# The executors a node can run on (`--executor`, or TSKF_EXECUTOR in the environment).
-# 'single' is rclpy's SingleThreadedExecutor, Jazzy's stable executor, which rebuilds its
-# wait set on every spin; 'events' is rclpy.experimental.EventsExecutor, which dispatches
-# from callbacks of the middleware (doc/benchmarks.md has both, measured).
-EXECUTORS = {'single': SingleThreadedExecutor, 'events': EventsExecutor}
-DEFAULT_EXECUTOR = 'single'
-EXECUTOR_VARIABLE = 'TSKF_EXECUTOR'
-# s: the longest EventsExecutor.spin_once between two checks of the context.  rclpy 7.1's
-# EventsExecutor.spin() (and its spin_once without a timeout) never returns after SIGINT
-# or SIGTERM, spinning a core; its spin_once with a timeout returns at once, raising
-# KeyboardInterrupt or ExternalShutdownException (test/nodes/test_node_base.py checks
-# both executors).  SingleThreadedExecutor.spin() needs no such loop.
-SPIN_TIMEOUT = 1.0
-# a parameter override refused at declaration (out of its range, wrong type), or a schema
-# that cannot be read (a broken installation): one line
-ROS_PARAMETER_ERRORS = (InvalidParameterTypeException, InvalidParameterValueException,
-                        ParameterError, SchemaFormatError)
-# exit status of a command line the node cannot parse (as argparse's usage errors)
-EXIT_USAGE = 2
-# rcl's source locations in its error strings (", at /project/src/parse.c:935")
-RCL_LOCATION = re.compile(r',? at \S+:\d+')
 # a link config dataclass of the core (OwcLinkConfig, LedLinkConfig)
 LinkConfig = TypeVar('LinkConfig')
 
@@ -95,134 +60,6 @@ class SimulatorSettings(Protocol):
     @property
     def wait_for_subscribers(self) -> int:
         """Return how many subscribers the sensor topic needs before sample 0 goes."""
-
-
-def executor_kind(kind: Optional[str] = None) -> str:
-    """Return the executor kind asked for: kind, else $TSKF_EXECUTOR, else the default."""
-    kind = kind or os.environ.get(EXECUTOR_VARIABLE) or DEFAULT_EXECUTOR
-    if kind not in EXECUTORS:
-        raise ValueError(f'executor must be one of {", ".join(EXECUTORS)}, got {kind!r}')
-    return kind
-
-
-def make_executor(kind: Optional[str] = None, *, context=None) -> Executor:
-    """Return a new executor of the kind (see executor_kind) in context."""
-    return EXECUTORS[executor_kind(kind)](context=context)
-
-
-def spin(executor: Executor, context=None) -> None:
-    """
-    Spin executor until its context shuts down (SIGINT, SIGTERM, rclpy.shutdown).
-
-    An rclpy Executor (SingleThreadedExecutor, the default) spins with its own spin(),
-    which returns on any of them; the EventsExecutor, which is no rclpy Executor, in a
-    loop of spin_once calls with a timeout (SPIN_TIMEOUT).
-    """
-    if isinstance(executor, Executor):
-        executor.spin()
-        return
-    context = context or rclpy.get_default_context()
-    while context.ok():
-        executor.spin_once(timeout_sec=SPIN_TIMEOUT)
-
-
-def ros_arguments_error(exc: RuntimeError) -> str:
-    """Return rcl's refusal of the ROS arguments as one line, without its source locations."""
-    text = RCL_LOCATION.sub('', str(exc)).strip().removeprefix('Failed to parse ROS arguments: ')
-    if text.startswith('['):
-        return f'unknown ROS argument(s) {text}'
-    text = f'bad ROS argument: {text}'
-    if 'parameter override rule' in text:
-        text += (' (the value after := is YAML: quote a string YAML cannot read, e.g. '
-                 """-p 'backend:="@py"')""")
-    return text
-
-
-def parse_args(prog: str, description: str,
-               argv: Optional[list] = None) -> argparse.Namespace:
-    """
-    Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS).
-
-    ROS arguments rcl cannot parse (a malformed `-p`, `-r` or `--params-file`, an unknown
-    `--ros-args` flag) end the process with one line and exit status EXIT_USAGE.
-    """
-    parser = argparse.ArgumentParser(prog=prog, description=description)
-    parser.add_argument('--executor', choices=sorted(EXECUTORS), default=None,
-                        help=f'the rclpy executor to spin on (default: ${EXECUTOR_VARIABLE} '
-                        f'if set, else {DEFAULT_EXECUTOR}): single = SingleThreadedExecutor, '
-                        'events = rclpy.experimental.EventsExecutor')
-    try:
-        # rcl's RCLInvalidROSArgsError and UnknownROSArgsError are RuntimeErrors
-        args = remove_ros_args(sys.argv if argv is None else argv)[1:]
-    except RuntimeError as exc:
-        print(f'{prog}: cannot start: {ros_arguments_error(exc)}', file=sys.stderr)
-        sys.exit(EXIT_USAGE)
-    return parser.parse_known_args(args)[0]
-
-
-def unused_parameter_file(node: Node, argv: Sequence[str]) -> str:
-    """Return a warning if a --params-file was given but set none of this node's parameters."""
-    files = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == '--params-file']
-    own = set()
-    for path in files:
-        try:
-            own |= parameters_for_node(path, node.get_fully_qualified_name())
-        except (OSError, yaml.YAMLError):
-            continue        # rcl refused such a file before the node started
-    if files and not own - {'use_sim_time'}:
-        return (f'the parameter file(s) {", ".join(files)} set none of the parameters of '
-                f'{node.get_fully_qualified_name()}: it runs on its built-in defaults. Key '
-                f'the section /**/{node.get_name()} (or /**) so that it applies in any '
-                'namespace')
-    return ''
-
-
-def run_node(factory: Callable[[], Node], *, name: str, description: str,
-             startup_errors: tuple = (), args: Optional[list] = None) -> None:
-    """
-    Run one node until Ctrl-C or shutdown, in the Jazzy form of ros2/demos.
-
-    An exception of `startup_errors` (bad parameters) ends the process with its message
-    on stderr and exit code 1, not a traceback.  `--executor single|events` chooses the
-    executor (see EXECUTORS).
-    """
-    options = parse_args(name, description, args)
-    try:
-        kind = executor_kind(options.executor)
-    except ValueError as exc:
-        print(f'{name}: cannot start: {exc}', file=sys.stderr)
-        sys.exit(1)
-    rclpy.init(args=args)
-    node = executor = None
-    try:
-        node = factory()
-        limit_blas_threads()
-        warning = unused_parameter_file(node, sys.argv if args is None else args)
-        if warning:
-            node.get_logger().error(warning)
-        executor = make_executor(kind)
-        executor.add_node(node)
-        spin(executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except startup_errors + ROS_PARAMETER_ERRORS as exc:
-        print(f'{name}: cannot start: {exc}', file=sys.stderr)
-        sys.exit(1)
-    finally:
-        if executor is not None:
-            executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-
-
-def limit_blas_threads() -> None:
-    """Run BLAS/OpenMP on one thread: a node filters one sample at a time (small matrices)."""
-    # without a limit OpenBLAS runs small products on every core: about 10 ms per sample
-    # of a jittered 1 kHz stream against 0.5 ms on one, under `ros2 run` (where nothing
-    # sets OPENBLAS_NUM_THREADS); called once the node is built, so that the libraries it
-    # loaded are covered
-    threadpool_limits(limits=1)
 
 
 class ReconfigurableNode(Node):

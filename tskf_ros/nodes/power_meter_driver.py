@@ -12,7 +12,8 @@ from tskf_ros.messages import conversions
 from tskf_ros.messages import power_meter_interface as interface
 from tskf_ros.messages.power_meter_interface import (DriverConfig, MeterError, NODE_NAME,
                                                      POWER_TOPIC, SENSOR_OUTPUT_QOS)
-from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
+from tskf_ros.nodes.node_base import ReconfigurableNode
+from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.owc.meter_settings import MeterConfig
 from tskf_ros.owc.power_meter import Opener, PowerMeter
 

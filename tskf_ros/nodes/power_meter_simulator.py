@@ -8,7 +8,8 @@ from rcl_interfaces.msg import SetParametersResult
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import POWER_TOPIC
-from tskf_ros.nodes.node_base import link_config, LinkSimulatorNode, MAX_BATCH, run_node
+from tskf_ros.nodes.node_base import link_config, LinkSimulatorNode, MAX_BATCH
+from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.owc.vibrating_link import OwcLink, OwcLinkConfig, OwcLinkError, Samples
 
 NODE_NAME = 'power_meter_simulator'

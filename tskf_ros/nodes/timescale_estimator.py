@@ -16,7 +16,8 @@ from tskf_ros.messages.estimator_interface import (ConfigError, diagnostics_mess
                                                    OutcomeMessages, output_qos, OUTPUT_TOPICS,
                                                    parameters_to_config)
 from tskf_ros.messages.qos import sensor_input_qos
-from tskf_ros.nodes.node_base import ReconfigurableNode, run_node
+from tskf_ros.nodes.node_base import ReconfigurableNode
+from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.owc.lagged_estimates import LaggedEstimate, LaggedEstimates
 from tskf_ros.owc.session import EstimatorSession, Outcome
 from tskf_ros.owc.session.diagnostics import status_line

@@ -50,7 +50,7 @@ def executor_kind() -> str:
 @pytest.fixture
 def ros_executor(ros_context: Any, executor_kind: str) -> Iterator[Any]:
     """Yield an executor of executor_kind in ros_context; shut it down afterwards."""
-    from tskf_ros.nodes.node_base import make_executor
+    from tskf_ros.nodes.node_runner import make_executor
 
     executor = make_executor(executor_kind, context=ros_context)
     try:

@@ -21,7 +21,7 @@ from rclpy.subscription import Subscription
 from tskf_ros.bag.message_types import BagTypeError, message_class
 from tskf_ros.messages.parameters import descriptor
 from tskf_ros.messages.qos import DEFAULT_DEPTH, matching_qos
-from tskf_ros.nodes.node_base import run_node
+from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.tools.message_definitions import DefinitionError, ros2msg_definition
 
 __all__ = ['BridgeError', 'DEFAULTS', 'FoxgloveBridge', 'main', 'NODE_NAME', 'SUBPROTOCOL']
