@@ -46,7 +46,8 @@ def test_replay_offline_draws_nothing_when_stderr_is_not_a_terminal(tmp_path, ca
 def test_alignment_mc_shows_its_points(monkeypatch):
     term = Terminal()
     monkeypatch.setattr('sys.stderr', term)
-    assert alignment_mc.main(['--runs', '2', '--steps', '10', '--noise-levels', '0.5,1.5']) == 0
+    assert alignment_mc.main(['--runs', '2', '--steps', '10', '--noise-levels', '0.5,1.5',
+                              '--algorithms', 'ekf,hill_climbing,three_point']) == 0
     shown = ''.join(term.text)
     # 2 noise levels x 3 algorithms
     assert 'alignment_mc noise' in shown and '/6' in shown

@@ -7,7 +7,7 @@ mu = period from (x0, P0) with y = C x0 + D healthy (tskf_ros.owc.session.health
 
 from dataclasses import dataclass
 from math import isqrt
-from typing import Mapping, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -71,25 +71,6 @@ def model_from_flat(*, A: Sequence[float], C: Sequence[float], Q: Sequence[float
                        G=g.reshape(n, r) if g.size else None,
                        B=b.reshape(n, -1) if b.size else None,
                        D=d if d.size else None, state_names=names)
-
-
-def check_ranges(values: Mapping[str, object], ranges: Mapping[str, tuple[float, float]]
-                 ) -> None:
-    """
-    Refuse a value outside its parameter's declared range [lo, hi], as the node does.
-
-    The node declares these ranges (a FloatingPointRange) and rclpy refuses a value
-    outside them at start and at run time; an offline tool calls this with the same
-    ranges so that it refuses what the node refuses.  NaN is outside every range.
-    """
-    for name, (lo, hi) in ranges.items():
-        if name not in values:
-            continue
-        value = values[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f'{name} must be a number in [{lo:g}, {hi:g}], got {value!r}')
-        if not lo <= value <= hi:
-            raise ConfigError(f'{name} = {value:g} is outside its range [{lo:g}, {hi:g}]')
 
 
 # the bounds that must be finite and >= 0
