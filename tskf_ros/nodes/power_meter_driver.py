@@ -179,7 +179,10 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
         try:
             callback()
         except KeyboardInterrupt:
-            rclpy.try_shutdown(context=self.context)
+            try:
+                rclpy.try_shutdown(context=self.context)
+            except Exception:  # noqa: B902 - the signal handler shut it down in between
+                pass
         except Exception:  # noqa: B902 - the node is ending, not failing
             if self.context.ok():
                 raise
