@@ -14,6 +14,9 @@ def loop(ros_context, executor_kind):
     executor.add_node(client)
     nodes = [client]
     yield executor, client, nodes
+    for n in nodes:             # off the executor first, then shut down, then destroyed
+        if n in executor.get_nodes():
+            executor.remove_node(n)
     executor.shutdown()
     for n in nodes:
         n.destroy_node()

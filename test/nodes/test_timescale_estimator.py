@@ -102,7 +102,11 @@ class Harness:
                 np.array([e.P for e in out]))
 
     def close(self):
-        """Destroy the nodes and the executor."""
+        """Take the nodes off the executor, shut it down, then destroy the nodes."""
+        # in this order: a node destroyed while an executor still holds its entities could
+        # wait for them for ever (seen once, on a loaded machine)
+        for node in (self.node, self.client):
+            self.executor.remove_node(node)
         self.executor.shutdown()
         self.node.destroy_node()
         self.client.destroy_node()
