@@ -25,6 +25,7 @@ from tskf_ros.bag.message_types import BagTypeError, message_class, qos_to_rclpy
 from tskf_ros.bag.play_options import build_parser, player_options, PlayerError
 from tskf_ros.bag.reader import BagError, BagReader, exit_status, RawMessage
 from tskf_ros.core.units import MAX_STAMP_NS, NS
+from tskf_ros.messages.context import end_context
 from tskf_ros.messages.qos import DEFAULT_DEPTH
 
 NODE_NAME = 'player'
@@ -362,7 +363,7 @@ def main(args: Optional[list] = None, stdin=None) -> int:
             print('play: published ' + ', '.join(
                 f'{t} {n}' for t, n in sorted(node.published.items())), file=sys.stderr)
             node.destroy_node()
-        rclpy.try_shutdown()
+        end_context()
     return exit_status('play', node.damage if node is not None else None, 'bag damaged')
 
 

@@ -20,6 +20,7 @@ from tskf_ros.bag.record_options import (build_parser, check_options, default_ou
                                          FLUSH_INTERVAL, NODE_NAME, recorder_options)
 from tskf_ros.bag.split_bag import SplitBagWriter
 from tskf_ros.bag.writer import BagWriteError, BagWriter
+from tskf_ros.messages.context import end_context
 
 # not recorded by --all unless named
 INTERNAL_TOPICS = ('/rosout', '/parameter_events')
@@ -285,7 +286,7 @@ def main(args: Optional[list] = None) -> int:
                 else:
                     print(f'record: wrote {path}: {counts}', file=sys.stderr)
             node.destroy_node()
-        rclpy.try_shutdown()
+        end_context()
     return status
 
 

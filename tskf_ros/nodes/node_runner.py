@@ -14,6 +14,7 @@ from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 from threadpoolctl import threadpool_limits
 
+from tskf_ros.messages.context import end_context
 from tskf_ros.messages.parameter_schema import ParameterError, SchemaFormatError
 from tskf_ros.messages.parameters import parameters_for_node
 
@@ -158,7 +159,7 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
             executor.shutdown()
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        end_context()
 
 
 def limit_blas_threads() -> None:

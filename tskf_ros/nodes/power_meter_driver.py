@@ -2,7 +2,6 @@
 
 from typing import Callable, Optional
 
-import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import Illuminance
@@ -10,6 +9,7 @@ from sensor_msgs.msg import Illuminance
 from tskf_ros.core.diagnostic_status import KeyValue, Status, WARN
 from tskf_ros.messages import conversions
 from tskf_ros.messages import power_meter_interface as interface
+from tskf_ros.messages.context import end_context
 from tskf_ros.messages.power_meter_interface import (DriverConfig, MeterError, NODE_NAME,
                                                      POWER_TOPIC, SENSOR_OUTPUT_QOS)
 from tskf_ros.nodes.node_base import ReconfigurableNode
@@ -179,10 +179,7 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
         try:
             callback()
         except KeyboardInterrupt:
-            try:
-                rclpy.try_shutdown(context=self.context)
-            except Exception:  # noqa: B902 - the signal handler shut it down in between
-                pass
+            end_context(self.context)
         except Exception:  # noqa: B902 - the node is ending, not failing
             if self.context.ok():
                 raise
