@@ -10,6 +10,7 @@ import pytest
 
 from tskf_ros.core.units import MAX_STAMP_NS, NS
 from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession
+from tskf_ros.led.pat_config import PatConfig
 
 T0 = 1_700_000_000 * NS
 
@@ -17,7 +18,8 @@ T0 = 1_700_000_000 * NS
 # -- the alignment session ---------------------------------------------------------------
 
 def aligner(**extra):
-    return AlignmentSession(AlignmentConfig(**extra))
+    # the scanning EKF alone (pat.enabled false): the supervisor's cases are below
+    return AlignmentSession(AlignmentConfig(**{'pat': PatConfig(enabled=False), **extra}))
 
 
 def test_alignment_gates_a_1e308_intensity_and_the_base_stays_in_its_limits():
@@ -45,6 +47,19 @@ def test_alignment_commands_are_clamped_and_the_ekf_told():
     assert int(a.diagnostics()[0].as_dict()['Commands clamped']) > 0
     with pytest.raises(ValueError, match='base_initial'):
         AlignmentConfig(base_initial=10.0, base_limits=(-3.0, 3.0))
+
+
+@pytest.mark.parametrize('bad', [1e308, 1e200, float('inf'), -1e308])
+def test_the_supervisor_survives_absurd_intensities_while_searching(bad):
+    # three absurd readings in the dark of a cold search, then light from sample 100:
+    # finite commands within the joint limits, and tracking at the end
+    a = AlignmentSession(AlignmentConfig())
+    outs = [a.add(T0 + k * NS // 20, bad if 5 <= k < 8 else (2.0 if k > 100 else 0.0))
+            for k in range(400)]
+    commands = [o.command for o in outs if o.command is not None]
+    assert len(commands) == 400 - a.stats.rejected.total()
+    assert all(-360.0 <= c <= 360.0 for c in commands)
+    assert a.pat_state == 'tracking'
 
 
 def test_alignment_rejects_stamps_beyond_int32_seconds():

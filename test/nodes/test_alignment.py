@@ -6,7 +6,6 @@ import subprocess
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import TwistWithCovarianceStamped
 from node_helpers import call
 import numpy as np
 import pytest
@@ -21,6 +20,7 @@ from std_srvs.srv import SetBool, Trigger
 from tskf_ros import led
 from tskf_ros.led.alignment_session import AlignmentConfig, AlignmentSession, NS
 from tskf_ros.led.led_link import closed_loop
+from tskf_ros.led.pat_config import PatConfig
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import COMMAND_TOPIC
 from tskf_ros.messages.parameters import flat_parameters
@@ -128,9 +128,9 @@ class Harness:
         self.commands, self.predicted, self.corrected, self.diagnostics = [], [], [], []
         self.client.create_subscription(Float64MultiArray, COMMAND_TOPIC, self.commands.append,
                                         deep)
-        self.client.create_subscription(TwistWithCovarianceStamped, 'estimate/predicted',
+        self.client.create_subscription(Float64MultiArray, 'estimate/predicted',
                                         self.predicted.append, deep)
-        self.client.create_subscription(TwistWithCovarianceStamped, 'estimate/corrected',
+        self.client.create_subscription(Float64MultiArray, 'estimate/corrected',
                                         self.corrected.append, deep)
         self.client.create_subscription(DiagnosticArray, '/diagnostics',
                                         self.diagnostics.append, 10)
@@ -203,7 +203,8 @@ GOOD = [2.9, 2.7, 2.8, 2.5, 2.6, 2.4]
 
 def offline(samples, **config):
     """Run the session offline on (stamp, z) samples; return its outcomes with a command."""
-    session = AlignmentSession(AlignmentConfig(**config))
+    # the node's parameter file config/alignment.yaml: no supervisor (Table I's loop)
+    session = AlignmentSession(AlignmentConfig(**{'pat': PatConfig(enabled=False), **config}))
     return [o for o in (session.add(t, z) for t, z in samples) if o.command is not None]
 
 
@@ -212,14 +213,20 @@ def check_outputs(h, samples):
     ref = offline(samples)
     got = [conversions.msg_to_base_command(m)[0] for m in h.commands]
     np.testing.assert_allclose(got, [o.command for o in ref], rtol=0, atol=1e-9)
-    est = [conversions.msg_to_alignment_estimate(m) for m in h.corrected]
-    assert [e[0] for e in est] == [o.stamp_ns for o in ref]
+    est = [conversions.msg_to_alignment_state(m) for m in h.corrected]
+    assert [e.stamp_ns for e in est] == [o.stamp_ns for o in ref]
     for e, o in zip(est, ref):
-        np.testing.assert_allclose(e[1], o.posterior[0], rtol=0, atol=1e-9)
-        np.testing.assert_allclose(e[2], o.posterior[1], rtol=1e-12, atol=1e-9)
-    for m in h.predicted + h.corrected:
-        assert np.all(np.isfinite(m.twist.covariance))
-        assert np.isfinite([m.twist.twist.linear.x, m.twist.twist.linear.y]).all()
+        np.testing.assert_allclose(e.x, o.posterior[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(e.P, o.posterior[1], rtol=1e-12, atol=1e-9)
+    # mu of both: the step into t_k, t_k - t_{k-1} in s (0 at the first sample)
+    stamps = [e.stamp_ns for e in est]
+    want_mu = [0.0] + [(b - a) / NS for a, b in zip(stamps, stamps[1:])]
+    for kind, msgs in (('predicted', h.predicted), ('corrected', h.corrected)):
+        read = [conversions.msg_to_state_estimate(m) for m in msgs]
+        assert {r.kind for r in read} == {kind}
+        assert all(r.names == conversions.ALIGNMENT_STATE_NAMES for r in read)
+        assert [r.mu for r in read] == pytest.approx(want_mu, rel=0, abs=1e-12)
+        assert all(np.all(np.isfinite(m.data)) for m in msgs)
     assert np.all(np.isfinite(got))
     return est
 
@@ -238,8 +245,8 @@ def test_bad_intensity_is_a_missing_sample(make, bad, reason):
     s = h.node.session.stats
     assert s.missing[reason] == 1 and s.used == 5
     # at the bad sample there is no update: the posterior is the prior
-    prior = conversions.msg_to_alignment_estimate(h.predicted[3])
-    np.testing.assert_allclose(est[3][1], prior[1], rtol=0, atol=1e-12)
+    prior = conversions.msg_to_alignment_state(h.predicted[3])
+    np.testing.assert_allclose(est[3].x, prior.x, rtol=0, atol=1e-12)
     _, values = h.values('aligner')
     assert values[f'Missing ({reason})'] == '1'
 
@@ -257,9 +264,10 @@ def test_missing_samples_are_predicted_over_with_the_stamps(make):
     h.run(samples)
     est = check_outputs(h, samples)
     # P^f = P + mu Q over the gap (the scan index moved once: one command per arrival)
-    prior = conversions.msg_to_alignment_estimate(h.predicted[3])
+    prior = conversions.msg_to_alignment_state(h.predicted[3])
     Q = np.diag([0.25, 1.0])
-    np.testing.assert_allclose(prior[2], est[2][2] + 4 * Q, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(prior.P, est[2].P + 4 * Q, rtol=1e-12, atol=1e-9)
+    assert prior.mu == pytest.approx(4 * DT, rel=1e-12)
     s = h.node.session.stats
     assert s.gaps == 1 and s.mu_max == pytest.approx(4.0)
     assert s.gap_max == pytest.approx(0.2)
@@ -283,7 +291,7 @@ def test_bad_stamp_is_dropped(make, bad_stamp, reason):
     h.run(samples)
     assert len(h.commands) == 4                  # nothing for the dropped sample
     check_outputs(h, samples)
-    stamps = [conversions.stamp_to_ns(m.header.stamp) for m in h.corrected]
+    stamps = [conversions.msg_to_state_estimate(m).stamp_ns for m in h.corrected]
     assert stamps == [at(k) for k in range(4)]
     assert h.node.session.stats.rejected[reason] == 1
     _, values = h.values('aligner')
@@ -296,8 +304,9 @@ def test_backward_jump_restarts(make):
     s = h.node.session.stats
     assert s.resets['backward_jump'] == 1 and len(h.commands) == 5
     # restarted from x0: the prior at the jump is Table I's
-    prior = conversions.msg_to_alignment_estimate(h.predicted[3])
-    np.testing.assert_allclose(prior[1], led.PAPER_X0, rtol=0, atol=1e-12)
+    prior = conversions.msg_to_alignment_state(h.predicted[3])
+    np.testing.assert_allclose(prior.x, led.PAPER_X0, rtol=0, atol=1e-12)
+    assert prior.mu == 0.0          # the first sample of the new run
 
 
 def test_clock_jump_restarts(make):

@@ -20,6 +20,7 @@ from rclpy.parameter import Parameter
 from tskf_ros.core.linear_models import owc
 from tskf_ros.led.alignment_config import AlignmentConfig
 from tskf_ros.led.led_link import LedLinkConfig
+from tskf_ros.led.pat_config import PatConfig
 from tskf_ros.messages.parameter_schema import (load_schema, ParameterError, parse_schema,
                                                 SchemaFormatError)
 from tskf_ros.messages.parameters import IGNORED, IGNORED_PREFIX
@@ -94,12 +95,13 @@ def test_the_estimator_defaults_are_cais_model_3():
     ('power_meter_simulator', OwcLinkConfig(), ''),
     ('led_link_simulator', LedLinkConfig(), ''),
     ('alignment', AlignmentConfig(), ''),
+    ('alignment', PatConfig(), 'pat.'),
     ('power_meter_driver', MeterConfig(), ''),
     ('power_meter_driver', ScpiCommands(), 'scpi_')])
 def test_the_schema_defaults_are_the_dataclass_defaults(name, config, prefix):
     values = load_schema(name).defaults()
     for f in fields(config):
-        if f.name == 'commands':
+        if f.name in ('commands', 'pat'):     # pat: the row of PatConfig
             continue
         want = getattr(config, f.name)
         want = [float(v) for v in want] if isinstance(want, tuple) else want

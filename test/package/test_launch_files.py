@@ -88,7 +88,7 @@ LIVE_LAYOUTS = {
     'foxglove_owc_live.json': ('/', {
         'received_power', 'true_angle', *estimator.OUTPUT_TOPICS.values()}),
     'foxglove_led_live.json': ('/led/', {
-        'intensity', 'true_angle', *aligner.OUTPUT_TOPICS.values()}),
+        'intensity', 'true_angle', aligner.PAT_STATE_TOPIC, *aligner.OUTPUT_TOPICS.values()}),
 }
 
 

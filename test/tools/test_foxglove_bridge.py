@@ -33,7 +33,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from tskf_ros.bag.message_types import message_class
 from tskf_ros.messages import alignment_interface, estimator_interface
-from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
+from tskf_ros.messages.conversions import STATES_TYPE
 from tskf_ros.messages.qos import matching_qos
 from tskf_ros.tools.foxglove_bridge import BridgeError, FoxgloveBridge, main, SUBPROTOCOL
 from tskf_ros.tools.message_definitions import DefinitionError, ros2msg_definition, SEPARATOR
@@ -47,7 +47,7 @@ MESSAGE_DATA = 0x01    # opcode of a server's binary message frame
 MSG_LINE = re.compile(r'^MSG: (\S+)$', re.M)
 # every message type the package's nodes publish or take
 PACKAGE_TYPES = sorted({
-    *estimator_interface.INPUT_TYPES, ESTIMATE_TYPE, STATES_TYPE,
+    *estimator_interface.INPUT_TYPES, alignment_interface.ESTIMATE_TYPE, STATES_TYPE,
     estimator_interface.ESTIMATE_TYPE, estimator_interface.INPUT_TYPE,
     estimator_interface.DIAGNOSTICS_TYPE, alignment_interface.COMMAND_TYPE})
 

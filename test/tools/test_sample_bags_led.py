@@ -75,7 +75,7 @@ def test_topics_types_and_stamps(bag, simulation):
     assert {t: (kind, len(msgs)) for t, (kind, msgs) in bag.items()} == {
         '/photodiode': ('sensor_msgs/msg/Illuminance', int(np.isfinite(traj.z[:, 0]).sum())),
         '/alignment/truth': ('sensor_msgs/msg/JointState', steps),
-        '/alignment/estimate': ('geometry_msgs/msg/TwistWithCovarianceStamped', steps),
+        '/alignment/estimate': ('std_msgs/msg/Float64MultiArray', steps),
         '/alignment/command': ('std_msgs/msg/Float64MultiArray', steps),
     }
     for topic in ('/alignment/truth', '/alignment/estimate', '/alignment/command'):
@@ -111,12 +111,17 @@ def test_command_is_the_absolute_base_position_in_radians(bag, simulation):
 def test_estimate_is_in_the_node_units(bag, simulation):
     traj, covariances = simulation
     r = math.pi / 180.0
-    for k, (_, msg) in enumerate(bag['/alignment/estimate'][1]):
+    for k, (log_ns, msg) in enumerate(bag['/alignment/estimate'][1]):
         x1hat, x2hat_deg = traj.estimate[k, 0]
-        lin = msg.twist.twist.linear
-        assert close(lin.x, x1hat), k
-        assert close(lin.y, math.radians(x2hat_deg)), k
-        cov = np.asarray(msg.twist.covariance, dtype=float).reshape(6, 6)
+        # the estimate layout, read by hand: [sec, nanosec, mu, x1, x2, P row-major]
+        assert msg.layout.data_offset == 3 and len(msg.data) == 3 + 2 + 4
+        assert [d.label for d in msg.layout.dim] == ['corrected',
+                                                     'x1_intensity_V,x2_scan_mean_rad']
+        assert int(msg.data[0]) * 10**9 + int(msg.data[1]) == log_ns
+        assert msg.data[2] == (0.0 if k == 0 else STEP_NS / 1e9), k
+        assert close(msg.data[3], x1hat), k
+        assert close(msg.data[4], math.radians(x2hat_deg)), k
+        cov = np.asarray(msg.data[5:], dtype=float).reshape(2, 2)
         P = covariances[k]
         assert close(cov[0, 0], P[0, 0]), k
         assert close(cov[0, 1], P[0, 1] * r), k

@@ -5,7 +5,7 @@ Section IV's observability condition (eq. (24): G > 1/91 for 2 degree scan steps
 the checks; angles are in degrees, intensities in volts.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import Sequence
 
@@ -13,6 +13,8 @@ import numpy as np
 
 from tskf_ros import led
 from tskf_ros.led.intensity_model import FloatArray
+from tskf_ros.led.pat_config import PatConfig
+from tskf_ros.led.supervisor import SupervisorConfig
 
 # parameters that change in place; any other change restarts the aligner
 TUNABLE = ('gain', 'Q', 'R', 'x1_floor', 'gamma', 'clip', 'negative_is_missing', 'max_gap',
@@ -65,6 +67,7 @@ class AlignmentConfig:
     base_limits: tuple[float, ...] = (-360.0, 360.0)     # deg: the joint limits of the base
     expected_rate: float = 0.0                   # Hz of the input (FrequencyStatus); 0: 1/dt
     rate_tolerance: float = 0.5                  # FrequencyStatus's tolerance around it
+    pat: PatConfig = field(default_factory=PatConfig)    # the pointing supervisor (pat.*)
 
     def __post_init__(self) -> None:
         """Check that the settings make a working aligner; raise AlignmentError if not."""
@@ -119,6 +122,11 @@ class AlignmentConfig:
             raise led.AlignmentError('scan has non-finite angles')
         # Section IV: det C_k != 0 needs G > 1/91 for 2 degree scan steps (eq. (24))
         led.check_observability(self.gain, tuple(scan))
+        if self.pat.enabled:
+            if self.controller != 'p':
+                raise led.AlignmentError(f'pat.enabled needs controller p: the supervisor '
+                                         f'cannot steer the {self.controller} controller')
+            self.supervisor()
 
     def ekf(self) -> led.EKFConfig:
         """Return the scanning EKF's configuration."""
@@ -129,6 +137,11 @@ class AlignmentConfig:
             R=tuple(map(tuple, _matrix(self.R, 'R', definite=True))),
             gain=float(self.gain), scan=tuple(float(v) for v in self.scan), dt=float(self.dt),
             x1_floor=float(self.x1_floor) if self.x1_floor > 0 else None)
+
+    def supervisor(self) -> SupervisorConfig:
+        """Return the supervisor's config: pat.*, noise sqrt(R_11), max_step and gate."""
+        return self.pat.supervisor(noise=math.sqrt(float(self.R[0])), max_step=self.max_step,
+                                   gate=self.gate)
 
     def response(self) -> led.IncidenceResponse:
         """Return g of eq. (4) in the configured unit (0: the tracking-zone unit)."""

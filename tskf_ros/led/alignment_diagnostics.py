@@ -1,12 +1,15 @@
 """
-The alignment session's diagnostic tasks besides its input's: the aligner and time scale.
+The alignment session's diagnostic tasks besides its input's: aligner, time scale, pointing.
 
 aligner: ERROR when it restarted itself since the last update; WARN when the EKF lost the
 transmitter (x1hat <= 0); OK otherwise, saying when the loop is paused (~/enable false);
 samples, commands and missing / rejected samples and restarts by reason.  time scale:
 WARN on a gap longer than max_gap since the last update; gaps and mu = interval / dt.
+pointing (with the supervisor): OK tracking, WARN acquiring, ERROR lost, OK paused; the
+state, its time, the transitions, losses and re-acquisitions, and the lock tests.
 """
 
+import math
 from typing import Optional, TYPE_CHECKING
 
 import numpy as np
@@ -16,10 +19,17 @@ from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_config import AlignmentConfig
 from tskf_ros.led.intensity_model import FloatArray
 
+from tskf_ros.led.lock_detector import LockVerdict
+from tskf_ros.led.pointing_stats import PointingStats
+
 if TYPE_CHECKING:
     from tskf_ros.led.alignment_session import AlignStats
 
 ALIGNER = 'aligner'
+POINTING = 'pointing'
+# the level of each supervisor state: tracking is the loop working, acquiring is the
+# search before it works (expected at start), lost is a link that worked and is gone
+POINTING_LEVELS = {'tracking': OK, 'acquiring': WARN, 'lost': ERROR}
 
 
 def aligner_status(st: 'AlignStats', cfg: AlignmentConfig, base: float, health_error: str,
@@ -75,11 +85,35 @@ def time_scale(st: 'AlignStats', cfg: AlignmentConfig) -> Status:
     return stat
 
 
+def pointing_status(p: PointingStats, verdict: Optional[LockVerdict], paused: bool,
+                    last_stamp_ns: int) -> Status:
+    """Return the 'pointing' status of the supervisor (see the module docstring)."""
+    stat = Status(POINTING)
+    if paused:
+        stat.summary(OK, f'paused (~/enable false) while {p.state}')
+    else:
+        stat.summary(POINTING_LEVELS.get(p.state, OK), p.state)
+    last_loss = 'never' if p.last_loss_ns is None else f'{p.last_loss_ns / NS:.3f}'
+    for key, value in (('State', p.state),
+                       ('Time in state (s)', p.time_in_state(last_stamp_ns)),
+                       ('Transitions', p.transitions), ('Acquisitions', p.acquisitions),
+                       ('Losses', p.losses), ('Re-acquisitions', p.reacquisitions),
+                       ('Acquire requests', p.requests), ('Last loss (stamp, s)', last_loss)):
+        stat.add(key, value)
+    if verdict is not None:
+        stat.add('Low samples in the lock window', int(verdict.low[0]))
+        for key, value in (('Windowed NIS', float(verdict.nis[0])),
+                           ('NIS band', float(verdict.band[0]))):
+            stat.add(key, value if math.isfinite(value) else 'none')
+    return stat
+
+
 def status_line(st: 'AlignStats', rate: float, base: float, paused: bool,
-                x: Optional[FloatArray]) -> str:
-    """Return the one-line status the node logs: rate, gaps, last command, estimate, resets."""
+                x: Optional[FloatArray], pat_state: str = 'disabled') -> str:
+    """Return the one-line status the node logs: rate, gaps, command, estimate, state."""
     estimate = '' if x is None else ', estimate [' + ' '.join(
         f'{v:.4g}' for v in x.tolist()) + ']'
+    state = '' if pat_state == 'disabled' else f'; {pat_state}'
     return (f'{rate:.3g} Hz in{" (paused)" if paused else ""}, {st.received} received, '
             f'{st.used} used; {st.gaps} gap(s) (longest {st.gap_max:g} s); base '
-            f'{base:.4g} deg{estimate}; {sum(st.resets.values())} restart(s)')
+            f'{base:.4g} deg{estimate}; {sum(st.resets.values())} restart(s){state}')

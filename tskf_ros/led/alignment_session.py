@@ -3,14 +3,16 @@ A streaming alignment session: stamped intensity samples in, base position comma
 
 Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018): each sample is one iteration k of an
 aligner of tskf_ros.led, the scanning EKF of Section IV (eq. (13)-(21), predicted over
-mu = elapsed / dt; its turn is u_k + psi_{k+1} - psi_k) or a baseline of Section V; the
-turn is added to the base angle.  What happens to bad input: doc/design/alignment.md.
+mu = elapsed / dt; its turn is u_k + psi_{k+1} - psi_k) or a baseline of Section V,
+with pat.enabled inside the acquiring / tracking / lost supervisor (not in the paper,
+doc/pointing.md); the turn is added to the base angle.  What happens to bad input:
+doc/design/alignment.md.
 """
 
 from collections import Counter
 from dataclasses import dataclass, field, fields
 import math
-from typing import NamedTuple, Optional
+from typing import NamedTuple, Optional, Union
 
 import numpy as np
 
@@ -19,8 +21,10 @@ from tskf_ros.core.diagnostic_status import (expected_frequency, FrequencyParams
                                              Status)
 from tskf_ros.core.units import MAX_STAMP_NS, NS
 from tskf_ros.led.alignment_config import AlignmentConfig, TUNABLE
-from tskf_ros.led.alignment_diagnostics import aligner_status, time_scale
+from tskf_ros.led.alignment_diagnostics import aligner_status, pointing_status, time_scale
 from tskf_ros.led.intensity_model import FloatArray
+from tskf_ros.led.pointing_stats import PointingStats, Transition
+from tskf_ros.led.supervisor import STATES, Supervisor, TRACKING
 
 GAP_FACTOR = 1.5        # an interval longer than this many dt is a gap (samples missing)
 MISSING_REASONS = ('non_finite', 'negative', 'out_of_range', 'gated')
@@ -44,6 +48,7 @@ class AlignOutcome:
     reason: str = ''
     message: str = ''
     stamp_ns: int = 0
+    mu: float = 0.0                      # s from the run's previous sample (0: its first)
     command: Optional[float] = None      # absolute base position command (deg)
     turn: Optional[float] = None         # the aligner's motor command (deg)
     prior: Optional[Estimate] = None     # EKF (x, P) before the update, x2 in deg
@@ -84,22 +89,64 @@ class AlignmentSession:
         self.health_error = ''          # why the aligner restarted itself
         self.paused = False             # the node's ~/enable false: samples are not used
         self.input = InputStream(_frequency(config))
-        self._restart()
+        self.pointing = PointingStats()
+        self._restart('start')
 
-    def _restart(self) -> None:
-        self.aligner = self.config.make_aligner()
+    def _restart(self, reason: str) -> None:
+        tracker = self._tracker = self.config.make_aligner()
+        self.supervisor: Optional[Supervisor] = None
+        self.aligner: Union[led.AnyAligner, Supervisor] = tracker
+        if self.config.pat.enabled:
+            if isinstance(tracker, led.LQGAligner):     # AlignmentConfig refuses it too
+                raise led.AlignmentError('the supervisor cannot steer the LQG aligner')
+            self.supervisor = Supervisor(tracker, self.config.supervisor(),
+                                         self.config.response())
+            self.aligner = self.supervisor
+            self.pointing.enter(STATES[int(self.supervisor.state[0])], reason,
+                                self.stats.last_stamp_ns or None)
+        else:
+            self.pointing.enter('disabled', reason, self.stats.last_stamp_ns or None)
         self.origin_ns: Optional[int] = None
         self.last_ns: Optional[int] = None
 
     @property
+    def tracker(self) -> led.AnyAligner:
+        """Return the aligner that tracks (inside the supervisor, if there is one)."""
+        return self._tracker
+
+    @property
     def ekf(self) -> Optional[led.ScanningEKF]:
-        """Return the aligner if it is the scanning EKF (the one with an estimate), else None."""
-        return self.aligner if isinstance(self.aligner, led.ScanningEKF) else None
+        """Return the tracker if it is the scanning EKF (the one with an estimate), else None."""
+        t = self.tracker
+        return t if isinstance(t, led.ScanningEKF) else None
 
     @property
     def is_ekf(self) -> bool:
-        """Tell whether the aligner is the scanning EKF (the one with an estimate)."""
-        return isinstance(self.aligner, led.ScanningEKF)
+        """Tell whether the tracker is the scanning EKF (the one with an estimate)."""
+        return isinstance(self.tracker, led.ScanningEKF)
+
+    @property
+    def pat_state(self) -> str:
+        """Return the supervisor's state (acquiring, tracking, lost); disabled without one."""
+        return self.pointing.state
+
+    @property
+    def tracking(self) -> bool:
+        """Tell whether the tracker steers: always without a supervisor, else in tracking."""
+        return self.supervisor is None or int(self.supervisor.state[0]) == TRACKING
+
+    def acquire(self) -> bool:
+        """Force a new cold search around the base (~/acquire); False without a supervisor."""
+        if self.supervisor is None:
+            return False
+        self.supervisor.acquire()
+        self.pointing.requests += 1
+        self.pointing.enter('acquiring', 'acquire requested', self.stats.last_stamp_ns or None)
+        return True
+
+    def take_transitions(self) -> list[Transition]:
+        """Return the state transitions since the last call, oldest first, and forget them."""
+        return self.pointing.take()
 
     # -- public API -----------------------------------------------------------------------
 
@@ -131,6 +178,8 @@ class AlignmentSession:
             last = None
         z = float(z)
         ekf = self.ekf
+        # the tracker uses this sample (a searching supervisor steps it with no measurement)
+        tracking = self.tracking
         if not math.isfinite(z):
             status, reason, message = 'missing', 'non_finite', f'intensity {z} is not finite'
         elif z < 0 and cfg.negative_is_missing:
@@ -139,7 +188,8 @@ class AlignmentSession:
                 cfg.intensity_range[0] <= z <= cfg.intensity_range[1]):
             status, reason = 'missing', 'out_of_range'
             message = f'intensity {z:g} V outside intensity_range {list(cfg.intensity_range)}'
-        elif cfg.gate > 0 and ekf is not None and last is not None and self.origin_ns is not None:
+        elif (cfg.gate > 0 and ekf is not None and tracking and last is not None
+              and self.origin_ns is not None):
             d = float(ekf.innovation_distance((stamp_ns - self.origin_ns) / NS, z)[0])
             if not d <= cfg.gate:
                 status, reason = 'missing', 'gated'
@@ -148,19 +198,32 @@ class AlignmentSession:
         if status == 'missing':
             st.missing[reason] += 1
             st.bad_since += 1
+        mu = 0.0
         if last is not None:
-            self._record_interval((stamp_ns - last) / NS)
+            mu = (stamp_ns - last) / NS
+            self._record_interval(mu)
         if self.origin_ns is None:
             self.origin_ns = stamp_ns
         self.last_ns = stamp_ns
         st.last_stamp_ns = stamp_ns
+        self.pointing.started(stamp_ns)
+        used = None if status == 'missing' else z
+        t = (stamp_ns - self.origin_ns) / NS
         try:
-            turn = float(self.aligner.step((stamp_ns - self.origin_ns) / NS,
-                                           None if status == 'missing' else z)[0])
+            # an absurd reading (1e308 V) overflows in the detectors: the checks below
+            # restart the aligner, so numpy's warnings would only repeat them
+            with np.errstate(over='ignore', invalid='ignore'):
+                if self.supervisor is not None and reason == 'negative':
+                    # missing to the tracker, but the dark the detectors need to see
+                    turn = float(self.supervisor.step(t, z, used)[0])
+                else:
+                    turn = float(self.aligner.step(t, used)[0])
         except (led.AlignmentError, np.linalg.LinAlgError) as exc:
             return self._fail(stamp_ns, str(exc))
+        if self.supervisor is not None:
+            self._note_supervisor(self.supervisor, stamp_ns)
         prior = posterior = None
-        if ekf is not None:
+        if ekf is not None and tracking:
             prior = Estimate(ekf.x_prior[0].copy(), _sym(ekf.P_prior[0]))
             posterior = Estimate(ekf.x[0].copy(), _sym(ekf.P[0]))
             # on plain floats: numpy's reductions cost more than these eight entries
@@ -186,7 +249,7 @@ class AlignmentSession:
         if status != 'missing':
             st.used += 1
         st.commands += 1
-        return AlignOutcome(status, reason, message, stamp_ns, self.base, applied, prior,
+        return AlignOutcome(status, reason, message, stamp_ns, mu, self.base, applied, prior,
                             posterior)
 
     def _clamp(self, turn: float) -> float:
@@ -197,10 +260,28 @@ class AlignmentSession:
         lo, hi = cfg.base_limits
         return min(max(self.base + turn, lo), hi) - self.base
 
+    def _note_supervisor(self, sup: Supervisor, stamp_ns: int) -> None:
+        """Count the supervisor's declared loss and state change at this sample."""
+        p = self.pointing
+        if bool(sup.declared[0]):
+            p.losses += 1
+            p.last_loss_ns = stamp_ns
+        new = STATES[int(sup.state[0])]
+        if new != p.state:
+            if new == 'tracking':
+                reason = 'light found'
+                if p.state == 'lost':
+                    p.reacquisitions += 1
+                else:
+                    p.acquisitions += 1
+            else:
+                reason = 'loss declared' if new == 'lost' else 'search'
+            p.enter(new, reason, stamp_ns)
+
     def reset(self, reason: str) -> None:
         """Restart the aligner from its initial state; the base stays where it is."""
         self.stats.resets[reason] += 1
-        self._restart()
+        self._restart(f'restarted ({reason})')
 
     def reconfigure(self, config: AlignmentConfig) -> str:
         """Switch to a new (validated) config; in place if only TUNABLE fields changed."""
@@ -211,7 +292,7 @@ class AlignmentSession:
         if changed - set(TUNABLE):
             self.reset('reconfigured')
             return f'aligner restarted ({", ".join(sorted(changed - set(TUNABLE)))} changed)'
-        a = self.aligner
+        a = self.tracker
         if isinstance(a, led.ScanningEKF):
             ekf = config.ekf()
             a.config, a.gain = ekf, ekf.gain
@@ -234,9 +315,10 @@ class AlignmentSession:
         """
         Return the statuses of the session's diagnostic tasks (see doc/diagnostics.md).
 
-        'aligner' and 'time scale'; with now_ns (receiver clock) first the input's
-        'input frequency' and 'timestamp delay'.  consume=True resets the
-        since-last-update counters (long gaps, bad samples, a self restart).
+        'aligner', 'time scale' and, with the supervisor, 'pointing'; with now_ns
+        (receiver clock) first the input's 'input frequency' and 'timestamp delay'.
+        consume=True resets the since-last-update counters (long gaps, bad samples, a
+        self restart).
         """
         st = self.stats
         ekf = self.ekf
@@ -245,6 +327,9 @@ class AlignmentSession:
                                None if ekf is None else (ekf.x[0], ekf.P[0]), self.paused,
                                (MISSING_REASONS, REJECT_REASONS, RESET_REASONS)),
                 time_scale(st, self.config)]
+        if self.supervisor is not None:
+            out.append(pointing_status(self.pointing, self.supervisor.verdict, self.paused,
+                                       st.last_stamp_ns))
         if consume:
             st.gaps_over_bound = 0
             st.bad_since = 0

@@ -91,6 +91,8 @@ class LedLink:
         self.target = 0.0
         self.bearing = -config.phi0
         self.x1 = config.max_intensity / self.g.peak
+        # an obstruction in the beam (set at run time): no light, the photodiode reads v
+        self.obstructed = False
 
     @property
     def count(self) -> int:
@@ -126,8 +128,8 @@ class LedLink:
         else:
             blocked = False
         phi = self.phi
-        # (5)/(8): z = x1 g(phi) + v
-        clean = float(self.x1 * self.g.g(phi))
+        # (5)/(8): z = x1 g(phi) + v; nothing of the light while the beam is obstructed
+        clean = 0.0 if self.obstructed else float(self.x1 * self.g.g(phi))
         self._k += 1
         return LedSample(k, k * c.dt, phi, self.base, self.bearing, self.x1, clean, clean + v,
                          bool(blocked))

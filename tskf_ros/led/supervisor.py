@@ -128,18 +128,25 @@ class Supervisor:
         self.base = self.base + delta
         self.tracker.correct_last_turn(delta)
 
-    def step(self, stamp: float, z: Measurement) -> FloatArray:
-        """Take the measurement at `stamp` (NaN/None: missing); return the turn per run."""
+    def step(self, stamp: float, z: Measurement,
+             tracker_z: Optional[Measurement] = None) -> FloatArray:
+        """
+        Take the measurement at `stamp` (NaN/None: missing); return the turn per run.
+
+        tracker_z (None: z) is what the tracker may use, where it differs: a reading the
+        tracker treats as missing (a negative one) is still dark to the detectors.
+        """
         cfg = self.config
         z = as_measurement(z, self.runs)
+        zt = z if tracker_z is None else as_measurement(tracker_z, self.runs)
         old = self.state.copy()
         tracking = old == TRACKING
         psi = self.tracker.scan_offset
         nis = np.full(self.runs, np.nan)
         if isinstance(self.tracker, ScanningEKF):
             # e_k = nu^2 / S of the new sample against the prior (before the step uses it)
-            nis = self.tracker.innovation_distance(stamp, z) ** 2
-        inner = self.tracker.step(stamp, np.where(tracking, z, np.nan))
+            nis = self.tracker.innovation_distance(stamp, zt) ** 2
+        inner = self.tracker.step(stamp, np.where(tracking, zt, np.nan))
         # the low level follows a light that dims: at most level_fraction of its mean in lock
         level = np.fmin(cfg.lock.level, cfg.level_fraction * self.bright)
         self.verdict = verdict = self.lock.update(z, nis, tracking, level)

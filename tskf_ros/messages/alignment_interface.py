@@ -5,13 +5,14 @@ from pathlib import Path
 from typing import Any, Optional, Union
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from tskf_ros import led
 from tskf_ros.led.alignment_config import AlignmentConfig
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
+from tskf_ros.led.pat_config import PatConfig
 from tskf_ros.messages import conversions
-from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
+from tskf_ros.messages.conversions import STATE_ESTIMATE_TYPE
 from tskf_ros.messages.parameter_schema import load_schema, ParameterError
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
 from tskf_ros.messages.qos import DEFAULT_DEPTH, reliable_qos
@@ -24,13 +25,17 @@ COMMAND_TOPIC = 'base_position_controller/commands'
 OUTPUT_TOPICS = {
     'predicted': 'estimate/predicted',
     'corrected': 'estimate/corrected',
-    'predicted_states': 'estimate/predicted_states',
-    'corrected_states': 'estimate/corrected_states',
     'command': COMMAND_TOPIC,
 }
 COMMAND_TYPE = 'std_msgs/msg/Float64MultiArray'
+# the supervisor's state (acquiring, tracking, lost; disabled), latched: pat_state_qos
+PAT_STATE_TOPIC = 'pat_state'
+PAT_STATE_TYPE = 'std_msgs/msg/String'
+PAT_PREFIX = 'pat.'          # the PatConfig fields' parameter names: pat.<field>
+# the EKF's estimates: the estimator node's estimate layout (conversions.state_estimate_to_msg),
+# states conversions.ALIGNMENT_STATE_NAMES (x1 in V, x2 in rad)
+ESTIMATE_TYPE = STATE_ESTIMATE_TYPE
 OUTPUT_TYPES = {'predicted': ESTIMATE_TYPE, 'corrected': ESTIMATE_TYPE,
-                'predicted_states': STATES_TYPE, 'corrected_states': STATES_TYPE,
                 'command': COMMAND_TYPE}
 # the same topics in a bag, resolved in '/'
 BAG_INPUT_TOPIC = '/' + INPUT_TOPIC
@@ -43,6 +48,7 @@ __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'bag_outcome_messages', 'COMM
            'COMMAND_TYPE', 'default_parameters', 'diagnostics_message', 'ESTIMATE_TYPE',
            'INPUT_TOPIC', 'load_config', 'NODE_NAME', 'NodeConfig', 'OPEN_LOOP_NOTE',
            'outcome_messages', 'OUTPUT_TOPICS', 'OUTPUT_TYPES', 'output_qos',
+           'PAT_PREFIX', 'PAT_STATE_TOPIC', 'PAT_STATE_TYPE', 'pat_state_qos',
            'parameters_to_config', 'ParamsError']
 
 
@@ -52,9 +58,10 @@ def parameters_to_config(values: dict) -> NodeConfig:
         values = load_schema(NODE_NAME).check(values)
     except ParameterError as exc:
         raise led.AlignmentError(str(exc)) from None
-    session = {f.name: values[f.name] for f in fields(AlignmentConfig)}
+    session = {f.name: values[f.name] for f in fields(AlignmentConfig) if f.name != 'pat'}
     arrays = {k: tuple(v) for k, v in session.items() if isinstance(v, list)}
-    return NodeConfig(AlignmentConfig(**{**session, **arrays}), values['frame_id'],
+    pat = PatConfig(**{f.name: values[PAT_PREFIX + f.name] for f in fields(PatConfig)})
+    return NodeConfig(AlignmentConfig(**{**session, **arrays}, pat=pat), values['frame_id'],
                       values['diagnostic_updater.period'], values['queue_depth'],
                       values['status_period'])
 
@@ -90,17 +97,23 @@ def output_qos(config: NodeConfig, output: str) -> QoSProfile:
     return reliable_qos(DEFAULT_DEPTH if output == 'command' else config.queue_depth)
 
 
+def pat_state_qos() -> QoSProfile:
+    """Return the QoS of pat_state: reliable, transient local, keep last 1 (latched)."""
+    return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
 def outcome_messages(out: AlignOutcome, config: NodeConfig) -> list:
     """Return the (output, message) pairs to publish for an outcome, in order."""
     if out.command is None:
         return []
     msgs = []
     if out.prior is not None:
+        # both come from the step into t_k: mu = t_k - t_{k-1} (the update at t_k does not
+        # depend on the step out of t_k, so the corrected estimate is published at once)
         for kind, (x, P) in (('predicted', out.prior), ('corrected', out.posterior)):
-            msgs.append((kind, conversions.alignment_estimate_to_msg(
-                out.stamp_ns, x, P, frame_id=config.frame_id)))
-            msgs.append((kind + '_states', conversions.alignment_estimate_to_joint_state(
-                out.stamp_ns, x, P, frame_id=config.frame_id)))
+            msgs.append((kind, conversions.alignment_state_to_msg(kind, out.stamp_ns, out.mu,
+                                                                  x, P)))
     msgs.append(('command', conversions.base_command_to_msg(out.command)))
     return msgs
 

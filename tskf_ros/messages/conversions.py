@@ -4,7 +4,7 @@ from typing import NamedTuple, Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import AccelStamped, TwistWithCovarianceStamped
+from geometry_msgs.msg import AccelStamped
 import numpy as np
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
@@ -13,11 +13,9 @@ from tskf_ros.core.diagnostic_status import Status
 from tskf_ros.core.units import NS
 
 SLOTS = 6
-# the alignment node's estimate: its state vector with its covariance (see below)
-ESTIMATE_TYPE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
-# the type of its mirror by name
+# the simulators' truth: joints (angles) by name
 STATES_TYPE = 'sensor_msgs/msg/JointState'
-# the time-scale estimator's estimates: a stamped state vector with its covariance
+# the estimates of both filter nodes: a stamped state vector with its covariance
 STATE_ESTIMATE_TYPE = 'std_msgs/msg/Float64MultiArray'
 LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
@@ -62,48 +60,7 @@ def msg_to_angle(msg: JointState) -> tuple[int, np.ndarray]:
     return stamp_to_ns(msg.header.stamp), np.array(msg.position, dtype=float)
 
 
-def estimate_to_msg(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
-                    frame_id: str = '') -> TwistWithCovarianceStamped:
-    """Convert State x (n <= 6) and covariance P -> TwistWithCovarianceStamped (slot i = x[i])."""
-    x = np.asarray(x, dtype=float).reshape(-1)
-    n = x.size
-    if n > SLOTS:
-        raise ValueError(f'a state of {n} > {SLOTS} entries does not fit the message')
-    v = np.zeros(SLOTS)
-    v[:n] = x
-    cov = np.zeros((SLOTS, SLOTS))
-    cov[:n, :n] = np.asarray(P, dtype=float).reshape(n, n)
-    msg = TwistWithCovarianceStamped()
-    msg.header.stamp = ns_to_stamp(stamp_ns)
-    msg.header.frame_id = frame_id
-    t = msg.twist.twist
-    t.linear.x, t.linear.y, t.linear.z = float(v[0]), float(v[1]), float(v[2])
-    t.angular.x, t.angular.y, t.angular.z = float(v[3]), float(v[4]), float(v[5])
-    msg.twist.covariance = cov.reshape(-1)
-    return msg
-
-
-def estimate_to_joint_state(stamp_ns: int, x: np.ndarray, P: np.ndarray,
-                            names: Sequence[str], *, frame_id: str = '') -> JointState:
-    """Convert x and P -> JointState: name = names, position = x, velocity = sqrt(diag P)."""
-    x = np.asarray(x, dtype=float).reshape(-1)
-    sd = np.sqrt(np.maximum(np.diag(np.asarray(P, dtype=float).reshape(x.size, x.size)), 0.0))
-    msg = JointState(name=list(names), position=x.tolist(), velocity=sd.tolist())
-    msg.header.stamp = ns_to_stamp(stamp_ns)
-    msg.header.frame_id = frame_id
-    return msg
-
-
-def msg_to_estimate(msg: TwistWithCovarianceStamped, n: int
-                    ) -> tuple[int, np.ndarray, np.ndarray]:
-    """Convert TwistWithCovarianceStamped -> (stamp ns, x of n entries, P n x n)."""
-    t = msg.twist.twist
-    v = np.array([t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z])
-    cov = np.asarray(msg.twist.covariance, dtype=float).reshape(SLOTS, SLOTS)
-    return stamp_to_ns(msg.header.stamp), v[:n], cov[:n, :n]
-
-
-# -- estimates of the time-scale estimator: std_msgs/msg/Float64MultiArray ----------------
+# -- estimates of the filter nodes: std_msgs/msg/Float64MultiArray ----------------------
 #
 # common_interfaces has no stamped state vector with a covariance (doc/interfaces.md): the
 # geometry types give their slots a meaning (an angle is no linear velocity), JointState
@@ -213,8 +170,8 @@ def msg_to_diagnostics(msg: DiagnosticArray) -> dict:
 #   position in rad: what a ros2_control forward_command_controller (position interface,
 #   one joint) takes on <controller>/commands.
 # - truth: sensor_msgs/msg/JointState with the joints LED_JOINTS (rad).
-# - estimate: TwistWithCovarianceStamped as for the time-scale estimates, x1 (V) in
-#   linear.x and x2 (rad) in linear.y, with their 2 x 2 covariance (V^2, V rad, rad^2).
+# - estimate: the estimate layout above, states ALIGNMENT_STATE_NAMES: x1 (V) and x2 (rad)
+#   with their 2 x 2 covariance (V^2, V rad, rad^2).
 
 LED_JOINTS = ('incidence', 'base', 'transmitter')
 
@@ -257,41 +214,32 @@ def msg_to_led_truth(msg: JointState) -> tuple[int, dict]:
     return stamp, dict(zip(msg.name, np.rad2deg(positions)))
 
 
-def alignment_estimate_to_msg(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
-                              frame_id: str = '') -> TwistWithCovarianceStamped:
-    """Convert EKF state [x1 V, x2 deg] and covariance -> TwistWithCovarianceStamped (rad)."""
-    D = _degree_scaling()
-    return estimate_to_msg(stamp_ns, D @ np.asarray(x, dtype=float).reshape(2),
-                           D @ np.asarray(P, dtype=float).reshape(2, 2) @ D,
-                           frame_id=frame_id)
-
-
 ALIGNMENT_STATE_NAMES = ('x1_intensity_V', 'x2_scan_mean_rad')
 
 
-def alignment_estimate_to_joint_state(stamp_ns: int, x: np.ndarray, P: np.ndarray, *,
-                                      frame_id: str = '') -> JointState:
-    """Convert EKF state [x1 V, x2 deg] and covariance -> JointState (x2 in rad)."""
+def alignment_state_to_msg(kind: str, stamp_ns: int, mu: float, x: np.ndarray,
+                           P: np.ndarray) -> Float64MultiArray:
+    """Convert EKF state [x1 V, x2 deg] and covariance (step of mu s) -> estimate layout (rad)."""
     D = _degree_scaling()
-    return estimate_to_joint_state(stamp_ns, D @ np.asarray(x, dtype=float).reshape(2),
-                                   D @ np.asarray(P, dtype=float).reshape(2, 2) @ D,
-                                   ALIGNMENT_STATE_NAMES, frame_id=frame_id)
+    return state_estimate_to_msg(kind, stamp_ns, mu, D @ np.asarray(x, dtype=float).reshape(2),
+                                 D @ np.asarray(P, dtype=float).reshape(2, 2) @ D,
+                                 ALIGNMENT_STATE_NAMES)
 
 
-def msg_to_alignment_estimate(msg: TwistWithCovarianceStamped
-                              ) -> tuple[int, np.ndarray, np.ndarray]:
-    """Convert TwistWithCovarianceStamped -> (stamp ns, [x1 V, x2 deg], P in V and deg)."""
-    stamp, x, P = msg_to_estimate(msg, 2)
+def msg_to_alignment_state(msg: Float64MultiArray) -> StateEstimate:
+    """Convert an alignment estimate message -> StateEstimate with x2 in deg (P in V and deg)."""
+    e = msg_to_state_estimate(msg)
+    if e.x.size != 2:
+        raise ValueError(f'not an alignment estimate: {e.x.size} states, not 2')
     Dinv = np.linalg.inv(_degree_scaling())
-    return stamp, Dinv @ x, Dinv @ P @ Dinv
+    return e._replace(x=Dinv @ e.x, P=Dinv @ e.P @ Dinv)
 
 
 # -- input u of the time-scale estimator (EstimatorSession.add_input) ---------------------
 #
 # Type: geometry_msgs/msg/AccelStamped, header.stamp = the time from which u is held
 # (zero-order hold until the next input), u[0..5] in accel.linear.x, .y, .z,
-# accel.angular.x, .y, .z: the same six-slot convention as the estimate's
-# TwistWithCovarianceStamped, so u[i] sits in slot i; unused slots are 0 and ignored.
+# accel.angular.x, .y, .z: six slots, u[i] in slot i; unused slots are 0 and ignored.
 # Why this type: the inputs of the models we run are accelerations (the drogue's measured
 # d'', a spring-mass force per unit mass), and AccelStamped is common_interfaces' stamped
 # six-vector without extra semantics.  AccelWithCovarianceStamped would carry a covariance

@@ -3,20 +3,19 @@
 from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import TwistWithCovarianceStamped
-from sensor_msgs.msg import Illuminance, JointState
-from std_msgs.msg import Float64MultiArray
-from std_srvs.srv import SetBool
+from sensor_msgs.msg import Illuminance
+from std_msgs.msg import Float64MultiArray, String
+from std_srvs.srv import SetBool, Trigger
 
 from tskf_ros import led
 from tskf_ros.led.alignment_diagnostics import status_line
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.messages import conversions
-from tskf_ros.messages.alignment_interface import (COMMAND_TYPE, diagnostics_message,
-                                                   INPUT_TOPIC, NODE_NAME, NodeConfig,
-                                                   outcome_messages, output_qos, OUTPUT_TOPICS,
-                                                   OUTPUT_TYPES, parameters_to_config)
-from tskf_ros.messages.conversions import ESTIMATE_TYPE, STATES_TYPE
+from tskf_ros.messages.alignment_interface import (diagnostics_message, INPUT_TOPIC,
+                                                   NODE_NAME, NodeConfig, outcome_messages,
+                                                   output_qos, OUTPUT_TOPICS,
+                                                   parameters_to_config, pat_state_qos,
+                                                   PAT_STATE_TOPIC)
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
@@ -36,12 +35,12 @@ class Alignment(ReconfigurableNode):
         qos_in = sensor_input_qos(self.config.queue_depth)
         self.sub = self.create_subscription(Illuminance, INPUT_TOPIC, self._on_intensity,
                                             qos_in)
-        types = {COMMAND_TYPE: Float64MultiArray, ESTIMATE_TYPE: TwistWithCovarianceStamped,
-                 STATES_TYPE: JointState}
-        self.pubs = {
-            key: self.create_publisher(types[OUTPUT_TYPES[key]], topic,
-                                       output_qos(self.config, key))
-            for key, topic in OUTPUT_TOPICS.items()}
+        # every output (the estimates and the command) is a std_msgs/msg/Float64MultiArray
+        self.pubs = {key: self.create_publisher(Float64MultiArray, topic,
+                                                output_qos(self.config, key))
+                     for key, topic in OUTPUT_TOPICS.items()}
+        # the supervisor's state, latched: published at start and on each transition
+        self.pat_pub = self.create_publisher(String, PAT_STATE_TOPIC, pat_state_qos())
         self.start_diagnostics()
         self.watch_clock_jumps()
         self.start_services()
@@ -49,6 +48,8 @@ class Alignment(ReconfigurableNode):
         self.enabled = True
         self.paused = 0
         self.enable_service = self.create_service(SetBool, '~/enable', self._on_enable)
+        # ~/acquire (std_srvs/srv/Trigger): force a new cold search (pat.enabled)
+        self.acquire_service = self.create_service(Trigger, '~/acquire', self._on_acquire)
         cfg = self.config.session
         self.get_logger().info(
             f'aligning with {cfg.algorithm}'
@@ -56,7 +57,10 @@ class Alignment(ReconfigurableNode):
                and cfg.controller == 'lqg' else
                f' (G = {cfg.gain:g}, {len(cfg.scan)} scan angles)'
                if cfg.algorithm == 'ekf' else f' (gamma = {cfg.gamma:g} deg)')
-            + f', base starting at {cfg.base_initial:g} deg')
+            + f', base starting at {cfg.base_initial:g} deg'
+            + (f'; pointing supervisor on, starting {cfg.pat.start}' if cfg.pat.enabled
+               else '; no pointing supervisor'))
+        self._report_transitions()
 
     # -- parameters -----------------------------------------------------------------------
 
@@ -66,7 +70,9 @@ class Alignment(ReconfigurableNode):
 
     def reconfigure(self, config: NodeConfig) -> str:
         """Switch the session to a validated config; return what it did."""
-        return self.session.reconfigure(config.session)
+        message = self.session.reconfigure(config.session)
+        self._report_transitions()
+        return message
 
     # -- data -----------------------------------------------------------------------------
 
@@ -80,12 +86,28 @@ class Alignment(ReconfigurableNode):
         out = self.session.add(stamp_ns, volts, now_ns=now_ns)
         self._report(out)
         self._publish(out)
+        if self.session.pointing.pending:
+            self._report_transitions()
+
+    def _report_transitions(self) -> None:
+        """Log each state transition once (a loss at WARN) and publish it on pat_state."""
+        for t in self.session.take_transitions():
+            at = '' if t.stamp_ns is None else f' at {t.stamp_ns / 1e9:.3f} s'
+            text = (f'pointing: {t.old} -> {t.new} ({t.reason}){at}' if t.old else
+                    f'pointing: {t.new} ({t.reason})')
+            if t.new == 'lost':
+                self.get_logger().warning(text)
+            elif t.old or t.new != 'disabled':     # (the start line says 'no supervisor')
+                self.get_logger().info(text)
+            self.pat_pub.publish(String(data=t.new))
 
     def _report(self, out: AlignOutcome) -> None:
         log = self.get_logger()
         if out.status == 'rejected':
             log.warning(f'sample dropped ({out.reason}): {out.message}')
-        elif out.status == 'missing':
+        elif out.status == 'missing' and not (out.reason == 'negative'
+                                              and self.session.supervisor is not None):
+            # (the supervisor takes a negative reading as the dark it is: no warning)
             log.warning(f'sample at {out.stamp_ns / 1e9:.3f} s treated as missing '
                         f'({out.reason}): {out.message}', throttle_duration_sec=1.0)
         elif out.status == 'reset':
@@ -101,6 +123,19 @@ class Alignment(ReconfigurableNode):
             return
         self.session.reset(reason)
         self.get_logger().warning(f'aligner restarted: {why}')
+        self._report_transitions()
+
+    def _on_acquire(self, request: Trigger.Request,
+                    response: Trigger.Response) -> Trigger.Response:
+        if not self.session.acquire():
+            response.success = False
+            response.message = 'no pointing supervisor (pat.enabled is false): nothing to do'
+            return response
+        self._report_transitions()
+        response.success = True
+        response.message = 'searching' + (' (paused: ~/enable is false)'
+                                          if not self.enabled else '')
+        return response
 
     def _on_enable(self, request: SetBool.Request,
                    response: SetBool.Response) -> SetBool.Response:
@@ -119,7 +154,7 @@ class Alignment(ReconfigurableNode):
         """Return the INFO status line: rate, gaps, last command and estimate, restarts."""
         s = self.session
         return status_line(s.stats, rate, s.base, s.paused,
-                           None if s.ekf is None else s.ekf.x[0])
+                           None if s.ekf is None else s.ekf.x[0], s.pat_state)
 
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""
@@ -128,7 +163,8 @@ class Alignment(ReconfigurableNode):
 
 
 DESCRIPTION = ('LED active alignment (Solanki et al.): scanning EKF, hill-climbing or '
-               'three-point averaging on the intensity, commanding a rotating base. '
+               'three-point averaging on the intensity, commanding a rotating base, inside '
+               'an acquiring / tracking / lost supervisor (pat.enabled). '
                'Parameters: --ros-args --params-file config/alignment.yaml or -p name:=value')
 
 

@@ -1,9 +1,10 @@
 """The led_link_simulator node: the LED link of Solanki et al. 2018 Section V, base commanded."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Optional
 
 import numpy as np
+from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.core.units import NS
@@ -29,6 +30,7 @@ class LedSimulatorConfig:
     start_time: float
     wait_for_subscribers: int
     frame_id: str
+    beam_blocked: bool = False
 
 
 class LedLinkSimulator(LinkSimulatorNode):
@@ -42,6 +44,8 @@ class LedLinkSimulator(LinkSimulatorNode):
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
         self.link = LedLink(self.config.link)
+        self.link.obstructed = self.config.beam_blocked
+        self.add_on_set_parameters_callback(self._validate)
         link = self.config.link
         # forward_command_controller subscribes with the system-default QoS (reliable, 10)
         self.command_sub = self.create_subscription(Float64MultiArray, COMMAND_TOPIC,
@@ -74,7 +78,21 @@ class LedLinkSimulator(LinkSimulatorNode):
         return LedSimulatorConfig(link, values['time_factor'], values['lockstep'],
                                   values['command_timeout'], values['duration'],
                                   values['start_time'], values['wait_for_subscribers'],
-                                  values['frame_id'])
+                                  values['frame_id'], values['beam_blocked'])
+
+    def _validate(self, changes: list) -> SetParametersResult:
+        """Only beam_blocked changes at run time; the seeded stream is fixed at start."""
+        for p in changes:
+            if p.name == 'beam_blocked':
+                if not isinstance(p.value, bool):
+                    return SetParametersResult(successful=False,
+                                               reason='beam_blocked must be a bool')
+                if p.value != self.config.beam_blocked:
+                    self.get_logger().info('beam blocked: the photodiode sees no light'
+                                           if p.value else 'beam unblocked')
+                self.config = replace(self.config, beam_blocked=p.value)
+                self.link.obstructed = p.value
+        return SetParametersResult(successful=True)
 
     # -- the loop ---------------------------------------------------------------------------
 

@@ -153,10 +153,10 @@ def estimator_figure(data: dict, measurement: list, C: float, D: float, title: s
 
 def _alignment_series(msgs: list) -> tuple:
     """Turn the node's EKF estimate messages (x2 in rad) into (t in s, x, sd) in [V, deg]."""
-    rows = [conversions.msg_to_alignment_estimate(m) for _, m in msgs]
-    t = np.array([r[0] for r in rows], float) / NS
-    x = np.array([r[1] for r in rows]).reshape(-1, 2)
-    sd = np.sqrt(np.array([[r[2][0, 0], r[2][1, 1]] for r in rows]).clip(0)).reshape(-1, 2)
+    rows = [conversions.msg_to_alignment_state(m) for _, m in msgs]
+    t = np.array([r.stamp_ns for r in rows], float) / NS
+    x = np.array([r.x for r in rows]).reshape(-1, 2)
+    sd = np.sqrt(np.array([[r.P[0, 0], r.P[1, 1]] for r in rows]).clip(0)).reshape(-1, 2)
     return t, x, sd
 
 

@@ -25,7 +25,7 @@ START_S = 1_700_000_000
 DEFAULT_SEED = 2013
 ILLUMINANCE = 'sensor_msgs/msg/Illuminance'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
-ESTIMATE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
+ESTIMATE = aligner_interface.ESTIMATE_TYPE
 ACCEL = 'geometry_msgs/msg/AccelStamped'
 DROGUE_TRUTH = ('displacement_m', 'velocity_m_s', 'depth_m', 'flow_velocity_m_s')
 # /alignment/truth of led_alignment: phi and x2 in rad, x1 in V
@@ -106,10 +106,10 @@ def led_alignment(writer: BagWriter, seed: int) -> None:
         if np.isfinite(z):
             writer.write('/photodiode', stamp, serialize(
                 conversions.power_to_msg(stamp, z, var, frame_id='photodiode')))
+        # the corrected estimate from the step into t_k: mu = dt (0 at the first sample)
         writer.write('/alignment/estimate', stamp, serialize(
-            conversions.alignment_estimate_to_msg(stamp, traj.estimate[k, 0],
-                                                  aligner.P_history[k],
-                                                  frame_id='scanning_ekf')))
+            conversions.alignment_state_to_msg('corrected', stamp, link.dt if k else 0.0,
+                                               traj.estimate[k, 0], aligner.P_history[k])))
         writer.write('/alignment/command', stamp, serialize(
             conversions.base_command_to_msg(base[k])))
 

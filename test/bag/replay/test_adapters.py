@@ -1,6 +1,5 @@
 """The adapters: offline replay equals the live nodes; measurements read as rosbags reads them."""
 
-from geometry_msgs.msg import TwistWithCovarianceStamped
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
@@ -198,9 +197,7 @@ def test_live_alignment_replay_equals_offline_replay(ros_context):
     res = replay(LED_BAG, None, params_file=LED_PARAMS, diagnostics=False, filter='alignment')
     assert res.topic == '/photodiode' and res.samples == 381
     assert any('open loop' in line for line in res.assumptions)
-    # the JointState mirrors carry the same numbers (test_joint_state_mirrors)
-    topics = [t for k, t in alignment_interface.BAG_OUTPUT_TOPICS.items()
-              if not k.endswith('_states')]
+    topics = list(alignment_interface.BAG_OUTPUT_TOPICS.values())
     offline = {t: [m for name, _, m in res.outputs if name == t] for t in topics}
     assert all(len(v) == 381 for v in offline.values())
     node = Alignment(context=ros_context, parameter_overrides=yaml_overrides(
@@ -209,8 +206,7 @@ def test_live_alignment_replay_equals_offline_replay(ros_context):
     player = Player(LED_BAG, rate=10.0, clock_hz=200.0, topics=['/photodiode'],
                     remap={'/photodiode': '/intensity'}, context=ros_context)
     client = rclpy.create_node('alignment_client', context=ros_context)
-    kinds = {t: Float64MultiArray if t.endswith('commands') else TwistWithCovarianceStamped
-             for t in topics}
+    kinds = {t: Float64MultiArray for t in topics}
     live = {t: [] for t in topics}
     for topic, cls in kinds.items():
         client.create_subscription(cls, topic, live[topic].append, QoSProfile(depth=DEEP))
@@ -243,12 +239,13 @@ def test_live_alignment_replay_equals_offline_replay(ros_context):
             np.testing.assert_allclose([m.data for m in got], [m.data for m in expected],
                                        rtol=0, atol=1e-9)
             continue
-        got = [conversions.msg_to_estimate(m, 2) for m in got]
-        expected = [conversions.msg_to_estimate(m, 2) for m in expected]
-        assert [g[0] for g in got] == [e[0] for e in expected], topic
+        got = [conversions.msg_to_state_estimate(m) for m in got]
+        expected = [conversions.msg_to_state_estimate(m) for m in expected]
+        assert [g.stamp_ns for g in got] == [e.stamp_ns for e in expected], topic
         for g, e in zip(got, expected):
-            np.testing.assert_allclose(g[1], e[1], rtol=0, atol=1e-9)
-            np.testing.assert_allclose(g[2], e[2], rtol=0, atol=1e-9)
+            assert (g.kind, g.mu, g.names) == (e.kind, e.mu, e.names), topic
+            np.testing.assert_allclose(g.x, e.x, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(g.P, e.P, rtol=0, atol=1e-9)
 
 
 def test_offline_alignment_reproduces_the_recorded_run_until_a_sample_is_missing():
@@ -258,12 +255,13 @@ def test_offline_alignment_reproduces_the_recorded_run_until_a_sample_is_missing
     for topic, _, msg in res.outputs:
         if topic == '/alignment/estimate':
             msg = deserialize_message(msg.data, message_class(msg.msgtype))
-            stamp, x, _ = conversions.msg_to_alignment_estimate(msg)   # the node's units
-            recorded[stamp] = x
+            e = conversions.msg_to_alignment_state(msg)      # the node's units
+            recorded[e.stamp_ns] = e.x
         elif topic == '/photodiode':
             stamps.append(msg.log_time_ns)
         elif topic == '/estimate/corrected':
-            replayed.append(conversions.msg_to_alignment_estimate(msg)[:2])
+            e = conversions.msg_to_alignment_state(msg)
+            replayed.append((e.stamp_ns, e.x))
     step = stamps[1] - stamps[0]
     first_gap = next(i for i, (a, b) in enumerate(zip(stamps, stamps[1:])) if b - a > step)
     assert first_gap >= 10
