@@ -217,5 +217,11 @@ def test_acquire_without_the_supervisor_says_so(ros_context):
         response = node._on_acquire(Trigger.Request(), Trigger.Response())
         assert not response.success and 'pat.enabled is false' in response.message
         assert node.session.pat_state == 'disabled'
+        # switched on at run time: the aligner restarts, searching
+        assert node.set_parameters([Parameter('pat.enabled', value=True)])[0].successful
+        assert node.session.pat_state == 'acquiring' and node.session.supervisor is not None
+        assert node.session.stats.resets['reconfigured'] == 1
+        result = node.set_parameters([Parameter('pat.scan_speed', value=50.0)])[0]
+        assert not result.successful and 'exceeds max_step' in result.reason
     finally:
         node.destroy_node()
