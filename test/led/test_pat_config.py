@@ -92,12 +92,16 @@ def test_acquire_forces_a_search_and_reset_starts_over():
     assert s.take_transitions()[-1].reason == 'restarted (service)'
 
 
-def test_start_tracking_is_the_papers_start_with_the_supervisor_watching():
-    s = AlignmentSession(AlignmentConfig(pat=PatConfig(start='tracking')))
+@pytest.mark.parametrize('clip, P0', [(False, (100.0, 0.0, 0.0, 1000.0)),
+                                      (True, (4.0, 0.0, 0.0, 25.0))])
+def test_start_tracking_is_the_papers_start_with_the_supervisor_watching(clip, P0):
+    s = AlignmentSession(AlignmentConfig(pat=PatConfig(start='tracking', clip_prior=clip)))
     out = feed(s, 0, [2.8])[0]
-    # the EKF from Table I's x0, P0, as without the supervisor
-    bare = AlignmentSession(AlignmentConfig(pat=PatConfig(enabled=False)))
+    # the EKF from Table I's x0 and P0 (clipped to [0.01, 4] V^2 and [4, 25] deg^2 with
+    # clip_prior), as the bare EKF started from that P0
+    bare = AlignmentSession(AlignmentConfig(P0=P0, pat=PatConfig(enabled=False)))
     ref = feed(bare, 0, [2.8])[0]
     np.testing.assert_allclose(out.posterior.x, ref.posterior.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out.posterior.P, ref.posterior.P, rtol=1e-12, atol=1e-12)
     assert out.command == pytest.approx(ref.command, abs=1e-12)
     assert s.pat_state == 'tracking'

@@ -49,7 +49,8 @@ MSG_LINE = re.compile(r'^MSG: (\S+)$', re.M)
 PACKAGE_TYPES = sorted({
     *estimator_interface.INPUT_TYPES, alignment_interface.ESTIMATE_TYPE, STATES_TYPE,
     estimator_interface.ESTIMATE_TYPE, estimator_interface.INPUT_TYPE,
-    estimator_interface.DIAGNOSTICS_TYPE, alignment_interface.COMMAND_TYPE})
+    estimator_interface.DIAGNOSTICS_TYPE, alignment_interface.COMMAND_TYPE,
+    alignment_interface.PAT_STATE_TYPE})
 
 
 def assert_same(ros_msg, decoded) -> None:
@@ -89,6 +90,8 @@ def sample(msgtype: str):
     elif msgtype == alignment_interface.COMMAND_TYPE:
         msg = Float64MultiArray(data=[0.5, -0.25])
         msg.layout.dim = [MultiArrayDimension(label='joint', size=2, stride=2)]
+    elif msgtype == alignment_interface.PAT_STATE_TYPE:
+        msg = message_class(msgtype)(data='tracking')
     else:
         msg = message_class(msgtype)()
         kind = estimator_interface.INPUT_TYPES.get(msgtype)

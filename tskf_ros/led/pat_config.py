@@ -14,7 +14,7 @@ from tskf_ros.led.light_detector import DetectorConfig
 from tskf_ros.led.lock_detector import LockConfig
 from tskf_ros.led.supervisor import STARTS, SupervisorConfig
 
-_SCAN, _DETECTOR, _LOCK = ScanConfig(), DetectorConfig(), LockConfig()
+_SCAN, _DETECTOR, _LOCK, _SUP = ScanConfig(), DetectorConfig(), LockConfig(), SupervisorConfig()
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,8 @@ class PatConfig:
     lock_level: float = _LOCK.level                   # V
     lock_nis_alpha: float = _LOCK.nis_alpha           # the NIS band's tail probability
     lock_corroborate: int = _LOCK.corroborate         # low samples confirming a high NIS
+    fade: float = _SUP.fade               # x noise: a dimmer mean in lock has faded (0: off)
+    clip_prior: bool = _SUP.clip_prior    # start tracking: x0 with P0 clipped as a hand-over
 
     def __post_init__(self) -> None:
         """Check the settings by building the supervisor's; raise AlignmentError if bad."""
@@ -62,4 +64,5 @@ class PatConfig:
             lock=LockConfig(window=self.lock_window, low_count=self.lock_low_count,
                             level=self.lock_level, nis_alpha=self.lock_nis_alpha,
                             gate=gate, corroborate=self.lock_corroborate),
-            noise=noise, max_step=max_step, reacquire=self.reacquire, start=self.start)
+            noise=noise, max_step=max_step, reacquire=self.reacquire, start=self.start,
+            fade=self.fade, clip_prior=self.clip_prior)
