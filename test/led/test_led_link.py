@@ -48,3 +48,17 @@ def test_the_same_seed_gives_the_same_samples_and_gilbert_elliott_loses_its_rate
     assert cfg.expected_drop_rate() == pytest.approx(0.2)
     lost = np.mean([s.blocked for s in first])
     assert lost == pytest.approx(0.2, abs=0.03)
+
+
+def test_an_obstructed_beam_reads_the_noise_alone_and_keeps_the_stream():
+    # the same seed with and without an obstruction from sample 5 to 9: the readings
+    # there are v alone (reading - clean of the clear link), the rest is unchanged
+    clear, blocked = LedLink(LedLinkConfig(seed=3)), LedLink(LedLinkConfig(seed=3))
+    for k in range(15):
+        blocked.obstructed = 5 <= k < 10
+        a, b = clear.sample(), blocked.sample()
+        assert b.phi == a.phi and b.x1 == a.x1
+        if blocked.obstructed:
+            assert b.clean == 0.0 and b.reading == pytest.approx(a.reading - a.clean, abs=1e-12)
+        else:
+            assert (b.clean, b.reading) == (a.clean, a.reading)
