@@ -13,7 +13,7 @@ import numpy as np
 
 from tskf_ros import led
 from tskf_ros.bag.progress import bar
-from tskf_ros.experiments import alignment_pat, output
+from tskf_ros.experiments import alignment_pat, arguments, output
 
 DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
 DEFAULT_DROPOUTS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
@@ -224,13 +224,16 @@ def parser() -> argparse.ArgumentParser:
     """Build the command-line interface."""
     p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.alignment_mc',
                                 description=__doc__.split('\n\n')[0])
-    p.add_argument('--runs', type=int, default=1000, help='runs per noise level (1000)')
+    p.add_argument('--runs', type=arguments.count(1, arguments.MAX_RUNS), default=1000,
+                   help='runs per noise level (1000)')
     p.add_argument('--noise-levels', type=floats, default=list(DEFAULT_NOISE_LEVELS),
                    help='comma list of noise standard deviations in volts (0,0.25,...,2.5)')
     p.add_argument('--beta', type=float, default=1.2, help='disturbance rate, deg/s (1.2)')
-    p.add_argument('--steps', type=int, default=400, help='steps per run (400 = 20 s)')
-    p.add_argument('--dt', type=float, default=led.PAPER_DT, help='time step, s (0.05)')
-    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--steps', type=arguments.count(1, arguments.MAX_STEPS), default=400,
+                   help='steps per run (400 = 20 s)')
+    p.add_argument('--dt', type=arguments.number(0.0, arguments.MAX_DT, open_low=True),
+                   default=led.PAPER_DT, help='time step, s (0.05)')
+    p.add_argument('--seed', type=arguments.seed, default=0)
     p.add_argument('--dropout', type=float, default=0.0,
                    help='probability that a measurement is missing (0)')
     p.add_argument('--x2-0', type=float, default=5.0, help='initial scan mean, deg (5)')
@@ -276,8 +279,6 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the requested experiments; return the exit status."""
     args = parser().parse_args(argv)
-    if args.runs < 1 or args.steps < 1:
-        parser().error('--runs and --steps must be positive')
     if not 0.0 <= args.dropout < 1.0 or any(not 0.0 <= d < 1.0 for d in args.dropout_levels):
         parser().error('dropout probabilities must be in [0, 1)')
 

@@ -12,6 +12,7 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
+from tskf_ros.experiments import arguments
 from tskf_ros.experiments.alignment_mc import floats, save_figure, write_json
 
 DEFAULT_BETAS = (0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0)
@@ -87,7 +88,8 @@ def parser() -> argparse.ArgumentParser:
     """Build the command-line interface."""
     p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.lqg_comparison',
                                 description=__doc__.split('\n\n')[0])
-    p.add_argument('--runs', type=int, default=1000, help='runs per point (1000)')
+    p.add_argument('--runs', type=arguments.count(1, arguments.MAX_RUNS), default=1000,
+                   help='runs per point (1000)')
     p.add_argument('--betas', type=floats, default=list(DEFAULT_BETAS),
                    help='comma list of drift rates, deg/s (0,2,...,16)')
     p.add_argument('--noise', type=float, default=math.sqrt(led.PAPER_R_SYS[0][0]),
@@ -95,9 +97,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--effort-noise', type=float, default=1.0, help='effort point noise, V (1)')
     p.add_argument('--effort-beta', type=float, default=2.8,
                    help='effort point drift rate, deg/s (2.8, Fig. 14)')
-    p.add_argument('--steps', type=int, default=400, help='steps per run (400 = 20 s)')
-    p.add_argument('--dt', type=float, default=led.PAPER_DT, help='time step, s (0.05)')
-    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--steps', type=arguments.count(1, arguments.MAX_STEPS), default=400,
+                   help='steps per run (400 = 20 s)')
+    p.add_argument('--dt', type=arguments.number(0.0, arguments.MAX_DT, open_low=True),
+                   default=led.PAPER_DT, help='time step, s (0.05)')
+    p.add_argument('--seed', type=arguments.seed, default=0)
     p.add_argument('--ablation', action='store_true',
                    help='also run the LQG variants of ABLATIONS at --ablation-beta (noise '
                         '--noise) and at the effort point')
@@ -111,10 +115,8 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the comparison; return the exit status."""
     args = parser().parse_args(argv)
-    if args.runs < 1 or args.steps < 1:
-        parser().error('--runs and --steps must be positive')
-    if not (args.dt > 0 and args.noise >= 0 and args.effort_noise >= 0):
-        parser().error('--dt must be > 0 and the noise levels >= 0')
+    if not (args.noise >= 0 and args.effort_noise >= 0):
+        parser().error('the noise levels must be >= 0')
     common = {'runs': args.runs, 'steps': args.steps, 'dt': args.dt, 'seed': args.seed}
     start = time.perf_counter()
     sweep: dict = {name: [] for name in led.CONTROLLERS}
