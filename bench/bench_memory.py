@@ -2,7 +2,6 @@
 Benchmark: the estimator node's resident memory (VmRSS) under a 2 kHz flood over loopback DDS.
 
     python bench/bench_memory.py [--rate 2000] [--seconds 65] [--executor single]
-        [--tracemalloc FILE]
 
 Two processes as in bench_stream.py: the node (`python -m tskf_ros.nodes.timescale_estimator`,
 period 1 / rate, its default parameters otherwise) and the publisher (`bench_stream.py
@@ -10,8 +9,7 @@ publish`: Illuminance at the rate, reliable, paced by the wall clock).  This pro
 the node's VmRSS from /proc/PID/status once a second from the moment the publisher matched
 until it has sent everything, and prints the samples, the values at the start, at 35 s and
 at the end, and the growth over the second half (after the first 5 s, which fill the queue,
-the caches and the history).  `--tracemalloc FILE` runs the node under tracemalloc and
-writes the 15 allocation sites (file:line) that grew most between 5 s and the end to FILE.
+the caches and the history).
 """
 
 import argparse
@@ -34,24 +32,6 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 TIMEOUT = 60.0          # s: a bound on discovery and on the node's exit, never a result
 WARM_UP = 5             # s of the stream before the growth is counted
 MIDDLE = 35             # s: the sample between the two halves of the growth
-# the node under tracemalloc: snapshots when told (SIGUSR1: first, SIGUSR2: the end)
-TRACED_NODE = """
-import runpy, signal, sys, tracemalloc
-tracemalloc.start(1)
-out = sys.argv.pop(1)
-first = []
-def take(signum, frame):
-    if signum == signal.SIGUSR1:
-        first.append(tracemalloc.take_snapshot())
-        return
-    top = tracemalloc.take_snapshot().compare_to(first[0], 'lineno')[:15]
-    with open(out, 'w') as f:
-        f.write('\\n'.join(str(s) for s in top) + '\\n')
-signal.signal(signal.SIGUSR1, take)
-signal.signal(signal.SIGUSR2, take)
-sys.argv[0] = 'timescale_estimator'
-runpy.run_module('tskf_ros.nodes.timescale_estimator', run_name='__main__')
-"""
 
 
 def vm_rss_kib(pid: int) -> int:
@@ -68,18 +48,13 @@ def main() -> None:
     parser.add_argument('--rate', type=float, default=2000.0)
     parser.add_argument('--seconds', type=int, default=65)
     parser.add_argument('--executor', default='single', choices=['single', 'events'])
-    parser.add_argument('--tracemalloc', type=Path, metavar='FILE',
-                        help='run the node under tracemalloc; write its top growth here')
     args = parser.parse_args()
     namespace = f'/memory{os.getpid()}'
     ros = ['--executor', args.executor, '--ros-args', '-r', f'__ns:={namespace}',
            '-p', f'period:={1.0 / args.rate!r}', '--log-level', 'warn']
-    if args.tracemalloc:
-        command = [sys.executable, '-c', TRACED_NODE, str(args.tracemalloc.resolve()), *ros]
-    else:
-        command = [sys.executable, '-m', 'tskf_ros.nodes.timescale_estimator', *ros]
-    print(f'{args.rate:g} Hz for {args.seconds} s into the node ({args.executor} executor'
-          f'{", under tracemalloc" if args.tracemalloc else ""}); load average '
+    command = [sys.executable, '-m', 'tskf_ros.nodes.timescale_estimator', *ros]
+    print(f'{args.rate:g} Hz for {args.seconds} s into the node ({args.executor} executor); '
+          f'load average '
           f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs', flush=True)
     log = tempfile.TemporaryFile('w+')
     node = subprocess.Popen(command, cwd=REPO, stdout=log, stderr=subprocess.STDOUT, text=True)
@@ -100,11 +75,7 @@ def main() -> None:
             if node.poll() is not None:
                 raise RuntimeError(f'the node ended (exit {node.returncode})')
             samples.append(vm_rss_kib(node.pid))
-            if args.tracemalloc and second == WARM_UP:
-                node.send_signal(signal.SIGUSR1)
         cpu = (cpu_seconds(node.pid) - cpu0) / (time.monotonic() - start)
-        if args.tracemalloc:
-            node.send_signal(signal.SIGUSR2)
         sent = json.loads(publisher.communicate(timeout=TIMEOUT)[0].strip().splitlines()[-1])
     finally:
         if publisher is not None and publisher.poll() is None:
@@ -128,8 +99,6 @@ def main() -> None:
     print(f'growth from {WARM_UP} s to {mid} s: {mib[mid] - mib[WARM_UP]:+.1f} MiB; '
           f'from {mid} s to the end: {mib[-1] - mib[mid]:+.1f} MiB '
           f'(max {max(mib):.1f} MiB at {mib.index(max(mib))} s)')
-    if args.tracemalloc:
-        print(f'tracemalloc: top growth from {WARM_UP} s to the end in {args.tracemalloc}')
 
 
 if __name__ == '__main__':
