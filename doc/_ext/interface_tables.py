@@ -12,10 +12,10 @@ In a MyST page::
     ```{diagnostic-table} timescale_estimator
     ```
 
-render the declaration of tskf_ros.messages.node_interfaces (the one the nodes create
-their topics and services from, and test/nodes/test_node_interfaces.py checks against the
-running nodes): the topics (name, direction, type, content, QoS), the services (the node's,
-then rclpy's parameter services) and each diagnostic task (status name, levels, keys).
+render the declaration of tskf_ros.messages.node_interfaces (built from the constants the
+nodes create their topics and services from; test/nodes/test_node_interfaces.py checks it
+against the running nodes): the topics (name, direction, type, content, QoS), the services (the node's,
+then rclpy's, every node's) and each diagnostic task (status name, levels, keys).
 """
 
 from pathlib import Path
@@ -26,7 +26,8 @@ from sphinx.util.docutils import SphinxDirective
 
 from doc_tables import paragraph, table
 from tskf_ros.messages import diagnostic_tasks, interface_spec, node_interfaces
-from tskf_ros.messages.interface_spec import NodeInterface, PARAMETER_SERVICES
+from tskf_ros.messages.interface_spec import (NodeInterface, PARAMETER_SERVICES,
+                                              STANDARD_TOPICS, TYPE_DESCRIPTION_SERVICE)
 from tskf_ros.messages.node_interfaces import interface
 
 TOPIC_HEADER = ('topic', 'dir', 'type', 'content', 'QoS')
@@ -69,6 +70,9 @@ class TopicTable(InterfaceDirective):
                              if t.type_parameter else '')
             content = t.content + (f' ({t.provided_by})' if t.provided_by else '')
             rows.append((_code(t.name), t.direction, kind, content, t.qos))
+        rows.append((', '.join(f'`{t.name}`' for t in STANDARD_TOPICS), 'out',
+                     ', '.join(t.type for t in STANDARD_TOPICS),
+                     "the log and the parameter changes (rclpy), every node's", ''))
         return [table(TOPIC_HEADER, TOPIC_WIDTHS, rows, 'topic-table')]
 
 
@@ -83,6 +87,8 @@ class ServiceTable(InterfaceDirective):
         rows.append((', '.join(f'`{s.name}`' for s in PARAMETER_SERVICES),
                      'rcl_interfaces/srv/*',
                      "rclpy's parameter services (`ros2 param`), every node's"))
+        t = TYPE_DESCRIPTION_SERVICE
+        rows.append((_code(t.name), t.type, "the types the node uses (rclpy), every node's"))
         return [table(SERVICE_HEADER, SERVICE_WIDTHS, rows, 'service-table')]
 
 

@@ -17,17 +17,13 @@ from diagnostic_msgs.msg import DiagnosticArray
 import pytest
 from rclpy.node import Node
 
-from tskf_ros.messages.interface_spec import IN, NodeInterface, OUT, PARAMETER_SERVICES
+from tskf_ros.messages.interface_spec import (IN, NodeInterface, OUT, STANDARD_SERVICES,
+                                              STANDARD_TOPICS)
 from tskf_ros.messages.node_interfaces import INTERFACES
 from tskf_ros.testing import NODES, spin_until, start_in_process
 from visa_faults import bench
 
 NAMESPACE = '/rig'
-# what rclpy gives every node: resolved topic names, and services relative to the node
-STANDARD_TOPICS = {'/rosout': 'rcl_interfaces/msg/Log',
-                   '/parameter_events': 'rcl_interfaces/msg/ParameterEvent'}
-STANDARD_SERVICES = {s.name: s.type for s in PARAMETER_SERVICES} | {
-    '~/get_type_description': 'type_description_interfaces/srv/GetTypeDescription'}
 # every node: diagnostics fast, so that the first message comes at once
 FAST = {'diagnostic_updater.period': 0.05}
 # the measurement type the estimator is started with when every topic must exist: not the
@@ -85,9 +81,9 @@ def expected(node: Node, declared: NodeInterface, parameters: dict) -> dict:
 
 def standard(node: Node) -> dict:
     """Return the graph entries rclpy makes for any node (left out of the comparison)."""
-    return {'publishers': STANDARD_TOPICS, 'subscriptions': {},
-            'services': {node.resolve_service_name(name): kind
-                         for name, kind in STANDARD_SERVICES.items()}}
+    return {'publishers': {t.name: t.type for t in STANDARD_TOPICS}, 'subscriptions': {},
+            'services': {node.resolve_service_name(s.name): s.type
+                         for s in STANDARD_SERVICES}}
 
 
 def without_standard(found: dict, node: Node) -> dict:

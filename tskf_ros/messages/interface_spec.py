@@ -8,7 +8,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 __all__ = ['DiagnosticTask', 'IN', 'KeyRow', 'LevelRow', 'LIFECYCLE', 'LIFECYCLE_SERVICES',
            'NodeInterface', 'OUT', 'PARAMETER_SERVICES', 'qos_summary', 'RCLPY', 'Service',
-           'Topic', 'TRANSITION_EVENT']
+           'STANDARD_SERVICES', 'STANDARD_TOPICS', 'Topic', 'TRANSITION_EVENT',
+           'TYPE_DESCRIPTION_SERVICE']
 
 IN, OUT = 'in', 'out'
 # who offers a service or topic other than the node's own code
@@ -143,6 +144,18 @@ LIFECYCLE_SERVICES = tuple(
         ('get_available_transitions', 'GetAvailableTransitions',
          'the transitions possible from the current state'),
         ('get_transition_graph', 'GetAvailableTransitions', 'every transition')))
+
+# rclpy's type description service of every node (REP 2011)
+TYPE_DESCRIPTION_SERVICE = Service(
+    '~/get_type_description', 'type_description_interfaces/srv/GetTypeDescription',
+    'the descriptions of the types the node uses (rclpy)', RCLPY)
+# what rclpy gives every node besides: services, and topics (absolute names)
+STANDARD_SERVICES = PARAMETER_SERVICES + (TYPE_DESCRIPTION_SERVICE,)
+STANDARD_TOPICS = (
+    Topic('/rosout', 'rcl_interfaces/msg/Log', OUT, 'reliable, keep last 1000, transient '
+          'local', "the node's log (rclpy)", provided_by=RCLPY),
+    Topic('/parameter_events', 'rcl_interfaces/msg/ParameterEvent', OUT,
+          'reliable, keep last 1000', 'every parameter change (rclpy)', provided_by=RCLPY))
 
 TRANSITION_EVENT = Topic(
     '~/transition_event', 'lifecycle_msgs/msg/TransitionEvent', OUT, 'reliable, keep last 10',
