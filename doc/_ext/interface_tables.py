@@ -66,12 +66,12 @@ class TopicTable(InterfaceDirective):
         """Return the table node."""
         rows = []
         for t in self.declared().topics:
-            kind = t.type + (f' (default; the `{t.type_parameter}` parameter names it)'
+            kind = t.msg_type + (f' (default; the `{t.type_parameter}` parameter names it)'
                              if t.type_parameter else '')
             content = t.content + (f' ({t.provided_by})' if t.provided_by else '')
             rows.append((_code(t.name), t.direction, kind, content, t.qos))
         rows.append((', '.join(f'`{t.name}`' for t in STANDARD_TOPICS), 'out',
-                     ', '.join(t.type for t in STANDARD_TOPICS),
+                     ', '.join(t.msg_type for t in STANDARD_TOPICS),
                      "the log and the parameter changes (rclpy), every node's", ''))
         return [table(TOPIC_HEADER, TOPIC_WIDTHS, rows, 'topic-table')]
 
@@ -81,14 +81,14 @@ class ServiceTable(InterfaceDirective):
 
     def run(self) -> list:
         """Return the table node."""
-        rows: list = [(_code(s.name), s.type, s.content
+        rows: list = [(_code(s.name), s.srv_type, s.content
                        + (f' ({s.provided_by})' if s.provided_by else ''))
                       for s in self.declared().services]
         rows.append((', '.join(f'`{s.name}`' for s in PARAMETER_SERVICES),
                      'rcl_interfaces/srv/*',
                      "rclpy's parameter services (`ros2 param`), every node's"))
         t = TYPE_DESCRIPTION_SERVICE
-        rows.append((_code(t.name), t.type, "the types the node uses (rclpy), every node's"))
+        rows.append((_code(t.name), t.srv_type, "the types the node uses (rclpy), every node's"))
         return [table(SERVICE_HEADER, SERVICE_WIDTHS, rows, 'service-table')]
 
 

@@ -50,9 +50,9 @@ def test_the_documentation_builds_without_a_warning(tmp_path):
         # (a type a parameter names reads '<default type> (default; ...)')
         topics = [(row[0], row[1], row[2].split(' ')[0])
                   for row in table_rows(page, 'topic-table', 5)]
-        assert topics[:-1] == [(t.name, t.direction, t.type) for t in declared.topics], name
+        assert topics[:-1] == [(t.name, t.direction, t.msg_type) for t in declared.topics], name
         services = [row[:2] for row in table_rows(page, 'service-table', 3)]
-        assert services[:len(declared.services)] == [(s.name, s.type)
+        assert services[:len(declared.services)] == [(s.name, s.srv_type)
                                                      for s in declared.services], name
         shown = [plain(status) for status in
                  re.findall(r'class="diagnostic-task"><strong>(.*?)</strong>', page, re.DOTALL)]
@@ -73,6 +73,7 @@ def table_rows(page: str, css_class: str, columns: int) -> list:
     table = table[:table.index('</table>')]
     cells = [plain(cell) for cell in re.findall(r'<td>(.*?)</td>', table, re.DOTALL)]
     return [tuple(cells[i:i + columns]) for i in range(0, len(cells), columns)]
+
 
 def test_no_page_mentions_issues():
     found = [f'{path}:{number}: {line.strip()}'

@@ -8,22 +8,29 @@ relative and absolute names are told apart, and the ROS graph is asked what it h
 types.  Every declared topic and service must be there with its type and nothing else may
 be, but for what rclpy gives every node (/rosout, /parameter_events, the parameter
 services, the type description service).  A topic that exists only with some parameters
-(only_with) must be absent with the defaults and present with them.  Then the first
+(only_with) must be absent with the defaults and present with them.  The graph's QoS of
+each topic (reliability, durability; discovery carries no depth) must be the one its QoS
+summary says.  Then the first
 /diagnostics message of the node must carry the declared tasks, in order, and only keys
 the tasks declare.
 """
 
+import uuid
+
 from diagnostic_msgs.msg import DiagnosticArray
 import pytest
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from tskf_ros.messages.interface_spec import (IN, NodeInterface, OUT, STANDARD_SERVICES,
-                                              STANDARD_TOPICS)
+                                              STANDARD_TOPICS, Topic)
 from tskf_ros.messages.node_interfaces import INTERFACES
 from tskf_ros.testing import NODES, spin_until, start_in_process
 from visa_faults import bench
 
-NAMESPACE = '/rig'
+# a namespace of each test's own: the graph may still show the node of an earlier test
+# (another participant, being removed) under the same name
+NAMESPACE = '/rig_{}'
 # every node: diagnostics fast, so that the first message comes at once
 FAST = {'diagnostic_updater.period': 0.05}
 # the measurement type the estimator is started with when every topic must exist: not the
@@ -69,20 +76,20 @@ def expected(node: Node, declared: NodeInterface, parameters: dict) -> dict:
     for topic in declared.topics:
         if any(parameters.get(k) != v for k, v in topic.only_with.items()):
             continue
-        kind = parameters.get(topic.type_parameter, topic.type) if topic.type_parameter \
-            else topic.type
+        kind = parameters.get(topic.type_parameter, topic.msg_type) if topic.type_parameter \
+            else topic.msg_type
         assert topic.direction in (IN, OUT), topic
         out['publishers' if topic.direction == OUT else 'subscriptions'][
             node.resolve_topic_name(topic.name)] = kind
     for service in declared.services:
-        out['services'][node.resolve_service_name(service.name)] = service.type
+        out['services'][node.resolve_service_name(service.name)] = service.srv_type
     return out
 
 
 def standard(node: Node) -> dict:
     """Return the graph entries rclpy makes for any node (left out of the comparison)."""
-    return {'publishers': {t.name: t.type for t in STANDARD_TOPICS}, 'subscriptions': {},
-            'services': {node.resolve_service_name(s.name): s.type
+    return {'publishers': {t.name: t.msg_type for t in STANDARD_TOPICS}, 'subscriptions': {},
+            'services': {node.resolve_service_name(s.name): s.srv_type
                          for s in STANDARD_SERVICES}}
 
 
@@ -95,7 +102,7 @@ def without_standard(found: dict, node: Node) -> dict:
 
 
 def start(loop, tmp_path, name: str, every_topic: bool) -> tuple[Node, dict]:
-    """Start the node in NAMESPACE (every topic: with only_with's parameters); return it."""
+    """Start the node in a NAMESPACE (every topic: with only_with's parameters); return it."""
     executor, _, nodes = loop
     declared = INTERFACES[name]
     parameters = dict(FAST)
@@ -106,7 +113,7 @@ def start(loop, tmp_path, name: str, every_topic: bool) -> tuple[Node, dict]:
     if name == 'power_meter_driver':        # the simulated PM100: a meter that answers
         parameters.update(backend=bench(tmp_path).backend, rate=50.0)
     node = start_in_process(name, executor.context, executor, parameters=parameters,
-                            namespace=NAMESPACE)
+                            namespace=NAMESPACE.format(uuid.uuid4().hex[:8]))
     nodes.append(node)
     return node, parameters
 
@@ -129,6 +136,32 @@ def test_the_running_node_has_the_declared_topics_and_services(loop, tmp_path, n
     found = without_standard(graph(node), node)
     for kind in want:
         assert found[kind] == want[kind], f'{name} {kind}'
+    # the QoS the graph shows (reliability, durability: DDS discovery carries no depth)
+    for topic in INTERFACES[name].topics:
+        if not topic.only_with or every_topic:
+            assert endpoint_qos(node, topic) == declared_qos(topic), f'{name} {topic.name}'
+
+
+def declared_qos(topic: Topic) -> tuple:
+    """Return the (reliability, durability) a topic's QoS summary says."""
+    reliability = (ReliabilityPolicy.RELIABLE if topic.qos.startswith('reliable') else
+                   ReliabilityPolicy.BEST_EFFORT if topic.qos.startswith('best effort')
+                   else None)
+    assert reliability is not None, f'{topic.name}: QoS {topic.qos!r} names no reliability'
+    durability = (DurabilityPolicy.TRANSIENT_LOCAL if 'transient local' in topic.qos
+                  else DurabilityPolicy.VOLATILE)
+    return reliability, durability
+
+
+def endpoint_qos(node: Node, topic: Topic) -> tuple:
+    """Return the (reliability, durability) of the node's endpoint of a topic in the graph."""
+    ask = (node.get_publishers_info_by_topic if topic.direction == OUT
+           else node.get_subscriptions_info_by_topic)
+    mine = [info.qos_profile for info in ask(node.resolve_topic_name(topic.name))
+            if (info.node_name, info.node_namespace) == (node.get_name(),
+                                                         node.get_namespace())]
+    assert len(mine) == 1, f'{topic.name}: {len(mine)} endpoints of the node'
+    return mine[0].reliability, mine[0].durability
 
 
 def first_diagnostics(loop, node: Node) -> DiagnosticArray:

@@ -27,7 +27,7 @@ class Topic:
     """
 
     name: str
-    type: str
+    msg_type: str
     direction: str
     qos: str
     content: str
@@ -41,7 +41,7 @@ class Service:
     """A service a node offers: name (relative, or '~/...' private), type, what it does."""
 
     name: str
-    type: str
+    srv_type: str
     content: str
     provided_by: str = ''        # '' the node's code, else RCLPY or LIFECYCLE
 
