@@ -101,11 +101,11 @@ def without_standard(found: dict, node: Node) -> dict:
             for kind, entries in found.items()}
 
 
-def start(loop, tmp_path, name: str, every_topic: bool) -> tuple[Node, dict]:
+def start(loop, tmp_path, name: str, every_topic: bool, **more) -> tuple[Node, dict]:
     """Start the node in a NAMESPACE (every topic: with only_with's parameters); return it."""
     executor, _, nodes = loop
     declared = INTERFACES[name]
-    parameters = dict(FAST)
+    parameters = {**FAST, **more}
     if every_topic:
         parameters.update(declared.every_topic_parameters())
         if name == 'timescale_estimator':
@@ -187,10 +187,25 @@ def test_the_running_node_publishes_the_declared_diagnostic_tasks(loop, tmp_path
     declared = INTERFACES[name]
     msg = first_diagnostics(loop, node)
     assert [s.name for s in msg.status] == declared.status_names(node.get_name())
+    assert_keys_declared(declared, msg)
+
+
+def assert_keys_declared(declared: NodeInterface, msg: DiagnosticArray) -> None:
+    """Assert that every key of every status of msg is one its task declares."""
     for status in msg.status:
         task = declared.task(status.name)
         undeclared = [kv.key for kv in status.values if not task.allows(kv.key)]
         assert not undeclared, f'{status.name}: keys not declared: {undeclared}'
+
+
+def test_an_unconfigured_driver_publishes_a_declared_task_with_declared_keys(loop, tmp_path):
+    # no meter open: only 'power meter', WARN, its one key the lifecycle state
+    node, _ = start(loop, tmp_path, 'power_meter_driver', every_topic=False, autostart=False)
+    declared = INTERFACES['power_meter_driver']
+    msg = first_diagnostics(loop, node)
+    assert [s.name for s in msg.status] == [f'{node.get_name()}: power meter']
+    assert [kv.key for kv in msg.status[0].values] == ['Lifecycle state']
+    assert_keys_declared(declared, msg)
 
 
 def test_a_task_allows_its_keys_and_reason_patterns_only():

@@ -16,6 +16,7 @@ from std_srvs.srv import Trigger
 from tskf_ros.core.diagnostic_status import FrequencyParams, FrequencyStatus, Status
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
+from tskf_ros.messages.diagnostic_tasks import OUTPUT_FREQUENCY
 from tskf_ros.messages.node_interfaces import RESET_SERVICE, TRUTH_TOPIC
 from tskf_ros.messages.parameter_schema import load_schema, ParameterSchema
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
@@ -277,7 +278,7 @@ class LinkSimulatorNode(Node):
         """Publish (and return) the 'output frequency' of the samples taken."""
         now = self.get_clock().now().nanoseconds
         self.frequency.count = self.count()
-        stat = self.frequency.run(Status('output frequency'), now)
+        stat = self.frequency.run(Status(OUTPUT_FREQUENCY), now)
         msg = conversions.diagnostics_to_msg(now, self.get_name(), [stat],
                                              hardware_id=self.get_name())
         self.diag_pub.publish(msg)
