@@ -206,10 +206,3 @@ def test_an_unconfigured_driver_publishes_a_declared_task_with_declared_keys(loo
     assert [s.name for s in msg.status] == [f'{node.get_name()}: power meter']
     assert [kv.key for kv in msg.status[0].values] == ['Lifecycle state']
     assert_keys_declared(declared, msg)
-
-
-def test_a_task_allows_its_keys_and_reason_patterns_only():
-    task = INTERFACES['timescale_estimator'].task('timescale_estimator: filter health')
-    assert task.allows('Samples received') and task.allows('Rejected (gated)')
-    assert not task.allows('Rejected') and not task.allows('Samples')
-    assert not task.allows('Rejected (gated) extra')

@@ -32,11 +32,11 @@ INPUT_QOS = ('best effort, keep last `queue_depth` (matches reliable and best-ef
 # the estimates, the base command, /diagnostics (rclpy's and forward_command_controller's)
 RELIABLE_QOS = qos_summary(reliable_qos(DEFAULT_DEPTH))
 DIAGNOSTICS = Topic(DIAGNOSTICS_TOPIC, estimator.DIAGNOSTICS_TYPE, OUT, RELIABLE_QOS,
-                    'one status per task below, every `diagnostic_updater.period` s')
+                    'one status per diagnostic task of the node, every '
+                    '`diagnostic_updater.period` s')
 POWER_CONTENT = ('header.stamp = the sample time, `illuminance` = power (mW), `variance` = '
                  '{variance}, frame `frame_id`')
 
-_ESTIMATE = 'std_msgs Float64MultiArray in the estimate layout (doc/interfaces.md): '
 ESTIMATE_CONTENT = {
     'predicted': "Table 3's predictor xhat(t_k), P(t_k) from the data before t_k, stamped "
                  't_k; `data[2]` = the graininess of the step into t_k',
@@ -51,8 +51,9 @@ ESTIMATE_CONTENT = {
 TIMESCALE_ESTIMATOR = NodeInterface(
     estimator.NODE_NAME,
     (Topic(estimator.MEASUREMENT_TOPIC, estimator.DEFAULT_MEASUREMENT_TYPE, IN, INPUT_QOS,
-           'y and, where the type has one, its variance (a std_msgs type is stamped on '
-           'arrival); launch files remap it to `received_power`',
+           'y and, where the type has one, its variance; `measurement_type` is one of '
+           + ', '.join(estimator.INPUT_TYPES) + ' (a std_msgs type is stamped on arrival). '
+           'Launch files remap it to `received_power`',
            type_parameter='measurement_type'),
      Topic(estimator.INPUT_TOPIC, estimator.INPUT_TYPE, IN, INPUT_QOS,
            "the model's input u: slot i = u[i] (linear.x, .y, .z, angular.x, .y, .z), held "
