@@ -8,6 +8,7 @@ import numpy as np
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure, Range, Temperature
 from std_msgs.msg import Float64, String
+from stderr_lines import error_lines, one_line, usage_error  # noqa: F401 - the bag tests' import
 
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.messages import conversions
@@ -90,28 +91,6 @@ def chunk_offsets(mcap):
             break
         pos += 9 + length
     return out
-
-
-def error_lines(err):
-    """Return the non-empty lines of stderr; there must be no traceback."""
-    assert 'Traceback' not in err, err
-    return [line for line in err.splitlines() if line.strip()]
-
-
-def one_line(err, prefix, *words):
-    """Check that stderr is exactly one line, starting with prefix, holding every word."""
-    lines = error_lines(err)
-    assert len(lines) == 1, err
-    assert lines[0].startswith(prefix), lines[0]
-    for w in words:
-        assert w in lines[0], lines[0]
-
-
-def usage_error(err, prog, text):
-    """Check an argparse usage error: usage lines, then exactly `prog: error: text`."""
-    lines = error_lines(err)
-    assert lines[0].startswith(f'usage: {prog}'), err
-    assert lines[-1] == f'{prog}: error: {text}', err
 
 
 def field_names(msg):

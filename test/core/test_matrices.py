@@ -1,8 +1,9 @@
-"""The covariance and invertibility checks of tskf_ros.core.matrices against eigenvalues."""
+"""tskf_ros.core.matrices: the covariance checks against eigenvalues, the vector conversion."""
 
 import numpy as np
+import pytest
 
-from tskf_ros.core.matrices import is_invertible, is_psd
+from tskf_ros.core.matrices import as_vector, FilterError, is_invertible, is_psd
 
 
 def test_fast_psd_and_invertibility_checks_agree_with_eigenvalues():
@@ -20,3 +21,20 @@ def test_fast_psd_and_invertibility_checks_agree_with_eigenvalues():
     singular = np.array([[1.0, 1.0], [-1.0, -1.0]])      # I + A of Example 3.20 on Z
     assert not is_invertible(singular) and not is_invertible(1e6 * singular)
     assert is_invertible(1e-6 * np.eye(3))                # scale does not matter
+
+
+@pytest.mark.parametrize('value, size', [(2.5, 1), ([1.0, 2.0], 2), (np.arange(3.0), 3),
+                                         (np.array([[1], [2]]), 2), ((1, 2, 3), 3)])
+def test_as_vector_gives_the_float_entries(value, size):
+    v = as_vector(value, size, 'y')
+    assert v.dtype == np.float64 and v.shape == (size,)
+    np.testing.assert_array_equal(v, np.asarray(value, dtype=float).reshape(-1))
+
+
+@pytest.mark.parametrize('value, size, words', [
+    (float('nan'), 1, 'non-finite'), ([1.0, float('inf')], 2, 'non-finite'),
+    (1e308 * 10, 1, 'non-finite'), ([1.0, 2.0], 3, 'must have 3 entries, got 2'),
+    ('abc', 1, 'not numeric'), (2.0, 2, 'must have 2 entries, got 1')])
+def test_as_vector_refuses_with_the_reason(value, size, words):
+    with pytest.raises(FilterError, match=words):
+        as_vector(value, size, 'y')

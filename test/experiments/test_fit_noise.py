@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
-
+from stderr_lines import one_line
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.core import noise_fit
 from tskf_ros.core.noise_fit import run_trace
@@ -273,15 +273,6 @@ def test_ctrl_c_is_one_line_and_writes_nothing(sim, tmp_path, capsys, monkeypatc
     assert list(tmp_path.iterdir()) == []
 
 
-def one_line(capsys, *words):
-    """Return stderr after asserting it is one line holding every word."""
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and 'Traceback' not in err, err
-    assert all(w in lines[0] for w in words), lines[0]
-    return lines[0]
-
-
 def test_no_output_may_be_a_file_of_the_input_bag(sim, tmp_path, capsys):
     # --json BAG/BAG.mcap would replace the recording with JSON
     d = sim[0]
@@ -296,13 +287,13 @@ def test_no_output_may_be_a_file_of_the_input_bag(sim, tmp_path, capsys):
         rc = fit_noise.main([str(bag), '--params-file', str(d / 'params.yaml'), option,
                              str(target), '--fix', 'R'])
         assert rc == 1, target
-        one_line(capsys, 'input bag')
+        one_line(capsys.readouterr().err, '', 'input bag')
         assert {p.name: p.read_bytes() for p in bag.iterdir()} == before
     # the bag given as its .mcap file: its directory is protected all the same
     rc = fit_noise.main([str(mcap), '--params-file', str(d / 'params.yaml'), '--json',
                          str(bag / 'fit.json'), '--fix', 'R'])
     assert rc == 1 and not (bag / 'fit.json').exists()
-    one_line(capsys, 'input bag')
+    one_line(capsys.readouterr().err, '', 'input bag')
     with pytest.raises(SystemExit) as exit_:
         fit_noise.main([str(bag), '--out', str(tmp_path / 'a'), '--json', str(tmp_path / 'a')])
     assert exit_.value.code == 2 and 'same file' in capsys.readouterr().err
@@ -332,7 +323,7 @@ def test_ctrl_c_while_reading_is_an_interrupt_not_damage(sim, tmp_path, capsys, 
     rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
                          '--out', str(out / 'f.yaml'), '--json', str(out / 'f.json')])
     assert rc == 130
-    one_line(capsys, 'interrupted', 'nothing written')
+    one_line(capsys.readouterr().err, '', 'interrupted', 'nothing written')
     assert not out.exists()
     assert signal.getsignal(signal.SIGINT) is handler
 
@@ -352,7 +343,7 @@ def test_ctrl_c_while_writing_writes_nothing(sim, tmp_path, capsys, monkeypatch)
     rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'), '--fix', 'R',
                          '--out', str(tmp_path / 'f.yaml'), '--json', str(tmp_path / 'f.json')])
     assert rc == 130
-    one_line(capsys, 'interrupted')
+    one_line(capsys.readouterr().err, '', 'interrupted')
     # the first file was renamed into place before the interrupt: removed again
     assert sorted(p.name for p in tmp_path.iterdir()) == []
 
@@ -365,7 +356,7 @@ def test_a_bad_out_writes_no_json(sim, tmp_path, capsys):
         rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
                              '--fix', 'R', '--json', str(js), '--out', str(bad)])
         assert rc == 1
-        one_line(capsys)
+        one_line(capsys.readouterr().err)
         assert not js.exists() and not list(tmp_path.glob('.*part'))
 
 
@@ -410,7 +401,7 @@ def test_the_node_ranges_refuse_a_params_file(sim, tmp_path, capsys):
         rc = fit_noise.main([str(d / 'bag'), '--params-file', str(tmp_path / 'p.yaml'),
                              '--json', str(tmp_path / 'f.json')])
         assert rc == 1
-        one_line(capsys, name, 'range')
+        one_line(capsys.readouterr().err, '', name, 'range')
         assert not (tmp_path / 'f.json').exists()
 
 
@@ -419,11 +410,11 @@ def test_a_bag_of_another_model_is_refused(capsys):
     rc = fit_noise.main([str(REPO / 'bags' / 'drogue'), '--params-file',
                          str(REPO / 'config' / 'owc_estimator.yaml')])
     assert rc == 1
-    one_line(capsys, 'another model', '/input')
+    one_line(capsys.readouterr().err, '', 'another model', '/input')
     rc = fit_noise.main([str(REPO / 'bags' / 'led_alignment'), '--params-file',
                          str(REPO / 'config' / 'owc_estimator.yaml')])
     assert rc == 1
-    one_line(capsys, 'another model', '/alignment/truth')
+    one_line(capsys.readouterr().err, '', 'another model', '/alignment/truth')
 
 
 def test_the_likelihood_is_shown_as_it_improves(sim, monkeypatch, capsys):

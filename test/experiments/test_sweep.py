@@ -11,7 +11,7 @@ import sys
 import time
 
 import pytest
-
+from stderr_lines import one_line
 from tskf_ros.experiments import sweep, sweep_table, sweep_tasks
 from tskf_ros.experiments.bag_analysis import METRICS
 from tskf_ros.messages.estimator_interface import default_parameters
@@ -226,15 +226,6 @@ def test_an_existing_scheduler_runs_the_same_sweep(bags, tmp_path):
     assert_same({r['key']: r for r in seq.rows}, {r['key']: r for r in remote.rows})
 
 
-def one_line(capsys, *words):
-    """Return stderr after asserting it is one line holding every word."""
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and 'Traceback' not in err, err
-    assert all(w in lines[0] for w in words), lines[0]
-    return lines[0]
-
-
 @pytest.mark.parametrize('workers', [0, 2])
 def test_a_bag_by_path_and_by_symlink_is_one_row(bags, tmp_path, workers):
     real = bags / 'terminal' / 'a'
@@ -257,7 +248,7 @@ def test_the_node_ranges_refuse_a_setting_in_one_line(bags, tmp_path, capsys):
                           ('max_jump=1e308', 'max_jump'), ('gate=nan', 'gate'),
                           ('period=inf', 'period')):
         assert sweep.main(base + ['--set', setting]) == 1
-        one_line(capsys, name)      # out of range, or not finite: named
+        one_line(capsys.readouterr().err, '', name)      # out of range, or not finite: named
     assert not (tmp_path / 't.csv').exists()
 
 
@@ -278,7 +269,7 @@ def test_no_output_may_be_a_file_of_an_input_bag(bags, tmp_path, capsys):
                   ['--out', str(a / 'new.csv')]):
         assert sweep.main(['--bags', str(a), '--workers', '0', '--no-progress',
                            '--params-file', str(PARAMS)] + extra) == 1
-        one_line(capsys, 'input bag')
+        one_line(capsys.readouterr().err, '', 'input bag')
         assert {p.name: p.read_bytes() for p in a.iterdir()} == before
 
 

@@ -1,9 +1,12 @@
-"""Checked conversion of model matrices, and the covariance tests the filters use."""
+"""Checked conversion of model matrices and vectors, and the covariance tests the filters use."""
 
+import math
 from typing import Optional
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+FLOAT64 = np.dtype(float)
 
 
 class FilterError(ValueError):
@@ -90,3 +93,24 @@ def is_psd(P: NDArray[np.float64], tol: float = 1e-9) -> bool:
     except np.linalg.LinAlgError:
         return False
     return True
+
+
+def as_vector(value: ArrayLike, size: int, name: str) -> NDArray[np.float64]:
+    """Return value as a finite float vector of `size` entries; a float64 vector is not copied."""
+    if value.__class__ is float:
+        if size != 1 or not math.isfinite(value):
+            return as_vector(np.array((value,)), size, name)
+        return np.array((value,))
+    elif value.__class__ is np.ndarray and value.dtype is FLOAT64:
+        v = value.reshape(-1)
+    else:
+        try:
+            v = np.array(value, dtype=float).reshape(-1)
+        except (TypeError, ValueError) as exc:
+            raise FilterError(f'{name} is not numeric: {exc}') from None
+    if v.shape != (size,):
+        raise FilterError(f'{name} must have {size} entries, got {v.size}')
+    # a sum is finite when every entry is; only a sum that is not needs the full check
+    if not math.isfinite(v.sum()) and not np.isfinite(v).all():
+        raise FilterError(f'{name} has non-finite entries: {v}')
+    return v

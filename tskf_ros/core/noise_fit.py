@@ -7,17 +7,16 @@ e_k = y_k - C xhat_k - D and S_k = C P_k C^T + R / mu_k of Bohner & Wintz Table 
     log L(Q, R) = -1/2 sum_k [ log det S_k + e_k^T S_k^-1 e_k + p log 2 pi ]
 
 maximised over log diag(Q) and log diag(R); standard errors se(q) = q se(log q) (delta
-method) from the Hessian in the log-parameters; NIS e^T S^-1 e against chi2(p).  How:
+method) from the Hessian in the log-parameters.  How:
 doc/design/core.md.
 """
 
 from dataclasses import dataclass, field, replace
-from typing import Callable, NotRequired, Optional, Sequence, TypedDict
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 import scipy.optimize
-import scipy.stats
 
 from tskf_ros.core.linear_models import LinearModel
 from tskf_ros.core.timescale_kalman import FilterError
@@ -197,42 +196,6 @@ def numerical_hessian(f: Objective, x: ArrayLike, h: float = HESSIAN_STEP) -> Fl
                                  - f(x - step[i] + step[j]) + f(x - step[i] - step[j])
                                  ) / (4.0 * h * h)
     return H
-
-
-class NisSummary(TypedDict):
-    """The NIS check of `nis_summary` (None entries: no innovations to judge)."""
-
-    n: int
-    mean: Optional[float]
-    expected: NotRequired[float]
-    band: list[Optional[float]]
-    consistent: Optional[bool]
-    fraction_in_band: Optional[float]
-    single_band: NotRequired[list[float]]
-    level: float
-
-
-def nis_summary(nis: ArrayLike, p: int, level: float = 0.95) -> NisSummary:
-    """
-    Return the NIS consistency check of N innovations of dimension p.
-
-    mean NIS against the two-sided `level` band of the mean of N chi2(p) variables,
-    [chi2.ppf(a/2, N p) / N, chi2.ppf(1 - a/2, N p) / N], and the fraction of single NIS
-    values inside the chi2(p) band of the same level (expected: `level`).
-    """
-    nis = np.asarray(nis, dtype=float)
-    n = int(nis.size)
-    alpha = 1.0 - level
-    if n == 0:
-        return {'n': 0, 'mean': None, 'band': [None, None], 'consistent': None,
-                'fraction_in_band': None, 'level': level}
-    lo, hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], n * p) / n
-    one_lo, one_hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], p)
-    mean = float(np.mean(nis))
-    inside = float(np.mean((nis >= one_lo) & (nis <= one_hi)))
-    return {'n': n, 'mean': mean, 'expected': float(p), 'band': [float(lo), float(hi)],
-            'consistent': bool(lo <= mean <= hi), 'fraction_in_band': inside,
-            'single_band': [float(one_lo), float(one_hi)], 'level': level}
 
 
 @dataclass

@@ -47,7 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 import scipy.integrate
 
 from tskf_ros.core import kalman
-from tskf_ros.core.matrices import as_matrix, check_covariance, FilterError
+from tskf_ros.core.matrices import as_matrix, as_vector, check_covariance, FilterError
 from tskf_ros.core.transitions import Transition, TransitionCache, TRANSITIONS
 
 Vector = NDArray[np.float64]
@@ -56,7 +56,6 @@ Matrix = NDArray[np.float64]
 __all__ = ['FilterError', 'InnovationTest', 'NonRegressiveError', 'RunResult', 'StepResult',
            'TimeScaleKalmanFilter', 'TRANSITIONS']
 
-_FLOAT = np.dtype(float)
 _INF = math.inf
 
 
@@ -94,27 +93,6 @@ class RunResult(NamedTuple):
     x_predicted: Matrix
     P_predicted: NDArray[np.float64]
     stopped: str            # '' all made, 'refused' (step would raise), 'test' (failed it)
-
-
-def as_vector(value: ArrayLike, size: int, name: str) -> Vector:
-    """Return value as a finite float vector of `size` entries; a float64 vector is not copied."""
-    if value.__class__ is float:
-        if size != 1 or not math.isfinite(value):
-            return as_vector(np.array((value,)), size, name)
-        return np.array((value,))
-    elif value.__class__ is np.ndarray and value.dtype is _FLOAT:
-        v = value.reshape(-1)
-    else:
-        try:
-            v = np.array(value, dtype=float).reshape(-1)
-        except (TypeError, ValueError) as exc:
-            raise FilterError(f'{name} is not numeric: {exc}') from None
-    if v.shape != (size,):
-        raise FilterError(f'{name} must have {size} entries, got {v.size}')
-    # a sum is finite when every entry is; only a sum that is not needs the full check
-    if not math.isfinite(v.sum()) and not np.isfinite(v).all():
-        raise FilterError(f'{name} has non-finite entries: {v}')
-    return v
 
 
 class _ModelMatrix:

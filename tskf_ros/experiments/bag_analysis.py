@@ -15,7 +15,7 @@ from tskf_ros.bag.reader import BagReader, Damage
 from tskf_ros.bag.replay.model_check import check_model
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic
-from tskf_ros.core.noise_fit import nis_summary
+from tskf_ros.core.nis_check import nis_summary
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATES_TYPE
 from tskf_ros.messages.estimator_interface import extractor, INPUT_TYPE, NodeConfig

@@ -22,8 +22,9 @@ from tskf_ros.bag.message_types import BagTypeError
 from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.progress import Interrupts
 from tskf_ros.bag.reader import BagError, error_exit, exit_status
+from tskf_ros.core.nis_check import nis_summary
 from tskf_ros.core.noise_fit import (FitError, FitProgress, FitResult, LOG_SEARCH_RADIUS,
-                                     negative_log_likelihood, nis_summary, RECENTRES)
+                                     negative_log_likelihood, RECENTRES)
 from tskf_ros.experiments.bag_analysis import read_stream
 from tskf_ros.experiments.output import json_bytes, write_all
 from tskf_ros.messages.estimator_interface import load_config, NODE_NAME, ParamsError

@@ -1,0 +1,21 @@
+"""The NIS check against the chi-square band of the mean, written out from its definition."""
+
+import numpy as np
+import pytest
+
+from tskf_ros.core.nis_check import nis_summary
+
+
+def test_nis_band_is_the_chi_square_band_of_the_mean():
+    rng = np.random.default_rng(3)
+    s = nis_summary(rng.chisquare(2, 4000), 2)
+    # the mean of N chi2(p) is chi2(N p) / N: mean p, variance 2 p / N
+    half = 1.959964 * np.sqrt(2 * 2 / 4000)
+    assert s['band'][0] == pytest.approx(2 - half, abs=2e-3)
+    assert s['band'][1] == pytest.approx(2 + half, abs=2e-3)
+    assert s['consistent'] and s['fraction_in_band'] == pytest.approx(0.95, abs=0.01)
+
+
+def test_no_innovations_judge_nothing():
+    s = nis_summary([], 1)
+    assert s['n'] == 0 and s['consistent'] is None and s['mean'] is None

@@ -1,0 +1,49 @@
+"""
+The NIS consistency check of a filter's innovations against the chi-square distribution.
+
+NIS_k = e_k^T S_k^-1 e_k is chi2(p) for a consistent filter (Bar-Shalom, Li & Kirubarajan,
+Estimation with Applications to Tracking and Navigation, Wiley 2001, Sec. 5.4); the mean of
+N of them is chi2(N p) / N.
+"""
+
+from typing import NotRequired, Optional, TypedDict
+
+import numpy as np
+from numpy.typing import ArrayLike
+import scipy.stats
+
+
+class NisSummary(TypedDict):
+    """The NIS check of `nis_summary` (None entries: no innovations to judge)."""
+
+    n: int
+    mean: Optional[float]
+    expected: NotRequired[float]
+    band: list[Optional[float]]
+    consistent: Optional[bool]
+    fraction_in_band: Optional[float]
+    single_band: NotRequired[list[float]]
+    level: float
+
+
+def nis_summary(nis: ArrayLike, p: int, level: float = 0.95) -> NisSummary:
+    """
+    Return the NIS consistency check of N innovations of dimension p.
+
+    mean NIS against the two-sided `level` band of the mean of N chi2(p) variables,
+    [chi2.ppf(a/2, N p) / N, chi2.ppf(1 - a/2, N p) / N], and the fraction of single NIS
+    values inside the chi2(p) band of the same level (expected: `level`).
+    """
+    nis = np.asarray(nis, dtype=float)
+    n = int(nis.size)
+    alpha = 1.0 - level
+    if n == 0:
+        return {'n': 0, 'mean': None, 'band': [None, None], 'consistent': None,
+                'fraction_in_band': None, 'level': level}
+    lo, hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], n * p) / n
+    one_lo, one_hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], p)
+    mean = float(np.mean(nis))
+    inside = float(np.mean((nis >= one_lo) & (nis <= one_hi)))
+    return {'n': n, 'mean': mean, 'expected': float(p), 'band': [float(lo), float(hi)],
+            'consistent': bool(lo <= mean <= hi), 'fraction_in_band': inside,
+            'single_band': [float(one_lo), float(one_hi)], 'level': level}
