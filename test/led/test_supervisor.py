@@ -22,6 +22,14 @@ class Scene:
     blocked: tuple[tuple[int, int], ...] = ()
     noise: float = 0.0
     seed: int = 0
+    fade: tuple[int, int, float] = (0, 0, 1.0)   # x1 falls linearly to this fraction
+
+    def x1(self, k: int) -> float:
+        """Return the light's intensity factor at sample k (V)."""
+        start, stop, to = self.fade
+        if k < start or stop <= start:
+            return X1
+        return X1 * (1.0 + (to - 1.0) * min(1.0, (k - start) / (stop - start)))
 
 
 @dataclass
@@ -48,7 +56,8 @@ def play(scene: Scene, steps: int, tracker: str = 'ekf',
     for k in range(steps):
         phi = base - scene.bearing
         blocked = any(a <= k < b for a, b in scene.blocked)
-        z = 0.0 if blocked else X1 * RESPONSE.g(phi) + scene.noise * rng.standard_normal()
+        z = 0.0 if blocked else (scene.x1(k) * RESPONSE.g(phi)
+                                 + scene.noise * rng.standard_normal())
         base += float(sup.step(k * DT, z)[0])
         states.append(int(sup.state[0]))
         declared.append(bool(sup.declared[0]))
@@ -135,3 +144,35 @@ def test_config_refuses_a_scan_faster_than_the_actuator():
         SupervisorConfig(max_step=2.0)
     with pytest.raises(led.AlignmentError, match='start must be one of'):
         SupervisorConfig(start='sleeping')
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+@pytest.mark.parametrize('fade, lost', [(1.0, False), (0.0, True)])
+def test_a_light_that_fades_under_the_noise_is_tracked_not_searched_for(fade, lost, seed):
+    # x1 falls from 3 V to 0.3 V over 10 s at noise 0.5 V: the mean in lock follows it
+    # under `fade` x noise (1 V), so a low intensity is not a pointing loss; without the rule the
+    # M-of-N test declares one and the sweep, finding nothing, takes the receiver away
+    config = SupervisorConfig(start='tracking', fade=fade)
+    played = play(Scene(bearing=-5.0, fade=(100, 300, 0.1), noise=0.5, seed=seed), 500, 'ekf',
+                  config)
+    assert played.declared.any() == lost
+    if not lost:
+        assert np.all(played.states == TRACKING)
+        assert np.all(np.abs(played.phi) <= led.TRACKING_ANGLE)
+
+
+def test_a_block_after_a_partial_fade_is_still_a_loss():
+    # dimmed to 70 % (its mean in lock still above the 1 V noise), then blocked: lost
+    config = SupervisorConfig(start='tracking')
+    played = play(Scene(bearing=-5.0, fade=(50, 150, 0.7), blocked=((300, 360),)), 400,
+                  'ekf', config)
+    assert [s for _, s in played.transitions()][:1] == [LOST]
+    assert not played.declared[:300].any()
+
+
+@pytest.mark.parametrize('clip, want', [(True, (4.0, 25.0)), (False, (100.0, 1000.0))])
+def test_a_known_start_ekf_starts_from_the_clipped_prior(clip, want):
+    config = SupervisorConfig(start='tracking', clip_prior=clip)
+    sup = Supervisor(led.make_aligner('ekf', runs=3), config, RESPONSE)
+    np.testing.assert_allclose(sup.tracker.P, np.tile(np.diag(want), (3, 1, 1)))
+    np.testing.assert_allclose(sup.tracker.x, np.tile(led.PAPER_X0, (3, 1)))

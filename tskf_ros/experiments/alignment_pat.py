@@ -52,7 +52,8 @@ def build_pat(name: str, runs: int, link: led.TrackingLinkConfig,
         # a known prior (the paper's x2_0) starts in tracking; a cold start searches
         config = SupervisorConfig(start='acquiring' if link.x2_0_spread > 0 else 'tracking')
     if name == 'ekf_reset':
-        config = dataclasses.replace(config, reacquire=False, start='tracking')
+        config = dataclasses.replace(config, reacquire=False, start='tracking',
+                                     clip_prior=False)
     return Recorded(Supervisor(tracker, config, response))
 
 

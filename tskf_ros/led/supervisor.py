@@ -46,12 +46,19 @@ class SupervisorConfig:
     inflate: float = 4.0          # the hand-over variances are this times the Fisher bound,
     x1_var: tuple[float, float] = (0.01, 4.0)      # V^2: clipped to this range
     angle_var: tuple[float, float] = (4.0, 25.0)   # deg^2: and this one
+    # times `noise`: a light whose mean in lock is below this has faded (slowly: the mean
+    # follows it) under the noise, and a low intensity is no evidence of a pointing loss:
+    # the intensity test is off and the tracker keeps steering (0: never); a sudden block
+    # leaves the mean high
+    fade: float = 1.0
+    # a known-start EKF's P0 gets the same clip: Table I's diag(100, 1000) throws runs off
+    clip_prior: bool = True
 
     def __post_init__(self) -> None:
         """Check the supervisor's settings; raise AlignmentError with the reason."""
         if self.start not in STARTS:
             raise AlignmentError(f'start must be one of {STARTS}, got {self.start!r}')
-        for name in ('noise', 'max_step', 'inflate', 'level_fraction'):
+        for name in ('noise', 'max_step', 'inflate', 'level_fraction', 'fade'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise AlignmentError(f'{name} must be >= 0, got {value}')
@@ -102,6 +109,8 @@ class Supervisor:
         self.tracked = np.zeros(n, dtype=int)       # samples since the hand-over
         self.losses = np.zeros(n, dtype=int)
         self.handovers = np.zeros(n, dtype=int)
+        if config.start == 'tracking' and config.clip_prior and self.is_ekf:
+            self._clip_prior()
 
     @property
     def scan_offset(self) -> float:
@@ -142,6 +151,7 @@ class Supervisor:
         inner = self.tracker.step(stamp, np.where(tracking, z, np.nan))
         # the low level follows a light that dims: at most level_fraction of its mean in lock
         level = np.fmin(cfg.lock.level, cfg.level_fraction * self.bright)
+        level = np.where(self.bright < cfg.fade * cfg.noise, -np.inf, level)   # faded
         self.verdict = verdict = self.lock.update(z, nis, tracking, level)
         # good lock: a full window since the hand-over with few low samples
         self.tracked = np.where(tracking, self.tracked + 1, 0)
@@ -208,6 +218,16 @@ class Supervisor:
         self.handovers[found] += 1
         self.lock.reset(found)
         return turn
+
+    def _clip_prior(self) -> None:
+        """Clip the EKF's starting variances to the hand-over's ranges, correlation dropped."""
+        t = self.tracker
+        assert isinstance(t, ScanningEKF)
+        cfg = self.config
+        P = np.zeros_like(t.P)
+        P[:, 0, 0] = np.clip(t.P[:, 0, 0], *cfg.x1_var)
+        P[:, 1, 1] = np.clip(t.P[:, 1, 1], *cfg.angle_var)
+        t.restart_runs(np.ones(self.runs, dtype=bool), t.x.copy(), P)
 
     def _restart_tracker(self, mask: Mask) -> None:
         """Restart the tracker of the runs in mask from its initial state (x0, P0)."""
