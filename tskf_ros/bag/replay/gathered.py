@@ -66,7 +66,7 @@ class Gathered:
                 continue
             statuses['accepted'] += item.count
             if rows:
-                _array_rows(sink, item, logs[k:k + item.count], sampled[k:k + item.count])
+                sink.run_rows(item, logs[k:k + item.count], sampled[k:k + item.count])
                 k += item.count
             else:
                 outcomes += item.outcomes()
@@ -80,13 +80,3 @@ class Gathered:
             for j in range(k, len(outcomes)):       # a sink that copies nothing
                 sink.outcome(est, logs[j], sampled[j], outcomes[j], False)
         self.held, self.sampled, self.logs = [], [], []
-
-
-def _array_rows(sink: ArraySink, run: Run, logs: list[int], sampled: list[Sample]) -> None:
-    """Add to the sink the rows ArraySink.outcome adds for each of the run's outcomes."""
-    sink.samples += [(log_ns, *sample, 'accepted', '') for log_ns, sample in zip(logs, sampled)]
-    rows = sink.estimates
-    stamps, previous = run.stamps_ns.tolist(), run.previous_ns.tolist()
-    rows['corrected', False] += zip(logs, previous, run.x_corrected, run.P_corrected)
-    rows['predicted', False] += zip(logs, stamps, run.x_predicted, run.P_predicted)
-    rows['mu', False] += zip(logs, previous, stamps)

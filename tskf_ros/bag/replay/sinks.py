@@ -2,18 +2,19 @@
 
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any, Optional, Protocol
+from typing import Any, Optional, Protocol, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tskf_ros.bag.cdr import serialize
 from tskf_ros.bag.reader import Damage, RawMessage
-from tskf_ros.bag.replay.adapters import AnyOutcome, ESTIMATE_TOPICS, OfflineEstimator
+from tskf_ros.bag.replay.adapters import AnyOutcome, ESTIMATE_TOPICS, OfflineEstimator, Sample
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.messages.estimator_interface import DIAGNOSTICS_TOPIC
+from tskf_ros.owc.session.outcome import Run
 
 __all__ = ['ArraySink', 'BagSink', 'Collector', 'ReplayResult', 'Sink', 'SMOOTHED_TOPIC']
 
@@ -190,6 +191,16 @@ class ArraySink:
             self.smoother.outcome(out)
         for j in out.jumps:
             rows['mu', j.revised].append((log_ns, j.stamp_ns, j.sigma_ns))
+
+    def run_rows(self, run: Run, logs: Sequence[int], sampled: Sequence[Sample]) -> None:
+        """Keep the rows `outcome` keeps for each sample of a run (all accepted, in order)."""
+        self.samples += [(log_ns, *sample, 'accepted', '')
+                         for log_ns, sample in zip(logs, sampled)]
+        rows = self.estimates
+        stamps, previous = run.stamps_ns.tolist(), run.previous_ns.tolist()
+        rows['corrected', False] += zip(logs, previous, run.x_corrected, run.P_corrected)
+        rows['predicted', False] += zip(logs, stamps, run.x_predicted, run.P_predicted)
+        rows['mu', False] += zip(logs, previous, stamps)
 
     def diagnostics(self, stamp_ns: int, msg: Any) -> None:
         """Keep a row of the /diagnostics message: the level and message of its worst task."""
