@@ -11,6 +11,10 @@ SEED_LIMIT = 2 ** 32
 MAX_RUNS = 100_000
 MAX_STEPS = 100_000
 MAX_DT = 60.0
+# the LED experiments' noise standard deviations (V: over 30 times the 3 V peak) and drift
+# rates (deg/s: a turn a second); beyond them the intensity model overflows to NaN
+MAX_NOISE = 100.0
+MAX_RATE = 360.0
 
 
 def seed(text: str) -> int:
@@ -53,3 +57,24 @@ def number(low: float, high: float, *, open_low: bool = False) -> Callable[[str]
         return value
     parse.__name__ = 'number'
     return parse
+
+
+def numbers(low: float, high: float) -> Callable[[str], list[float]]:
+    """Return an argparse type of a comma-separated list of finite floats in [low, high]."""
+    one = number(low, high)
+
+    def parse(text: str) -> list[float]:
+        values = [one(part) for part in text.split(',') if part.strip()]
+        if not values:
+            raise argparse.ArgumentTypeError(f'need a comma-separated list of numbers, '
+                                             f'got {text!r}')
+        return values
+    parse.__name__ = 'numbers'
+    return parse
+
+
+# the LED experiments' option types
+noise_volts = number(0.0, MAX_NOISE)
+noise_list = numbers(0.0, MAX_NOISE)
+rate_deg_s = number(0.0, MAX_RATE)
+angle_deg = number(-180.0, 180.0)

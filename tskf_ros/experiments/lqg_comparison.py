@@ -13,7 +13,7 @@ import numpy as np
 
 from tskf_ros import led
 from tskf_ros.experiments import arguments
-from tskf_ros.experiments.alignment_mc import floats, save_figure, write_json
+from tskf_ros.experiments.alignment_mc import save_figure, write_json
 
 DEFAULT_BETAS = (0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0)
 LABELS = {'p': 'EKF + P controller (paper, eq. (21))', 'lqg': 'EKF + drift + time-scale LQR'}
@@ -90,12 +90,14 @@ def parser() -> argparse.ArgumentParser:
                                 description=__doc__.split('\n\n')[0])
     p.add_argument('--runs', type=arguments.count(1, arguments.MAX_RUNS), default=1000,
                    help='runs per point (1000)')
-    p.add_argument('--betas', type=floats, default=list(DEFAULT_BETAS),
+    p.add_argument('--betas',
+                   type=arguments.numbers(0.0, arguments.MAX_RATE), default=list(DEFAULT_BETAS),
                    help='comma list of drift rates, deg/s (0,2,...,16)')
-    p.add_argument('--noise', type=float, default=math.sqrt(led.PAPER_R_SYS[0][0]),
+    p.add_argument('--noise', type=arguments.noise_volts, default=math.sqrt(led.PAPER_R_SYS[0][0]),
                    help='noise of the beta sweep, V (0.2: Table I R_sys)')
-    p.add_argument('--effort-noise', type=float, default=1.0, help='effort point noise, V (1)')
-    p.add_argument('--effort-beta', type=float, default=2.8,
+    p.add_argument('--effort-noise', type=arguments.noise_volts,
+                   default=1.0, help='effort point noise, V (1)')
+    p.add_argument('--effort-beta', type=arguments.rate_deg_s, default=2.8,
                    help='effort point drift rate, deg/s (2.8, Fig. 14)')
     p.add_argument('--steps', type=arguments.count(1, arguments.MAX_STEPS), default=400,
                    help='steps per run (400 = 20 s)')
@@ -105,7 +107,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--ablation', action='store_true',
                    help='also run the LQG variants of ABLATIONS at --ablation-beta (noise '
                         '--noise) and at the effort point')
-    p.add_argument('--ablation-beta', type=float, default=14.0,
+    p.add_argument('--ablation-beta', type=arguments.rate_deg_s, default=14.0,
                    help='drift rate of the ablation at --noise, deg/s (14)')
     p.add_argument('--json', type=Path, help='write the results as JSON')
     p.add_argument('--png', type=Path, help='write tracking % against beta')
