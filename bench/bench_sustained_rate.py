@@ -17,8 +17,9 @@ is taken.  Drops by cause, from the node's own counters (task 'filter health'):
                     in the subscription's keep-last queue (queue_depth) before the
                     executor took them
 
-Printed: one row per (load, rate) and, per load, the highest rate at which nothing was lost
-(nor at any lower rate of the sweep).
+Printed: one row per (load, rate), with the machine's 1-minute load average after the run,
+and, per load, the highest rate at which nothing was lost (nor at any lower rate of the
+sweep).
 """
 
 import argparse
@@ -149,7 +150,8 @@ def main() -> None:
     print(f'{args.seconds:g} s per rate, node on CPU {NODE_CPU} ({executor} executor), '
           f'publisher and monitor on CPU {OTHER_CPU}; load average '
           f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs', flush=True)
-    print('load   rate Hz     sent  received  transport  overflow  node CPU', flush=True)
+    print('load   rate Hz     sent  received  transport  overflow  node CPU  load avg',
+          flush=True)
     for load in args.load.split(','):
         busy = busy_loop() if load == 'busy' else None
         best = previous = None
@@ -157,7 +159,8 @@ def main() -> None:
             for rate in rates:
                 r = run_once(rate, args.seconds, executor)
                 print(f'{load:5} {rate:8g} {r["sent"]:8d} {r["received"]:9d} '
-                      f'{r["transport"]:10d} {r["overflow"]:9d} {r["cpu"]:8.0%}', flush=True)
+                      f'{r["transport"]:10d} {r["overflow"]:9d} {r["cpu"]:8.0%} '
+                      f'{os.getloadavg()[0]:9.2f}', flush=True)
                 if r['received'] == r['sent'] and best == previous:
                     best = rate         # nothing lost at this rate nor any below it
                 previous = rate

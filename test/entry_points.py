@@ -14,3 +14,14 @@ def console_scripts():
             specs = ast.literal_eval(node.value).get('console_scripts', [])
             return [spec.split('=', 1)[0].strip() for spec in specs]
     return []
+
+
+def console_script_targets():
+    """Return {executable name: 'module:function'} of setup.py's console_scripts."""
+    tree = ast.parse((REPO_ROOT / 'setup.py').read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.keyword) and node.arg == 'entry_points':
+            specs = ast.literal_eval(node.value).get('console_scripts', [])
+            return {name.strip(): target.strip()
+                    for name, _, target in (spec.partition('=') for spec in specs)}
+    return {}

@@ -16,24 +16,11 @@ from docutils import nodes
 from sphinx.application import Sphinx
 from sphinx.util.docutils import SphinxDirective
 
+from doc_tables import table
 from tskf_ros.messages.parameter_schema import load_schema, schema_path
 
 HEADER = ('parameter', 'type', 'default', 'range', 'read-only', 'description')
 WIDTHS = (16, 8, 12, 14, 6, 44)
-
-
-def _cell(content: nodes.Node) -> nodes.entry:
-    entry = nodes.entry()
-    entry += nodes.paragraph('', '', content) if not isinstance(content, nodes.paragraph) \
-        else content
-    return entry
-
-
-def _row(cells: list) -> nodes.row:
-    row = nodes.row()
-    for content in cells:
-        row += _cell(content)
-    return row
 
 
 class ParameterTable(SphinxDirective):
@@ -47,21 +34,11 @@ class ParameterTable(SphinxDirective):
         node_name = self.arguments[0]
         schema = load_schema(node_name)
         self.env.note_dependency(str(schema_path(node_name)))
-        table = nodes.table(classes=['parameter-table'])
-        group = nodes.tgroup(cols=len(HEADER))
-        table += group
-        group.extend(nodes.colspec(colwidth=w) for w in WIDTHS)
-        head = nodes.thead()
-        head += _row([nodes.Text(h) for h in HEADER])
-        group += head
-        body = nodes.tbody()
-        for row in schema.table_rows():
-            body += _row([
-                nodes.literal(row.name, row.name), nodes.Text(row.type_name),
-                nodes.literal(row.default, row.default), nodes.Text(row.constraints),
-                nodes.Text('yes' if row.read_only else ''), nodes.Text(row.description)])
-        group += body
-        return [table]
+        return [table(HEADER, WIDTHS, [
+            (nodes.literal(row.name, row.name), nodes.Text(row.type_name),
+             nodes.literal(row.default, row.default), nodes.Text(row.constraints),
+             nodes.Text('yes' if row.read_only else ''), nodes.Text(row.description))
+            for row in schema.table_rows()], 'parameter-table')]
 
 
 def setup(app: Sphinx) -> dict:

@@ -93,9 +93,12 @@ def test_the_player_refuses_extreme_times_with_a_player_error(small_bag, ros_con
 
 
 @SETTINGS
-@given(flag=st.sampled_from(PLAY_FLOATS), value=numbers)
+@given(flag=st.sampled_from(PLAY_FLOATS + ('--playback-until-nsec',)),
+       value=st.one_of(numbers, st.integers(), st.sampled_from([10 ** 400, -10 ** 400])))
 @example(flag='--rate', value=1e308)
 @example(flag='--clock', value=5e-324)
+@example(flag='--playback-until-nsec', value=2 ** 63)
+@example(flag='--playback-until-nsec', value=2 ** 63 - 1)
 def test_any_number_for_a_play_option_plays_or_is_one_line(small_bag, ros_context, capsys,
                                                            flag, value):
     kwargs = parse_play([str(small_bag), f'{flag}={value!r}'], capsys)

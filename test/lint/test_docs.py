@@ -1,4 +1,4 @@
-"""The documentation builds (Sphinx, -W -n), lists every node parameter, says nothing of issues."""
+"""The docs build (-W -n), show every node's parameters and interface, and mention no issues."""
 
 import html
 from pathlib import Path
@@ -8,6 +8,7 @@ import sys
 
 from documented_commands import documentation
 
+from tskf_ros.messages.node_interfaces import INTERFACES
 from tskf_ros.messages.parameter_schema import load_schema
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -38,17 +39,40 @@ def test_the_documentation_builds_without_a_warning(tmp_path):
     # (test/nodes/test_parameter_schema.py checks the running nodes against the schemas)
     for schema in sorted((REPO_ROOT / 'config' / 'schema').glob('*.yaml')):
         page = (out / 'nodes' / f'{schema.stem}.html').read_text()
-        table = page[page.index('parameter-table'):]
-        table = table[:table.index('</table>')]
-        cells = [html.unescape(re.sub(r'<[^>]+>', '', cell)).strip()
-                 for cell in re.findall(r'<td>(.*?)</td>', table, re.DOTALL)]
-        # Sphinx's smart quotes: 'a' -> \u2018a\u2019, -- -> \u2013, ... -> \u2026
-        for fancy, plain in SMART_QUOTES.items():
-            cells = [cell.replace(fancy, plain) for cell in cells]
-        rows = [tuple(cells[i:i + 6]) for i in range(0, len(cells), 6)]
+        rows = table_rows(page, 'parameter-table', 6)
         want = [(r.name, r.type_name, r.default, r.constraints, 'yes' if r.read_only else '',
                  r.description) for r in load_schema(schema.stem).table_rows()]
         assert rows == want, schema.stem
+    # and its declared topics, services and diagnostic tasks (node_interfaces; checked
+    # against the running nodes by test/nodes/test_node_interfaces.py)
+    for name, declared in INTERFACES.items():
+        page = (out / 'nodes' / f'{name}.html').read_text()
+        # (a type a parameter names reads '<default type> (default; ...)')
+        topics = [(row[0], row[1], row[2].split(' ')[0])
+                  for row in table_rows(page, 'topic-table', 5)]
+        assert topics[:-1] == [(t.name, t.direction, t.msg_type) for t in declared.topics], name
+        services = [row[:2] for row in table_rows(page, 'service-table', 3)]
+        assert services[:len(declared.services)] == [(s.name, s.srv_type)
+                                                     for s in declared.services], name
+        shown = [plain(status) for status in
+                 re.findall(r'class="diagnostic-task"><strong>(.*?)</strong>', page, re.DOTALL)]
+        assert shown == declared.status_names(), name
+
+
+def plain(text: str) -> str:
+    """Return a cell's HTML as text, Sphinx's smart quotes undone."""
+    text = html.unescape(re.sub(r'<[^>]+>', '', text)).strip()
+    for fancy, ascii_text in SMART_QUOTES.items():
+        text = text.replace(fancy, ascii_text)
+    return text
+
+
+def table_rows(page: str, css_class: str, columns: int) -> list:
+    """Return the body rows of the first table of css_class on an HTML page, as text."""
+    table = page[page.index(css_class):]
+    table = table[:table.index('</table>')]
+    cells = [plain(cell) for cell in re.findall(r'<td>(.*?)</td>', table, re.DOTALL)]
+    return [tuple(cells[i:i + columns]) for i in range(0, len(cells), columns)]
 
 
 def test_no_page_mentions_issues():

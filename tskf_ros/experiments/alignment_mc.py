@@ -13,7 +13,7 @@ import numpy as np
 
 from tskf_ros import led
 from tskf_ros.bag.progress import bar
-from tskf_ros.experiments import alignment_pat, output
+from tskf_ros.experiments import alignment_pat, arguments, output
 
 DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
 DEFAULT_DROPOUTS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
@@ -209,31 +209,26 @@ def single_run(beta: float, args: argparse.Namespace, response: led.IncidenceRes
 # Command line
 
 
-def floats(text: str) -> list[float]:
-    """Parse a comma-separated list of floats."""
-    try:
-        values = [float(part) for part in text.split(',') if part.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a comma-separated list of numbers: {text!r}')
-    if not values or not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f'need finite numbers, got {text!r}')
-    return values
-
-
 def parser() -> argparse.ArgumentParser:
     """Build the command-line interface."""
     p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.alignment_mc',
                                 description=__doc__.split('\n\n')[0])
-    p.add_argument('--runs', type=int, default=1000, help='runs per noise level (1000)')
-    p.add_argument('--noise-levels', type=floats, default=list(DEFAULT_NOISE_LEVELS),
+    p.add_argument('--runs', type=arguments.count(1, arguments.MAX_RUNS), default=1000,
+                   help='runs per noise level (1000)')
+    p.add_argument('--noise-levels', type=arguments.noise_list,
+                   default=list(DEFAULT_NOISE_LEVELS),
                    help='comma list of noise standard deviations in volts (0,0.25,...,2.5)')
-    p.add_argument('--beta', type=float, default=1.2, help='disturbance rate, deg/s (1.2)')
-    p.add_argument('--steps', type=int, default=400, help='steps per run (400 = 20 s)')
-    p.add_argument('--dt', type=float, default=led.PAPER_DT, help='time step, s (0.05)')
-    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--beta', type=arguments.rate_deg_s,
+                   default=1.2, help='disturbance rate, deg/s (1.2)')
+    p.add_argument('--steps', type=arguments.count(1, arguments.MAX_STEPS), default=400,
+                   help='steps per run (400 = 20 s)')
+    p.add_argument('--dt', type=arguments.number(0.0, arguments.MAX_DT, open_low=True),
+                   default=led.PAPER_DT, help='time step, s (0.05)')
+    p.add_argument('--seed', type=arguments.seed, default=0)
     p.add_argument('--dropout', type=float, default=0.0,
                    help='probability that a measurement is missing (0)')
-    p.add_argument('--x2-0', type=float, default=5.0, help='initial scan mean, deg (5)')
+    p.add_argument('--x2-0', type=arguments.angle_deg,
+                   default=5.0, help='initial scan mean, deg (5)')
     p.add_argument('--cold-start', type=float, default=0.0, metavar='DEG',
                    help='initial angle uniform on +-DEG (x2_0 = 0; the supervised algorithms '
                         'then start with a search); 0: the known start of the paper (--x2-0)')
@@ -241,14 +236,16 @@ def parser() -> argparse.ArgumentParser:
                    help='comma list of the algorithms compared (default: '
                         + ','.join(led.ALGORITHMS + PAT_ALGORITHMS) + '; lqg: the plain ones)')
     units = p.add_mutually_exclusive_group()
-    units.add_argument('--units-per-degree', type=float, default=None,
+    units.add_argument('--units-per-degree',
+                       type=arguments.number(0.0, 1e6, open_low=True), default=None,
                        help='fit units per degree of g (default: the 20%%-at-15-deg unit)')
     units.add_argument('--literal-units', action='store_true',
                        help='read g with phi in degrees, as printed (1 unit per degree)')
     p.add_argument('--controller', choices=led.CONTROLLERS, default='p',
                    help="the EKF's controller: p (the paper's eq. (21)) or lqg "
                         '(tskf_ros.led.lqg_alignment)')
-    p.add_argument('--x1-floor', type=float, default=None,
+    p.add_argument('--x1-floor',
+                   type=arguments.number(-arguments.MAX_NOISE, arguments.MAX_NOISE), default=None,
                    help='keep x1hat >= this (not in the paper; default off)')
     p.add_argument('--clip-three-point', action='store_true',
                    help='clip gamma_p of eq. (26) to [-gamma, gamma] (not in the paper)')
@@ -259,16 +256,18 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--fig9', type=Path, help='write the failing run (Fig. 9)')
     p.add_argument('--pat-run', type=Path, help='write one ekf_pat run (--run-noise, '
                    '--cold-start, blocked from 8 to 11 s): angle, state and intensity in time')
-    p.add_argument('--fig9-beta', type=float, default=FAIL_BETA,
+    p.add_argument('--fig9-beta', type=arguments.rate_deg_s, default=FAIL_BETA,
                    help=f'beta of the failing run, deg/s ({FAIL_BETA:g})')
-    p.add_argument('--run-noise', type=float, default=math.sqrt(led.PAPER_R_SYS[0][0]),
+    p.add_argument('--run-noise', type=arguments.noise_volts,
+                   default=math.sqrt(led.PAPER_R_SYS[0][0]),
                    help='noise of the Fig. 8/9 runs, V (0.2: Table I R_sys)')
     p.add_argument('--dropout-png', type=Path, help='write tracking vs dropout probability')
     p.add_argument('--dropout-json', type=Path, help='write the dropout sweep as JSON')
-    p.add_argument('--dropout-levels', type=floats, default=list(DEFAULT_DROPOUTS))
-    p.add_argument('--dropout-noise', type=float, default=1.0,
+    p.add_argument('--dropout-levels', type=arguments.numbers(0.0, 1.0),
+                   default=list(DEFAULT_DROPOUTS))
+    p.add_argument('--dropout-noise', type=arguments.noise_volts, default=1.0,
                    help='noise level of the dropout sweep, V (1.0)')
-    p.add_argument('--dropout-beta', type=float, default=DROPOUT_BETA,
+    p.add_argument('--dropout-beta', type=arguments.rate_deg_s, default=DROPOUT_BETA,
                    help=f'beta of the dropout sweep, deg/s ({DROPOUT_BETA:g}, as in Fig. 14)')
     return p
 
@@ -276,8 +275,6 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the requested experiments; return the exit status."""
     args = parser().parse_args(argv)
-    if args.runs < 1 or args.steps < 1:
-        parser().error('--runs and --steps must be positive')
     if not 0.0 <= args.dropout < 1.0 or any(not 0.0 <= d < 1.0 for d in args.dropout_levels):
         parser().error('dropout probabilities must be in [0, 1)')
 

@@ -15,9 +15,12 @@ import numpy as np
 from tskf_ros.core.linear_models import OWC_LINEAR_RANGE
 from tskf_ros.core.time_scales import jumps
 from tskf_ros.core.units import NS
+from tskf_ros.experiments import arguments
 from tskf_ros.led import PAPER_DT, TRACKING_ANGLE
 
 LED_NAMESPACE = '/led'
+# the largest ROS_DOMAIN_ID of ROS 2 on Linux (its ports must stay below 65536)
+MAX_DOMAIN_ID = 232
 LED_DT = PAPER_DT          # s: the LED link's sample period (config/led_link_simulator.yaml)
 
 
@@ -263,27 +266,34 @@ def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
     """Command line of the demo."""
     parser = argparse.ArgumentParser(
         prog='python -m tskf_ros.experiments.demo', description=__doc__.split('\n')[0])
-    parser.add_argument('--duration', type=float, default=300.0,
+    number = arguments.number
+    seconds = number(0.0, 86_400.0, open_low=True)      # of stamped data: at most a day
+    parser.add_argument('--duration', type=seconds, default=300.0,
                         help='seconds of stamped data (default: 300, as Cai IV-C)')
-    parser.add_argument('--duration-scale', type=float, default=0.05,
+    parser.add_argument('--duration-scale', type=number(0.0, 100.0, open_low=True),
+                        default=0.05,
                         help='wall time per stamped second (default 0.05: 300 s in 15 s)')
-    parser.add_argument('--rate', type=float, default=1.0, help='samples per second')
-    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--rate', type=number(0.0, 10_000.0, open_low=True), default=1.0,
+                        help='samples per second')
+    parser.add_argument('--seed', type=arguments.seed, default=0)
     parser.add_argument('--transition', choices=('euler', 'exact'), default='euler')
     parser.add_argument('--blockage', choices=('none', 'bernoulli', 'gilbert_elliott'),
                         default='none')
-    parser.add_argument('--drop-probability', type=float, default=0.0)
-    parser.add_argument('--domain-id', type=int, default=None,
+    parser.add_argument('--drop-probability', type=number(0.0, 1.0), default=0.0)
+    parser.add_argument('--domain-id', type=arguments.count(0, MAX_DOMAIN_ID), default=None,
                         help='ROS_DOMAIN_ID for all processes (default: from the '
                         'environment, else derived from the process id)')
-    parser.add_argument('--led-duration', type=float, default=60.0,
+    parser.add_argument('--led-duration', type=seconds, default=60.0,
                         help='seconds of stamped data of the LED alignment loop (default 60)')
-    parser.add_argument('--led-time-factor', type=float, default=4.0,
+    parser.add_argument('--led-time-factor', type=number(0.0, 1000.0, open_low=True),
+                        default=4.0,
                         help='the LED loop plays this many times faster than its stamps')
     parser.add_argument('--led-algorithm', choices=('ekf', 'hill_climbing', 'three_point'),
                         default='ekf')
-    parser.add_argument('--led-beta', type=float, default=1.2, help='deg/s (Fig. 8: 1.2)')
-    parser.add_argument('--led-noise', type=float, default=0.2, help='V (R_sys: 0.2)')
+    parser.add_argument('--led-beta', type=number(-1000.0, 1000.0), default=1.2,
+                        help='deg/s (Fig. 8: 1.2)')
+    parser.add_argument('--led-noise', type=number(0.0, 100.0), default=0.2,
+                        help='V (R_sys: 0.2)')
     parser.add_argument('--led-blockage', choices=('none', 'bernoulli', 'gilbert_elliott'),
                         default='none')
     parser.add_argument('--out', type=Path, default=Path('results'),
@@ -293,10 +303,7 @@ def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
                         help='skip replaying the sample bag')
     parser.add_argument('--no-alignment', action='store_true',
                         help='run the estimator demo only')
-    args = parser.parse_args(argv)
-    if not args.duration_scale > 0:
-        parser.error('--duration-scale must be > 0')
-    return args
+    return parser.parse_args(argv)
 
 
 def main(argv: Optional[list] = None) -> int:

@@ -20,7 +20,12 @@ from typing import Optional, Sequence
 import numpy as np
 
 from tskf_ros.core import irregular
+from tskf_ros.experiments import arguments
 from tskf_ros.experiments.output import save_results
+
+
+# the longest simulation the command line runs (25 times the paper's 4 h)
+MAX_HOURS = 100.0
 
 
 @dataclass(frozen=True)
@@ -289,11 +294,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the drogue example, print the RMS errors, write drogue.png and drogue.json."""
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--out', type=Path, required=True, help='output directory')
-    parser.add_argument('--seed', type=int, default=DrogueConfig.seed)
-    parser.add_argument('--hours', type=float, default=DrogueConfig.duration / 3600.0)
+    parser.add_argument('--seed', type=arguments.seed, default=DrogueConfig.seed)
+    parser.add_argument('--hours', type=arguments.number(0.0, MAX_HOURS, open_low=True),
+                        default=DrogueConfig.duration / 3600.0,
+                        help=f'simulated hours (default 4, at most {MAX_HOURS:g})')
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    r = run(DrogueConfig(seed=args.seed, duration=args.hours * 3600.0))
+    try:
+        r = run(DrogueConfig(seed=args.seed, duration=args.hours * 3600.0))
+    except irregular.IrregularError as exc:     # e.g. too short for one sampling interval
+        print(f'drogue: error: {exc}', file=sys.stderr)
+        return 1
     data = summary(r, time.perf_counter() - start)
     rms = data['rms']
     print(f'drogue: {data["samples"]} samples, {data["position_fixes"]} position fixes, '

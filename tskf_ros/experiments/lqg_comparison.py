@@ -12,7 +12,8 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
-from tskf_ros.experiments.alignment_mc import floats, save_figure, write_json
+from tskf_ros.experiments import arguments
+from tskf_ros.experiments.alignment_mc import save_figure, write_json
 
 DEFAULT_BETAS = (0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0)
 LABELS = {'p': 'EKF + P controller (paper, eq. (21))', 'lqg': 'EKF + drift + time-scale LQR'}
@@ -87,21 +88,26 @@ def parser() -> argparse.ArgumentParser:
     """Build the command-line interface."""
     p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.lqg_comparison',
                                 description=__doc__.split('\n\n')[0])
-    p.add_argument('--runs', type=int, default=1000, help='runs per point (1000)')
-    p.add_argument('--betas', type=floats, default=list(DEFAULT_BETAS),
+    p.add_argument('--runs', type=arguments.count(1, arguments.MAX_RUNS), default=1000,
+                   help='runs per point (1000)')
+    p.add_argument('--betas',
+                   type=arguments.numbers(0.0, arguments.MAX_RATE), default=list(DEFAULT_BETAS),
                    help='comma list of drift rates, deg/s (0,2,...,16)')
-    p.add_argument('--noise', type=float, default=math.sqrt(led.PAPER_R_SYS[0][0]),
+    p.add_argument('--noise', type=arguments.noise_volts, default=math.sqrt(led.PAPER_R_SYS[0][0]),
                    help='noise of the beta sweep, V (0.2: Table I R_sys)')
-    p.add_argument('--effort-noise', type=float, default=1.0, help='effort point noise, V (1)')
-    p.add_argument('--effort-beta', type=float, default=2.8,
+    p.add_argument('--effort-noise', type=arguments.noise_volts,
+                   default=1.0, help='effort point noise, V (1)')
+    p.add_argument('--effort-beta', type=arguments.rate_deg_s, default=2.8,
                    help='effort point drift rate, deg/s (2.8, Fig. 14)')
-    p.add_argument('--steps', type=int, default=400, help='steps per run (400 = 20 s)')
-    p.add_argument('--dt', type=float, default=led.PAPER_DT, help='time step, s (0.05)')
-    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--steps', type=arguments.count(1, arguments.MAX_STEPS), default=400,
+                   help='steps per run (400 = 20 s)')
+    p.add_argument('--dt', type=arguments.number(0.0, arguments.MAX_DT, open_low=True),
+                   default=led.PAPER_DT, help='time step, s (0.05)')
+    p.add_argument('--seed', type=arguments.seed, default=0)
     p.add_argument('--ablation', action='store_true',
                    help='also run the LQG variants of ABLATIONS at --ablation-beta (noise '
                         '--noise) and at the effort point')
-    p.add_argument('--ablation-beta', type=float, default=14.0,
+    p.add_argument('--ablation-beta', type=arguments.rate_deg_s, default=14.0,
                    help='drift rate of the ablation at --noise, deg/s (14)')
     p.add_argument('--json', type=Path, help='write the results as JSON')
     p.add_argument('--png', type=Path, help='write tracking % against beta')
@@ -111,10 +117,8 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the comparison; return the exit status."""
     args = parser().parse_args(argv)
-    if args.runs < 1 or args.steps < 1:
-        parser().error('--runs and --steps must be positive')
-    if not (args.dt > 0 and args.noise >= 0 and args.effort_noise >= 0):
-        parser().error('--dt must be > 0 and the noise levels >= 0')
+    if not (args.noise >= 0 and args.effort_noise >= 0):
+        parser().error('the noise levels must be >= 0')
     common = {'runs': args.runs, 'steps': args.steps, 'dt': args.dt, 'seed': args.seed}
     start = time.perf_counter()
     sweep: dict = {name: [] for name in led.CONTROLLERS}

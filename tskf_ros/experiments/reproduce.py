@@ -10,7 +10,12 @@ from typing import Optional
 import numpy as np
 
 from tskf_ros.core import linear_models as models, time_scales as timescale
+from tskf_ros.experiments import arguments
 from tskf_ros.experiments.output import save_figure, write_json
+
+# the command line's most points per time scale, and its finest dense step (P_1,2, T_d)
+MAX_POINTS = 100_000
+MIN_STEP = 0.001
 
 
 @dataclass
@@ -237,32 +242,40 @@ def td_summary(series: dict) -> dict:
     return res
 
 
-def main(argv: Optional[list] = None) -> int:
-    """Command-line entry point."""
+def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
+    """Parse and check the command line (one usage line for a value out of range)."""
     parser = argparse.ArgumentParser(
         prog='reproduce',
         description='Reproduce Bohner & Wintz Example 3.20 and Cai et al. Section V '
                     '(PNGs and JSON into --out).')
     parser.add_argument('--out', type=Path, default=Path('results'),
                         help='output folder (default: results/)')
-    parser.add_argument('--seed', type=int, default=2013, help='base random seed')
+    parser.add_argument('--seed', type=arguments.seed, default=2013, help='base random seed')
     parser.add_argument('--noise-scaling', choices=models.NOISE_SCALINGS, default='theory',
                         help="'theory': process noise mu*GQG^T per jump, measurement R/mu "
                              "(what Table 3 assumes); 'unit': N(0, Q) and N(0, R) at every "
                              'point whatever mu is')
-    parser.add_argument('--iterations', type=int, default=15,
+    points = arguments.count(2, MAX_POINTS)
+    parser.add_argument('--iterations', type=points, default=15,
                         help='points per time scale in the paper-length run (default 15)')
-    parser.add_argument('--long-iterations', type=int, default=150,
+    parser.add_argument('--long-iterations', type=points, default=150,
                         help='points per time scale in the longer run (default 150)')
-    parser.add_argument('--p12-step', type=float, default=0.25,
-                        help='step realising the dense parts of P_1,2 (default 0.25)')
-    parser.add_argument('--td-dense-step', type=float, default=0.1,
+    step = arguments.number(MIN_STEP, 1.0)
+    parser.add_argument('--p12-step', type=step, default=0.25,
+                        help='step realising the dense parts of P_1,2, below 1 (default 0.25)')
+    parser.add_argument('--td-dense-step', type=step, default=0.1,
                         help='step realising the dense parts of T_d in s (default 0.1)')
     args = parser.parse_args(argv)
-    if args.iterations < 2 or args.long_iterations < 2:
-        parser.error('--iterations and --long-iterations must be at least 2')
-    if not (0 < args.p12_step <= 1 and 0 < args.td_dense_step <= 1):
-        parser.error('--p12-step and --td-dense-step must be in (0, 1]')
+    if args.p12_step == 1.0:
+        # mu = 1 on P_1,2's dense part: I + mu A is singular for the spring-mass A
+        parser.error('argument --p12-step: must be below 1 (at 1, A is not regressive on '
+                     'P_1,2)')
+    return args
+
+
+def main(argv: Optional[list] = None) -> int:
+    """Command-line entry point."""
+    args = parse_args(argv)
 
     out = args.out
     summary: dict = {'seed': args.seed, 'noise_scaling': args.noise_scaling,

@@ -8,6 +8,7 @@ from sensor_msgs.msg import Illuminance
 from tskf_ros.core.diagnostic_status import (FrequencyParams, FrequencyStatus, LEVEL_NAMES,
                                              Status)
 from tskf_ros.messages import conversions
+from tskf_ros.messages.diagnostic_tasks import OUTPUT_FREQUENCY, POWER_METER
 from tskf_ros.messages.estimator_interface import POWER_TOPIC
 from tskf_ros.messages.parameter_schema import load_schema, ParameterError
 from tskf_ros.messages.qos import SENSOR_OUTPUT_QOS
@@ -81,11 +82,11 @@ def diagnostics_message(meter: PowerMeter, config: DriverConfig, stamp_ns: int,
     """Return the /diagnostics message: 'output frequency' and 'power meter' at stamp_ns."""
     level, message, values = meter.diagnostics()
     frequency.count = meter.published
-    device = Status('power meter', LEVEL_NAMES.index(level), message)
+    device = Status(POWER_METER, LEVEL_NAMES.index(level), message)
     for key, value in values.items():
         device.add(key, value)
     return conversions.diagnostics_to_msg(
-        stamp_ns, node_name, [frequency.run(Status('output frequency'), stamp_ns), device],
+        stamp_ns, node_name, [frequency.run(Status(OUTPUT_FREQUENCY), stamp_ns), device],
         hardware_id=config.session.resource)
 
 

@@ -16,6 +16,8 @@ from std_srvs.srv import Trigger
 from tskf_ros.core.diagnostic_status import FrequencyParams, FrequencyStatus, Status
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
+from tskf_ros.messages.diagnostic_tasks import OUTPUT_FREQUENCY
+from tskf_ros.messages.node_interfaces import RESET_SERVICE, TRUTH_TOPIC
 from tskf_ros.messages.parameter_schema import load_schema, ParameterSchema
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
 from tskf_ros.nodes.status_line import StatusLine
@@ -24,8 +26,6 @@ from tskf_ros.nodes.status_line import StatusLine
 MAX_BATCH = 10_000
 # its output frequency is WARN outside rate * (1 -/+ this): it catches up in batches
 SIMULATOR_RATE_TOLERANCE = 0.5
-# the evaluation truth of both simulators (sensor_msgs/msg/JointState)
-TRUTH_TOPIC = 'true_angle'
 # a link config dataclass of the core (OwcLinkConfig, LedLinkConfig)
 LinkConfig = TypeVar('LinkConfig')
 
@@ -132,7 +132,7 @@ class ReconfigurableNode(Node):
 
     def start_services(self) -> None:
         """Offer ~/reset (std_srvs/srv/Trigger): restart the session from its initial state."""
-        self.reset_service = self.create_service(Trigger, '~/reset', self._on_reset)
+        self.reset_service = self.create_service(Trigger, RESET_SERVICE, self._on_reset)
 
     def _on_reset(self, request: Trigger.Request,
                   response: Trigger.Response) -> Trigger.Response:
@@ -278,7 +278,7 @@ class LinkSimulatorNode(Node):
         """Publish (and return) the 'output frequency' of the samples taken."""
         now = self.get_clock().now().nanoseconds
         self.frequency.count = self.count()
-        stat = self.frequency.run(Status('output frequency'), now)
+        stat = self.frequency.run(Status(OUTPUT_FREQUENCY), now)
         msg = conversions.diagnostics_to_msg(now, self.get_name(), [stat],
                                              hardware_id=self.get_name())
         self.diag_pub.publish(msg)

@@ -10,6 +10,7 @@ from tskf_ros.core.diagnostic_status import KeyValue, Status, WARN
 from tskf_ros.messages import conversions
 from tskf_ros.messages import power_meter_interface as interface
 from tskf_ros.messages.context import end_context
+from tskf_ros.messages.diagnostic_tasks import POWER_METER
 from tskf_ros.messages.power_meter_interface import (DriverConfig, MeterError, NODE_NAME,
                                                      POWER_TOPIC, SENSOR_OUTPUT_QOS)
 from tskf_ros.nodes.node_base import ReconfigurableNode
@@ -263,7 +264,7 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
     def diagnostics_message(self, stamp_ns: int):
         """Return the meter's /diagnostics message, its lifecycle state in the message."""
         if self.session is None:
-            idle = Status('power meter', WARN, f'{self.state}: not reading',
+            idle = Status(POWER_METER, WARN, f'{self.state}: not reading',
                           [KeyValue('Lifecycle state', self.state)])
             return conversions.diagnostics_to_msg(stamp_ns, self.get_name(), [idle],
                                                   hardware_id=self.config.session.resource)

@@ -1,0 +1,122 @@
+"""
+Sphinx extension: a node's topics, services and diagnostic tasks from its declared interface.
+
+In a MyST page::
+
+    ```{topic-table} timescale_estimator
+    ```
+
+    ```{service-table} timescale_estimator
+    ```
+
+    ```{diagnostic-table} timescale_estimator
+    ```
+
+render the declaration of tskf_ros.messages.node_interfaces (built from the constants the
+nodes create their topics and services from; test/nodes/test_node_interfaces.py checks it
+against the running nodes): the topics (name, direction, type, content, QoS), the services (the node's,
+then rclpy's, every node's) and each diagnostic task (status name, levels, keys).
+"""
+
+from pathlib import Path
+
+from docutils import nodes
+from sphinx.application import Sphinx
+from sphinx.util.docutils import SphinxDirective
+
+from doc_tables import paragraph, table
+from tskf_ros.messages import diagnostic_tasks, interface_spec, node_interfaces
+from tskf_ros.messages.interface_spec import (NodeInterface, PARAMETER_SERVICES,
+                                              STANDARD_TOPICS, TYPE_DESCRIPTION_SERVICE)
+from tskf_ros.messages.node_interfaces import interface
+
+TOPIC_HEADER = ('topic', 'dir', 'type', 'content', 'QoS')
+TOPIC_WIDTHS = (18, 5, 20, 40, 17)
+SERVICE_HEADER = ('service', 'type', 'what it does')
+SERVICE_WIDTHS = (25, 25, 50)
+LEVEL_HEADER = ('level', 'when')
+LEVEL_WIDTHS = (10, 90)
+KEY_HEADER = ('keys', 'meaning')
+KEY_WIDTHS = (40, 60)
+# the modules a table is read from: a page is rebuilt when one changes
+SOURCES = (interface_spec, diagnostic_tasks, node_interfaces)
+
+
+class InterfaceDirective(SphinxDirective):
+    """A directive whose argument names a node; its page depends on the declaration."""
+
+    required_arguments = 1
+    has_content = False
+
+    def declared(self) -> NodeInterface:
+        """Return the node's declared interface, noting the modules it comes from."""
+        for module in SOURCES:
+            self.env.note_dependency(str(Path(module.__file__)))
+        return interface(self.arguments[0])
+
+
+def _code(text: str) -> nodes.literal:
+    return nodes.literal(text, text)
+
+
+class TopicTable(InterfaceDirective):
+    """Render the topics of the node named by the argument."""
+
+    def run(self) -> list:
+        """Return the table node."""
+        rows = []
+        for t in self.declared().topics:
+            kind = t.msg_type + (f' (default; the `{t.type_parameter}` parameter names it)'
+                             if t.type_parameter else '')
+            content = t.content + (f' ({t.provided_by})' if t.provided_by else '')
+            rows.append((_code(t.name), t.direction, kind, content, t.qos))
+        rows.append((', '.join(f'`{t.name}`' for t in STANDARD_TOPICS), 'out',
+                     ', '.join(t.msg_type for t in STANDARD_TOPICS),
+                     "the log and the parameter changes (rclpy), every node's", ''))
+        return [table(TOPIC_HEADER, TOPIC_WIDTHS, rows, 'topic-table')]
+
+
+class ServiceTable(InterfaceDirective):
+    """Render the services of the node named by the argument, rclpy's parameters last."""
+
+    def run(self) -> list:
+        """Return the table node."""
+        rows: list = [(_code(s.name), s.srv_type, s.content
+                       + (f' ({s.provided_by})' if s.provided_by else ''))
+                      for s in self.declared().services]
+        rows.append((', '.join(f'`{s.name}`' for s in PARAMETER_SERVICES),
+                     'rcl_interfaces/srv/*',
+                     "rclpy's parameter services (`ros2 param`), every node's"))
+        t = TYPE_DESCRIPTION_SERVICE
+        rows.append((_code(t.name), t.srv_type, "the types the node uses (rclpy), every node's"))
+        return [table(SERVICE_HEADER, SERVICE_WIDTHS, rows, 'service-table')]
+
+
+class DiagnosticTable(InterfaceDirective):
+    """Render each diagnostic task of the node named by the argument: levels, keys."""
+
+    def run(self) -> list:
+        """Return, per task, a paragraph naming its status, its levels and its keys."""
+        declared = self.declared()
+        out: list = []
+        for task, status in zip(declared.diagnostics, declared.status_names()):
+            title = nodes.paragraph(classes=['diagnostic-task'])
+            title += nodes.strong('', '', _code(status))
+            title += nodes.Text(': ')
+            title.extend(paragraph(task.summary).children)
+            out.append(title)
+            out.append(table(LEVEL_HEADER, LEVEL_WIDTHS,
+                             [(level.level, level.when) for level in task.levels],
+                             'diagnostic-levels'))
+            out.append(table(KEY_HEADER, KEY_WIDTHS,
+                             [(', '.join(f'`{key}`' for key in row.keys), row.meaning)
+                              for row in task.keys], 'diagnostic-keys'))
+        return out
+
+
+def setup(app: Sphinx) -> dict:
+    """Register the directives."""
+    app.add_directive('topic-table', TopicTable)
+    app.add_directive('service-table', ServiceTable)
+    app.add_directive('diagnostic-table', DiagnosticTable)
+    return {'parallel_read_safe': True, 'parallel_write_safe': True, 'version': '1'}

@@ -1,0 +1,43 @@
+"""The interface declaration's pieces: QoS in words, diagnostic key patterns, lookups."""
+
+import pytest
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
+                       ReliabilityPolicy)
+
+from tskf_ros.messages.interface_spec import DiagnosticTask, KeyRow, qos_summary
+from tskf_ros.messages.node_interfaces import interface, INTERFACES
+
+
+def test_qos_summary_says_rclpys_profiles_in_words():
+    # rclpy's sensor-data profile: best effort, keep last 5 (rmw qos_profile_sensor_data)
+    assert qos_summary(qos_profile_sensor_data) == 'best effort, keep last 5'
+    assert qos_summary(QoSProfile(depth=10)) == 'reliable, keep last 10'
+    latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    assert qos_summary(latched) == 'reliable, keep last 1, transient local'
+
+
+def test_a_task_allows_its_keys_and_reason_patterns_only():
+    task = DiagnosticTask('t', '', (), (KeyRow(('Samples received', 'Rejected (<reason>)',
+                                                'skipped_<reason>'), ''),))
+    assert task.allows('Samples received') and task.allows('Rejected (gated)')
+    assert task.allows('skipped_timeout')
+    assert not task.allows('Rejected') and not task.allows('Samples')
+    assert not task.allows('Rejected (gated) extra') and not task.allows('skipped_')
+    # the parentheses are literal, not a regular expression's group
+    assert not task.allows('Rejected gated')
+
+
+def test_status_names_and_tasks_of_a_declared_node():
+    declared = interface('timescale_estimator')
+    assert declared.status_names('est') == ['est: input frequency', 'est: timestamp delay',
+                                            'est: filter health', 'est: time scale']
+    assert declared.task('est: filter health').name == 'filter health'
+    with pytest.raises(KeyError):
+        declared.task('est: nothing')
+    with pytest.raises(ValueError, match='not a node of tskf_ros'):
+        interface('talker')
+    # with every_topic_parameters() every topic exists: the smoothed estimate needs a lag
+    assert declared.every_topic_parameters() == {'smoothing_lag': 1}
+    assert all(i.node == name for name, i in INTERFACES.items())

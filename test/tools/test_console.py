@@ -1,0 +1,150 @@
+"""
+Ctrl-C on a console script in any phase: exit 130 (or the tool's own 0), never a traceback.
+
+Each tool runs as a process through its console-script function of tskf_ros.tools.console,
+as the installed executable runs it, and takes SIGINT at a point found by polling a
+condition with a deadline (no sleeps): at once, while its third-party modules load (their
+shared objects appear in /proc/PID/maps), and for the tools that run until stopped, once
+they are running (their first output, or the recording directory).
+"""
+
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+from bag.helpers import make_bag, TIMEOUT
+from entry_points import console_script_targets
+import pytest
+
+from tskf_ros.tools import console
+
+REPO = Path(__file__).resolve().parent.parent.parent
+INTERRUPTED = 130
+POLL = 0.002                    # s between two looks at a condition (not a synchronisation)
+
+
+def start(tool: str, args: list, tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+    """Start one console script (as its executable does) with stderr to a file."""
+    err = tmp_path / f'{tool}.err'
+    code = f'from tskf_ros.tools.console import {tool}; {tool}()'
+    with open(err, 'w') as f:
+        proc = subprocess.Popen([sys.executable, '-c', code, *args], cwd=tmp_path,
+                                stdout=subprocess.DEVNULL, stderr=f)
+    return proc, err
+
+
+def wait_for(condition, proc: subprocess.Popen) -> bool:
+    """Poll condition until it holds (True) or proc ends (False); fail after TIMEOUT."""
+    deadline = time.monotonic() + TIMEOUT
+    while not condition():
+        if proc.poll() is not None:
+            return False
+        assert time.monotonic() < deadline, 'the condition never held'
+        time.sleep(POLL)
+    return True
+
+
+def loading_site_packages(pid: int) -> bool:
+    """Return whether the process has mapped a shared object of a third-party package."""
+    try:
+        maps = Path(f'/proc/{pid}/maps').read_text()
+    except OSError:
+        return False
+    return any('-packages/' in line and '.so' in line for line in maps.splitlines())
+
+
+def interrupt(proc: subprocess.Popen, err: Path) -> tuple[int, str]:
+    """Send SIGINT (if it still runs); return its exit status and stderr."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        code = proc.wait(timeout=TIMEOUT)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise
+    return code, err.read_text()
+
+
+def test_every_console_script_goes_through_the_wrapper():
+    targets = console_script_targets()
+    assert set(targets) == set(console.TOOLS)
+    for name, target in targets.items():
+        # the installed script calls the tool's function, or its quiet wrapper here
+        assert target in (console.TOOLS[name], f'tskf_ros.tools.console:{name}'), name
+        assert callable(getattr(console, name))
+
+
+@pytest.mark.parametrize('tool', sorted(console.TOOLS))
+def test_ctrl_c_while_the_modules_load_is_quiet(tool, tmp_path):
+    # --help: the tool ends by itself (0) once loaded; a SIGINT before that is 130
+    proc, err = start(tool, ['--help'], tmp_path)
+    wait_for(lambda: loading_site_packages(proc.pid), proc)
+    code, text = interrupt(proc, err)
+    assert 'Traceback' not in text and code in (INTERRUPTED, 0), (code, text)
+    assert len(text.splitlines()) <= 1, text
+
+
+@pytest.mark.parametrize('tool', ['play', 'sweep', 'timescale_estimator'])
+def test_ctrl_c_at_once_is_quiet(tool, tmp_path):
+    # before the interpreter installs its handler, SIGINT ends it as the signal does
+    proc, err = start(tool, ['--help'], tmp_path)
+    code, text = interrupt(proc, err)
+    assert 'Traceback' not in text and code in (INTERRUPTED, 0, -signal.SIGINT), (code, text)
+
+
+@pytest.fixture(scope='module')
+def bag(tmp_path_factory):
+    return make_bag(tmp_path_factory.mktemp('console') / 'bag', [0.0, 0.5, 1.0, 30.0])
+
+
+def test_ctrl_c_while_play_plays_is_quiet(bag, tmp_path):
+    proc, err = start('play', [str(bag), '--loop', '--disable-keyboard-controls'], tmp_path)
+    assert wait_for(lambda: loading_site_packages(proc.pid) and 'rclpy' in Path(
+        f'/proc/{proc.pid}/maps').read_text(), proc)
+    code, text = interrupt(proc, err)
+    assert 'Traceback' not in text and code in (INTERRUPTED, 0), (code, text)
+
+
+def test_ctrl_c_while_record_records_is_quiet(tmp_path):
+    out = tmp_path / 'out'
+    out.mkdir()
+    proc, err = start('record', ['-o', str(out / 'bag'), '--topics', '/x:std_msgs/msg/String'],
+                      tmp_path)
+    assert wait_for(lambda: any(out.iterdir()), proc), err.read_text()   # the bag begun
+    code, text = interrupt(proc, err)
+    assert 'Traceback' not in text and code in (INTERRUPTED, 0), (code, text)
+
+
+def test_ctrl_c_while_a_node_runs_is_quiet(tmp_path):
+    proc, err = start('timescale_estimator', ['--ros-args', '--log-level', 'info'], tmp_path)
+    assert wait_for(lambda: err.stat().st_size > 0, proc), err.read_text()
+    code, text = interrupt(proc, err)
+    assert 'Traceback' not in text and code in (INTERRUPTED, 0), (code, text)
+
+
+def test_the_wrapper_turns_an_interrupt_into_130(monkeypatch, capsys):
+    def interrupted():
+        raise KeyboardInterrupt
+    monkeypatch.setitem(console.TOOLS, 'play', f'{__name__}:interrupted_entry')
+    monkeypatch.setattr(sys.modules[__name__], 'interrupted_entry', interrupted, raising=False)
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit) as exit_:
+            console.play()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert exit_.value.code == INTERRUPTED and capsys.readouterr().err == ''
+
+
+def test_the_wrapper_passes_the_tools_status_on(monkeypatch):
+    monkeypatch.setitem(console.TOOLS, 'reindex', f'{__name__}:status_entry')
+    monkeypatch.setattr(sys.modules[__name__], 'status_entry', lambda: 3, raising=False)
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit) as exit_:
+            console.reindex()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert exit_.value.code == 3

@@ -1,0 +1,80 @@
+"""argparse types of the experiments' numeric options: any value out of range is one usage line."""
+
+import argparse
+import math
+from typing import Callable
+
+# seeds: what numpy's default_rng takes as one 32-bit word (every documented seed fits)
+SEED_LIMIT = 2 ** 32
+# the Monte Carlo experiments' largest runs per point and steps per run (100 times the
+# papers'), and their longest time step in s (the loop runs at 20 Hz: 0.05)
+MAX_RUNS = 100_000
+MAX_STEPS = 100_000
+MAX_DT = 60.0
+# the LED experiments' noise standard deviations (V: over 30 times the 3 V peak) and drift
+# rates (deg/s: a turn a second); beyond them the intensity model overflows to NaN
+MAX_NOISE = 100.0
+MAX_RATE = 360.0
+
+
+def seed(text: str) -> int:
+    """Parse a random seed: an integer in [0, 2**32)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not an integer: {text!r}') from None
+    if not 0 <= value < SEED_LIMIT:
+        raise argparse.ArgumentTypeError(f'a seed must be in [0, 2**32), got {text}')
+    return value
+
+
+def count(low: int, high: int) -> Callable[[str], int]:
+    """Return an argparse type of an integer in [low, high]."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'not an integer: {text!r}') from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f'must be in [{low}, {high}], got {text}')
+        return value
+    parse.__name__ = 'count'
+    return parse
+
+
+def number(low: float, high: float, *, open_low: bool = False) -> Callable[[str], float]:
+    """Return an argparse type of a finite float in [low, high] ((low, high] if open_low)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+        above = value > low if open_low else value >= low
+        if not (math.isfinite(value) and above and value <= high):
+            raise argparse.ArgumentTypeError(
+                f'must be a finite number in {"(" if open_low else "["}{low:g}, {high:g}], '
+                f'got {text}')
+        return value
+    parse.__name__ = 'number'
+    return parse
+
+
+def numbers(low: float, high: float) -> Callable[[str], list[float]]:
+    """Return an argparse type of a comma-separated list of finite floats in [low, high]."""
+    one = number(low, high)
+
+    def parse(text: str) -> list[float]:
+        values = [one(part) for part in text.split(',') if part.strip()]
+        if not values:
+            raise argparse.ArgumentTypeError(f'need a comma-separated list of numbers, '
+                                             f'got {text!r}')
+        return values
+    parse.__name__ = 'numbers'
+    return parse
+
+
+# the LED experiments' option types
+noise_volts = number(0.0, MAX_NOISE)
+noise_list = numbers(0.0, MAX_NOISE)
+rate_deg_s = number(0.0, MAX_RATE)
+angle_deg = number(-180.0, 180.0)

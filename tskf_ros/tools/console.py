@@ -1,0 +1,73 @@
+"""The console scripts' entry: import the tool, run it, and end quietly on Ctrl-C in any phase."""
+
+import importlib
+import signal
+import sys
+from typing import Callable, NoReturn
+
+from tskf_ros.bag.bag_errors import EXIT_INTERRUPTED
+
+# each console script (setup.py's console_scripts) and the function it runs;
+# test/tools/test_console.py checks this table against setup.py
+TOOLS = {
+    'reproduce': 'tskf_ros.experiments.reproduce:main',
+    'power_meter_simulator': 'tskf_ros.nodes.power_meter_simulator:main',
+    'timescale_estimator': 'tskf_ros.nodes.timescale_estimator:main',
+    'record': 'tskf_ros.bag.recorder:console_main',
+    'play': 'tskf_ros.bag.player:console_main',
+    'replay_offline': 'tskf_ros.bag.replay.cli:console_main',
+    'reindex': 'tskf_ros.bag.reindex:console_main',
+    'plot_bag': 'tskf_ros.tools.plot_bag:console_main',
+    'make_sample_bags': 'tskf_ros.tools.sample_bags:console_main',
+    'led_link_simulator': 'tskf_ros.nodes.led_link_simulator:main',
+    'alignment': 'tskf_ros.nodes.alignment:main',
+    'power_meter_driver': 'tskf_ros.nodes.power_meter_driver:main',
+    'fit_noise': 'tskf_ros.experiments.fit_noise:console_main',
+    'sweep': 'tskf_ros.experiments.sweep:console_main',
+    'foxglove_bridge': 'tskf_ros.tools.foxglove_bridge:main',
+}
+
+
+def run(tool: str) -> NoReturn:
+    """
+    Import and run one tool (a key of TOOLS); exit with its status.
+
+    A KeyboardInterrupt while its modules import (numpy, rclpy: seconds on a loaded
+    machine), while it runs or while it cleans up ends the process with EXIT_INTERRUPTED
+    and nothing on stderr; once the tool has ended, Ctrl-C is ignored.
+    """
+    try:
+        module, _, name = TOOLS[tool].partition(':')
+        entry: Callable[[], object] = getattr(importlib.import_module(module), name)
+        status = entry()
+    except KeyboardInterrupt:
+        status = EXIT_INTERRUPTED
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)    # the exit itself is not interrupted
+    sys.exit(status)
+
+
+def entry_point(tool: str) -> Callable[[], NoReturn]:
+    """Return the console-script function of one tool (what setup.py names)."""
+    def main() -> NoReturn:
+        run(tool)
+    main.__name__ = main.__qualname__ = tool
+    main.__doc__ = f'Run {tool} (the console script), quiet on Ctrl-C.'
+    return main
+
+
+reproduce = entry_point('reproduce')
+power_meter_simulator = entry_point('power_meter_simulator')
+timescale_estimator = entry_point('timescale_estimator')
+record = entry_point('record')
+play = entry_point('play')
+replay_offline = entry_point('replay_offline')
+reindex = entry_point('reindex')
+plot_bag = entry_point('plot_bag')
+make_sample_bags = entry_point('make_sample_bags')
+led_link_simulator = entry_point('led_link_simulator')
+alignment = entry_point('alignment')
+power_meter_driver = entry_point('power_meter_driver')
+fit_noise = entry_point('fit_noise')
+sweep = entry_point('sweep')
+foxglove_bridge = entry_point('foxglove_bridge')
