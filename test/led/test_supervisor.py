@@ -176,3 +176,13 @@ def test_a_known_start_ekf_starts_from_the_clipped_prior(clip, want):
     sup = Supervisor(led.make_aligner('ekf', runs=3), config, RESPONSE)
     np.testing.assert_allclose(sup.tracker.P, np.tile(np.diag(want), (3, 1, 1)))
     np.testing.assert_allclose(sup.tracker.x, np.tile(led.PAPER_X0, (3, 1)))
+
+
+@pytest.mark.parametrize('after', [14, 18, 22, 26])
+def test_a_block_right_after_the_hand_over_is_a_loss(after):
+    # the mean in lock holds a few samples then; the dark ones must not make it a faded
+    # light (or a dim one whose low level is 0) before it counts
+    found = play(Scene(bearing=-40.0), 200).transitions()[0][0]
+    block = (found + after, found + after + 78)
+    played = play(Scene(bearing=-40.0, blocked=(block,), noise=1.0, seed=1), block[1] + 60)
+    assert played.declared[block[0]:block[1]].any()

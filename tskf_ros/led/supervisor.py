@@ -156,9 +156,14 @@ class Supervisor:
             # e_k = nu^2 / S of the new sample against the prior (before the step uses it)
             nis = self.tracker.innovation_distance(stamp, zt) ** 2
         inner = self.tracker.step(stamp, np.where(tracking, zt, np.nan))
+        # the mean in lock counts once it holds bright_samples (a mean of a few samples is no
+        # evidence: right after a hand-over the dark samples of a block would make it small)
+        known = self.bright_count >= cfg.bright_samples
         # the low level follows a light that dims: at most level_fraction of its mean in lock
-        level = np.fmin(cfg.lock.level, cfg.level_fraction * self.bright)
-        level = np.where(self.bright < cfg.fade * cfg.noise, -np.inf, level)   # faded
+        level = np.where(known, np.fmin(cfg.lock.level, cfg.level_fraction * self.bright),
+                         cfg.lock.level)
+        # faded: a mean in lock under the noise; no intensity test
+        level = np.where(known & (self.bright < cfg.fade * cfg.noise), -np.inf, level)
         self.verdict = verdict = self.lock.update(z, nis, tracking, level)
         # good lock: a full window since the hand-over with few low samples
         self.tracked = np.where(tracking, self.tracked + 1, 0)
