@@ -302,10 +302,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     start = time.perf_counter()
     try:
         r = run(DrogueConfig(seed=args.seed, duration=args.hours * 3600.0))
+        data = summary(r, time.perf_counter() - start)
     except irregular.IrregularError as exc:     # e.g. too short for one sampling interval
         print(f'drogue: error: {exc}', file=sys.stderr)
         return 1
-    data = summary(r, time.perf_counter() - start)
     rms = data['rms']
     print(f'drogue: {data["samples"]} samples, {data["position_fixes"]} position fixes, '
           f'intervals {data["sampling_intervals"][0]}..{data["sampling_intervals"][-1]}')
