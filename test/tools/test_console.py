@@ -148,3 +148,37 @@ def test_the_wrapper_passes_the_tools_status_on(monkeypatch):
     finally:
         signal.signal(signal.SIGINT, previous)
     assert exit_.value.code == 3
+
+
+FAKE_TOOL = """
+import os, signal
+try:
+    os.kill(os.getpid(), signal.SIGINT)     # Ctrl-C inside an extension's import:
+    for _ in range(10 ** 7):                 # numpy turns it into an ImportError
+        pass
+except KeyboardInterrupt:
+    raise ImportError('PyCapsule_Import could not import module "datetime"')
+def main():
+    return 0
+"""
+
+
+@pytest.mark.parametrize('interrupt', [True, False])
+def test_an_error_after_a_ctrl_c_is_the_interrupt(tmp_path, monkeypatch, interrupt):
+    (tmp_path / 'fake_tool.py').write_text(
+        FAKE_TOOL if interrupt else FAKE_TOOL.replace('os.kill(os.getpid(), signal.SIGINT)',
+                                                      'raise KeyboardInterrupt'))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setitem(console.TOOLS, 'fake', 'fake_tool:main')
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        if interrupt:
+            with pytest.raises(SystemExit) as end:
+                console.run('fake')
+            assert end.value.code == INTERRUPTED
+        else:
+            # the same error with no Ctrl-C is a real error: it is raised
+            with pytest.raises(ImportError, match='PyCapsule_Import'):
+                console.run('fake')
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -3,7 +3,8 @@
 import importlib
 import signal
 import sys
-from typing import Callable, NoReturn
+from types import FrameType
+from typing import Callable, NoReturn, Optional
 
 from tskf_ros.bag.bag_errors import EXIT_INTERRUPTED
 
@@ -34,13 +35,27 @@ def run(tool: str) -> NoReturn:
 
     A KeyboardInterrupt while its modules import (numpy, rclpy: seconds on a loaded
     machine), while it runs or while it cleans up ends the process with EXIT_INTERRUPTED
-    and nothing on stderr; once the tool has ended, Ctrl-C is ignored.
+    and nothing on stderr; once the tool has ended, Ctrl-C is ignored.  An interrupt that
+    lands inside a C extension's import comes out as another error (numpy: an ImportError
+    "PyCapsule_Import could not import module"): after a Ctrl-C, any error is the
+    interrupt.
     """
+    interrupted = False
+
+    def on_sigint(signum: int, frame: Optional[FrameType]) -> None:
+        nonlocal interrupted
+        interrupted = True
+        raise KeyboardInterrupt
+    signal.signal(signal.SIGINT, on_sigint)    # Python's own handler, which also remembers
     try:
         module, _, name = TOOLS[tool].partition(':')
         entry: Callable[[], object] = getattr(importlib.import_module(module), name)
         status = entry()
     except KeyboardInterrupt:
+        status = EXIT_INTERRUPTED
+    except Exception:  # noqa: B902 - only after a Ctrl-C, which it then is
+        if not interrupted:
+            raise
         status = EXIT_INTERRUPTED
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)    # the exit itself is not interrupted
