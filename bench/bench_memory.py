@@ -16,13 +16,12 @@ import argparse
 import json
 import os
 from pathlib import Path
-import signal
 import subprocess
 import sys
 import tempfile
 import time
 
-from bench_stream import cpu_seconds  # noqa: I100 - bench/, next to this script
+from bench_stream import cpu_seconds, stop_processes  # noqa: I100 - bench/, next to this script
 
 REPO = Path(__file__).resolve().parent.parent
 STREAM = Path(__file__).resolve().parent / 'bench_stream.py'
@@ -78,13 +77,7 @@ def main() -> None:
         cpu = (cpu_seconds(node.pid) - cpu0) / (time.monotonic() - start)
         sent = json.loads(publisher.communicate(timeout=TIMEOUT)[0].strip().splitlines()[-1])
     finally:
-        if publisher is not None and publisher.poll() is None:
-            publisher.kill()
-        node.send_signal(signal.SIGINT)
-        try:
-            node.wait(timeout=TIMEOUT)
-        except subprocess.TimeoutExpired:
-            node.kill()
+        stop_processes(publisher, node)
         log.close()
     print('s  VmRSS MiB')
     for second, kib in enumerate(samples):

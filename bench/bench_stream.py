@@ -24,6 +24,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from typing import Optional
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -80,6 +81,17 @@ def publish(namespace: str, rate: float, seconds: float) -> None:
     node.destroy_node()
     context.try_shutdown()
     print(json.dumps({'sent': sent, 'wall': wall}), flush=True)
+
+
+def stop_processes(publisher: Optional[subprocess.Popen], node: subprocess.Popen) -> None:
+    """Kill the publisher if it still runs; stop the node with SIGINT (kill it after TIMEOUT)."""
+    if publisher is not None and publisher.poll() is None:
+        publisher.kill()
+    node.send_signal(signal.SIGINT)
+    try:
+        node.wait(timeout=TIMEOUT)
+    except subprocess.TimeoutExpired:
+        node.kill()
 
 
 def cpu_seconds(pid: int) -> float:
@@ -180,13 +192,7 @@ def main() -> None:
         executor.shutdown()
         monitor.destroy_node()
         context.try_shutdown()
-        if publisher is not None and publisher.poll() is None:
-            publisher.kill()
-        node.send_signal(signal.SIGINT)
-        try:
-            node.wait(timeout=TIMEOUT)
-        except subprocess.TimeoutExpired:
-            node.kill()
+        stop_processes(publisher, node)
         log.seek(0)
         lines = log.read().splitlines()
         log.close()

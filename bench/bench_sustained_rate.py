@@ -26,7 +26,6 @@ import argparse
 import json
 import os
 from pathlib import Path
-import signal
 import subprocess
 import sys
 import tempfile
@@ -46,7 +45,8 @@ from rclpy.qos import QoSProfile  # noqa: E402
 from tskf_ros.messages import conversions  # noqa: E402
 from tskf_ros.nodes.node_runner import make_executor  # noqa: E402
 
-from bench_stream import cpu_seconds  # noqa: E402, I100 - bench/, next to this script
+# bench/, next to this script
+from bench_stream import cpu_seconds, stop_processes  # noqa: E402, I100
 
 STREAM = Path(__file__).resolve().parent / 'bench_stream.py'
 TIMEOUT = 60.0          # s: a bound on discovery and on the node settling, never a result
@@ -110,13 +110,7 @@ def run_once(rate: float, seconds: float, executor: str) -> dict:
         spinner.shutdown()
         monitor.destroy_node()
         context.try_shutdown()
-        if publisher is not None and publisher.poll() is None:
-            publisher.kill()
-        node.send_signal(signal.SIGINT)
-        try:
-            node.wait(timeout=TIMEOUT)
-        except subprocess.TimeoutExpired:
-            node.kill()
+        stop_processes(publisher, node)
         log.close()
     received, transport = seen[-1]
     return {'rate': rate, 'sent': sent, 'received': received, 'transport': transport,
