@@ -6,9 +6,11 @@ import os
 from pathlib import Path
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
+import warnings
 
 import pytest
 from stderr_lines import one_line
@@ -341,3 +343,22 @@ def test_ctrl_c_in_a_dask_sweep_is_one_line_without_worker_tracebacks(bags, tmp_
     lines = [line for line in err.splitlines() if line.strip()]
     assert proc.returncode == 130 and len(lines) == 1, err
     assert 'interrupted' in lines[0] and 'Traceback' not in err
+
+
+def test_a_busy_port_8787_gives_no_warning():
+    # another sweep (or any dask cluster) holds 8787: the scheduler's HTTP server takes a
+    # loopback port of its own instead of warning on stderr
+    holder = socket.socket()
+    try:
+        holder.bind(('0.0.0.0', 8787))
+        holder.listen()
+    except OSError:
+        pass                                    # already held by someone else: as wanted
+    try:
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter('always')
+            cluster = sweep.local_cluster(1)
+            cluster.close()
+        assert not [w for w in seen if 'already in use' in str(w.message)]
+    finally:
+        holder.close()

@@ -114,6 +114,10 @@ def local_cluster(workers: int):
     try:
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                             host='127.0.0.1', dashboard_address=None,
+                            # with no dashboard the scheduler still serves HTTP (health
+                            # routes), on 8787 unless told: a port of its own on loopback,
+                            # so that two sweeps do not warn "Port 8787 is already in use"
+                            scheduler_kwargs={'dashboard_address': '127.0.0.1:0'},
                             silence_logs=logging.ERROR)
     finally:
         if main:
