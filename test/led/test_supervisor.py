@@ -39,6 +39,7 @@ class Played:
     states: np.ndarray
     declared: np.ndarray
     phi: np.ndarray
+    handovers: int = 0
 
     def transitions(self) -> list[tuple[int, int]]:
         """Return (sample, new state) at each change of state."""
@@ -62,7 +63,7 @@ def play(scene: Scene, steps: int, tracker: str = 'ekf',
         states.append(int(sup.state[0]))
         declared.append(bool(sup.declared[0]))
         phis.append(phi)
-    return Played(np.array(states), np.array(declared), np.array(phis))
+    return Played(np.array(states), np.array(declared), np.array(phis), int(sup.handovers[0]))
 
 
 @pytest.mark.parametrize('bearing, first_leg', [(-40.0, False), (35.0, True)])
@@ -186,3 +187,45 @@ def test_a_block_right_after_the_hand_over_is_a_loss(after):
     block = (found + after, found + after + 78)
     played = play(Scene(bearing=-40.0, blocked=(block,), noise=1.0, seed=1), block[1] + 60)
     assert played.declared[block[0]:block[1]].any()
+
+
+@pytest.mark.parametrize('tracker, handovers', [('ekf', 0), ('hill_climbing', 1)])
+def test_a_loss_of_a_dim_light_is_held_by_the_ekf_and_searched_for_by_a_baseline(
+        tracker, handovers):
+    # dimmed to 70 %: a mean in lock of about 1.1 V, between `fade` (1 V) and `hold` (2 V)
+    # x noise; blocked for 2.5 s.  The EKF holds (keeps steering, no sweep) and is tracking
+    # again a window after the light is back, with no hand-over; hill-climbing searches.
+    config = SupervisorConfig(start='tracking')
+    played = play(Scene(bearing=-5.0, fade=(50, 150, 0.7), blocked=((250, 300),)), 400,
+                  tracker, config)
+    (lost, s1), (found, s2) = played.transitions()[:2]
+    assert (s1, s2) == (LOST, TRACKING)
+    assert 250 + config.lock.corroborate - 1 <= lost <= 250 + config.lock.low_count - 1
+    assert played.handovers == handovers
+    if tracker == 'ekf':
+        assert 300 < found <= 300 + config.lock.window
+        assert played.declared.sum() == 1
+    else:
+        # the sweep's first leg reaches 15 deg past the last good angle
+        assert np.max(np.abs(played.phi[lost:found])) > led.TRACKING_ANGLE + 10.0
+
+
+@pytest.mark.parametrize('hold_samples', [0, 100])
+def test_a_held_loss_turns_into_a_search_after_hold_samples(hold_samples):
+    # blocked for 10 s: the hold ends after hold_samples and the sweep widens from there
+    config = SupervisorConfig(start='tracking', hold_samples=hold_samples)
+    played = play(Scene(bearing=-5.0, fade=(50, 150, 0.7), blocked=((250, 450),)), 450,
+                  'ekf', config)
+    lost = played.transitions()[0][0]
+    assert played.states[lost] == LOST and np.all(played.states[lost:] == LOST)
+    search = lost + hold_samples + 1
+    # holding: the EKF's own scan keeps it near the light; searching: the legs widen
+    assert np.max(np.abs(played.phi[lost:search])) < led.TRACKING_ANGLE + 5.0
+    assert np.max(np.abs(played.phi[search:])) > 3 * led.TRACKING_ANGLE
+
+
+def test_config_refuses_a_negative_hold():
+    with pytest.raises(led.AlignmentError, match='hold must be >= 0'):
+        SupervisorConfig(hold=-1.0)
+    with pytest.raises(led.AlignmentError, match='hold_samples must be >= 0'):
+        SupervisorConfig(hold_samples=-1)

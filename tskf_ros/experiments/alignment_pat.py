@@ -14,6 +14,7 @@ from tskf_ros.led.supervisor import STATES, Supervisor, SupervisorConfig, TRACKI
 PAT_ALGORITHMS = {'ekf_pat': 'ekf', 'hill_climbing_pat': 'hill_climbing',
                   'three_point_pat': 'three_point', 'ekf_reset': 'ekf'}
 ACQUIRED_WITHIN = 10.0       # s: the cold-start goal
+MIN_NOISE = 0.1              # V: the least sigma ekf_pat's R is set from (noise 0: R > 0)
 
 
 class Recorded:
@@ -45,7 +46,15 @@ class Recorded:
 def build_pat(name: str, runs: int, link: led.TrackingLinkConfig,
               response: led.IncidenceResponse, ekf: led.EKFConfig, clip: bool,
               config: Optional[SupervisorConfig] = None) -> Recorded:
-    """Build the supervised aligner `name` (one of PAT_ALGORITHMS) for `runs` runs."""
+    """
+    Build the supervised aligner `name` (one of PAT_ALGORITHMS) for `runs` runs.
+
+    ekf_pat's EKF is told the link's noise: R = sigma^2 I (Table I's R is 1 V^2 at every
+    level of Fig. 10); the plain ekf and ekf_reset keep Table I.
+    """
+    if name == 'ekf_pat':
+        r = max(link.noise, MIN_NOISE) ** 2
+        ekf = dataclasses.replace(ekf, R=((r, 0.0), (0.0, r)))
     tracker = led.make_aligner(PAT_ALGORITHMS[name], runs=runs, dt=link.dt, response=response,
                                ekf=ekf, clip=clip)
     if config is None:
@@ -180,4 +189,4 @@ def plot_pat_run(traj: led.Trajectory, record: Recorded, *, run: int = 0,
 
 
 __all__ = ['plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'empty_record', 'evaluate', 'metrics',
-           'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']
+           'MIN_NOISE', 'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']

@@ -7,7 +7,8 @@ tracker starts from the least-squares fit of what the scan saw (the EKF's x and 
 from it, not from Table I's P0), the base turned onto the fitted bearing; tracking: the
 aligner (scanning EKF of eq. (13)-(21), or a baseline of Section V) steers, watched by
 lock_detector; lost: the sweep again, centred on the last good pointing angle and
-widening.  Vectorised over runs like the aligners.  Design: doc/pointing.md.
+widening, or for the EKF and a dim light first a hold (the EKF keeps steering, tracking
+again once a window is clean).  Vectorised over runs like the aligners.  Design: doc/pointing.md.
 """
 
 from dataclasses import dataclass, field
@@ -53,15 +54,22 @@ class SupervisorConfig:
     fade: float = 1.0
     # a known-start EKF's P0 gets the same clip: Table I's diag(100, 1000) throws runs off
     clip_prior: bool = True
+    # times `noise`: a loss of a light whose mean in lock is below this is held, not searched
+    # for (a sweep cannot see a light that dim): the tracker keeps steering, tracking again
+    # after a full window with few low samples, or the sweep after hold_samples (0: never)
+    hold: float = 2.0
+    hold_samples: int = 100
 
     def __post_init__(self) -> None:
         """Check the supervisor's settings; raise AlignmentError with the reason."""
         if self.start not in STARTS:
             raise AlignmentError(f'start must be one of {STARTS}, got {self.start!r}')
-        for name in ('noise', 'max_step', 'inflate', 'level_fraction', 'fade'):
+        for name in ('noise', 'max_step', 'inflate', 'level_fraction', 'fade', 'hold'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise AlignmentError(f'{name} must be >= 0, got {value}')
+        if self.hold_samples < 0:
+            raise AlignmentError(f'hold_samples must be >= 0, got {self.hold_samples}')
         if self.bright_samples < 1:
             raise AlignmentError(f'bright_samples must be >= 1, got {self.bright_samples}')
         if not self.noise > 0 or not self.inflate > 0:
@@ -106,7 +114,8 @@ class Supervisor:
         # mean intensity in good lock (V; NaN: none yet) and how many samples it holds
         self.bright = np.full(n, np.nan)
         self.bright_count = np.zeros(n, dtype=int)
-        self.tracked = np.zeros(n, dtype=int)       # samples since the hand-over
+        self.tracked = np.zeros(n, dtype=int)       # samples steered by the tracker
+        self.held = np.zeros(n, dtype=int)          # samples held since a loss (0: none)
         self.losses = np.zeros(n, dtype=int)
         self.handovers = np.zeros(n, dtype=int)
         if config.start == 'tracking' and config.clip_prior and self.is_ekf:
@@ -127,6 +136,7 @@ class Supervisor:
         mask = np.ones(self.runs, dtype=bool) if mask is None else np.asarray(mask, bool)
         old = self.state.copy()
         self.state[mask] = ACQUIRING
+        self.held[mask] = 0
         self.sweep.start(mask, self.base, cold=True)
         self.finder.reset(mask)
         self.changed = old != self.state
@@ -150,12 +160,14 @@ class Supervisor:
         zt = z if tracker_z is None else as_measurement(tracker_z, self.runs)
         old = self.state.copy()
         tracking = old == TRACKING
+        holding = self.held > 0
+        steering = tracking | holding
         psi = self.tracker.scan_offset
         nis = np.full(self.runs, np.nan)
         if isinstance(self.tracker, ScanningEKF):
             # e_k = nu^2 / S of the new sample against the prior (before the step uses it)
             nis = self.tracker.innovation_distance(stamp, zt) ** 2
-        inner = self.tracker.step(stamp, np.where(tracking, zt, np.nan))
+        inner = self.tracker.step(stamp, np.where(steering, zt, np.nan))
         # the mean in lock counts once it holds bright_samples (a mean of a few samples is no
         # evidence: right after a hand-over the dark samples of a block would make it small)
         known = self.bright_count >= cfg.bright_samples
@@ -164,46 +176,65 @@ class Supervisor:
                          cfg.lock.level)
         # faded: a mean in lock under the noise; no intensity test
         level = np.where(known & (self.bright < cfg.fade * cfg.noise), -np.inf, level)
-        self.verdict = verdict = self.lock.update(z, nis, tracking, level)
-        # good lock: a full window since the hand-over with few low samples
-        self.tracked = np.where(tracking, self.tracked + 1, 0)
-        good = tracking & (self.tracked >= cfg.lock.window) & (
-            verdict.low < max(cfg.lock.corroborate, 1))
+        self.verdict = verdict = self.lock.update(z, nis, steering, level)
+        # good lock: a full window since the hand-over (or a hold) with few low samples
+        self.tracked = np.where(steering, self.tracked + 1, 0)
+        steady = (self.tracked >= cfg.lock.window) & (verdict.low < max(cfg.lock.corroborate, 1))
+        good = tracking & steady
         self.last_good = np.where(good, self.base - psi, self.last_good)
         seen = good & np.isfinite(z)
         self.bright_count[seen] = np.minimum(self.bright_count[seen] + 1, cfg.bright_samples)
         self.bright[seen] = np.where(np.isfinite(self.bright[seen]), self.bright[seen], 0.0) + (
             z[seen] - np.nan_to_num(self.bright[seen])) / self.bright_count[seen]
-        searching = ~tracking
+        searching = ~steering
         # searching again for a light that was dimmer than the detector's design
         scale = np.where(old == LOST, np.fmin(1.0, 0.5 * self.bright
                                               / cfg.detector.reference), 1.0)
         found = self.finder.update(z, self.base, searching, np.nan_to_num(scale, nan=1.0))
-        turn = np.where(tracking, inner, self.sweep.turn(self.base, searching))
+        turn = np.where(steering, inner, self.sweep.turn(self.base, searching))
         if np.any(found):
             turn[found] = self._hand_over(found)
-        lost = verdict.lost
+        steered = steering.copy()           # the runs whose turn is the tracker's
+        if np.any(holding):
+            self.held[holding] += 1
+            self.state[holding & steady] = TRACKING
+            self.held[holding & steady] = 0
+            timeout = holding & ~steady & (self.held > cfg.hold_samples)
+            self._search(timeout, turn)
+            steered &= ~timeout
+        lost = verdict.lost & tracking
         self.declared = lost
         if np.any(lost):
             self.losses[lost] += 1
             self.tracked[lost] = 0          # good lock needs a full window again
             if cfg.reacquire:
                 self.state[lost] = LOST
-                self.sweep.start(lost, self.last_good)
-                self.finder.reset(lost)
-                turn[lost] = self.sweep.turn(self.base, lost)[lost]
+                # only the EKF holds: its model of x1 and of the drift steers on a dim light,
+                # where a baseline's climb wanders (doc/pointing.md measures both)
+                dim = lost & known & (self.bright < cfg.hold * cfg.noise) & self.is_ekf
+                self.held[dim] = 1
+                self.lock.reset(dim)
+                self._search(lost & ~dim, turn)
+                steered &= ~(lost & ~dim)
             else:
                 self._restart_tracker(lost)
                 self.lock.reset(lost)
         if cfg.max_step > 0:
             clamped = np.clip(turn, -cfg.max_step, cfg.max_step)
             if np.any(clamped != turn):
-                self.tracker.correct_last_turn(np.where(self.state == TRACKING,
-                                                        clamped - turn, 0.0))
+                self.tracker.correct_last_turn(np.where(steered, clamped - turn, 0.0))
             turn = clamped
         self.base = self.base + turn
         self.changed = old != self.state
         return turn
+
+    def _search(self, mask: Mask, turn: FloatArray) -> None:
+        """Start the sweep around the last good angle for the runs in mask; set their turn."""
+        if np.any(mask):
+            self.held[mask] = 0
+            self.sweep.start(mask, self.last_good)
+            self.finder.reset(mask)
+            turn[mask] = self.sweep.turn(self.base, mask)[mask]
 
     def _hand_over(self, found: Mask) -> FloatArray:
         """Start tracking the runs in `found` from the scan's fit; return their turns."""
