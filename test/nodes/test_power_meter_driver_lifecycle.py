@@ -10,14 +10,17 @@ on received_power.
 from lifecycle_msgs.msg import State, Transition, TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetState
 import pytest
+import rclpy
 
-from test_power_meter_driver import Loop
+from test_power_meter_driver import Loop, TIMEOUT
+from tskf_ros.testing import spin_until
 from visa_faults import bench, FaultyOpener
 
 NODE = '/power_meter_driver'
 UNCONFIGURED, INACTIVE, ACTIVE, FINALIZED = (
     State.PRIMARY_STATE_UNCONFIGURED, State.PRIMARY_STATE_INACTIVE, State.PRIMARY_STATE_ACTIVE,
     State.PRIMARY_STATE_FINALIZED)
+ATTEMPTS = 3        # client nodes tried, TIMEOUT / ATTEMPTS each
 
 
 @pytest.fixture
@@ -32,13 +35,31 @@ class Lifecycle:
 
     def __init__(self, lp: Loop) -> None:
         self.loop = lp
-        self.change = lp.listener.create_client(ChangeState, f'{NODE}/change_state')
-        self.get = lp.listener.create_client(GetState, f'{NODE}/get_state')
         self.events: list = []
         lp.listener.create_subscription(TransitionEvent, f'{NODE}/transition_event',
                                         self.events.append, 100)
-        lp.until(lambda: self.change.service_is_ready() and self.get.service_is_ready(),
-                 'the lifecycle services')
+        # the clients live on a node of their own, made again if its clients never match:
+        # with Fast DDS a client node sometimes never sees a server in the same process
+        # (ros2/rclcpp#1152: "the success is determined when you make a node"); here the
+        # listener's clients once waited 60 s in about ten runs of the suite on two loaded cores
+        for attempt in range(ATTEMPTS):
+            node = rclpy.create_node(f'lifecycle_client_{attempt}', context=lp.context)
+            lp.add(node)
+            self.change = node.create_client(ChangeState, f'{NODE}/change_state')
+            self.get = node.create_client(GetState, f'{NODE}/get_state')
+            try:
+                spin_until(lp.executor, self._ready, TIMEOUT / ATTEMPTS)
+                return
+            except TimeoutError:
+                pass
+            lp.executor.remove_node(node)
+            lp.nodes.remove(node)
+            node.destroy_node()
+        raise TimeoutError(f'the lifecycle services never matched ({ATTEMPTS} client nodes, '
+                           f'{TIMEOUT:g} s)')
+
+    def _ready(self) -> bool:
+        return self.change.service_is_ready() and self.get.service_is_ready()
 
     def _call(self, client, request):
         future = client.call_async(request)
