@@ -48,7 +48,8 @@ OPEN_LOOP_NOTE = ('open loop: the commands on ' + BAG_OUTPUT_TOPICS['command'] +
                   'intensities')
 
 __all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'bag_outcome_messages',
-           'BAG_PAT_STATE_TOPIC', 'bag_pat_state_messages', 'COMMAND_TOPIC', 'COMMAND_TYPE', 'default_parameters', 'diagnostics_message', 'ESTIMATE_TYPE',
+           'BAG_PAT_STATE_TOPIC', 'bag_pat_state_messages', 'COMMAND_TOPIC', 'COMMAND_TYPE',
+           'default_parameters', 'diagnostics_message', 'ESTIMATE_TYPE',
            'INPUT_TOPIC', 'load_config', 'NODE_NAME', 'NodeConfig', 'OPEN_LOOP_NOTE',
            'outcome_messages', 'OUTPUT_TOPICS', 'OUTPUT_TYPES', 'output_qos',
            'PAT_PREFIX', 'PAT_STATE_TOPIC', 'PAT_STATE_TYPE', 'pat_state_message',

@@ -1,4 +1,4 @@
-"""The alignment replay's pat_state: the supervisor's transitions as the live node publishes them."""
+"""The alignment replay's pat_state: the supervisor's transitions as the node publishes them."""
 
 from mcap.reader import make_reader
 import numpy as np
@@ -26,8 +26,10 @@ DT_NS = NS // 20            # the node's dt, 0.05 s
 
 def light_dark_bag(path):
     """
-    Write /intensity at 20 Hz: light 0-4 s, dark 4-7 s, light to 12 s; then 2 s of light
-    stamped 11 s back (logged on): the supervisor acquires, loses, re-acquires, restarts.
+    Write /intensity at 20 Hz: light 0-4 s, dark 4-7 s, light to 12 s, then 2 s back.
+
+    The last 2 s of light are stamped 11 s back (logged on): the supervisor acquires,
+    loses, re-acquires and, the aligner restarted, acquires again.
     """
     rng = np.random.default_rng(3)
     with BagWriter(path) as w:
@@ -64,8 +66,8 @@ def stepped(bag, topic, config):
     for connection, log_ns, data in raws:
         if connection.topic != topic:
             continue
-        stamp_ns, volts, _ = conversions.msg_to_intensity(deserialize_message(data,
-                                                                               Illuminance))
+        msg = deserialize_message(data, Illuminance)
+        stamp_ns, volts, _ = conversions.msg_to_intensity(msg)
         out = session.add(stamp_ns, volts, now_ns=log_ns)
         order += [(log_ns, aligner.BAG_OUTPUT_TOPICS[key])
                   for key, _ in aligner.outcome_messages(out, config)]

@@ -65,7 +65,7 @@ class Sink(Protocol):
         """Take a /diagnostics message (rclpy) due at stamp_ns."""
 
     def message(self, topic: str, log_ns: int, msg: Any) -> None:
-        """Take a message (rclpy) the node publishes outside an outcome (as it starts)."""
+        """Take an rclpy message that the node publishes outside an outcome, as it starts."""
 
 
 class Collector:
