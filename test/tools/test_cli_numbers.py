@@ -96,7 +96,7 @@ TOOLS = {
         '--algorithms', 'ekf'],
         ('--runs', '--noise-levels', '--beta', '--steps', '--dt', '--seed', '--dropout',
          '--x2-0', '--cold-start', '--units-per-degree', '--x1-floor', '--fig9-beta',
-         '--run-noise', '--dropout-levels', '--dropout-noise', '--dropout-beta'),
+         '--run-noise', '--dropout-levels', '--dropout-noise', '--dropout-beta', '--blocked'),
         ('--algorithms', '--controller', '--json', '--png', '--fig8', '--fig9', '--pat-run',
          '--dropout-png', '--dropout-json')),
     'lqg_comparison': Tool(lqg_comparison.main, lambda d: [
