@@ -157,6 +157,40 @@ def test_the_wrapper_passes_the_tools_status_on(monkeypatch):
     assert exit_.value.code == 3
 
 
+@pytest.mark.parametrize('returned, status', [(None, None), (4, 4)])   # None: exit 0
+def test_run_as_main_passes_the_status_on(returned, status):
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit) as exit_:
+            console.run_as_main(lambda: returned)
+        # once main has ended, a Ctrl-C no longer interrupts the exit
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert exit_.value.code == status
+
+
+def test_run_as_main_is_quiet_on_a_ctrl_c_while_main_cleans_up(capsys):
+    cleaned = []
+
+    def main() -> int:
+        try:
+            signal.raise_signal(signal.SIGINT)          # the first Ctrl-C: main stops...
+        except KeyboardInterrupt:
+            print('tool: interrupted', file=sys.stderr)
+            signal.raise_signal(signal.SIGINT)          # ...and a second one in its cleanup
+            cleaned.append(True)                        # (not reached)
+        return 0
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit) as exit_:
+            console.run_as_main(main)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert exit_.value.code == INTERRUPTED and not cleaned
+    assert capsys.readouterr().err == 'tool: interrupted\n'     # the tool's own line only
+
+
 FAKE_TOOL = """
 import os, signal
 try:

@@ -129,9 +129,14 @@ def replay_sample_bag(out: Path) -> int:
 
 def node_command(module: str, params_file: Path,
                  **params: Union[bool, int, float, str]) -> list:
-    """`python -m tskf_ros.nodes.<module> --ros-args --params-file ... -p k:=v`."""
-    cmd = [sys.executable, '-m', f'tskf_ros.nodes.{module}', '--ros-args',
-           '--params-file', str(params_file)]
+    """
+    The node's console script (tskf_ros.tools.console) `--ros-args --params-file ... -p k:=v`.
+
+    Run as the installed executable runs it, a node that takes the terminal's Ctrl-C while
+    it still imports ends quietly too (`python -m` would print that traceback).
+    """
+    cmd = [sys.executable, '-c', f'from tskf_ros.tools.console import {module}; {module}()',
+           '--ros-args', '--params-file', str(params_file)]
     for k, v in params.items():
         cmd += ['-p', f'{k}:={str(v).lower() if isinstance(v, bool) else v}']
     return cmd
