@@ -130,7 +130,7 @@ def replay_sample_bag(out: Path) -> int:
 def node_command(module: str, params_file: Path,
                  **params: Union[bool, int, float, str]) -> list:
     """
-    The node's console script (tskf_ros.tools.console) `--ros-args --params-file ... -p k:=v`.
+    Return the node's console-script command `--ros-args --params-file ... -p k:=v`.
 
     Run as the installed executable runs it, a node that takes the terminal's Ctrl-C while
     it still imports ends quietly too (`python -m` would print that traceback).
