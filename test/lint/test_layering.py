@@ -5,7 +5,9 @@ The layers flow one way, read from every module's imports (ast), not from its be
                                                    nodes  ->  testing (the pytest plugin)
 
 A module may import its own folder and the folders of lower layers only; nodes and bag are
-siblings and never import each other; core and the domains never import ROS.  Also: no
+siblings and never import each other; core and the domains never import ROS.  A module's
+`if __name__ == '__main__':` block (the process entry of `python -m`, outside the layers as
+setup.py's console scripts are) may also import ENTRY, the quiet-on-Ctrl-C runner.  Also: no
 module name is used twice in the package, and no constant is defined twice.
 """
 
@@ -34,6 +36,7 @@ ALLOWED = {
 ROS_FREE = ('core', 'owc', 'led')
 # top-level packages that mean ROS: rclpy and the interface packages
 ROS_PACKAGES = ('rclpy', 'rcl_interfaces', 'builtin_interfaces', 'rosidl_runtime_py')
+ENTRY = f'{PACKAGE}.tools.console'
 
 
 def modules() -> dict:
@@ -47,10 +50,19 @@ def modules() -> dict:
     return out
 
 
-def imports(path: Path) -> set:
-    """Return the absolute dotted names a module imports, at any depth of its code."""
+def is_main_block(node: ast.AST) -> bool:
+    """Return whether node is `if __name__ == '__main__':`."""
+    test = getattr(node, 'test', None)
+    return (isinstance(node, ast.If) and isinstance(test, ast.Compare)
+            and isinstance(test.left, ast.Name) and test.left.id == '__name__'
+            and len(test.comparators) == 1 and isinstance(test.comparators[0], ast.Constant)
+            and test.comparators[0].value == '__main__')
+
+
+def imported_names(tree: ast.AST, path: Path) -> set:
+    """Return the absolute dotted names imported anywhere under tree."""
     names = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -59,6 +71,17 @@ def imports(path: Path) -> set:
                 names.update(f'{PACKAGE}.{a.name}' for a in node.names)
             else:
                 names.add(node.module)
+    return names
+
+
+def imports(path: Path) -> set:
+    """Return the absolute dotted names a module imports, at any depth of its code."""
+    tree = ast.parse(path.read_text())
+    main_blocks = [node for node in tree.body if is_main_block(node)]
+    tree.body = [node for node in tree.body if not is_main_block(node)]
+    names = imported_names(tree, path)
+    for block in main_blocks:
+        names |= imported_names(block, path) - {ENTRY}
     return names
 
 
@@ -103,6 +126,17 @@ def test_the_layer_check_catches_an_upward_import(tmp_path):
     sibling.write_text('from tskf_ros.bag import reader\n')
     assert layer_violations({'tskf_ros.nodes.y': sibling}) == [
         'tskf_ros.nodes.y imports tskf_ros.bag']
+
+
+def test_only_the_main_block_may_import_the_entry(tmp_path):
+    entry = tmp_path / 'z.py'
+    entry.write_text("if __name__ == '__main__':\n    from tskf_ros.tools.console import "
+                     'run_as_main\n    from tskf_ros.tools import plot_bag\n')
+    assert layer_violations({'tskf_ros.core.z': entry}) == [
+        'tskf_ros.core.z imports tskf_ros.tools']
+    entry.write_text('from tskf_ros.tools.console import run_as_main\n')
+    assert layer_violations({'tskf_ros.core.z': entry}) == [
+        'tskf_ros.core.z imports tskf_ros.tools.console']
 
 
 def test_no_module_name_is_used_twice():

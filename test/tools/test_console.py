@@ -5,10 +5,17 @@ Each tool runs as a process through its console-script function of tskf_ros.tool
 as the installed executable runs it, and takes SIGINT at a point found by polling a
 condition with a deadline (no sleeps): at once, while its third-party modules load (their
 shared objects appear in /proc/PID/maps), and for the tools that run until stopped, once
-they are running (their first output, or the recording directory).
+they are running (their first output, or the recording directory).  The documented
+`python -m` commands take SIGINT once they work (a first line, their output table, their
+bag open): exit 130, only the tool's own lines on stderr, every output file whole or absent.
 """
 
+import ast
+import json
+import os
 from pathlib import Path
+import random
+import re
 import signal
 import subprocess
 import sys
@@ -150,6 +157,40 @@ def test_the_wrapper_passes_the_tools_status_on(monkeypatch):
     assert exit_.value.code == 3
 
 
+@pytest.mark.parametrize('returned, status', [(None, None), (4, 4)])   # None: exit 0
+def test_run_as_main_passes_the_status_on(returned, status):
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit) as exit_:
+            console.run_as_main(lambda: returned)
+        # once main has ended, a Ctrl-C no longer interrupts the exit
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert exit_.value.code == status
+
+
+def test_run_as_main_is_quiet_on_a_ctrl_c_while_main_cleans_up(capsys):
+    cleaned = []
+
+    def main() -> int:
+        try:
+            signal.raise_signal(signal.SIGINT)          # the first Ctrl-C: main stops...
+        except KeyboardInterrupt:
+            print('tool: interrupted', file=sys.stderr)
+            signal.raise_signal(signal.SIGINT)          # ...and a second one in its cleanup
+            cleaned.append(True)                        # (not reached)
+        return 0
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit) as exit_:
+            console.run_as_main(main)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert exit_.value.code == INTERRUPTED and not cleaned
+    assert capsys.readouterr().err == 'tool: interrupted\n'     # the tool's own line only
+
+
 FAKE_TOOL = """
 import os, signal
 try:
@@ -182,3 +223,121 @@ def test_an_error_after_a_ctrl_c_is_the_interrupt(tmp_path, monkeypatch, interru
                 console.run('fake')
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def main_blocks() -> dict:
+    """Return {module: its `if __name__ == '__main__':` block (ast.If)} of the package."""
+    blocks = {}
+    for path in sorted((REPO / 'tskf_ros').rglob('*.py')):
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.If) and ast.unparse(node.test) == "__name__ == '__main__'":
+                blocks['.'.join(path.relative_to(REPO).with_suffix('').parts)] = node
+    return blocks
+
+
+def test_every_main_block_runs_through_run_as_main():
+    blocks = main_blocks()
+    assert {t.partition(':')[0] for t in console.TOOLS.values()} <= set(blocks)
+    entries = {t.partition(':')[0]: t.partition(':')[2] for t in console.TOOLS.values()}
+    for module, block in blocks.items():
+        # the function the console script runs, else the module's main
+        expected = ['from tskf_ros.tools.console import run_as_main',
+                    f'run_as_main({entries.get(module, "main")})']
+        assert [ast.unparse(statement) for statement in block.body] == expected, module
+
+
+def start_module(module: str, args: list, tmp_path: Path) -> tuple[subprocess.Popen, Path, Path]:
+    """Start `python -m module args` in tmp_path; its stdout and stderr go to files."""
+    out, err = tmp_path / 'stdout', tmp_path / 'stderr'
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_DOMAIN_ID=os.environ.get('ROS_DOMAIN_ID', str(random.randint(1, 100))),
+               OPENBLAS_NUM_THREADS='1')
+    with open(out, 'w') as o, open(err, 'w') as e:
+        proc = subprocess.Popen([sys.executable, '-m', module, *map(str, args)], cwd=tmp_path,
+                                stdout=o, stderr=e, env=env)
+    return proc, out, err
+
+
+def has_open(pid: int, name: str) -> bool:
+    """Return whether the process holds a file of this name open."""
+    try:
+        return any(os.readlink(fd).endswith(name) for fd in Path(f'/proc/{pid}/fd').iterdir())
+    except OSError:
+        return False
+
+
+def whole_or_absent(paths: list) -> list:
+    """Check each output is whole (JSON parses, PNG ends with IEND) or absent; return those."""
+    present = [p for p in paths if p.exists()]
+    for p in present:
+        if p.suffix == '.json':
+            json.loads(p.read_text())
+        elif p.suffix == '.png':
+            assert p.read_bytes().endswith(b'IEND\xaeB`\x82'), p
+    leftovers = [q.name for p in paths if p.parent.is_dir() for q in p.parent.iterdir()
+                 if q.name.startswith('.') and 'part' in q.name]
+    assert leftovers == [], leftovers
+    return present
+
+
+def test_ctrl_c_while_alignment_mc_runs(tmp_path):
+    # enough work that the interrupt lands inside the sweep, which it ends at once
+    outputs = [tmp_path / 'res' / 'fig10.json', tmp_path / 'res' / 'fig10.png']
+    proc, _, err = start_module('tskf_ros.experiments.alignment_mc', [
+        '--runs', 2, '--noise-levels', ','.join(['0.5'] * 50), '--algorithms', 'ekf',
+        '--json', outputs[0], '--png', outputs[1]], tmp_path)
+    assert wait_for(lambda: '[alignment_mc] g at' in err.read_text(), proc), err.read_text()
+    code, text = interrupt(proc, err)
+    assert code == INTERRUPTED, text
+    # its own progress lines only
+    assert all(line.startswith('[alignment_mc] ') for line in text.splitlines()), text
+    assert whole_or_absent(outputs) == []
+
+
+def test_ctrl_c_while_reproduce_runs(tmp_path):
+    out = tmp_path / 'results'
+    proc, stdout, err = start_module('tskf_ros.experiments.reproduce', [
+        '--out', out, '--iterations', 15, '--long-iterations', 2000], tmp_path)
+    assert wait_for(lambda: '[example 3.20]' in stdout.read_text(), proc), err.read_text()
+    code, text = interrupt(proc, err)
+    assert code == INTERRUPTED and text == ''
+    # the files of the finished steps are whole; the summary (written last) is absent
+    written = whole_or_absent(sorted(out.iterdir()))
+    assert written and not (out / 'summary.json').exists()
+
+
+def test_ctrl_c_while_fit_noise_reads(tmp_path):
+    # its own one line after an interrupt: 'interrupted; nothing written'
+    outputs = [tmp_path / 'fit.yaml', tmp_path / 'fit.json']
+    proc, _, err = start_module('tskf_ros.experiments.fit_noise', [
+        REPO / 'bags' / 'owc_ge_1khz', '--params-file', REPO / 'config' / 'owc_estimator.yaml',
+        '--out', outputs[0], '--json', outputs[1]], tmp_path)
+    assert wait_for(lambda: has_open(proc.pid, 'owc_ge_1khz.mcap'), proc), err.read_text()
+    code, text = interrupt(proc, err)
+    assert code == INTERRUPTED and 'Traceback' not in text, text
+    assert re.fullmatch(r'fit_noise: interrupted; nothing written\n', text), text
+    assert [p for p in outputs if p.exists()] == []
+
+
+def test_ctrl_c_while_sweep_runs(tmp_path):
+    # its own one line: how many rows of the table are kept for a resume
+    table = tmp_path / 'table.csv'
+    proc, _, err = start_module('tskf_ros.experiments.sweep', [
+        '--bags', REPO / 'bags' / 'owc_ge_1khz', REPO / 'bags' / 'owc_cai_td_1hz',
+        '--set', 'R=1,2,3,4', '--workers', 0, '--no-progress', '--out', table], tmp_path)
+    assert wait_for(lambda: table.exists() and table.stat().st_size > 0, proc), err.read_text()
+    code, text = interrupt(proc, err)
+    assert code == INTERRUPTED, text
+    assert re.fullmatch(r'sweep: interrupted: \d+ rows in \S+ kept; the same command '
+                        r'resumes\n', text), text
+    rows = table.read_text().splitlines(keepends=True)
+    assert rows and all(r.endswith('\n') for r in rows)
+    assert {r.count(',') for r in rows} == {rows[0].count(',')}   # no row cut short
+
+
+def test_ctrl_c_while_a_node_runs_as_a_module(tmp_path):
+    proc, _, err = start_module('tskf_ros.nodes.timescale_estimator',
+                                ['--ros-args', '--log-level', 'info'], tmp_path)
+    assert wait_for(lambda: err.stat().st_size > 0, proc), err.read_text()
+    code, text = interrupt(proc, err)
+    assert 'Traceback' not in text and code in (INTERRUPTED, 0), (code, text)

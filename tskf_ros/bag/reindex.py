@@ -172,4 +172,5 @@ def console_main() -> None:
 
 
 if __name__ == '__main__':
-    console_main()
+    from tskf_ros.tools.console import run_as_main
+    run_as_main(console_main)

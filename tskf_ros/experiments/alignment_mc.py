@@ -394,4 +394,5 @@ def table(parameter: str, values: Sequence[float], results: dict) -> str:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    from tskf_ros.tools.console import run_as_main
+    run_as_main(main)

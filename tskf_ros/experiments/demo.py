@@ -129,9 +129,14 @@ def replay_sample_bag(out: Path) -> int:
 
 def node_command(module: str, params_file: Path,
                  **params: Union[bool, int, float, str]) -> list:
-    """`python -m tskf_ros.nodes.<module> --ros-args --params-file ... -p k:=v`."""
-    cmd = [sys.executable, '-m', f'tskf_ros.nodes.{module}', '--ros-args',
-           '--params-file', str(params_file)]
+    """
+    Return the node's console-script command `--ros-args --params-file ... -p k:=v`.
+
+    Run as the installed executable runs it, a node that takes the terminal's Ctrl-C while
+    it still imports ends quietly too (`python -m` would print that traceback).
+    """
+    cmd = [sys.executable, '-c', f'from tskf_ros.tools.console import {module}; {module}()',
+           '--ros-args', '--params-file', str(params_file)]
     for k, v in params.items():
         cmd += ['-p', f'{k}:={str(v).lower() if isinstance(v, bool) else v}']
     return cmd
@@ -332,4 +337,5 @@ def main(argv: Optional[list] = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    from tskf_ros.tools.console import run_as_main
+    run_as_main(main)

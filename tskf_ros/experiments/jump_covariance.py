@@ -2,7 +2,6 @@
 
 import argparse
 from pathlib import Path
-import sys
 from typing import Optional, Sequence
 
 import numpy as np
@@ -116,4 +115,5 @@ def _fmt(v: np.ndarray) -> str:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    from tskf_ros.tools.console import run_as_main
+    run_as_main(main)

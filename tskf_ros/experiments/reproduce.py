@@ -3,7 +3,6 @@
 import argparse
 from dataclasses import dataclass
 from pathlib import Path
-import sys
 import time
 from typing import Optional
 
@@ -321,4 +320,5 @@ def main(argv: Optional[list] = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    from tskf_ros.tools.console import run_as_main
+    run_as_main(main)

@@ -213,4 +213,5 @@ def main(argv: Optional[list[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    from tskf_ros.tools.console import run_as_main
+    run_as_main(main)

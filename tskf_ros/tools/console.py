@@ -1,4 +1,4 @@
-"""The console scripts' entry: import the tool, run it, and end quietly on Ctrl-C in any phase."""
+"""The console scripts' and `python -m` entry: run a tool, end quietly (exit 130) on Ctrl-C."""
 
 import importlib
 import signal
@@ -40,6 +40,26 @@ def run(tool: str) -> NoReturn:
     "PyCapsule_Import could not import module"): after a Ctrl-C, any error is the
     interrupt.
     """
+    def entry() -> object:
+        module, _, name = TOOLS[tool].partition(':')
+        return getattr(importlib.import_module(module), name)()
+    _quietly(entry)
+
+
+def run_as_main(main: Callable[[], object]) -> NoReturn:
+    """
+    Run main as a module's `if __name__ == '__main__':` block does (`python -m`); exit.
+
+    Ctrl-C while main runs or cleans up ends the process as run() does: EXIT_INTERRUPTED,
+    no traceback (a tool may print its own one line), and Ctrl-C is ignored once main has
+    ended.  Not covered: a Ctrl-C while `python -m` imports the module (its numpy, scipy,
+    rclpy), which happens before this is called: Python prints its KeyboardInterrupt
+    traceback and dies of SIGINT.  The console scripts (run) cover that phase too.
+    """
+    _quietly(main)
+
+
+def _quietly(entry: Callable[[], object]) -> NoReturn:
     interrupted = False
 
     def on_sigint(signum: int, frame: Optional[FrameType]) -> None:
@@ -48,8 +68,6 @@ def run(tool: str) -> NoReturn:
         raise KeyboardInterrupt
     signal.signal(signal.SIGINT, on_sigint)    # Python's own handler, which also remembers
     try:
-        module, _, name = TOOLS[tool].partition(':')
-        entry: Callable[[], object] = getattr(importlib.import_module(module), name)
         status = entry()
     except KeyboardInterrupt:
         status = EXIT_INTERRUPTED

@@ -1,0 +1,29 @@
+"""The demo's node processes start through the console scripts' runner (quiet on Ctrl-C)."""
+
+import os
+import subprocess
+import sys
+
+from bag.helpers import CONFIG, TIMEOUT
+import pytest
+
+from tskf_ros.experiments import demo
+from tskf_ros.tools import console
+
+
+@pytest.mark.parametrize('node', ['timescale_estimator', 'power_meter_simulator',
+                                  'led_link_simulator', 'alignment'])
+def test_each_node_command_runs_that_nodes_console_script(node):
+    cmd = demo.node_command(node, CONFIG / 'x.yaml', seed=1, loop=False)
+    assert cmd[:2] == [sys.executable, '-c'] and node in console.TOOLS
+    assert cmd[2] == f'from tskf_ros.tools.console import {node}; {node}()'
+    assert cmd[3:] == ['--ros-args', '--params-file', str(CONFIG / 'x.yaml'),
+                       '-p', 'seed:=1', '-p', 'loop:=false']
+
+
+def test_a_node_command_starts_the_node():
+    # --help in place of --ros-args: the node's own usage, exit 0
+    cmd = demo.node_command('timescale_estimator', CONFIG / 'owc_estimator.yaml')[:3]
+    proc = subprocess.run([*cmd, '--help'], env=dict(os.environ), capture_output=True,
+                          text=True, timeout=TIMEOUT)
+    assert proc.returncode == 0 and 'usage' in proc.stdout and proc.stderr == '', proc.stderr
