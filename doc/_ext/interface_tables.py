@@ -1,27 +1,4 @@
-"""
-Sphinx extension: a node's topics, services and diagnostic tasks from its declared interface.
-
-In a MyST page::
-
-    ```{topic-table} timescale_estimator
-    ```
-
-    ```{service-table} timescale_estimator
-    ```
-
-    ```{diagnostic-table} timescale_estimator
-    ```
-
-    ```{diagnostic-table} timescale_estimator alignment
-    :tasks: input frequency
-    ```
-
-render the declaration of tskf_ros.messages.node_interfaces (built from the constants the
-nodes create their topics and services from; test/nodes/test_node_interfaces.py checks it
-against the running nodes): the topics (name, direction, type, content, QoS), the services
-(the node's, then rclpy's, every node's) and each diagnostic task (status names, levels with
-their messages, keys).
-"""
+"""Sphinx extension: a node's topics, services and diagnostic tasks, from node_interfaces."""
 
 from pathlib import Path
 from typing import Optional
@@ -51,7 +28,12 @@ SOURCES = (interface_spec, diagnostic_tasks, node_interfaces)
 
 
 class InterfaceDirective(SphinxDirective):
-    """A directive whose argument names a node; its page depends on the declaration."""
+    """
+    A directive whose argument names a node; its page depends on the declaration.
+
+    In a MyST page ```{topic-table} timescale_estimator``` (or service-table,
+    diagnostic-table) renders the node's declaration in tskf_ros.messages.node_interfaces.
+    """
 
     required_arguments = 1
     has_content = False
@@ -106,7 +88,11 @@ class DiagnosticTable(InterfaceDirective):
 
     Options: `:tasks:` the task names to show (comma-separated; default every task), and
     `:levels-only:` to leave the keys out.  A task several of the nodes share (the same
-    declaration) is shown once, under each status name that publishes it.
+    declaration) is shown once, under each status name that publishes it::
+
+        ```{diagnostic-table} timescale_estimator alignment
+        :tasks: input frequency
+        ```
     """
 
     optional_arguments = 9

@@ -9,7 +9,7 @@ from sphinx.application import Sphinx
 from sphinx.util.docutils import SphinxDirective
 
 from doc_tables import bullets, Cell, table
-from tskf_ros.messages import diagnostic_tasks, interface_spec, node_interfaces
+from interface_tables import SOURCES
 from tskf_ros.messages.interface_spec import IN, OUT, Service, Topic
 from tskf_ros.messages.node_interfaces import INTERFACES
 
@@ -17,8 +17,6 @@ NODE_HEADER = ('node', 'what it does', 'in', 'out', 'services')
 NODE_WIDTHS = (14, 22, 22, 24, 18)
 TASK_HEADER = ('node', 'status on /diagnostics', 'levels', 'what it reports')
 TASK_WIDTHS = (16, 24, 14, 46)
-# the modules a table is read from: a page is rebuilt when one changes
-SOURCES = (interface_spec, diagnostic_tasks, node_interfaces)
 
 
 def topic_item(t: Topic) -> str:
@@ -49,7 +47,7 @@ class OverviewDirective(SphinxDirective):
     has_content = False
 
     def note_sources(self) -> None:
-        """Rebuild the page when a module the table is read from changes."""
+        """Rebuild the page when a module the table is read from changes (SOURCES)."""
         for module in SOURCES:
             self.env.note_dependency(str(Path(module.__file__)))
 
