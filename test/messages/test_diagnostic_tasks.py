@@ -61,6 +61,24 @@ def test_the_timestamp_task_declares_every_summary_of_timestamp_status():
     assert got == declared(TIMESTAMP_DELAY_TASK)
 
 
+def declared_keys(task: DiagnosticTask) -> list[str]:
+    """Return a task's keys, row after row."""
+    return [key for row in task.keys for key in row.keys]
+
+
+def test_the_standard_tasks_declare_their_keys_one_by_one_in_the_order_they_come():
+    # a target frequency (min = max, finite): every FrequencyStatus key is there
+    frequency = FrequencyStatus(FrequencyParams(10.0, 10.0, 0.5), now_ns=0)
+    keys = [kv.key for kv in frequency.run(Status('f'), NS).values]
+    assert keys == declared_keys(INPUT_FREQUENCY_TASK)
+    stamps = TimeStampStatus(TimeStampParams())
+    keys = [kv.key for kv in stamps.run(Status('t')).values]
+    assert keys == declared_keys(TIMESTAMP_DELAY_TASK)
+    # one key a row: each key's format and meaning has a row of its own
+    assert all(len(row.keys) == 1 for task in (INPUT_FREQUENCY_TASK, TIMESTAMP_DELAY_TASK)
+               for row in task.keys)
+
+
 def test_the_pointing_task_declares_the_level_of_every_supervisor_state():
     by_message = {row.message: row.level for row in POINTING_TASK.levels}
     for state, level in POINTING_LEVELS.items():
