@@ -64,6 +64,31 @@ def test_supervised_algorithms_write_the_lock_fields(tmp_path, capsys):
     assert 'ekf_pat' in capsys.readouterr().out
 
 
+@pytest.mark.parametrize('noise', ['0', '1.0'])
+def test_a_blocked_beam_is_lost_by_every_run_and_recorded(noise, tmp_path, capsys):
+    # 3 s without light in every run: each ekf_pat run declares the loss once and tracks
+    # again after the block; the block is in the JSON's config
+    out = tmp_path / 'a.json'
+    assert alignment_mc.main(['--runs', '5', '--steps', '300', '--noise-levels', noise,
+                              '--blocked', '5,8', '--algorithms', 'ekf_pat',
+                              '--json', str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data['config']['blocked_s'] == [5.0, 8.0]
+    got = data['results']['ekf_pat']
+    assert got['reacquisition_s']['events'] == [5]
+    # declared within the block (12 of 20 dark samples: 0.6 s), tracking after it
+    assert 8.0 - 5.0 - 0.6 < got['reacquisition_s']['median'][0] < 8.0 - 5.0 + 2.0
+    assert got['lost_at_end'] == [0.0]
+
+
+@pytest.mark.parametrize('blocked', ['5', '8,5', '1,2,3'])
+def test_a_blocked_interval_needs_start_before_stop(blocked, capsys):
+    with pytest.raises(SystemExit) as exc:
+        alignment_mc.main(['--runs', '2', '--blocked', blocked])
+    assert exc.value.code == 2
+    assert '--blocked needs START,STOP' in capsys.readouterr().err
+
+
 def test_metrics_of_a_scripted_trajectory():
     # 2 runs, 6 steps of 0.5 s: run 0 leaves the zone at step 2 (declared lost there) and
     # is back, tracking, at step 4; run 1 never leaves and has one declared loss

@@ -125,6 +125,7 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
 def _config_record(args: argparse.Namespace, response: led.IncidenceResponse) -> dict:
     return {'runs': args.runs, 'beta_deg_per_s': args.beta, 'steps': args.steps, 'dt_s': args.dt,
             'seed': args.seed, 'x2_0_deg': args.x2_0, 'cold_start_deg': args.cold_start,
+            'blocked_s': list(args.blocked),
             'max_intensity_v': led.MAX_INTENSITY,
             'units_per_degree': response.units_per_degree, 'x1_floor': args.x1_floor,
             'clip_three_point': args.clip_three_point, 'controller': args.controller,
@@ -232,6 +233,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--cold-start', type=float, default=0.0, metavar='DEG',
                    help='initial angle uniform on +-DEG (x2_0 = 0; the supervised algorithms '
                         'then start with a search); 0: the known start of the paper (--x2-0)')
+    p.add_argument('--blocked', type=arguments.numbers(0.0, 1e6), default=[],
+                   metavar='START,STOP',
+                   help='no light in every run from START to STOP s (a blocked beam: the '
+                        "supervisor's loss and re-acquisition); default: never")
     p.add_argument('--algorithms', type=lambda t: [a for a in t.split(',') if a], default=None,
                    help='comma list of the algorithms compared (default: '
                         + ','.join(led.ALGORITHMS + PAT_ALGORITHMS) + '; lqg: the plain ones)')
@@ -291,6 +296,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     if not (math.isfinite(args.cold_start) and 0.0 <= args.cold_start <= 180.0):
         parser().error('--cold-start must be in [0, 180] deg')
+    if args.blocked and not (len(args.blocked) == 2 and args.blocked[0] < args.blocked[1]):
+        parser().error(f'--blocked needs START,STOP in s with START < STOP, '
+                       f'got {args.blocked}')
     names = args.algorithms or (led.ALGORITHMS + PAT_ALGORITHMS if args.controller == 'p'
                                 else led.ALGORITHMS)
     unknown = set(names) - set(led.ALGORITHMS + PAT_ALGORITHMS)
@@ -299,7 +307,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                        f'--controller {args.controller} (the supervisor steers the P controller)')
     link = led.TrackingLinkConfig(beta=args.beta, dt=args.dt, steps=args.steps,
                                   x2_0=0.0 if args.cold_start else args.x2_0,
-                                  x2_0_spread=args.cold_start, dropout=args.dropout)
+                                  x2_0_spread=args.cold_start, dropout=args.dropout,
+                                  blocked=tuple(args.blocked))
     common = {'runs': args.runs, 'seed': args.seed, 'response': response, 'ekf': ekf,
               'clip': args.clip_three_point, 'controller': args.controller,
               'progress': progress}
