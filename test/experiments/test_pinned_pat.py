@@ -55,6 +55,6 @@ def test_ekf_pat_is_told_the_noise_and_leads_at_two_and_a_half_volts():
                                              RESPONSE, led.EKFConfig(), False)
         score[name] = float(np.mean(angular))
     # pinned regression numbers of this seed (0.05 points: the printed digit)
-    assert score['ekf_pat'] == pytest.approx(98.04, abs=0.05)
+    assert score['ekf_pat'] == pytest.approx(98.65, abs=0.05)
     assert score['hill_climbing_pat'] == pytest.approx(85.21, abs=0.05)
     assert score['ekf_pat'] == max(score.values())

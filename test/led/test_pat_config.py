@@ -70,7 +70,8 @@ def test_light_found_then_lost_after_m_of_n_dark_samples_negative_ones_included(
     outs = feed(s, 63, dark)
     assert sum(o.reason == 'negative' for o in outs) == 10
     (lost,) = s.take_transitions()
-    assert (lost.new, lost.reason, lost.stamp_ns) == ('lost', 'loss declared', T0 + 74 * STEP)
+    assert (lost.new, lost.reason, lost.stamp_ns) == ('lost', 'loss declared, held',
+                                                      T0 + 74 * STEP)
     assert s.pointing.losses == 1 and s.pointing.last_loss_ns == T0 + 74 * STEP
     status = s.diagnostics()[-1]
     assert status.level == ERROR and status.as_dict()['Losses'] == '1'
@@ -105,3 +106,21 @@ def test_start_tracking_is_the_papers_start_with_the_supervisor_watching(clip, P
     np.testing.assert_allclose(out.posterior.P, ref.posterior.P, rtol=1e-12, atol=1e-12)
     assert out.command == pytest.approx(ref.command, abs=1e-12)
     assert s.pat_state == 'tracking'
+
+
+def test_a_loss_is_held_with_estimates_and_tracked_again():
+    # a dark spell is declared but held: the EKF keeps steering and publishing, and the
+    # run is tracking again once a window has few low samples, with no new hand-over
+    s = AlignmentSession(AlignmentConfig())
+    feed(s, 0, [1.5] * 80)
+    assert [t.new for t in s.take_transitions()] == ['acquiring', 'tracking']
+    held = feed(s, 80, [0.0] * 20)
+    (lost,) = s.take_transitions()
+    assert (lost.new, lost.reason) == ('lost', 'loss declared, held')
+    assert s.supervisor.held[0] > 0 and s.pat_state == 'lost'
+    assert all(o.posterior is not None for o in held)            # still estimating
+    back = feed(s, 100, [1.5] * 40)
+    (found,) = s.take_transitions()
+    assert (found.old, found.new, found.reason) == ('lost', 'tracking', 'light back after a hold')
+    assert s.pointing.reacquisitions == 1 and s.supervisor.handovers[0] == 1
+    assert all(o.posterior is not None for o in back)

@@ -24,7 +24,7 @@ from tskf_ros.led.alignment_config import AlignmentConfig, TUNABLE
 from tskf_ros.led.alignment_diagnostics import aligner_status, pointing_status, time_scale
 from tskf_ros.led.intensity_model import FloatArray
 from tskf_ros.led.pointing_stats import PointingStats, Transition
-from tskf_ros.led.supervisor import STATES, Supervisor, TRACKING
+from tskf_ros.led.supervisor import STATES, Supervisor
 
 GAP_FACTOR = 1.5        # an interval longer than this many dt is a gap (samples missing)
 MISSING_REASONS = ('non_finite', 'negative', 'out_of_range', 'gated')
@@ -132,8 +132,8 @@ class AlignmentSession:
 
     @property
     def tracking(self) -> bool:
-        """Tell whether the tracker steers: always without a supervisor, else in tracking."""
-        return self.supervisor is None or int(self.supervisor.state[0]) == TRACKING
+        """Tell whether the tracker steers: always without a supervisor, else tracking or held."""
+        return self.supervisor is None or bool(self.supervisor.steering[0])
 
     def acquire(self) -> bool:
         """Force a new cold search around the base (~/acquire); False without a supervisor."""
@@ -269,13 +269,14 @@ class AlignmentSession:
         new = STATES[int(sup.state[0])]
         if new != p.state:
             if new == 'tracking':
-                reason = 'light found'
+                reason = 'light back after a hold' if sup.resumed[0] else 'light found'
                 if p.state == 'lost':
                     p.reacquisitions += 1
                 else:
                     p.acquisitions += 1
             else:
-                reason = 'loss declared' if new == 'lost' else 'search'
+                reason = ('search' if new != 'lost' else 'loss declared'
+                          + (', held' if sup.held[0] > 0 else ''))
             p.enter(new, reason, stamp_ns)
 
     def reset(self, reason: str) -> None:

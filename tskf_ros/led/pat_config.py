@@ -39,8 +39,7 @@ class PatConfig:
     lock_corroborate: int = _LOCK.corroborate         # low samples confirming a high NIS
     fade: float = _SUP.fade               # x noise: a dimmer mean in lock has faded (0: off)
     clip_prior: bool = _SUP.clip_prior    # start tracking: x0 with P0 clipped as a hand-over
-    hold: float = _SUP.hold               # x noise: the EKF holds the loss of a dimmer light
-    hold_samples: int = _SUP.hold_samples  # samples a hold lasts before the search
+    hold_samples: int = _SUP.hold_samples  # samples the EKF holds a loss before the search
 
     def __post_init__(self) -> None:
         """Check the settings by building the supervisor's; raise AlignmentError if bad."""
@@ -67,5 +66,4 @@ class PatConfig:
                             level=self.lock_level, nis_alpha=self.lock_nis_alpha,
                             gate=gate, corroborate=self.lock_corroborate),
             noise=noise, max_step=max_step, reacquire=self.reacquire, start=self.start,
-            fade=self.fade, clip_prior=self.clip_prior, hold=self.hold,
-            hold_samples=self.hold_samples)
+            fade=self.fade, clip_prior=self.clip_prior, hold_samples=self.hold_samples)

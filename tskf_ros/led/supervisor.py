@@ -7,8 +7,8 @@ tracker starts from the least-squares fit of what the scan saw (the EKF's x and 
 from it, not from Table I's P0), the base turned onto the fitted bearing; tracking: the
 aligner (scanning EKF of eq. (13)-(21), or a baseline of Section V) steers, watched by
 lock_detector; lost: the sweep again, centred on the last good pointing angle and
-widening, or for the EKF and a dim light first a hold (the EKF keeps steering, tracking
-again once a window is clean).  Vectorised over runs like the aligners.  Design: doc/pointing.md.
+widening; for the EKF after a hold (it keeps steering, tracking again once a window is
+clean).  Vectorised over runs like the aligners.  Design: doc/pointing.md.
 """
 
 from dataclasses import dataclass, field
@@ -54,17 +54,16 @@ class SupervisorConfig:
     fade: float = 1.0
     # a known-start EKF's P0 gets the same clip: Table I's diag(100, 1000) throws runs off
     clip_prior: bool = True
-    # times `noise`: a loss of a light whose mean in lock is below this is held, not searched
-    # for (a sweep cannot see a light that dim): the tracker keeps steering, tracking again
-    # after a full window with few low samples, or the sweep after hold_samples (0: never)
-    hold: float = 2.0
+    # the EKF holds a declared loss for this many samples before the sweep: it keeps
+    # steering on its model and is tracking again after a full window with few low samples
+    # (a block of the light leaves the pointing as it was); 0: sweep at once
     hold_samples: int = 100
 
     def __post_init__(self) -> None:
         """Check the supervisor's settings; raise AlignmentError with the reason."""
         if self.start not in STARTS:
             raise AlignmentError(f'start must be one of {STARTS}, got {self.start!r}')
-        for name in ('noise', 'max_step', 'inflate', 'level_fraction', 'fade', 'hold'):
+        for name in ('noise', 'max_step', 'inflate', 'level_fraction', 'fade'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise AlignmentError(f'{name} must be >= 0, got {value}')
@@ -109,6 +108,7 @@ class Supervisor:
         self.finder = LightDetector(config.detector, self.response, n)
         self.lock = LockDetector(config.lock, n)
         self.changed: Mask = np.zeros(n, dtype=bool)
+        self.resumed: Mask = np.zeros(n, dtype=bool)     # tracking again after a hold
         self.declared: Mask = np.zeros(n, dtype=bool)
         self.verdict: Optional[LockVerdict] = None
         # mean intensity in good lock (V; NaN: none yet) and how many samples it holds
@@ -125,6 +125,11 @@ class Supervisor:
     def scan_offset(self) -> float:
         """Return the tracker's scan offset psi of the next sample (0 for the baselines)."""
         return self.tracker.scan_offset
+
+    @property
+    def steering(self) -> Mask:
+        """Tell per run whether the tracker steers: tracking, or holding a declared loss."""
+        return (self.state == TRACKING) | (self.held > 0)
 
     @property
     def is_ekf(self) -> bool:
@@ -161,7 +166,7 @@ class Supervisor:
         old = self.state.copy()
         tracking = old == TRACKING
         holding = self.held > 0
-        steering = tracking | holding
+        steering = self.steering
         psi = self.tracker.scan_offset
         nis = np.full(self.runs, np.nan)
         if isinstance(self.tracker, ScanningEKF):
@@ -195,10 +200,11 @@ class Supervisor:
         if np.any(found):
             turn[found] = self._hand_over(found)
         steered = steering.copy()           # the runs whose turn is the tracker's
+        self.resumed = holding & steady
         if np.any(holding):
             self.held[holding] += 1
-            self.state[holding & steady] = TRACKING
-            self.held[holding & steady] = 0
+            self.state[self.resumed] = TRACKING
+            self.held[self.resumed] = 0
             timeout = holding & ~steady & (self.held > cfg.hold_samples)
             self._search(timeout, turn)
             steered &= ~timeout
@@ -209,13 +215,13 @@ class Supervisor:
             self.tracked[lost] = 0          # good lock needs a full window again
             if cfg.reacquire:
                 self.state[lost] = LOST
-                # only the EKF holds: its model of x1 and of the drift steers on a dim light,
+                # only the EKF holds: its model of x1 and of the scan steers in the dark,
                 # where a baseline's climb wanders (doc/pointing.md measures both)
-                dim = lost & known & (self.bright < cfg.hold * cfg.noise) & self.is_ekf
-                self.held[dim] = 1
-                self.lock.reset(dim)
-                self._search(lost & ~dim, turn)
-                steered &= ~(lost & ~dim)
+                hold = lost & (self.is_ekf and cfg.hold_samples > 0)
+                self.held[hold] = 1
+                self.lock.reset(hold)
+                self._search(lost & ~hold, turn)
+                steered &= ~(lost & ~hold)
             else:
                 self._restart_tracker(lost)
                 self.lock.reset(lost)

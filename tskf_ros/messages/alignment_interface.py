@@ -2,15 +2,17 @@
 
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, Optional, Union
+from typing import Any, Optional, Sequence, Union
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
 
 from tskf_ros import led
 from tskf_ros.led.alignment_config import AlignmentConfig
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
 from tskf_ros.led.pat_config import PatConfig
+from tskf_ros.led.pointing_stats import Transition
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATE_ESTIMATE_TYPE
 from tskf_ros.messages.parameter_schema import load_schema, ParameterError
@@ -40,16 +42,18 @@ OUTPUT_TYPES = {'predicted': ESTIMATE_TYPE, 'corrected': ESTIMATE_TYPE,
 # the same topics in a bag, resolved in '/'
 BAG_INPUT_TOPIC = '/' + INPUT_TOPIC
 BAG_OUTPUT_TOPICS = {key: '/' + topic for key, topic in OUTPUT_TOPICS.items()}
+BAG_PAT_STATE_TOPIC = '/' + PAT_STATE_TOPIC
 OPEN_LOOP_NOTE = ('open loop: the commands on ' + BAG_OUTPUT_TOPICS['command'] + ' do not '
                   'move the recorded receiver; the estimates are the filter on the recorded '
                   'intensities')
 
-__all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'bag_outcome_messages', 'COMMAND_TOPIC',
-           'COMMAND_TYPE', 'default_parameters', 'diagnostics_message', 'ESTIMATE_TYPE',
+__all__ = ['BAG_INPUT_TOPIC', 'BAG_OUTPUT_TOPICS', 'bag_outcome_messages',
+           'BAG_PAT_STATE_TOPIC', 'bag_pat_state_messages', 'COMMAND_TOPIC', 'COMMAND_TYPE',
+           'default_parameters', 'diagnostics_message', 'ESTIMATE_TYPE',
            'INPUT_TOPIC', 'load_config', 'NODE_NAME', 'NodeConfig', 'OPEN_LOOP_NOTE',
            'outcome_messages', 'OUTPUT_TOPICS', 'OUTPUT_TYPES', 'output_qos',
-           'PAT_PREFIX', 'PAT_STATE_TOPIC', 'PAT_STATE_TYPE', 'pat_state_qos',
-           'parameters_to_config', 'ParamsError']
+           'PAT_PREFIX', 'PAT_STATE_TOPIC', 'PAT_STATE_TYPE', 'pat_state_message',
+           'pat_state_qos', 'parameters_to_config', 'ParamsError']
 
 
 def parameters_to_config(values: dict) -> NodeConfig:
@@ -101,6 +105,16 @@ def pat_state_qos() -> QoSProfile:
     """Return the QoS of pat_state: reliable, transient local, keep last 1 (latched)."""
     return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def pat_state_message(transition: Transition) -> String:
+    """Return the pat_state message of a state transition: the state entered."""
+    return String(data=transition.new)
+
+
+def bag_pat_state_messages(transitions: Sequence[Transition]) -> list[tuple[str, String]]:
+    """Return the (bag topic, message) pairs the live node publishes for transitions."""
+    return [(BAG_PAT_STATE_TOPIC, pat_state_message(t)) for t in transitions]
 
 
 def outcome_messages(out: AlignOutcome, config: NodeConfig) -> list:

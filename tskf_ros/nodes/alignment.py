@@ -14,8 +14,8 @@ from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import (diagnostics_message, INPUT_TOPIC,
                                                    NODE_NAME, NodeConfig, outcome_messages,
                                                    output_qos, OUTPUT_TOPICS,
-                                                   parameters_to_config, pat_state_qos,
-                                                   PAT_STATE_TOPIC)
+                                                   parameters_to_config, pat_state_message,
+                                                   pat_state_qos, PAT_STATE_TOPIC)
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
@@ -99,7 +99,7 @@ class Alignment(ReconfigurableNode):
                 self.get_logger().warning(text)
             elif t.old or t.new != 'disabled':     # (the start line says 'no supervisor')
                 self.get_logger().info(text)
-            self.pat_pub.publish(String(data=t.new))
+            self.pat_pub.publish(pat_state_message(t))
 
     def _report(self, out: AlignOutcome) -> None:
         log = self.get_logger()

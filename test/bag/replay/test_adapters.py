@@ -10,7 +10,7 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.serde import SerdeError
 from sensor_msgs.msg import TimeReference
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
 from tskf_ros.bag.message_types import message_class, typestore
 from tskf_ros.bag.player import Player
@@ -193,16 +193,25 @@ def test_alignment_node_defaults_are_the_adapters(ros_context):
         assert (list(value) if isinstance(value, (list, tuple)) else value) == mine[key], key
 
 
-def test_live_alignment_replay_equals_offline_replay(ros_context):
-    res = replay(LED_BAG, None, params_file=LED_PARAMS, diagnostics=False, filter='alignment')
+@pytest.mark.parametrize('pat', [False, True])
+def test_live_alignment_replay_equals_offline_replay(ros_context, pat):
+    # pat: the pointing supervisor (config/alignment.yaml has it off), whose state the
+    # node latches on pat_state
+    config = alignment_interface.load_config(LED_PARAMS, {'pat.enabled': pat})
+    res = replay(LED_BAG, None, params_file=config, diagnostics=False, filter='alignment')
     assert res.topic == '/photodiode' and res.samples == 381
     assert any('open loop' in line for line in res.assumptions)
     topics = list(alignment_interface.BAG_OUTPUT_TOPICS.values())
     offline = {t: [m for name, _, m in res.outputs if name == t] for t in topics}
-    assert all(len(v) == 381 for v in offline.values())
+    # estimates only while tracking: from the third sample with the supervisor
+    assert [len(v) for v in offline.values()] == ([378, 378, 381] if pat else [381] * 3)
+    offline_states = [m.data for t, _, m in res.outputs
+                      if t == alignment_interface.BAG_PAT_STATE_TOPIC]
+    assert offline_states == (['acquiring', 'tracking'] if pat else ['disabled'])
     node = Alignment(context=ros_context, parameter_overrides=yaml_overrides(
         LED_PARAMS, '/**/alignment') + [Parameter('use_sim_time', value=True),
-                                        Parameter('queue_depth', value=DEEP)])
+                                        Parameter('queue_depth', value=DEEP),
+                                        Parameter('pat.enabled', value=pat)])
     player = Player(LED_BAG, rate=10.0, clock_hz=200.0, topics=['/photodiode'],
                     remap={'/photodiode': '/intensity'}, context=ros_context)
     client = rclpy.create_node('alignment_client', context=ros_context)
@@ -210,6 +219,11 @@ def test_live_alignment_replay_equals_offline_replay(ros_context):
     live = {t: [] for t in topics}
     for topic, cls in kinds.items():
         client.create_subscription(cls, topic, live[topic].append, QoSProfile(depth=DEEP))
+    # pat_state, latched: the state the node published as it started, then its transitions
+    states = []
+    client.create_subscription(String, alignment_interface.PAT_STATE_TOPIC,
+                               lambda m: states.append(m.data),
+                               alignment_interface.pat_state_qos())
     flusher = Flusher(client, kinds)
     executor = SingleThreadedExecutor(context=ros_context)
     for n in (node, client):
@@ -217,7 +231,7 @@ def test_live_alignment_replay_equals_offline_replay(ros_context):
     try:
         spin_until(executor, lambda: all(client.count_publishers(t) >= 2 for t in topics)
                    and player.pubs['/photodiode'].get_subscription_count()
-                   and flusher.matched(), 'matching')
+                   and flusher.matched() and states, 'matching')
         executor.add_node(player)
         spin_until(executor, lambda: player.done.done()
                    and node.session.stats.received == res.samples,
@@ -225,6 +239,8 @@ def test_live_alignment_replay_equals_offline_replay(ros_context):
                    f'{player.done.done()}, published {player.published}, aligner took '
                    f'{node.session.stats.received})')
         flusher.flush(executor, live)
+        spin_until(executor, lambda: len(states) >= len(offline_states),
+                   lambda: f'the pat_state messages (got {states})')
         sim_now = node.get_clock().now().nanoseconds
     finally:
         executor.shutdown()
@@ -232,6 +248,7 @@ def test_live_alignment_replay_equals_offline_replay(ros_context):
             n.destroy_node()
     assert abs(sim_now - 1_700_000_020 * 10**9) < 5 * 10**9, 'the node ran on the bag clock'
     assert node.session.stats.used == 381 and not node.session.stats.resets
+    assert states == offline_states
     for topic in topics:
         got, expected = live[topic], offline[topic]
         assert len(got) == len(expected), topic

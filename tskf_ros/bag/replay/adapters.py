@@ -84,6 +84,10 @@ class OfflineEstimator:
         return [(name, estimator.output_type(key), qos)
                 for key, name in BAG_OUTPUT_TOPICS.items() if key != 'smoothed']
 
+    def start_messages(self) -> list[tuple[str, Any]]:
+        """Return the (bag topic, rclpy message) pairs the live node publishes as it starts."""
+        return []
+
     def diagnostics_due(self, log_ns: int) -> list[tuple[int, Any]]:
         """
         Return the /diagnostics message due at log_ns, if any: at most one.
@@ -141,7 +145,13 @@ class OfflineAligner(OfflineEstimator):
     def output_topics(self) -> list[tuple[str, str, QoSProfile]]:
         """Return the (topic, type, rclpy QoS) of every output but /diagnostics."""
         return [(name, aligner.OUTPUT_TYPES[key], aligner.output_qos(self.config, key))
-                for key, name in aligner.BAG_OUTPUT_TOPICS.items()]
+                for key, name in aligner.BAG_OUTPUT_TOPICS.items()] + [
+                    (aligner.BAG_PAT_STATE_TOPIC, aligner.PAT_STATE_TYPE,
+                     aligner.pat_state_qos())]
+
+    def start_messages(self) -> list[tuple[str, Any]]:
+        """Return the pat_state message of the state the session starts in (taken from it)."""
+        return aligner.bag_pat_state_messages(self.session.take_transitions())
 
     def process(self, data: bytes, log_ns: int) -> tuple[Sample, AnyOutcome]:
         """Decode one intensity sample and run it; return (sample, outcome)."""
@@ -149,8 +159,14 @@ class OfflineAligner(OfflineEstimator):
         return sample, self.session.add(sample[0], sample[1], now_ns=log_ns)
 
     def messages(self, out: AnyOutcome) -> list[tuple[str, Any]]:
-        """Return the (bag topic, rclpy message) pairs the live node publishes for out."""
-        return aligner.bag_outcome_messages(out, self.config)
+        """
+        Return the (bag topic, rclpy message) pairs the live node publishes for out.
+
+        Its outputs, then a pat_state message per state transition the sample made (taken
+        from the session, as the node does after publishing: call once per outcome).
+        """
+        return (aligner.bag_outcome_messages(out, self.config)
+                + aligner.bag_pat_state_messages(self.session.take_transitions()))
 
     def encoded(self, out: AnyOutcome) -> list[tuple[str, bytes]]:
         """Return what messages(out) returns, serialized (canonical CDR, rosbags)."""

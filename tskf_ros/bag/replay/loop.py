@@ -194,8 +194,9 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
 
     The estimator's measurements are gathered up to the next input u, /diagnostics message
     due or GATHER messages and taken by the session in runs (EstimatorSession.add_many);
-    the sink gets every message and outcome in storage order, as one at a time.  progress:
-    a bar of the messages read (a terminal only).
+    the sink gets every message and outcome in storage order, as one at a time, and first
+    (at the first message's log time) what the node publishes as it starts.  progress: a
+    bar of the messages read (a terminal only).
     """
     topic, input_topic = result.topic, result.input_topic
     process_input = est.process_input
@@ -213,6 +214,9 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
         total = sum(counts) if all(c is not None for c in counts) else None
         messages = wrap(messages, total, 'replaying', 'msg')
 
+    # what the node publishes as it starts, written at the first message's log time
+    start: Optional[Callable[[], list]] = est.start_messages
+
     def flush() -> None:
         if gathered.logs or gathered.held:
             gathered.hand_over(est, sink, statuses)
@@ -220,6 +224,10 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
         for raw in messages:
             read += 1
             log_ns = raw.log_time_ns
+            if start is not None:
+                for name, msg in start():
+                    sink.message(name, log_ns, msg)
+                start = None
             if due_at is not None and log_ns >= due_at:
                 flush()
                 for t, msg in est.diagnostics_due(log_ns):

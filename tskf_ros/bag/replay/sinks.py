@@ -64,6 +64,9 @@ class Sink(Protocol):
     def diagnostics(self, stamp_ns: int, msg: Any) -> None:
         """Take a /diagnostics message (rclpy) due at stamp_ns."""
 
+    def message(self, topic: str, log_ns: int, msg: Any) -> None:
+        """Take an rclpy message that the node publishes outside an outcome, as it starts."""
+
 
 class Collector:
     """Outputs kept in memory as rclpy messages (result.outputs)."""
@@ -86,8 +89,12 @@ class Collector:
 
     def diagnostics(self, stamp_ns: int, msg: Any) -> None:
         """Keep the /diagnostics message."""
-        self.result.written[DIAGNOSTICS_TOPIC] += 1
-        self.result.outputs.append((DIAGNOSTICS_TOPIC, stamp_ns, msg))
+        self.message(DIAGNOSTICS_TOPIC, stamp_ns, msg)
+
+    def message(self, topic: str, log_ns: int, msg: Any) -> None:
+        """Keep the message."""
+        self.result.written[topic] += 1
+        self.result.outputs.append((topic, log_ns, msg))
 
 
 class BagSink:
@@ -136,8 +143,12 @@ class BagSink:
 
     def diagnostics(self, stamp_ns: int, msg: Any) -> None:
         """Write the /diagnostics message."""
-        self.written[DIAGNOSTICS_TOPIC] += 1
-        self.writer.write(DIAGNOSTICS_TOPIC, stamp_ns, serialize(msg))
+        self.message(DIAGNOSTICS_TOPIC, stamp_ns, msg)
+
+    def message(self, topic: str, log_ns: int, msg: Any) -> None:
+        """Write the message, serialized to canonical CDR."""
+        self.written[topic] += 1
+        self.writer.write(topic, log_ns, serialize(msg))
 
 
 class ArraySink:
@@ -191,6 +202,9 @@ class ArraySink:
             self.smoother.outcome(out)
         for j in out.jumps:
             rows['mu', j.revised].append((log_ns, j.stamp_ns, j.sigma_ns))
+
+    def message(self, topic: str, log_ns: int, msg: Any) -> None:
+        """Keep nothing: the estimator publishes no message outside an outcome."""
 
     def run_rows(self, run: Run, logs: Sequence[int], sampled: Sequence[Sample]) -> None:
         """Keep the rows `outcome` keeps for each sample of a run (all accepted, in order)."""
