@@ -18,7 +18,7 @@ author = 'tskf_ros maintainers'
 copyright = 'tskf_ros maintainers, Apache-2.0'   # noqa: A001 - the name Sphinx reads
 release = '0.1.0'
 
-extensions = ['myst_parser', 'parameter_tables', 'interface_tables']
+extensions = ['myst_parser', 'parameter_tables', 'interface_tables', 'overview_tables']
 root_doc = 'index'
 exclude_patterns = ['_build', '_ext', 'Thumbs.db', '.DS_Store']
 # `figures` is a link to ../docs (the figures the README shows too); its markdown notes

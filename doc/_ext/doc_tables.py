@@ -4,7 +4,8 @@ from typing import Sequence, Union
 
 from docutils import nodes
 
-# a cell: plain text (`code` in backticks becomes a literal) or a node
+# a cell: plain text (`code` in backticks becomes a literal), a paragraph, a bullet list or
+# an inline node
 Cell = Union[str, nodes.Node]
 
 
@@ -20,11 +21,23 @@ def paragraph(text: str) -> nodes.paragraph:
     return nodes.paragraph('', '', *inline(text))
 
 
+def bullets(items: Sequence[str]) -> Cell:
+    """Return a bullet list of inline texts (see inline), or '' for no item."""
+    if not items:
+        return ''
+    out = nodes.bullet_list()
+    for text in items:
+        item = nodes.list_item()
+        item += paragraph(text)
+        out += item
+    return out
+
+
 def _row(cells: Sequence[Cell]) -> nodes.row:
     row = nodes.row()
     for content in cells:
         entry = nodes.entry()
-        if isinstance(content, nodes.paragraph):
+        if isinstance(content, (nodes.paragraph, nodes.bullet_list)):
             entry += content
         elif isinstance(content, str):
             entry += paragraph(content)

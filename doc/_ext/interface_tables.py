@@ -1,41 +1,26 @@
-"""
-Sphinx extension: a node's topics, services and diagnostic tasks from its declared interface.
-
-In a MyST page::
-
-    ```{topic-table} timescale_estimator
-    ```
-
-    ```{service-table} timescale_estimator
-    ```
-
-    ```{diagnostic-table} timescale_estimator
-    ```
-
-render the declaration of tskf_ros.messages.node_interfaces (built from the constants the
-nodes create their topics and services from; test/nodes/test_node_interfaces.py checks it
-against the running nodes): the topics (name, direction, type, content, QoS), the services (the node's,
-then rclpy's, every node's) and each diagnostic task (status name, levels, keys).
-"""
+"""Sphinx extension: a node's topics, services and diagnostic tasks, from node_interfaces."""
 
 from pathlib import Path
+from typing import Optional
 
 from docutils import nodes
+from docutils.parsers.rst import directives
 from sphinx.application import Sphinx
 from sphinx.util.docutils import SphinxDirective
 
 from doc_tables import paragraph, table
 from tskf_ros.messages import diagnostic_tasks, interface_spec, node_interfaces
-from tskf_ros.messages.interface_spec import (NodeInterface, PARAMETER_SERVICES,
-                                              STANDARD_TOPICS, TYPE_DESCRIPTION_SERVICE)
+from tskf_ros.messages.interface_spec import (DiagnosticTask, NodeInterface,
+                                              PARAMETER_SERVICES, STANDARD_TOPICS,
+                                              TYPE_DESCRIPTION_SERVICE)
 from tskf_ros.messages.node_interfaces import interface
 
 TOPIC_HEADER = ('topic', 'dir', 'type', 'content', 'QoS')
 TOPIC_WIDTHS = (18, 5, 20, 40, 17)
 SERVICE_HEADER = ('service', 'type', 'what it does')
 SERVICE_WIDTHS = (25, 25, 50)
-LEVEL_HEADER = ('level', 'when')
-LEVEL_WIDTHS = (10, 90)
+LEVEL_HEADER = ('level', 'message', 'when')
+LEVEL_WIDTHS = (10, 30, 60)
 KEY_HEADER = ('keys', 'meaning')
 KEY_WIDTHS = (40, 60)
 # the modules a table is read from: a page is rebuilt when one changes
@@ -43,16 +28,21 @@ SOURCES = (interface_spec, diagnostic_tasks, node_interfaces)
 
 
 class InterfaceDirective(SphinxDirective):
-    """A directive whose argument names a node; its page depends on the declaration."""
+    """
+    A directive whose argument names a node; its page depends on the declaration.
+
+    In a MyST page ```{topic-table} timescale_estimator``` (or service-table,
+    diagnostic-table) renders the node's declaration in tskf_ros.messages.node_interfaces.
+    """
 
     required_arguments = 1
     has_content = False
 
-    def declared(self) -> NodeInterface:
-        """Return the node's declared interface, noting the modules it comes from."""
+    def declared(self, node: str = '') -> NodeInterface:
+        """Return the declared interface of node (the argument's), noting its modules."""
         for module in SOURCES:
             self.env.note_dependency(str(Path(module.__file__)))
-        return interface(self.arguments[0])
+        return interface(node or self.arguments[0])
 
 
 def _code(text: str) -> nodes.literal:
@@ -93,25 +83,64 @@ class ServiceTable(InterfaceDirective):
 
 
 class DiagnosticTable(InterfaceDirective):
-    """Render each diagnostic task of the node named by the argument: levels, keys."""
+    """
+    Render diagnostic tasks of the nodes named by the arguments: status, levels, keys.
+
+    Options: `:tasks:` the task names to show (comma-separated; default every task), and
+    `:levels-only:` to leave the keys out.  A task several of the nodes share (the same
+    declaration) is shown once, under each status name that publishes it::
+
+        ```{diagnostic-table} timescale_estimator alignment
+        :tasks: input frequency
+        ```
+    """
+
+    optional_arguments = 9
+    option_spec = {'tasks': directives.unchanged_required, 'levels-only': directives.flag}
 
     def run(self) -> list:
-        """Return, per task, a paragraph naming its status, its levels and its keys."""
-        declared = self.declared()
+        """Return, per task, a paragraph naming its statuses, its levels and its keys."""
+        wanted = ([name.strip() for name in self.options['tasks'].split(',')]
+                  if 'tasks' in self.options else None)
+        shown = shared_tasks([self.declared(node) for node in self.arguments], wanted)
+        missing = set(wanted or ()) - {task.name for task, _ in shown}
+        if missing:
+            raise self.error(f'no task {sorted(missing)} in {self.arguments}')
         out: list = []
-        for task, status in zip(declared.diagnostics, declared.status_names()):
+        for task, statuses in shown:
             title = nodes.paragraph(classes=['diagnostic-task'])
-            title += nodes.strong('', '', _code(status))
+            names = nodes.strong()
+            for i, status in enumerate(statuses):
+                names.extend(([nodes.Text(', ')] if i else []) + [_code(status)])
+            title += names
             title += nodes.Text(': ')
             title.extend(paragraph(task.summary).children)
             out.append(title)
             out.append(table(LEVEL_HEADER, LEVEL_WIDTHS,
-                             [(level.level, level.when) for level in task.levels],
+                             [(level.level, _code(level.message) if level.message else '',
+                               level.when) for level in task.levels],
                              'diagnostic-levels'))
-            out.append(table(KEY_HEADER, KEY_WIDTHS,
-                             [(', '.join(f'`{key}`' for key in row.keys), row.meaning)
-                              for row in task.keys], 'diagnostic-keys'))
+            if 'levels-only' not in self.options:
+                out.append(table(KEY_HEADER, KEY_WIDTHS,
+                                 [(', '.join(f'`{key}`' for key in row.keys), row.meaning)
+                                  for row in task.keys], 'diagnostic-keys'))
         return out
+
+
+def shared_tasks(declared: list[NodeInterface],
+                 wanted: Optional[list[str]]) -> list[tuple[DiagnosticTask, list[str]]]:
+    """Return the nodes' tasks (those named in wanted, or all), each with its statuses."""
+    shown: list[tuple[DiagnosticTask, list[str]]] = []
+    for node in declared:
+        for task, status in zip(node.diagnostics, node.status_names()):
+            if wanted is not None and task.name not in wanted:
+                continue
+            statuses = next((names for seen, names in shown if seen == task), None)
+            if statuses is None:
+                shown.append((task, [status]))
+            else:
+                statuses.append(status)
+    return shown
 
 
 def setup(app: Sphinx) -> dict:

@@ -1,4 +1,4 @@
-"""The docs build (-W -n), show every node's parameters and interface, and mention no issues."""
+"""The docs build (-W -n), show every node's parameters, interface and tasks, mention no issues."""
 
 import html
 from pathlib import Path
@@ -7,7 +7,9 @@ import subprocess
 import sys
 
 from documented_commands import documentation
+import pytest
 
+from tskf_ros.messages.interface_spec import DiagnosticTask, IN, OUT
 from tskf_ros.messages.node_interfaces import INTERFACES
 from tskf_ros.messages.parameter_schema import load_schema
 
@@ -19,9 +21,12 @@ SMART_QUOTES = {'\u2018': "'", '\u2019': "'", '\u201c': '"', '\u201d': '"',
                 '\u2014': '---', '\u2013': '--', '\u2026': '...'}
 
 
-def test_the_documentation_builds_without_a_warning(tmp_path):
-    # as ./run docs, into a temporary directory: -W warnings are errors, -n every
-    # cross-reference must resolve, --keep-going reports all of them at once
+@pytest.fixture(scope='module')
+def site(tmp_path_factory) -> Path:
+    """Build the documentation once, as ./run docs does; return the HTML folder."""
+    # -W warnings are errors, -n every cross-reference must resolve, --keep-going reports
+    # all of them at once
+    tmp_path = tmp_path_factory.mktemp('docs')
     out = tmp_path / 'html'
     build = subprocess.run(
         [sys.executable, '-m', 'sphinx', '-W', '-n', '--keep-going', '-q', '-b', 'html',
@@ -29,12 +34,20 @@ def test_the_documentation_builds_without_a_warning(tmp_path):
         capture_output=True, text=True, timeout=600, check=False)
     assert build.returncode == 0, \
         f'sphinx-build failed (exit {build.returncode}):\n{build.stderr}{build.stdout}'
-    assert (out / 'index.html').is_file()
+    return out
+
+
+def test_the_documentation_builds_without_a_warning(site):
+    assert (site / 'index.html').is_file()
     # every design draft is a page (the glob toctree picks up new ones)
     drafts = sorted(path.stem for path in (DOC / 'design').glob('*.md'))
     assert drafts, 'doc/design/ holds no draft'
-    missing = [name for name in drafts if not (out / 'design' / f'{name}.html').is_file()]
+    missing = [name for name in drafts if not (site / 'design' / f'{name}.html').is_file()]
     assert not missing, f'design drafts without a page: {missing}'
+
+
+def test_every_node_page_shows_its_parameters_and_interface(site):
+    out = site
     # every node page shows its schema's parameter table, row for row, cell for cell
     # (test/nodes/test_parameter_schema.py checks the running nodes against the schemas)
     for schema in sorted((REPO_ROOT / 'config' / 'schema').glob('*.yaml')):
@@ -54,9 +67,65 @@ def test_the_documentation_builds_without_a_warning(tmp_path):
         services = [row[:2] for row in table_rows(page, 'service-table', 3)]
         assert services[:len(declared.services)] == [(s.name, s.srv_type)
                                                      for s in declared.services], name
-        shown = [plain(status) for status in
-                 re.findall(r'class="diagnostic-task"><strong>(.*?)</strong>', page, re.DOTALL)]
-        assert shown == declared.status_names(), name
+        shown = task_sections(page)
+        assert [status for statuses, _ in shown for status in statuses] == \
+            declared.status_names(), name
+        for (_, levels), task in zip(shown, declared.diagnostics):
+            assert levels == level_rows(task), f'{name}: {task.name}'
+
+
+def test_the_nodes_overview_shows_every_declared_topic_and_service(site):
+    # doc/nodes/index.md: one row per node, its topics in and out and its services, each
+    # with its type (a topic the node gains is declared, or test_node_interfaces fails)
+    rows = table_cells((site / 'nodes' / 'index.html').read_text(), 'node-overview', 5)
+    assert [plain(row[0]) for row in rows] == list(INTERFACES)
+    for row, declared in zip(rows, INTERFACES.values()):
+        assert declared.purpose and plain(row[1]) == declared.purpose, declared.node
+        for cell, direction in ((row[2], IN), (row[3], OUT)):
+            items = [plain(item) for item in re.findall(r'<li>(.*?)</li>', cell, re.DOTALL)]
+            topics = [t for t in declared.topics if t.direction == direction]
+            assert [item.split(' (')[0] for item in items] == [t.name for t in topics], \
+                f'{declared.node} {direction}'
+            for item, topic in zip(items, topics):
+                assert item.startswith(f'{topic.name} ({topic.msg_type}'), item
+        shown = [plain(code) for code in re.findall(r'<code.*?</code>', row[4], re.DOTALL)]
+        assert shown == [s.name for s in declared.services], declared.node
+        assert all(s.srv_type in plain(row[4]) for s in declared.services), declared.node
+
+
+def test_the_diagnostics_page_shows_every_task_and_its_levels(site):
+    page = (site / 'diagnostics.html').read_text()
+    # the overview: every node's statuses in publishing order, their levels and summary
+    want = [(name, status, ', '.join(task.level_names()), task.summary.replace('`', ''))
+            for name, declared in INTERFACES.items()
+            for task, status in zip(declared.diagnostics, declared.status_names())]
+    assert table_rows(page, 'diagnostic-overview', 4) == want
+    # and a level table of every task under its status names, each status once (a task
+    # the page's sections do not name fails here)
+    tasks = {status: task for declared in INTERFACES.values()
+             for task, status in zip(declared.diagnostics, declared.status_names())}
+    seen = []
+    for statuses, levels in task_sections(page):
+        for status in statuses:
+            assert levels == level_rows(tasks[status]), status
+        seen += statuses
+    assert sorted(seen) == sorted(tasks)
+
+
+def task_sections(page: str) -> list[tuple[list[str], list]]:
+    """Return each diagnostic task shown on a page: its status names, its level rows."""
+    out = []
+    for section in page.split('class="diagnostic-task">')[1:]:
+        title = re.match(r'<strong>(.*?)</strong>', section, re.DOTALL)
+        assert title, section[:200]
+        out.append((plain(title.group(1)).split(', '),
+                    table_rows(section, 'diagnostic-levels', 3)))
+    return out
+
+
+def level_rows(task: DiagnosticTask) -> list[tuple[str, str, str]]:
+    """Return the rows a task's level table shows: level, message, when (as text)."""
+    return [(row.level, row.message, row.when.replace('`', '')) for row in task.levels]
 
 
 def plain(text: str) -> str:
@@ -67,12 +136,17 @@ def plain(text: str) -> str:
     return text
 
 
-def table_rows(page: str, css_class: str, columns: int) -> list:
-    """Return the body rows of the first table of css_class on an HTML page, as text."""
+def table_cells(page: str, css_class: str, columns: int) -> list:
+    """Return the body rows of the first table of css_class on an HTML page, as HTML."""
     table = page[page.index(css_class):]
     table = table[:table.index('</table>')]
-    cells = [plain(cell) for cell in re.findall(r'<td>(.*?)</td>', table, re.DOTALL)]
+    cells = re.findall(r'<td>(.*?)</td>', table, re.DOTALL)
     return [tuple(cells[i:i + columns]) for i in range(0, len(cells), columns)]
+
+
+def table_rows(page: str, css_class: str, columns: int) -> list:
+    """Return the body rows of the first table of css_class on an HTML page, as text."""
+    return [tuple(plain(cell) for cell in row) for row in table_cells(page, css_class, columns)]
 
 
 def test_no_page_mentions_issues():

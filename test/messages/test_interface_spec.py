@@ -4,7 +4,7 @@ import pytest
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
                        ReliabilityPolicy)
 
-from tskf_ros.messages.interface_spec import DiagnosticTask, KeyRow, qos_summary
+from tskf_ros.messages.interface_spec import DiagnosticTask, KeyRow, LevelRow, qos_summary
 from tskf_ros.messages.node_interfaces import interface, INTERFACES
 
 
@@ -41,3 +41,14 @@ def test_status_names_and_tasks_of_a_declared_node():
     # with every_topic_parameters() every topic exists: the smoothed estimate needs a lag
     assert declared.every_topic_parameters() == {'smoothing_lag': 1}
     assert all(i.node == name for name, i in INTERFACES.items())
+
+
+def test_level_names_are_the_declared_levels_once_each_in_order():
+    task = DiagnosticTask('t', '', (LevelRow('WARN', 'a', 'x'), LevelRow('ERROR', 'b'),
+                                    LevelRow('WARN', 'c'), LevelRow('OK', 'd')), ())
+    assert task.level_names() == ['WARN', 'ERROR', 'OK']
+
+
+def test_every_node_says_what_it_does():
+    # the nodes overview (doc/nodes/index.md) shows it next to the node's topics
+    assert all(i.purpose and '\n' not in i.purpose for i in INTERFACES.values())

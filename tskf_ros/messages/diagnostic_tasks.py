@@ -23,45 +23,54 @@ def _reasons(reasons: tuple[str, ...]) -> str:
     return ', '.join(reasons)
 
 
-# diagnostic_updater's FrequencyStatus (tskf_ros/core/diagnostic_status.py)
+# diagnostic_updater's FrequencyStatus (tskf_ros/core/diagnostic_status.py); the summaries
+# are set in this order, so the last that applies is the one shown
 FREQUENCY_LEVELS = (
-    LevelRow('ERROR', '"No events recorded.": no event in the window'),
-    LevelRow('WARN', '"Frequency too low." / "Frequency too high.": outside the acceptable '
-             'frequencies'),
-    LevelRow('OK', '"Desired frequency met": otherwise'))
+    LevelRow('ERROR', 'no event in the window (the stream went silent, or never came)',
+             'No events recorded.'),
+    LevelRow('WARN', 'below the minimum acceptable frequency', 'Frequency too low.'),
+    LevelRow('WARN', 'above the maximum acceptable frequency', 'Frequency too high.'),
+    LevelRow('OK', 'otherwise', 'Desired frequency met'))
 FREQUENCY_KEYS = (
-    KeyRow(('Events in window', 'Events since startup'),
-           'events in the window of the last 5 updates, since the start'),
-    KeyRow(('Duration of window (s)', 'Actual frequency (Hz)'),
-           'the window, events / window'),
-    KeyRow(('Target frequency (Hz)', 'Minimum acceptable frequency (Hz)',
-            'Maximum acceptable frequency (Hz)'),
-           'the target, and the target x (1 -/+ tolerance)'))
+    KeyRow(('Events in window',), 'events in the window of the last `window_size` = 5 '
+           'updates (`%d`)'),
+    KeyRow(('Events since startup',), 'events since the node started (`%d`)'),
+    KeyRow(('Duration of window (s)',), 'the window (`%f`)'),
+    KeyRow(('Actual frequency (Hz)',), 'events / window (`%f`)'),
+    KeyRow(('Target frequency (Hz)',), 'the target the summary names (`%f`; absent '
+           'without a target)'),
+    KeyRow(('Minimum acceptable frequency (Hz)',), 'target x (1 - tolerance)'),
+    KeyRow(('Maximum acceptable frequency (Hz)',), 'target x (1 + tolerance)'))
 
 INPUT_FREQUENCY_TASK = DiagnosticTask(
     INPUT_FREQUENCY, 'FrequencyStatus of the input messages, accepted or not, against '
-    '`expected_rate` (0: the nominal period) with `rate_tolerance`',
+    '`expected_rate` (0: 1 / `period`, 1 / `dt` for the alignment node) with '
+    '`rate_tolerance`',
     FREQUENCY_LEVELS, FREQUENCY_KEYS)
 
+# diagnostic_updater's TimeStampStatus: as FrequencyStatus, the last summary that applies
 TIMESTAMP_DELAY_TASK = DiagnosticTask(
     TIMESTAMP_DELAY, 'TimeStampStatus: node clock at reception minus `header.stamp`, '
     'acceptable from -1 s to 5 s',
-    (LevelRow('WARN', '"No data since last update."'),
-     LevelRow('ERROR', '"Timestamps too far in future seen." (delay < -1 s), "Timestamps too '
-              'far in past seen." (delay > 5 s), "Zero timestamp seen."'),
-     LevelRow('OK', '"Timestamps are reasonable."')),
-    (KeyRow(('Earliest timestamp delay:', 'Latest timestamp delay:'),
-            'smallest and largest delay since the last update (s)'),
-     KeyRow(('Earliest acceptable timestamp delay:', 'Latest acceptable timestamp delay:'),
-            '-1 and 5'),
-     KeyRow(('Late diagnostic update count:', 'Early diagnostic update count:',
-             'Zero seen diagnostic update count:'),
-            'updates that saw a delay above 5 s, below -1 s, a zero stamp')))
+    (LevelRow('WARN', 'no stamped message since the last update',
+              'No data since last update.'),
+     LevelRow('ERROR', 'a delay below -1 s', 'Timestamps too far in future seen.'),
+     LevelRow('ERROR', 'a delay above 5 s', 'Timestamps too far in past seen.'),
+     LevelRow('ERROR', 'a message stamped 0', 'Zero timestamp seen.'),
+     LevelRow('OK', 'otherwise', 'Timestamps are reasonable.')),
+    (KeyRow(('Earliest timestamp delay:',), 'smallest delay since the last update (s, '
+            '`%f`)'),
+     KeyRow(('Latest timestamp delay:',), 'largest delay since the last update'),
+     KeyRow(('Earliest acceptable timestamp delay:',), '-1'),
+     KeyRow(('Latest acceptable timestamp delay:',), '5'),
+     KeyRow(('Late diagnostic update count:',), 'updates that saw a delay above 5 s'),
+     KeyRow(('Early diagnostic update count:',), 'updates that saw a delay below -1 s'),
+     KeyRow(('Zero seen diagnostic update count:',), 'updates that saw a zero stamp')))
 
 FILTER_HEALTH_TASK = DiagnosticTask(
     FILTER_HEALTH, 'the filter: samples, rejections and resets by reason',
-    (LevelRow('ERROR', '"filter re-initialised itself: ...": a step gave a non-finite or '
-              'absurd state since the last update'),
+    (LevelRow('ERROR', 'a step gave a non-finite or absurd state since the last update '
+              '(`state_health`)', 'filter re-initialised itself: ...'),
      LevelRow('OK', 'otherwise, saying how many samples were rejected since the last '
               'update')),
     (KeyRow(('Samples received', 'Samples accepted', 'Samples inserted late'),
@@ -99,11 +108,11 @@ ESTIMATOR_TIME_SCALE_TASK = DiagnosticTask(
 
 ALIGNER_TASK = DiagnosticTask(
     ALIGNER, 'the aligner: samples, commands, missing and rejected samples, the EKF',
-    (LevelRow('ERROR', '"aligner restarted itself: ...": the EKF state went beyond '
-              '`state_limit` since the last update'),
+    (LevelRow('ERROR', 'the EKF state went beyond `state_limit` since the last update',
+              'aligner restarted itself: ...'),
      LevelRow('WARN', 'the EKF has lost the transmitter (x1hat <= 0)'),
      LevelRow('OK', 'otherwise; while `~/enable` is false the message says the loop is '
-              'paused')),
+              'paused and how many samples came meanwhile: a paused loop is not a fault')),
     (KeyRow(('Algorithm', 'Paused'), 'the aligner, `yes` while `~/enable` is false'),
      KeyRow(('Samples received', 'Samples received while paused', 'Samples used'),
             'intensities received (paused or not), those received while paused, those '
@@ -130,10 +139,12 @@ ALIGNMENT_TIME_SCALE_TASK = DiagnosticTask(
 POINTING_TASK = DiagnosticTask(
     POINTING, 'with `pat.enabled` only: the acquiring / tracking / lost supervisor '
     '(doc/pointing.md); the state is also on `pat_state`',
-    (LevelRow('ERROR', 'lost: the lock tests declared a link that worked gone'),
+    (LevelRow('ERROR', 'lost: the lock tests declared a link that worked gone', 'lost'),
      LevelRow('WARN', 'acquiring: no light yet (expected after a start or `~/acquire`, a '
-              'fault only if it lasts)'),
-     LevelRow('OK', 'tracking; or paused (`~/enable` false), which the message says')),
+              'fault only if it lasts)', 'acquiring'),
+     LevelRow('OK', 'tracking: the loop works', 'tracking'),
+     LevelRow('OK', 'paused (`~/enable` false), in any state: a paused loop is what was '
+              'asked for', 'paused (~/enable false) while <state>')),
     (KeyRow(('State', 'Time in state (s)'), 'acquiring, tracking or lost; the sample '
             'stamps since it began'),
      KeyRow(('Transitions',), 'state changes since the start (hand-overs, losses, forced '
@@ -166,8 +177,9 @@ POWER_METER_TASK = DiagnosticTask(
     POWER_METER, "the meter's state, `hardware_id` = the resource; outside the active "
     'state the message starts with the state (`inactive: ...`)',
     (LevelRow('ERROR', 'not connected'),
-     LevelRow('WARN', 'readings skipped or converted, or device errors, since the last '
-              'update; or no meter open (unconfigured: "unconfigured: not reading")'),
+     LevelRow('WARN', 'readings skipped or converted, or the device reported errors, since '
+              'the last update; or no meter open (unconfigured: "unconfigured: not '
+              'reading")'),
      LevelRow('OK', 'otherwise')),
     (KeyRow(('Lifecycle state',), 'the state, while no meter is open (then the only key)'),
      KeyRow(('connected', 'resource', 'identity'),

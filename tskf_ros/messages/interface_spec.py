@@ -62,10 +62,11 @@ class KeyRow:
 
 @dataclass(frozen=True)
 class LevelRow:
-    """One level a task can report: DiagnosticStatus's name (OK, WARN, ERROR) and when."""
+    """One level a task can report: DiagnosticStatus's name (OK, WARN, ERROR), when, message."""
 
     level: str
     when: str
+    message: str = ''            # the status message, where it is a fixed text
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,10 @@ class DiagnosticTask:
         """Tell whether a key a status carries is one this task declares."""
         return any(p.match(key) for row in self.keys for p in row.patterns())
 
+    def level_names(self) -> list[str]:
+        """Return the levels the task can report, each once, in the order declared."""
+        return list(dict.fromkeys(row.level for row in self.levels))
+
 
 @dataclass(frozen=True)
 class NodeInterface:
@@ -91,6 +96,7 @@ class NodeInterface:
     services: tuple[Service, ...]
     diagnostics: tuple[DiagnosticTask, ...]
     note: str = ''
+    purpose: str = ''            # what the node does, in one line (doc/nodes/index.md)
 
     def status_names(self, node_name: str = '') -> list[str]:
         """Return the /diagnostics status names, '<node>: <task>', in publishing order."""

@@ -68,7 +68,8 @@ TIMESCALE_ESTIMATOR = NodeInterface(
     (Service(RESET_SERVICE, RESET_TYPE,
              'restart the session from `x0`, `P0` (counted as `Resets (service)`)'),),
     (INPUT_FREQUENCY_TASK, TIMESTAMP_DELAY_TASK, FILTER_HEALTH_TASK,
-     ESTIMATOR_TIME_SCALE_TASK))
+     ESTIMATOR_TIME_SCALE_TASK),
+    purpose='the time-scale Kalman filter on a stream of stamped scalar samples')
 
 POWER_METER_SIMULATOR = NodeInterface(
     'power_meter_simulator',
@@ -79,7 +80,9 @@ POWER_METER_SIMULATOR = NodeInterface(
            'included'),
      DIAGNOSTICS),
     (),
-    (samples_frequency_task('`rate` x `time_factor`'),))
+    (samples_frequency_task('`rate` x `time_factor`'),),
+    purpose="Cai et al.'s vibrating, intermittent OWC link, as a power meter driver would "
+    'publish it')
 
 LED_LINK_SIMULATOR = NodeInterface(
     'led_link_simulator',
@@ -92,7 +95,8 @@ LED_LINK_SIMULATOR = NodeInterface(
            '`[base angle]` (rad), as a ros2_control forward_command_controller takes it'),
      DIAGNOSTICS),
     (),
-    (samples_frequency_task('`time_factor` / `dt` (none in lockstep)'),))
+    (samples_frequency_task('`time_factor` / `dt` (none in lockstep)'),),
+    purpose="Solanki et al.'s LED link with a commanded rotating receiver base")
 
 POWER_METER_DRIVER = NodeInterface(
     'power_meter_driver',
@@ -107,7 +111,9 @@ POWER_METER_DRIVER = NodeInterface(
              'backoff')),
     (readings_frequency_task(), POWER_METER_TASK),
     note='a lifecycle node: its lifecycle services and ~/transition_event come from '
-    'rclpy.lifecycle')
+    'rclpy.lifecycle',
+    purpose='a real optical power meter (Thorlabs PM100 or any SCPI meter) over VISA, '
+    'published as the simulator does')
 
 ALIGNMENT = NodeInterface(
     align.NODE_NAME,
@@ -144,7 +150,8 @@ ALIGNMENT = NodeInterface(
              '(acquiring, on `pat_state`); without the supervisor it answers success '
              'false')),
     (INPUT_FREQUENCY_TASK, TIMESTAMP_DELAY_TASK, ALIGNER_TASK, ALIGNMENT_TIME_SCALE_TASK,
-     POINTING_TASK))
+     POINTING_TASK),
+    purpose='LED active alignment: the scanning EKF or a baseline, commanding the base')
 
 # node (executable) name -> its interface
 INTERFACES = {i.node: i for i in (TIMESCALE_ESTIMATOR, POWER_METER_SIMULATOR,
