@@ -324,7 +324,7 @@ def test_ctrl_c_in_a_dask_sweep_is_one_line_without_worker_tracebacks(bags, tmp_
     out = tmp_path / 'd.csv'
     proc = subprocess.Popen(
         [sys.executable, '-m', 'tskf_ros.experiments.sweep', '--bags', str(bags / 'terminal'),
-         '--params-file', str(PARAMS), '--set', 'R=' + ','.join(str(r) for r in range(1, 40)),
+         '--params-file', str(PARAMS), '--set', 'R=' + ','.join(str(r) for r in range(1, 400)),
          '--workers', '2', '--out', str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
         env=dict(os.environ, OPENBLAS_NUM_THREADS='1'))

@@ -9,6 +9,7 @@ from pathlib import Path
 import signal
 import sys
 import threading
+from types import FrameType
 from typing import Optional
 
 import numpy as np
@@ -75,10 +76,15 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
             client = Client(cluster)
         else:
             client = Client(scheduler)
+        # a Ctrl-C raised where it is swallowed (a finaliser, a callback of distributed's)
+        # would let the loop finish: remember it, and stop at the next row
+        interrupted = SigintFlag()
         try:
             futures = {client.submit(run_task, t, key=f'sweep-{t.key}', pure=False): t
                        for t in todo}
             for fut in as_completed(futures):
+                if interrupted.is_set():
+                    raise KeyboardInterrupt
                 t = futures[fut]
                 try:
                     row = fut.result()
@@ -92,12 +98,37 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
             quiet_dask()
             raise
         finally:
+            interrupted.restore()
             client.close()
             if cluster is not None:
                 cluster.close()
     finally:
         bar.close()
     return result
+
+
+class SigintFlag:
+    """Take SIGINT as Python does (KeyboardInterrupt) and remember it; restore() undoes it."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.previous = None
+        self.main = threading.current_thread() is threading.main_thread()
+        if self.main:
+            self.previous = signal.signal(signal.SIGINT, self._on_sigint)
+
+    def _on_sigint(self, signum: int, frame: Optional[FrameType]) -> None:
+        self.event.set()
+        raise KeyboardInterrupt
+
+    def is_set(self) -> bool:
+        """Tell whether a SIGINT came."""
+        return self.event.is_set()
+
+    def restore(self) -> None:
+        """Put the previous SIGINT handler back (in the main thread)."""
+        if self.main:
+            signal.signal(signal.SIGINT, self.previous)
 
 
 def local_cluster(workers: int):
