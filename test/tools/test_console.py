@@ -101,6 +101,14 @@ def test_ctrl_c_at_once_is_quiet(tool, tmp_path):
     assert 'Traceback' not in text and code in (INTERRUPTED, 0, -signal.SIGINT), (code, text)
 
 
+@pytest.fixture
+def sigint_restored():
+    """Put back the SIGINT handler the console wrapper replaces in this process."""
+    previous = signal.getsignal(signal.SIGINT)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @pytest.fixture(scope='module')
 def bag(tmp_path_factory):
     return make_bag(tmp_path_factory.mktemp('console') / 'bag', [0.0, 0.5, 1.0, 30.0])
@@ -131,46 +139,34 @@ def test_ctrl_c_while_a_node_runs_is_quiet(tmp_path):
     assert 'Traceback' not in text and code in (INTERRUPTED, 0), (code, text)
 
 
-def test_the_wrapper_turns_an_interrupt_into_130(monkeypatch, capsys):
+def test_the_wrapper_turns_an_interrupt_into_130(monkeypatch, capsys, sigint_restored):
     def interrupted():
         raise KeyboardInterrupt
     monkeypatch.setitem(console.TOOLS, 'play', f'{__name__}:interrupted_entry')
     monkeypatch.setattr(sys.modules[__name__], 'interrupted_entry', interrupted, raising=False)
-    previous = signal.getsignal(signal.SIGINT)
-    try:
-        with pytest.raises(SystemExit) as exit_:
-            console.play()
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    with pytest.raises(SystemExit) as exit_:
+        console.play()
     assert exit_.value.code == INTERRUPTED and capsys.readouterr().err == ''
 
 
-def test_the_wrapper_passes_the_tools_status_on(monkeypatch):
+def test_the_wrapper_passes_the_tools_status_on(monkeypatch, sigint_restored):
     monkeypatch.setitem(console.TOOLS, 'reindex', f'{__name__}:status_entry')
     monkeypatch.setattr(sys.modules[__name__], 'status_entry', lambda: 3, raising=False)
-    previous = signal.getsignal(signal.SIGINT)
-    try:
-        with pytest.raises(SystemExit) as exit_:
-            console.reindex()
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    with pytest.raises(SystemExit) as exit_:
+        console.reindex()
     assert exit_.value.code == 3
 
 
 @pytest.mark.parametrize('returned, status', [(None, None), (4, 4)])   # None: exit 0
-def test_run_as_main_passes_the_status_on(returned, status):
-    previous = signal.getsignal(signal.SIGINT)
-    try:
-        with pytest.raises(SystemExit) as exit_:
-            console.run_as_main(lambda: returned)
-        # once main has ended, a Ctrl-C no longer interrupts the exit
-        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
-    finally:
-        signal.signal(signal.SIGINT, previous)
+def test_run_as_main_passes_the_status_on(returned, status, sigint_restored):
+    with pytest.raises(SystemExit) as exit_:
+        console.run_as_main(lambda: returned)
+    # once main has ended, a Ctrl-C no longer interrupts the exit
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     assert exit_.value.code == status
 
 
-def test_run_as_main_is_quiet_on_a_ctrl_c_while_main_cleans_up(capsys):
+def test_run_as_main_is_quiet_on_a_ctrl_c_while_main_cleans_up(capsys, sigint_restored):
     cleaned = []
 
     def main() -> int:
@@ -181,12 +177,8 @@ def test_run_as_main_is_quiet_on_a_ctrl_c_while_main_cleans_up(capsys):
             signal.raise_signal(signal.SIGINT)          # ...and a second one in its cleanup
             cleaned.append(True)                        # (not reached)
         return 0
-    previous = signal.getsignal(signal.SIGINT)
-    try:
-        with pytest.raises(SystemExit) as exit_:
-            console.run_as_main(main)
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    with pytest.raises(SystemExit) as exit_:
+        console.run_as_main(main)
     assert exit_.value.code == INTERRUPTED and not cleaned
     assert capsys.readouterr().err == 'tool: interrupted\n'     # the tool's own line only
 
@@ -205,24 +197,21 @@ def main():
 
 
 @pytest.mark.parametrize('interrupt', [True, False])
-def test_an_error_after_a_ctrl_c_is_the_interrupt(tmp_path, monkeypatch, interrupt):
+def test_an_error_after_a_ctrl_c_is_the_interrupt(tmp_path, monkeypatch, interrupt,
+                                                  sigint_restored):
     (tmp_path / 'fake_tool.py').write_text(
         FAKE_TOOL if interrupt else FAKE_TOOL.replace('os.kill(os.getpid(), signal.SIGINT)',
                                                       'raise KeyboardInterrupt'))
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setitem(console.TOOLS, 'fake', 'fake_tool:main')
-    previous = signal.getsignal(signal.SIGINT)
-    try:
-        if interrupt:
-            with pytest.raises(SystemExit) as end:
-                console.run('fake')
-            assert end.value.code == INTERRUPTED
-        else:
-            # the same error with no Ctrl-C is a real error: it is raised
-            with pytest.raises(ImportError, match='PyCapsule_Import'):
-                console.run('fake')
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    if interrupt:
+        with pytest.raises(SystemExit) as end:
+            console.run('fake')
+        assert end.value.code == INTERRUPTED
+    else:
+        # the same error with no Ctrl-C is a real error: it is raised
+        with pytest.raises(ImportError, match='PyCapsule_Import'):
+            console.run('fake')
 
 
 def main_blocks() -> dict:
