@@ -9,7 +9,6 @@ from pathlib import Path
 import signal
 import sys
 import threading
-from types import FrameType
 from typing import Optional
 
 import numpy as np
@@ -24,6 +23,7 @@ from tskf_ros.experiments.sweep_tasks import (build_tasks, find_bags, FIT_COLUMN
                                               parse_setting, run_task, setting_text,
                                               settings_product)
 from tskf_ros.messages.estimator_interface import default_parameters, ParamsError
+from tskf_ros.tools.console import SigintFlag
 
 PROG = 'sweep'
 EXIT_ROW_ERRORS = 5
@@ -105,30 +105,6 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
     finally:
         bar.close()
     return result
-
-
-class SigintFlag:
-    """Take SIGINT as Python does (KeyboardInterrupt) and remember it; restore() undoes it."""
-
-    def __init__(self) -> None:
-        self.event = threading.Event()
-        self.previous = None
-        self.main = threading.current_thread() is threading.main_thread()
-        if self.main:
-            self.previous = signal.signal(signal.SIGINT, self._on_sigint)
-
-    def _on_sigint(self, signum: int, frame: Optional[FrameType]) -> None:
-        self.event.set()
-        raise KeyboardInterrupt
-
-    def is_set(self) -> bool:
-        """Tell whether a SIGINT came."""
-        return self.event.is_set()
-
-    def restore(self) -> None:
-        """Put the previous SIGINT handler back (in the main thread)."""
-        if self.main:
-            signal.signal(signal.SIGINT, self.previous)
 
 
 def local_cluster(workers: int):

@@ -3,6 +3,7 @@
 import importlib
 import signal
 import sys
+import threading
 from types import FrameType
 from typing import Callable, NoReturn, Optional
 
@@ -59,20 +60,36 @@ def run_as_main(main: Callable[[], object]) -> NoReturn:
     _quietly(main)
 
 
-def _quietly(entry: Callable[[], object]) -> NoReturn:
-    interrupted = False
+class SigintFlag:
+    """Take SIGINT as Python does (KeyboardInterrupt) and remember it; restore() undoes it."""
 
-    def on_sigint(signum: int, frame: Optional[FrameType]) -> None:
-        nonlocal interrupted
-        interrupted = True
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.main = threading.current_thread() is threading.main_thread()
+        self.previous = signal.signal(signal.SIGINT, self._on_sigint) if self.main else None
+
+    def _on_sigint(self, signum: int, frame: Optional[FrameType]) -> None:
+        self.event.set()
         raise KeyboardInterrupt
-    signal.signal(signal.SIGINT, on_sigint)    # Python's own handler, which also remembers
+
+    def is_set(self) -> bool:
+        """Tell whether a SIGINT came."""
+        return self.event.is_set()
+
+    def restore(self) -> None:
+        """Put the previous SIGINT handler back (in the main thread)."""
+        if self.main:
+            signal.signal(signal.SIGINT, self.previous)
+
+
+def _quietly(entry: Callable[[], object]) -> NoReturn:
+    interrupted = SigintFlag()
     try:
         status = entry()
     except KeyboardInterrupt:
         status = EXIT_INTERRUPTED
     except Exception:  # noqa: B902 - only after a Ctrl-C, which it then is
-        if not interrupted:
+        if not interrupted.is_set():
             raise
         status = EXIT_INTERRUPTED
     finally:
