@@ -20,7 +20,8 @@ DEFAULT_DROPOUTS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
 FAIL_BETA = 16.0        # deg/s: the EKF loses every run at 50 ms steps (8 deg/s still tracks)
 DROPOUT_BETA = 2.8      # deg/s: the disturbance of the paper's experiments (Fig. 14)
 LABELS = {'ekf': 'EKF', 'hill_climbing': 'Hill', 'three_point': '3Point',
-          'ekf_hold': 'EKF, last value held', 'ekf_pat': 'EKF+PAT', 'ekf_reset': 'EKF reset',
+          'ekf_hold': 'EKF, last value held', 'ekf_pat': r'EKF+PAT ($R = \sigma^2$)',
+          'ekf_reset': 'EKF reset',
           'hill_climbing_pat': 'Hill+PAT', 'three_point_pat': '3Point+PAT'}
 COLORS = {'ekf': 'tab:blue', 'hill_climbing': 'tab:orange', 'three_point': 'tab:green',
           'ekf_hold': 'tab:purple', 'ekf_pat': 'navy', 'ekf_reset': 'tab:cyan',
