@@ -1,6 +1,7 @@
 """sweep: bags x settings on a Dask LocalCluster, a damaged bag in the set, resume."""
 
 import csv
+import logging
 import math
 import os
 from pathlib import Path
@@ -362,3 +363,18 @@ def test_a_busy_port_8787_gives_no_warning():
         assert not [w for w in seen if 'already in use' in str(w.message)]
     finally:
         holder.close()
+
+
+def test_quiet_dask_silences_the_loggers_distributed_gives_levels_of_their_own():
+    # distributed's config sets tornado.application to ERROR itself: after a Ctrl-C its
+    # sync() cancel callback logs there, so the parent's level is not enough
+    cluster = sweep.local_cluster(1)
+    try:
+        sweep.quiet_dask()
+        loud = [name for name, logger in logging.root.manager.loggerDict.items()
+                if isinstance(logger, logging.Logger)
+                and name.split('.')[0] in ('distributed', 'tornado', 'asyncio')
+                and logger.isEnabledFor(logging.CRITICAL)]
+        assert loud == []
+    finally:
+        cluster.close()

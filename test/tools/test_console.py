@@ -330,3 +330,15 @@ def test_ctrl_c_while_a_node_runs_as_a_module(tmp_path):
     assert wait_for(lambda: err.stat().st_size > 0, proc), err.read_text()
     code, text = interrupt(proc, err)
     assert 'Traceback' not in text and code in (INTERRUPTED, 0), (code, text)
+
+
+def test_the_sigint_flag_runs_first_before_the_interrupt(sigint_restored):
+    order = []
+    flag = console.SigintFlag(first=lambda: order.append('first'))
+    try:
+        signal.raise_signal(signal.SIGINT)
+    except KeyboardInterrupt:
+        order.append('interrupt')
+    finally:
+        flag.restore()
+    assert order == ['first', 'interrupt'] and flag.is_set()

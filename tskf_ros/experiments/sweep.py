@@ -77,8 +77,11 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
         else:
             client = Client(scheduler)
         # a Ctrl-C raised where it is swallowed (a finaliser, a callback of distributed's)
-        # would let the loop finish: remember it, and stop at the next row
-        interrupted = SigintFlag()
+        # would let the loop finish: remember it, and stop at the next row.  Dask is
+        # silenced in the handler itself: the interrupt reaches distributed's sync(), whose
+        # cancel callback runs at once on the event loop's thread and can log an error
+        # (a NameError of distributed's own) before this thread gets to the except below
+        interrupted = SigintFlag(first=quiet_dask)
         try:
             futures = {client.submit(run_task, t, key=f'sweep-{t.key}', pure=False): t
                        for t in todo}
@@ -132,9 +135,19 @@ def local_cluster(workers: int):
 
 
 def quiet_dask() -> None:
-    """Silence distributed's loggers (a shutdown after Ctrl-C logs lost connections)."""
-    for name in ('distributed', 'tornado', 'asyncio'):
-        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+    """
+    Silence distributed's loggers (a shutdown after Ctrl-C logs lost connections).
+
+    Every logger under distributed, tornado and asyncio: distributed's logging config
+    gives some of them a level of their own (tornado.application: ERROR), which a level
+    on the parent does not override.
+    """
+    families = ('distributed', 'tornado', 'asyncio')
+    names = [*families, *(name for name, logger in list(logging.root.manager.loggerDict.items())
+                          if isinstance(logger, logging.Logger))]
+    for name in names:
+        if name.split('.')[0] in families:
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
 def sweep(bags: list, *, out: Path, params_file: Optional[Path] = None, sets: list = (),

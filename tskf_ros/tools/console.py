@@ -61,15 +61,23 @@ def run_as_main(main: Callable[[], object]) -> NoReturn:
 
 
 class SigintFlag:
-    """Take SIGINT as Python does (KeyboardInterrupt) and remember it; restore() undoes it."""
+    """
+    Take SIGINT as Python does (KeyboardInterrupt) and remember it; restore() undoes it.
 
-    def __init__(self) -> None:
+    first (optional) runs in the handler, before the KeyboardInterrupt: before any code
+    that the interrupt reaches, in this thread or in one it hands work to.
+    """
+
+    def __init__(self, first: Optional[Callable[[], None]] = None) -> None:
         self.event = threading.Event()
+        self.first = first
         self.main = threading.current_thread() is threading.main_thread()
         self.previous = signal.signal(signal.SIGINT, self._on_sigint) if self.main else None
 
     def _on_sigint(self, signum: int, frame: Optional[FrameType]) -> None:
         self.event.set()
+        if self.first is not None:
+            self.first()
         raise KeyboardInterrupt
 
     def is_set(self) -> bool:
