@@ -1,5 +1,7 @@
 """The scanning EKF of Solanki et al. 2018 (Section IV): Jacobian (17), observability, EKF."""
 
+import warnings
+
 import numpy as np
 import pytest
 from solanki_paper import dg_paper, g_paper
@@ -40,12 +42,79 @@ def test_scan_set_is_the_papers():
     assert np.all(steps == 2.0)
 
 
-def test_observability_fails_at_one_over_91():
-    assert led.min_gain() == pytest.approx(1.0 / 91.0)
-    with pytest.raises(led.ObservabilityError, match=r'G > 0\.010989'):
-        led.check_observability(1.0 / 91.0)
-    with pytest.raises(led.ObservabilityError):
-        led.ScanningEKF(led.EKFConfig(gain=1.0 / 91.0))
+def _det_after_command(gain, x2_prev, psi_prev, psi, x1=2.0):
+    """det C_k of (17) written out: x2hat_{k-1} steered by (21), then predicted by (13)."""
+    g = led.IncidenceResponse()
+    u = -gain * x2_prev                      # (21)
+    x2f = x2_prev + u                        # (13)
+    a1, a2 = x2f + psi, x2f - u + psi_prev   # the arguments of the two rows of (17)
+    C = np.array([[g.g(a1), x1 * g.dg(a1)], [g.g(a2), x1 * g.dg(a2)]])
+    return float(np.linalg.det(C)), x2f
+
+
+def test_observability_is_guaranteed_up_to_one_over_91():
+    # erratum of (24): x2hat^f = (1 - G)/G dpsi with |dpsi| = 2 is out of |x2hat^f| < 180
+    # for G <= 1/91, so det C_k != 0 there; the paper's printed "G > 1/91" runs the wrong way
+    assert led.max_gain() == pytest.approx(1.0 / 91.0, rel=1e-15)
+    eps = 1e-6
+    for gain in (1.0 / 91.0, 1.0 / 91.0 - eps, 0.005):
+        report = led.observability(gain)
+        assert report.guaranteed and report.vanishing == ()
+        with warnings.catch_warnings():
+            warnings.simplefilter('error')
+            led.check_observability(gain)
+        led.ScanningEKF(led.EKFConfig(gain=gain))
+        # and det C_k written out stays away from 0 over |x2hat^f| < 180, both step signs
+        x2f = np.linspace(-179.9, 179.9, 3599)
+        for dpsi in (2.0, -2.0):
+            det = [_det_after_command(gain, x / (1 - gain), 0.0, dpsi)[0] for x in x2f[::37]]
+            assert np.all(np.abs(det) > 0.0)
+    report = led.observability(1.0 / 91.0 + eps)
+    assert not report.guaranteed
+    # x2hat^f = (1 - G)/G * 2 = 90 * 2 / (1 + 91 eps) + O(eps^2): just inside 180
+    want = (1 - (1 / 91 + eps)) / (1 / 91 + eps) * 2.0
+    np.testing.assert_allclose(report.vanishing, [-want, want], rtol=1e-12)
+    assert 179.9 < want < 180.0
+    with pytest.warns(led.ObservabilityWarning, match='does not guarantee observability'):
+        led.check_observability(1.0 / 91.0 + eps)
+    gain = 1.0 / 91.0 + eps
+    det, x2f = _det_after_command(gain, 2.0 / gain, 0.0, 2.0)
+    assert x2f == pytest.approx(want, rel=1e-12)
+    scale = abs(_det_after_command(gain, 2.0 / gain + 1.0, 0.0, 2.0)[0])
+    assert abs(det) <= 1e-9 * scale
+
+
+def test_det_vanishes_at_the_paper_gain_at_two_degrees():
+    # G = 0.5: x2hat_{k-1} = +-4 deg gives u_{k-1} = -+2, cancelling a +-2 deg scan step, and
+    # x2hat^f = +-2 deg: the two rows of C_k coincide, det C_k = 0 exactly
+    report = led.observability(0.5)
+    assert report.vanishing == (-2.0, 2.0) and not report.guaranteed
+    assert 'x2hat^f is -2, +2 deg' in report.message
+    with pytest.warns(led.ObservabilityWarning, match=r'\+2'):
+        assert led.check_observability(0.5) == report
+    for sign in (1.0, -1.0):
+        det, x2f = _det_after_command(0.5, 4.0 * sign, 0.0, 2.0 * sign)
+        assert x2f == 2.0 * sign and det == 0.0
+        # the filter's own Jacobian (17) at that state: identical rows
+        ekf = led.ScanningEKF(led.EKFConfig(gain=0.5))
+        C = ekf.jacobian(np.array([[2.0, x2f]]), 2.0 * sign, np.array([-2.0 * sign]),
+                         np.array([0.0]))
+        assert np.linalg.det(C[0]) == 0.0
+        # one degree off it is not singular
+        det, _ = _det_after_command(0.5, 4.0 * sign + 1.0, 0.0, 2.0 * sign)
+        assert abs(det) > 1e-6
+
+
+def test_unusable_gains_and_scans_are_refused():
+    for gain in (0.0, -0.1, 2.0, 2.5, float('nan'), float('inf')):
+        with pytest.raises(led.ObservabilityError, match='need 0 < G < 2'):
+            led.check_observability(gain)
+        with pytest.raises(led.ObservabilityError):
+            led.ScanningEKF(led.EKFConfig(gain=gain))
+    with pytest.raises(led.ObservabilityError, match='must differ'):
+        led.observability(0.5, (0.0, 0.0, 2.0))
+    with pytest.raises(led.ObservabilityError, match='at least two'):
+        led.observability(0.5, (0.0,))
 
 
 class ReferenceEKF:
@@ -117,8 +186,7 @@ def test_ekf_equals_the_paper_written_out():
         phi += 0.06 + want + 0.1 * rng.standard_normal()
 
 
-def test_observability_passes_at_paper_gain():
-    led.check_observability(0.5)
+def test_paper_gain_runs_with_nonzero_det_away_from_two_degrees():
     ekf = led.ScanningEKF(led.EKFConfig(gain=0.5), runs=3)
     refs = [ReferenceEKF(ekf.response.units_per_degree) for _ in range(3)]
     for t, z in ((0.0, [2.0, 2.5, 3.0]), (0.05, [2.2, 2.4, 2.9])):

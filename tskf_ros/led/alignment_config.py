@@ -1,8 +1,9 @@
 """
 The alignment session's settings, checked when made: Table I of Solanki, Al-Rubaia & Tan 2018.
 
-Section IV's observability condition (eq. (24): G > 1/91 for 2 degree scan steps) is one of
-the checks; angles are in degrees, intensities in volts.
+Section IV's observability condition (eq. (24), corrected: 0 < G < 2 and a scan without a
+zero step; G <= 1/91 would guarantee det C_k != 0) is one of the checks; angles are in
+degrees, intensities in volts.
 """
 
 from dataclasses import dataclass, field
@@ -120,8 +121,9 @@ class AlignmentConfig:
         scan = np.asarray(list(self.scan), dtype=float)
         if not np.all(np.isfinite(scan)):
             raise led.AlignmentError('scan has non-finite angles')
-        # Section IV: det C_k != 0 needs G > 1/91 for 2 degree scan steps (eq. (24))
-        led.check_observability(self.gain, tuple(scan))
+        # Section IV, eq. (24) corrected: 0 < G < 2 and no zero scan step (where det C_k
+        # can still vanish, as at the paper's G = 0.5: led.observability(...).message)
+        led.observability(self.gain, tuple(scan))
         if self.pat.enabled:
             if self.controller != 'p':
                 raise led.AlignmentError(f'pat.enabled needs controller p: the supervisor '

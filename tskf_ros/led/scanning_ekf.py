@@ -7,7 +7,9 @@ The receiver scans through Psi (Section IV, Fig. 7), and the EKF of eq. (13)-(20
 the last two measurements (12), y_k = [x1 g(x2_k + psi_k), x1 g(x2_{k-1} + psi_{k-1})].
 The P controller (21) u_k = -G x2hat_k drives the scan mean to zero and the motor gets
 u_k + psi_{k+1} - psi_k.  Observability (Section IV): det C_k != 0, which the paper
-guarantees with G > 1/91 for 2 degree scan steps (eq. (24)).
+says G > 1/91 guarantees for 2 degree scan steps (eq. (24)); the inequality runs the other
+way (G <= 1/91 guarantees it; at G = 0.5 det C_k = 0 at x2hat^f = +-2 deg), and
+`observability` reports where it vanishes.
 
 Not in the paper: a gap of missing measurements is predicted over with mu = elapsed / dt
 (P^f = P + mu Q), and every aligner is vectorised over independent runs
@@ -17,6 +19,7 @@ Not in the paper: a gap of missing measurements is predicted over with mu = elap
 from dataclasses import dataclass
 import math
 from typing import Optional, Protocol, Sequence, Union
+import warnings
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,33 +55,94 @@ class ObservabilityError(AlignmentError):
 # Observability (Section IV)
 
 
-def min_gain(scan: Sequence[float] = SCAN_ANGLES, *, max_angle: float = 180.0) -> float:
+@dataclass(frozen=True)
+class Observability:
     """
-    Smallest P gain with |(1 - G)/G| max|dpsi| < max_angle: 1/91 for 2 degree steps.
+    Where the P controller (21) with gain G and the scan make det C_k vanish (Section IV).
+
+    det C_k = 0 iff u_{k-1} + psi_k - psi_{k-1} = 0 (the two rows of (17) coincide), and
+    with u_{k-1} = -G x2hat_{k-1}, x2hat^f_k = (1 - G) x2hat_{k-1} that is iff
+    x2hat^f_k = (1 - G)/G (psi_k - psi_{k-1}) (eq. (24)).  `vanishing` lists those
+    x2hat^f (deg) within |x2hat^f| < 180; none (guaranteed) when
+    |(1 - G)/G| min|dpsi| >= 180, i.e. 0 < G <= 1/91 for 2 degree steps.  (The paper
+    prints the opposite inequality, G > 1/91; doc/design/lqr.md, erratum.)
+    """
+
+    gain: float
+    max_gain: float                 # the largest G that guarantees det C_k != 0
+    vanishing: tuple[float, ...]    # x2hat^f (deg) where det C_k = 0, |x2hat^f| < 180
+
+    @property
+    def guaranteed(self) -> bool:
+        """Tell whether det C_k != 0 at every |x2hat^f| < 180."""
+        return not self.vanishing
+
+    @property
+    def message(self) -> str:
+        """One line: what the gain guarantees, or where det C_k vanishes."""
+        if self.guaranteed:
+            return (f'P gain G = {self.gain:g} guarantees det C_k != 0 for |x2hat^f| < 180 '
+                    'deg (eq. (24), corrected)')
+        at = ', '.join(f'{v:+.4g}' for v in self.vanishing)
+        return (f'P gain G = {self.gain:g} does not guarantee observability: det C_k = 0 '
+                f'where the predicted scan mean x2hat^f is {at} deg (there the command '
+                'cancels the scan step); only G <= '
+                f'{self.max_gain:.6g} (= 1/{1.0 / self.max_gain:g}) guarantees det C_k != 0 '
+                '(eq. (24), corrected)')
+
+
+class ObservabilityWarning(UserWarning):
+    """The P gain and scan leave states where det C_k = 0 (Section IV, eq. (24))."""
+
+
+def max_gain(scan: Sequence[float] = SCAN_ANGLES, *, max_angle: float = 180.0) -> float:
+    """
+    Largest P gain with |(1 - G)/G| min|dpsi| >= max_angle: 1/91 for 2 degree steps.
 
     Eq. (24): det C_k = 0 needs x2hat^f = (1 - G)/G (psi_k - psi_{k-1}); with
-    |x2hat^f| < 180 that cannot happen when |(1 - G)/G| < 180 / max|dpsi|.
+    |x2hat^f| < 180 that cannot happen for any step of the scan when
+    (1 - G)/G >= 180 / min|dpsi| (0 < G < 1).
     """
     steps = np.abs(np.diff(np.r_[scan, scan[0]]))
     if np.any(steps == 0.0):
         raise ObservabilityError('consecutive scan angles must differ, or the two rows of C_k '
                                  f'coincide (det C_k = 0): scan {tuple(scan)}')
-    return 1.0 / (1.0 + max_angle / float(np.max(steps)))
+    return 1.0 / (1.0 + max_angle / float(np.min(steps)))
 
 
-def check_observability(gain: float, scan: Sequence[float] = SCAN_ANGLES) -> None:
-    """Raise ObservabilityError unless the gain and scan guarantee det C_k != 0 (eq. (24))."""
+def observability(gain: float, scan: Sequence[float] = SCAN_ANGLES) -> Observability:
+    """
+    Return where det C_k vanishes for this gain and scan (eq. (24), corrected).
+
+    Raise ObservabilityError for a gain the P controller cannot use (not 0 < G < 2:
+    x2hat <- (1 - G) x2hat diverges or stands still) or a scan with a zero step.
+    """
     if len(scan) < 2:
         raise ObservabilityError(f'the scan needs at least two angles, got {tuple(scan)}')
-    g_min = min_gain(scan)
-    if not (math.isfinite(gain) and gain > g_min * (1.0 + 1e-9)):
-        raise ObservabilityError(
-            f'P gain G = {gain:g} does not guarantee observability: need G > {g_min:.6g} '
-            f'(= 1/{1.0 / g_min:g}, from |(1 - G)/G| * max|dpsi| < 180, eq. (24)); '
-            'with it det C_k can vanish and the EKF loses x2')
-    if gain >= 2.0:
-        raise ObservabilityError(f'P gain G = {gain:g} makes x2hat <- (1 - G) x2hat diverge; '
-                                 'need G < 2')
+    g_max = max_gain(scan)
+    if not (math.isfinite(gain) and 0.0 < gain < 2.0):
+        raise ObservabilityError(f'P gain G = {gain:g} makes x2hat <- (1 - G) x2hat diverge '
+                                 'or stand still; need 0 < G < 2')
+    steps = np.unique(np.diff(np.r_[scan, scan[0]]))
+    # (24): x2hat^f = (1 - G)/G (psi_k - psi_{k-1}), reachable while |x2hat^f| < 180
+    # (the relative 1e-12 keeps G = 1/91 itself, where x2hat^f = +-180, on the safe side)
+    x2f = (1.0 - gain) / gain * steps
+    vanishing = tuple(sorted({float(v) for v in x2f if abs(v) < 180.0 * (1.0 - 1e-12)}))
+    return Observability(gain=float(gain), max_gain=g_max, vanishing=vanishing)
+
+
+def check_observability(gain: float, scan: Sequence[float] = SCAN_ANGLES) -> Observability:
+    """
+    Check the gain and scan (eq. (24), corrected); return the report.
+
+    Raise ObservabilityError where the P controller cannot work (see `observability`);
+    warn (ObservabilityWarning) where det C_k can vanish, as at the paper's G = 0.5
+    (x2hat^f = +-2 deg).
+    """
+    report = observability(gain, scan)
+    if not report.guaranteed:
+        warnings.warn(report.message, ObservabilityWarning, stacklevel=2)
+    return report
 
 
 # ---------------------------------------------------------------------------------------
@@ -164,7 +228,7 @@ class ScanningEKF:
 
     def __init__(self, config: EKFConfig = EKFConfig(),
                  response: Optional[IncidenceResponse] = None, *, runs: int = 1) -> None:
-        check_observability(config.gain, config.scan)
+        observability(config.gain, config.scan)
         self.config = config
         self.response = response if response is not None else IncidenceResponse()
         self.runs = int(runs)
