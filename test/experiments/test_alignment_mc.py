@@ -56,8 +56,10 @@ def test_supervised_algorithms_write_the_lock_fields(tmp_path, capsys):
     for name in names:
         got = data['results'][name]
         assert len(got['lost_at_end']) == 1 and 0.0 <= got['lost_at_end'][0] <= 1.0
-        assert set(got['reacquisition_s']) == {'median', 'p90', 'events'}
-        assert set(got['acquisition_s']) == {'median', 'p90'}
+        events = {'median', 'p90', 'events', 'ended', 'censored'}
+        assert set(got['reacquisition_s']) == events
+        assert set(got['supervisor_latency_s']) == events
+        assert set(got['acquisition_s']) == events | {'mean_ended', 'histogram'}
     # the plain algorithms declare nothing: no false-alarm rate
     assert data['results']['ekf']['false_alarms_per_1000s'] == [None]
     assert data['results']['ekf_pat']['false_alarms_per_1000s'][0] is not None
@@ -75,9 +77,14 @@ def test_a_blocked_beam_is_lost_by_every_run_and_recorded(noise, tmp_path, capsy
     data = json.loads(out.read_text())
     assert data['config']['blocked_s'] == [5.0, 8.0]
     got = data['results']['ekf_pat']
-    assert got['reacquisition_s']['events'] == [5]
-    # declared within the block (12 of 20 dark samples: 0.6 s), tracking after it
-    assert 8.0 - 5.0 - 0.6 < got['reacquisition_s']['median'][0] < 8.0 - 5.0 + 2.0
+    assert got['supervisor_latency_s']['events'] == [5]
+    # the lock-window latency: declared within the block (12 of 20 dark samples: 0.6 s),
+    # tracking after it
+    assert 8.0 - 5.0 - 0.6 < got['supervisor_latency_s']['median'][0] < 8.0 - 5.0 + 2.0
+    # the pointing, from the light's return: at most one event per run, back within 2 s
+    reacq = got['reacquisition_s']
+    assert reacq['events'][0] <= 5 and reacq['censored'] == [0]
+    assert reacq['events'][0] == 0 or 0.0 <= reacq['median'][0] <= 2.0
     assert got['lost_at_end'] == [0.0]
 
 
@@ -87,6 +94,19 @@ def test_a_blocked_interval_needs_start_before_stop(blocked, capsys):
         alignment_mc.main(['--runs', '2', '--blocked', blocked])
     assert exc.value.code == 2
     assert '--blocked needs START,STOP' in capsys.readouterr().err
+
+
+def test_no_comparison_refuses_the_comparison_outputs(tmp_path, capsys):
+    # --json and --png belong to the comparison: with --no-comparison they are refused in
+    # one line, and nothing is written
+    out = tmp_path / 'f.json'
+    for flag in ('--json', '--png'):
+        with pytest.raises(SystemExit) as exc:
+            alignment_mc.main(['--runs', '2', '--no-comparison', flag, str(out)])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert 'which --no-comparison skips' in err[-1]
+    assert not out.exists()
 
 
 def test_metrics_of_a_scripted_trajectory():
@@ -102,9 +122,12 @@ def test_metrics_of_a_scripted_trajectory():
     declared[2, 0] = declared[3, 1] = True
     m = alignment_pat.metrics(traj, states, declared)
     assert m['lost_at_end'] == 0.0
-    # run 0: lost at step 2, tracking in the zone at 4; run 1: its false alarm at 3 is
-    # 'tracking in the zone' at once (0 s)
-    np.testing.assert_allclose(sorted(m['reacquisition']), [0.0, 1.0])
+    # the supervisor's latency: run 0 lost at step 2, tracking in the zone at 4; run 1's
+    # false alarm at 3 is 'tracking in the zone' at once (0 s)
+    np.testing.assert_allclose(sorted(m['latency'].times), [0.0, 1.0])
+    # the pointing: run 0 leaves the zone at step 2 and is back at 4 and stays (hold 1 s
+    # = 2 steps): 1.0 s; run 1 never leaves
+    np.testing.assert_allclose(m['reacquisition'].times, [1.0])
     # one declared loss in run 1's 3 s (6 steps of 0.5 s) never out of the zone
     assert m['false_alarms_per_1000s'] == pytest.approx(1000.0 / 3.0)
-    np.testing.assert_allclose(m['acquisition'], [0.0, 0.0])
+    np.testing.assert_allclose(m['acquisition'].times, [0.0, 0.0])

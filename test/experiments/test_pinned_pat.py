@@ -9,8 +9,10 @@ from tskf_ros.experiments import alignment_pat
 RUNS = 100
 RESPONSE = led.IncidenceResponse()
 # what this seed gives (100 runs at noise 1 V); the 1000-run numbers: doc/pointing.md
-PLAIN, PAT, PAT_LOST, PAT_EVENTS = 97.48, 99.98, 0.0, 0
-COLD_WITHIN, COLD_MEDIAN = 1.0, 3.05
+PLAIN, PAT, PAT_LOST, PAT_DECLARED = 97.48, 99.98, 0.0, 0
+# excursions of the true |phi| out of the cone: 6, one of them at the end (censored)
+PAT_EXCURSIONS, PAT_CENSORED = 6, 1
+COLD_WITHIN, COLD_MEDIAN, COLD_MEAN = 1.0, 2.925, 2.2395
 
 
 def run(name, **link):
@@ -30,7 +32,9 @@ def test_ekf_pat_against_the_plain_ekf_at_one_volt():
     assert plain == pytest.approx(PLAIN, abs=0.05)
     assert pat == pytest.approx(PAT, abs=0.05)
     assert entry['lost_at_end'][0] == pytest.approx(PAT_LOST, abs=1e-9)
-    assert entry['reacquisition_s']['events'][0] == PAT_EVENTS
+    assert entry['supervisor_latency_s']['events'][0] == PAT_DECLARED
+    assert entry['reacquisition_s']['events'][0] == PAT_EXCURSIONS
+    assert entry['reacquisition_s']['censored'][0] == PAT_CENSORED
     assert entry['false_alarms_per_1000s'][0] == pytest.approx(0.0, abs=1e-9)
     # the supervisor rescues the runs the fixed P0 throws off
     assert pat > plain
@@ -39,7 +43,11 @@ def test_ekf_pat_against_the_plain_ekf_at_one_volt():
 def test_ekf_pat_cold_start_within_90_degrees():
     _, entry = run('ekf_pat', x2_0=0.0, x2_0_spread=90.0)
     assert entry['acquired_within_10s'][0] == pytest.approx(COLD_WITHIN, abs=1e-9)
-    assert entry['acquisition_s']['median'][0] == pytest.approx(COLD_MEDIAN, abs=1e-9)
+    acq = entry['acquisition_s']
+    assert acq['median'][0] == pytest.approx(COLD_MEDIAN, abs=1e-9)
+    assert acq['mean_ended'][0] == pytest.approx(COLD_MEAN, abs=1e-9)
+    # the histogram holds every run: acquired ones in bins, the rest censored
+    assert sum(acq['histogram'][0]['counts']) + acq['histogram'][0]['censored'] == RUNS
 
 
 def test_ekf_pat_is_told_the_noise_and_leads_at_two_and_a_half_volts():

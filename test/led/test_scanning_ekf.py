@@ -43,7 +43,7 @@ def test_scan_set_is_the_papers():
 
 
 def _det_after_command(gain, x2_prev, psi_prev, psi, x1=2.0):
-    """det C_k of (17) written out: x2hat_{k-1} steered by (21), then predicted by (13)."""
+    """Return det C_k of (17) written out: x2hat_{k-1} steered by (21), then predicted by (13)."""
     g = led.IncidenceResponse()
     u = -gain * x2_prev                      # (21)
     x2f = x2_prev + u                        # (13)

@@ -110,7 +110,7 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
                 traj = led.simulate_tracking(aligner, cfg, rng, response)
                 angular, measure = led.tracking(
                     traj, threshold=led.TRACKING_LEVEL * cfg.max_intensity)
-                m = alignment_pat.metrics(traj, None, None)
+                m = alignment_pat.metrics(traj, None, None, blocked=cfg.blocked)
             _record(results, name, angular, measure)
             alignment_pat.record(results[name], m)
             parts.append(f'{name} {np.mean(angular):5.1f}%')
@@ -291,12 +291,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         scale = led.LITERAL_UNITS_PER_DEGREE if args.literal_units else args.units_per_degree
         response = led.IncidenceResponse(units_per_degree=scale)
         ekf = led.EKFConfig(dt=args.dt, x1_floor=args.x1_floor)
-        led.check_observability(ekf.gain, ekf.scan)
+        observable = led.observability(ekf.gain, ekf.scan)
     except led.AlignmentError as exc:
         print(f'alignment_mc: {exc}', file=sys.stderr)
         return 2
+    if not observable.guaranteed:
+        progress(f'note: {observable.message}')
     if not (math.isfinite(args.cold_start) and 0.0 <= args.cold_start <= 180.0):
         parser().error('--cold-start must be in [0, 180] deg')
+    if args.no_comparison and (args.json or args.png):
+        parser().error('--json and --png write the noise-level comparison, which '
+                       '--no-comparison skips')
     if args.blocked and not (len(args.blocked) == 2 and args.blocked[0] < args.blocked[1]):
         parser().error(f'--blocked needs START,STOP in s with START < STOP, '
                        f'got {args.blocked}')

@@ -7,6 +7,7 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
+from tskf_ros.experiments import pointing_metrics
 from tskf_ros.led.supervisor import STATES, Supervisor, SupervisorConfig, TRACKING
 
 # name -> (tracker of led.ALGORITHMS, supervisor mode): '_pat' searches, acquires and
@@ -66,69 +67,77 @@ def build_pat(name: str, runs: int, link: led.TrackingLinkConfig,
     return Recorded(Supervisor(tracker, config, response))
 
 
-def _quantiles(values: Sequence[float]) -> tuple[Optional[float], Optional[float]]:
-    """Return (median, p90) of values (inf: never happened; None where inf or empty)."""
-    if not len(values):
-        return None, None
-    big = np.finfo(float).max                  # inf would make the interpolation NaN
-    v = np.asarray(values, dtype=float)
-    q = np.quantile(np.where(np.isfinite(v), v, big), [0.5, 0.9], method='lower')
-    return tuple(float(x) if x < big else None for x in q)
+def dark_steps(t: np.ndarray, blocked: Sequence[float]) -> np.ndarray:
+    """Return the steps of stamps t (s) in the blocked interval [start, stop) (no light)."""
+    if not blocked:
+        return np.zeros(t.size, dtype=bool)
+    return (blocked[0] <= t) & (t < blocked[1])
 
 
 def metrics(traj: led.Trajectory, states: Optional[np.ndarray],
-            declared: Optional[np.ndarray], *, angle: float = led.TRACKING_ANGLE) -> dict:
+            declared: Optional[np.ndarray], *, angle: float = led.TRACKING_ANGLE,
+            blocked: Sequence[float] = ()) -> dict:
     """
-    Return the lock metrics of one simulation; states / declared (steps, runs) or None.
+    Return the pointing metrics of one simulation; states / declared (steps, runs) or None.
 
-    In lock: |phi| <= angle.  A run acquires at its first step tracking in lock (a plain
-    algorithm: in lock); a declared loss is re-acquired at the first later such step (inf
-    if never); false alarms are the declared losses of runs never out of lock.
+    acquisition / reacquisition: pointing_metrics.Durations from the true |phi| (the
+    cone `angle`, held HOLD_S; blocked: the light's [start, stop) s); latency: the
+    supervisor's, from each declared loss to its next step tracking in the cone (None for
+    a plain algorithm); false alarms: the declared losses of runs never out of the cone.
     """
     dt = float(traj.t[1] - traj.t[0]) if traj.t.size > 1 else 1.0
     steps, runs = traj.phi.shape
-    inside = np.abs(led.wrap_degrees(traj.phi)) <= angle
-    locked = inside if states is None else inside & (states == TRACKING)
-    first = np.where(locked.any(axis=0), np.argmax(locked, axis=0), -1)
-    acquisition = np.where(first >= 0, first * dt, np.inf)
-    out = {'lost_at_end': float(np.mean(~inside[-1])),
-           'acquisition': acquisition}
-    if declared is None:
-        out.update({'reacquisition': np.array([]), 'false_alarms_per_1000s': None})
+    phi = led.wrap_degrees(traj.phi)
+    inside = np.abs(phi) <= angle
+    acquisition, reacquisition = pointing_metrics.pointing_events(
+        phi, dt, angle=angle, dark=dark_steps(traj.t, blocked))
+    out = {'lost_at_end': float(np.mean(~inside[-1])), 'acquisition': acquisition,
+           'reacquisition': reacquisition, 'duration_s': steps * dt}
+    if declared is None or states is None:
+        out.update({'latency': None, 'false_alarms_per_1000s': None})
         return out
-    # the next locked step at or after each step: suffix minimum of locked step indices
-    index = np.where(locked, np.arange(steps)[:, None], steps)
-    nxt = np.minimum.accumulate(index[::-1], axis=0)[::-1]
-    k, r = np.nonzero(declared)
-    wait = nxt[k, r] - k
-    reacq = np.where(nxt[k, r] < steps, wait * dt, np.inf)
+    locked = inside & (states == TRACKING)
     clean = inside.all(axis=0)
     seconds = clean.sum() * steps * dt
     alarms = declared[:, clean].sum()
-    out.update({'reacquisition': reacq,
+    out.update({'latency': pointing_metrics.step_latency(phi, dt, locked, declared,
+                                                         angle=angle),
                 'false_alarms_per_1000s': float(1000.0 * alarms / seconds) if seconds else None})
     return out
 
 
+def _events() -> dict:
+    return {key: [] for key in ('median', 'p90', 'events', 'ended', 'censored')}
+
+
 def empty_record() -> dict:
     """Return the per-algorithm lists metrics() fills, one entry per noise level."""
-    return {'lost_at_end': [], 'reacquisition_s': {'median': [], 'p90': [], 'events': []},
+    return {'lost_at_end': [], 'reacquisition_s': _events(), 'supervisor_latency_s': _events(),
             'false_alarms_per_1000s': [], 'acquired_within_10s': [],
-            'acquisition_s': {'median': [], 'p90': []}}
+            'acquisition_s': {**_events(), 'mean_ended': [], 'histogram': []}}
+
+
+def _append(lists: dict, values: dict) -> None:
+    for key, value in values.items():
+        lists[key].append(value)
 
 
 def record(entry: dict, m: dict) -> None:
     """Append one noise level's metrics to an algorithm's entry."""
     entry['lost_at_end'].append(m['lost_at_end'])
-    med, p90 = _quantiles(m['reacquisition'])
-    entry['reacquisition_s']['median'].append(med)
-    entry['reacquisition_s']['p90'].append(p90)
-    entry['reacquisition_s']['events'].append(int(m['reacquisition'].size))
+    _append(entry['reacquisition_s'], pointing_metrics.summary(m['reacquisition']))
+    latency = m['latency']
+    _append(entry['supervisor_latency_s'], pointing_metrics.summary(latency) if latency
+            is not None else {key: None for key in entry['supervisor_latency_s']})
     entry['false_alarms_per_1000s'].append(m['false_alarms_per_1000s'])
-    entry['acquired_within_10s'].append(float(np.mean(m['acquisition'] <= ACQUIRED_WITHIN)))
-    med, p90 = _quantiles(m['acquisition'])
-    entry['acquisition_s']['median'].append(med)
-    entry['acquisition_s']['p90'].append(p90)
+    acq = m['acquisition']
+    within = acq.observed & (acq.times <= ACQUIRED_WITHIN)
+    entry['acquired_within_10s'].append(float(np.mean(within)) if acq.times.size else None)
+    ended = acq.times[acq.observed]
+    _append(entry['acquisition_s'], {
+        **pointing_metrics.summary(acq),
+        'mean_ended': float(np.mean(ended)) if ended.size else None,
+        'histogram': pointing_metrics.histogram(acq, stop=m['duration_s'])})
 
 
 def evaluate(name: str, runs: int, link: led.TrackingLinkConfig, rng: np.random.Generator,
@@ -144,13 +153,14 @@ def evaluate(name: str, runs: int, link: led.TrackingLinkConfig, rng: np.random.
     if name in PAT_ALGORITHMS:
         aligner: Optional[Recorded] = build_pat(name, runs, link, response, ekf, clip, config)
         traj = led.simulate_tracking(aligner, link, rng, response)
-        m = metrics(traj, np.array(aligner.states), np.array(aligner.declared))
+        m = metrics(traj, np.array(aligner.states), np.array(aligner.declared),
+                    blocked=link.blocked)
     else:
         aligner = None
         traj = led.simulate_tracking(led.make_aligner(name, runs=runs, dt=link.dt,
                                                       response=response, ekf=ekf, clip=clip),
                                      link, rng, response)
-        m = metrics(traj, None, None)
+        m = metrics(traj, None, None, blocked=link.blocked)
     angular, measure = led.tracking(traj, threshold=led.TRACKING_LEVEL * link.max_intensity)
     return angular, measure, m, traj, aligner
 
@@ -188,5 +198,6 @@ def plot_pat_run(traj: led.Trajectory, record: Recorded, *, run: int = 0,
     return fig
 
 
-__all__ = ['plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'empty_record', 'evaluate', 'metrics',
+__all__ = ['plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'dark_steps', 'empty_record',
+           'evaluate', 'metrics',
            'MIN_NOISE', 'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']

@@ -110,7 +110,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--ablation-beta', type=arguments.rate_deg_s, default=14.0,
                    help='drift rate of the ablation at --noise, deg/s (14)')
     p.add_argument('--json', type=Path, help='write the results as JSON')
-    p.add_argument('--png', type=Path, help='write tracking % against beta')
+    p.add_argument('--png', type=Path, help='write tracking %% against beta')
     return p
 
 

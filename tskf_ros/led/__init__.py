@@ -16,7 +16,7 @@ from tskf_ros.led.intensity_model import (AlignmentError, attenuation, Incidence
                                           wrap_degrees, zone_units_per_degree)
 from tskf_ros.led.lqg_alignment import LQGAligner, LQGConfig, triangle_scan
 from tskf_ros.led.scanning_ekf import (Aligner, as_measurement, check_observability, EKFConfig,
-                                       max_gain, Measurement, observability, Observability,
+                                       max_gain, Measurement, Observability, observability,
                                        ObservabilityError, ObservabilityWarning, PAPER_DT,
                                        PAPER_GAIN, PAPER_P0, PAPER_Q, PAPER_Q_SYS, PAPER_R,
                                        PAPER_R_SYS, PAPER_X0, SCAN_ANGLES, ScanningEKF, StampClock)
@@ -27,8 +27,8 @@ __all__ = [
     'ALGORITHMS', 'Aligner', 'AlignmentError', 'AnyAligner', 'as_measurement', 'attenuation',
     'check_observability', 'CONTROLLERS', 'EKFConfig', 'HILL_STEP', 'HillClimbing',
     'IncidenceResponse', 'irradiance', 'LITERAL_UNITS_PER_DEGREE', 'LQGAligner', 'LQGConfig',
-    'make_aligner', 'MAX_INTENSITY', 'max_gain', 'Measurement', 'observability',
-    'Observability', 'ObservabilityError', 'ObservabilityWarning',
+    'make_aligner', 'MAX_INTENSITY', 'max_gain', 'Measurement', 'Observability',
+    'observability', 'ObservabilityError', 'ObservabilityWarning',
     'PAPER_DT', 'PAPER_G_COEFFICIENTS', 'PAPER_GAIN', 'PAPER_P0', 'PAPER_Q', 'PAPER_Q_SYS',
     'PAPER_R', 'PAPER_R_SYS', 'PAPER_X0', 'SCAN_ANGLES', 'ScanningEKF', 'simulate_tracking',
     'StampClock', 'ThreePointAveraging', 'tracking', 'TRACKING_ANGLE', 'TRACKING_LEVEL',

@@ -1,0 +1,171 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+"""
+Pointing metrics from the true pointing error: acquisition, re-acquisition, censoring.
+
+In the cone: |phi| <= 15 deg (Section V).  Back in the cone: the first step from which
+|phi| stays within the cone for HOLD_S seconds.  Acquisition: from the start of the run to
+the first step back in the cone.  A re-acquisition event starts where |phi| leaves the
+cone after the run was back in it (or, if the light is blocked at that step, where the
+light is back), and lasts until |phi| is back in the cone.  An event still open at the end
+of the run is censored at the time it was watched (the last step from which a hold could
+still be seen); the distribution is the Kaplan-Meier estimate, and its percentiles are
+read off it by linear interpolation between the event times (`km_quantile`).
+"""
+
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+HOLD_S = 1.0                       # s |phi| must stay within the cone to count as back
+HISTOGRAM_BIN_S = 0.25             # s: the acquisition histogram's bins
+Bools = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class Durations:
+    """Event durations (s) and whether each was seen to end (False: censored)."""
+
+    times: NDArray[np.float64]
+    observed: Bools
+
+    @staticmethod
+    def join(parts: Sequence['Durations']) -> 'Durations':
+        """Concatenate several sets of events."""
+        if not parts:
+            return Durations(np.zeros(0), np.zeros(0, dtype=bool))
+        return Durations(np.concatenate([p.times for p in parts]),
+                         np.concatenate([p.observed for p in parts]))
+
+
+def kaplan_meier(d: Durations) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """
+    Return the distinct observed times t_j and the Kaplan-Meier survival S(t_j).
+
+    S(t) = prod_{t_j <= t} (1 - d_j / n_j), d_j events ending at t_j, n_j events with a
+    time >= t_j (one censored at t_j is still at risk there).
+    """
+    ended = np.unique(d.times[d.observed])
+    if not ended.size:
+        return ended, np.ones(0)
+    order = np.sort(d.times)
+    at_risk = order.size - np.searchsorted(order, ended, side='left')
+    deaths = np.array([np.count_nonzero(d.times[d.observed] == t) for t in ended])
+    return ended, np.cumprod(1.0 - deaths / at_risk)
+
+
+def km_quantile(d: Durations, q: float) -> Optional[float]:
+    """
+    Return the q-quantile of the Kaplan-Meier distribution (None if it is not reached).
+
+    F = 1 - S at the event times t_1 < t_2 < ...: t_1 if q <= F(t_1), else linearly
+    interpolated between the two event times whose F bracket q.  Not reached when more
+    than 1 - q of the mass is censored beyond the last event.
+    """
+    t, s = kaplan_meier(d)
+    if not t.size:
+        return None
+    f = 1.0 - s
+    if q > f[-1] + 1e-12:
+        return None
+    j = int(np.searchsorted(f, q - 1e-12, side='left'))
+    if j == 0:
+        return float(t[0])
+    return float(t[j - 1] + (q - f[j - 1]) / (f[j] - f[j - 1]) * (t[j] - t[j - 1]))
+
+
+def summary(d: Durations) -> dict:
+    """Median, p90 (Kaplan-Meier, interpolated), event, ended and censored counts."""
+    return {'median': km_quantile(d, 0.5), 'p90': km_quantile(d, 0.9),
+            'events': int(d.times.size), 'ended': int(np.count_nonzero(d.observed)),
+            'censored': int(np.count_nonzero(~d.observed))}
+
+
+def _back(inside: Bools, hold: int) -> Bools:
+    """Per step k of one run: |phi| within the cone from k through k + hold - 1."""
+    steps = inside.size
+    if steps < hold:
+        return np.zeros(0, dtype=bool)
+    c = np.r_[0, np.cumsum(inside)]
+    return (c[hold:] - c[:-hold]) == hold            # k = 0 .. steps - hold
+
+
+def pointing_events(phi: NDArray[np.float64], dt: float, *, angle: float,
+                    dark: Optional[Bools] = None,
+                    hold_s: float = HOLD_S) -> tuple[Durations, Durations]:
+    """
+    Return (acquisition, re-acquisition) durations of phi (steps, runs), in seconds.
+
+    dark (steps,): the steps without light (a blocked beam); an event that starts in the
+    dark starts when the light is back.
+    """
+    steps, runs = phi.shape
+    hold = max(int(round(hold_s / dt)), 1)
+    inside = np.abs(phi) <= angle
+    dark = np.zeros(steps, dtype=bool) if dark is None else np.asarray(dark, dtype=bool)
+    # the first lit step at or after each step (steps: none)
+    lit = np.where(~dark, np.arange(steps), steps)
+    next_lit = np.minimum.accumulate(np.r_[lit, steps][::-1])[::-1]
+    last = steps - hold                 # the last step from which a hold can be seen
+    acq_t, acq_o, re_t, re_o = [], [], [], []
+    for r in range(runs):
+        back = np.flatnonzero(_back(inside[:, r], hold))
+        if not back.size:
+            acq_t.append((last + 1) * dt)
+            acq_o.append(False)
+            continue
+        acq_t.append(back[0] * dt)
+        acq_o.append(True)
+        leaves = np.flatnonzero(inside[:-1, r] & ~inside[1:, r]) + 1
+        k = back[0] + hold
+        while True:
+            i = int(np.searchsorted(leaves, k))
+            if i == leaves.size:
+                break
+            start = int(next_lit[leaves[i]])
+            if start > last:            # not watched long enough for a hold: censored at 0
+                re_t.append(0.0)
+                re_o.append(False)
+                break
+            j = int(np.searchsorted(back, start))
+            if j == back.size:
+                re_t.append((last + 1 - start) * dt)
+                re_o.append(False)
+                break
+            re_t.append((back[j] - start) * dt)
+            re_o.append(True)
+            k = back[j] + hold
+    return (Durations(np.array(acq_t, dtype=float), np.array(acq_o, dtype=bool)),
+            Durations(np.array(re_t, dtype=float), np.array(re_o, dtype=bool)))
+
+
+def step_latency(phi: NDArray[np.float64], dt: float, locked: Bools, declared: Bools,
+                 *, angle: float) -> Durations:
+    """
+    Return the supervisor's lock-window latency: from each declared loss to the next step tracking.
+
+    locked (steps, runs): tracking and |phi| <= angle; a loss with no such later step is
+    censored at the end of the run.  This measures the supervisor's own state changes
+    (a held loss returns only after a clean lock window), not the pointing.
+    """
+    steps = phi.shape[0]
+    index = np.where(locked, np.arange(steps)[:, None], steps)
+    nxt = np.minimum.accumulate(index[::-1], axis=0)[::-1]
+    k, r = np.nonzero(declared)
+    ended = nxt[k, r] < steps
+    times = np.where(ended, nxt[k, r] - k, steps - k) * dt
+    return Durations(times.astype(float), ended)
+
+
+def histogram(d: Durations, *, bin_s: float = HISTOGRAM_BIN_S, stop: float) -> dict:
+    """Return the ended times binned from 0 to stop (s), and the censored count beside them."""
+    edges = np.arange(0.0, stop + bin_s, bin_s)
+    counts, _ = np.histogram(d.times[d.observed], bins=edges)
+    return {'edges_s': [float(e) for e in edges], 'counts': [int(c) for c in counts],
+            'censored': int(np.count_nonzero(~d.observed))}
+
+
+__all__ = ['Durations', 'HISTOGRAM_BIN_S', 'histogram', 'HOLD_S', 'kaplan_meier',
+           'km_quantile', 'pointing_events', 'step_latency', 'summary']
