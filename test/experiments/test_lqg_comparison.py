@@ -2,8 +2,10 @@
 
 import json
 
+import numpy as np
 import pytest
 
+from tskf_ros import led
 from tskf_ros.experiments import lqg_comparison
 
 
@@ -12,7 +14,12 @@ def test_comparison_writes_both_controllers(tmp_path, capsys):
     assert lqg_comparison.main(['--runs', '3', '--steps', '30', '--betas', '0,14',
                                 '--json', str(out), '--png', str(png)]) == 0
     data = json.loads(out.read_text())
-    assert set(data['sweep']) == {'p', 'lqg'} and len(data['sweep']['lqg']) == 2
+    assert set(data['sweep']) == {'p', 'p_prior', 'lqg'} and len(data['sweep']['lqg']) == 2
+    ratio = data['mean_abs_phi_ratio_lqg_over']['p_prior']['effort']
+    assert ratio['ci95'][0] <= ratio['ratio'] <= ratio['ci95'][1]
+    for point in data['sweep']['p_prior']:
+        lo, hi = point['angular']['ci95']
+        assert lo <= point['angular']['mean'] <= hi
     assert data['effort']['lqg']['noise_v'] == 1.0
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
@@ -23,3 +30,18 @@ def test_help_prints_and_exits_0(capsys):
         lqg_comparison.main(['--help'])
     assert exc.value.code == 0
     assert 'write tracking % against beta' in capsys.readouterr().out
+
+
+def test_p_with_the_clipped_prior_is_the_paper_p_but_for_p0():
+    # the only difference between 'p' and 'p_prior' is P0: diag(100, 1000) -> diag(4, 25)
+    assert lqg_comparison.EKF_CONFIGS['p'] == led.EKFConfig()
+    assert lqg_comparison.EKF_CONFIGS['p_prior'] == led.EKFConfig(P0=((4.0, 0.0), (0.0, 25.0)))
+    common = {'beta': 2.8, 'noise': 1.0, 'runs': 4, 'steps': 40, 'dt': 0.05, 'seed': 5}
+    p, phi_p = lqg_comparison.simulate_point('p', **common)
+    aligner = led.make_aligner('ekf', runs=4)
+    traj = led.simulate_tracking(aligner, led.TrackingLinkConfig(beta=2.8, noise=1.0, steps=40),
+                                 np.random.default_rng(5))
+    np.testing.assert_allclose(phi_p, np.abs(led.wrap_degrees(traj.phi)).mean(axis=0),
+                               rtol=1e-12)
+    ratio = lqg_comparison.phi_ratio(phi_p, phi_p, 0)
+    assert ratio == {'ratio': 1.0, 'ci95': [1.0, 1.0]}

@@ -6,18 +6,27 @@ import math
 from pathlib import Path
 import sys
 import time
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
 from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
 from tskf_ros.experiments import arguments
+from tskf_ros.experiments.alignment_ablation_report import bootstrap_ci
 from tskf_ros.experiments.alignment_mc import save_figure, write_json
 
 DEFAULT_BETAS = (0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0)
-LABELS = {'p': 'EKF + P controller (paper, eq. (21))', 'lqg': 'EKF + drift + time-scale LQR'}
-COLORS = {'p': 'tab:blue', 'lqg': 'tab:red'}
+# the controllers compared: the paper's P with Table I's P0 = diag(100, 1000), the P with
+# the clipped prior diag(4, 25) (the LQG's x1, x2 information is no better), and the LQG
+CLIPPED_P0 = ((4.0, 0.0), (0.0, 25.0))
+EKF_CONFIGS = {'p': led.EKFConfig(), 'p_prior': led.EKFConfig(P0=CLIPPED_P0)}
+CONTROLLERS = ('p', 'p_prior', 'lqg')
+LABELS = {'p': 'EKF + P controller (paper, eq. (21), Table I P0)',
+          'p_prior': 'EKF + P controller, P0 = diag(4, 25)',
+          'lqg': 'EKF + drift + time-scale LQR'}
+COLORS = {'p': 'tab:blue', 'p_prior': 'tab:green', 'lqg': 'tab:red'}
+BOOTSTRAP = 1000                # resamples of the 95 % intervals (over runs)
 _LQG = led.LQGConfig()
 # the LQG with one part changed: what each part is worth
 ABLATIONS = {
@@ -30,24 +39,45 @@ ABLATIONS = {
 }
 
 
-def run_point(controller: str, *, beta: float, noise: float, runs: int, steps: int, dt: float,
-              seed: int, lqg: Optional[led.LQGConfig] = None) -> dict:
-    """Run one controller at one (beta, noise); return its metrics (see the docstring)."""
+def simulate_point(controller: str, *, beta: float, noise: float, runs: int, steps: int,
+                   dt: float, seed: int, lqg: Optional[led.LQGConfig] = None
+                   ) -> tuple[dict, np.ndarray]:
+    """Run one controller (of CONTROLLERS) at one (beta, noise); return metrics, per-run |phi|."""
     link = led.TrackingLinkConfig(beta=beta, noise=noise, steps=steps, dt=dt)
     if lqg is not None:
         lqg = dataclasses.replace(lqg, dt=dt)
-    aligner = led.make_aligner('ekf', runs=runs, dt=dt, controller=controller, lqg=lqg)
+    kind = 'lqg' if controller == 'lqg' else 'p'
+    ekf = dataclasses.replace(EKF_CONFIGS.get(controller, led.EKFConfig()), dt=dt)
+    aligner = led.make_aligner('ekf', runs=runs, dt=dt, controller=kind, lqg=lqg, ekf=ekf)
     traj = led.simulate_tracking(aligner, link, np.random.default_rng(seed))
     angular, measure = led.tracking(traj)
     psi = traj.phi - traj.x2
     dpsi = np.vstack([np.diff(psi, axis=0), aligner.scan_offset - psi[-1:]])
-    return {'beta_deg_per_s': beta, 'noise_v': noise,
-            'angular': {'mean': float(angular.mean()), 'std': float(angular.std())},
-            'measure': {'mean': float(measure.mean()), 'std': float(measure.std())},
-            'mean_abs_phi_deg': float(np.abs(led.wrap_degrees(traj.phi)).mean()),
-            'lost_runs': int(np.sum(angular < 50.0)),
-            'actuation_deg': float(np.abs(traj.command).sum(axis=0).mean()),
-            'control_actuation_deg': float(np.abs(traj.command - dpsi).sum(axis=0).mean())}
+    abs_phi = np.abs(led.wrap_degrees(traj.phi)).mean(axis=0)
+    index = np.random.default_rng(seed + 1).integers(0, runs, size=(BOOTSTRAP, runs))
+    record = {'beta_deg_per_s': beta, 'noise_v': noise,
+              'angular': {'mean': float(angular.mean()), 'std': float(angular.std()),
+                          'ci95': bootstrap_ci(angular, index)},
+              'mean_abs_phi_deg_ci95': bootstrap_ci(abs_phi, index),
+              'measure': {'mean': float(measure.mean()), 'std': float(measure.std())},
+              'mean_abs_phi_deg': float(abs_phi.mean()),
+              'lost_runs': int(np.sum(angular < 50.0)),
+              'actuation_deg': float(np.abs(traj.command).sum(axis=0).mean()),
+              'control_actuation_deg': float(np.abs(traj.command - dpsi).sum(axis=0).mean())}
+    return record, abs_phi
+
+
+def run_point(controller: str, **kwargs: Any) -> dict:
+    """Run one controller at one (beta, noise); return its metrics (simulate_point)."""
+    return simulate_point(controller, **kwargs)[0]
+
+
+def phi_ratio(lqg: np.ndarray, p: np.ndarray, seed: int) -> dict:
+    """Return mean|phi| of the LQG over that of P, with a paired 95 % bootstrap interval."""
+    index = np.random.default_rng(seed + 2).integers(0, lqg.size, size=(BOOTSTRAP, lqg.size))
+    ratios = lqg[index].mean(axis=1) / p[index].mean(axis=1)
+    lo, hi = np.percentile(ratios, [2.5, 97.5])
+    return {'ratio': float(lqg.mean() / p.mean()), 'ci95': [float(lo), float(hi)]}
 
 
 def plot(betas: Sequence[float], results: dict, *, title: str) -> Figure:
@@ -121,14 +151,22 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         parser().error('the noise levels must be >= 0')
     common = {'runs': args.runs, 'steps': args.steps, 'dt': args.dt, 'seed': args.seed}
     start = time.perf_counter()
-    sweep: dict = {name: [] for name in led.CONTROLLERS}
+    sweep: dict = {name: [] for name in CONTROLLERS}
     effort = {}
-    for name in led.CONTROLLERS:
+    phi: dict = {name: [] for name in CONTROLLERS}      # per-run mean |phi|, each point
+    for name in CONTROLLERS:
         for beta in args.betas:
-            sweep[name].append(run_point(name, beta=beta, noise=args.noise, **common))
+            point, runs_phi = simulate_point(name, beta=beta, noise=args.noise, **common)
+            sweep[name].append(point)
+            phi[name].append(runs_phi)
             print(f'[lqg_comparison] {name} beta {beta:g}: '
                   f'{sweep[name][-1]["angular"]["mean"]:.1f}%', file=sys.stderr, flush=True)
-        effort[name] = run_point(name, beta=args.effort_beta, noise=args.effort_noise, **common)
+        effort[name], runs_phi = simulate_point(name, beta=args.effort_beta,
+                                                noise=args.effort_noise, **common)
+        phi[name].append(runs_phi)
+    # mean |phi| of the LQG over that of each P, at each beta and at the effort point
+    ratios = {p: [phi_ratio(phi['lqg'][i], phi[p][i], args.seed) for i in range(len(phi[p]))]
+              for p in ('p', 'p_prior')}
     ablation: dict = {}
     if args.ablation:
         points = ((args.noise, args.ablation_beta), (args.effort_noise, args.effort_beta))
@@ -142,9 +180,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(table(ablation))
     data = {'config': {**common, 'noise_v': args.noise, 'effort_noise_v': args.effort_noise,
                        'effort_beta_deg_per_s': args.effort_beta,
-                       'controllers': list(led.CONTROLLERS)},
+                       'controllers': list(CONTROLLERS),
+                       'p_prior_P0': CLIPPED_P0},
             'betas_deg_per_s': list(args.betas), 'sweep': sweep, 'effort': effort,
-            'ablation': ablation, 'elapsed_s': elapsed}
+            'ablation': ablation, 'elapsed_s': elapsed,
+            'mean_abs_phi_ratio_lqg_over': {p: {'sweep': r[:-1], 'effort': r[-1]}
+                                            for p, r in ratios.items()},
+            'method': {'interval': '95 % percentile bootstrap over runs', 'resamples': BOOTSTRAP,
+                       'ratio': 'paired over the same runs (common random numbers)'}}
+    for p, r in ratios.items():
+        print(f'mean |phi| LQG / {p} at the effort point: {r[-1]["ratio"]:.3f} '
+              f'[{r[-1]["ci95"][0]:.3f}, {r[-1]["ci95"][1]:.3f}]')
     if args.json:
         write_json(args.json, data)
     if args.png:
