@@ -27,8 +27,8 @@ import pytest
 
 from tskf_ros.bag import play_options, record_options, reindex
 from tskf_ros.bag.replay import cli as replay_cli
-from tskf_ros.experiments import (alignment_mc, demo, drogue, fit_noise, jump_covariance,
-                                  lqg_comparison, reproduce, smoothing, sweep)
+from tskf_ros.experiments import (alignment_ablation, alignment_mc, demo, drogue, fit_noise,
+                                  jump_covariance, lqg_comparison, reproduce, smoothing, sweep)
 from tskf_ros.nodes import (alignment, led_link_simulator, power_meter_driver,
                             power_meter_simulator, timescale_estimator)
 from tskf_ros.tools import console, foxglove_bridge, plot_bag, sample_bags
@@ -99,6 +99,11 @@ TOOLS = {
          '--run-noise', '--dropout-levels', '--dropout-noise', '--dropout-beta', '--blocked'),
         ('--algorithms', '--controller', '--json', '--png', '--fig8', '--fig9', '--pat-run',
          '--dropout-png', '--dropout-json')),
+    'alignment_ablation': Tool(alignment_ablation.main, lambda d: [
+        '--runs', '2', '--steps', '3', '--noise-levels', '0.5', '--rows', 'ekf',
+        '--workers', '1'],
+        ('--runs', '--noise-levels', '--beta', '--steps', '--seed', '--workers'),
+        ('--rows', '--json', '--markdown', '--png')),
     'lqg_comparison': Tool(lqg_comparison.main, lambda d: [
         '--runs', '2', '--steps', '3', '--betas', '1'],
         ('--runs', '--betas', '--noise', '--effort-noise', '--effort-beta', '--steps', '--dt',
