@@ -96,11 +96,22 @@ def test_a_blocked_interval_needs_start_before_stop(blocked, capsys):
     assert '--blocked needs START,STOP' in capsys.readouterr().err
 
 
+def test_cold_start_histogram_figure(tmp_path, capsys):
+    png, out = tmp_path / 'h.png', tmp_path / 'h.json'
+    assert alignment_mc.main(['--runs', '6', '--steps', '120', '--noise-levels', '1.0',
+                              '--cold-start', '90', '--algorithms', 'ekf,ekf_pat',
+                              '--json', str(out), '--acquisition-png', str(png)]) == 0
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    hist = json.loads(out.read_text())['results']['ekf_pat']['acquisition_s']['histogram'][0]
+    assert sum(hist['counts']) + hist['censored'] == 6
+    assert hist['edges_s'][0] == 0.0 and hist['edges_s'][-1] >= 6.0
+
+
 def test_no_comparison_refuses_the_comparison_outputs(tmp_path, capsys):
     # --json and --png belong to the comparison: with --no-comparison they are refused in
     # one line, and nothing is written
     out = tmp_path / 'f.json'
-    for flag in ('--json', '--png'):
+    for flag in ('--json', '--png', '--acquisition-png'):
         with pytest.raises(SystemExit) as exc:
             alignment_mc.main(['--runs', '2', '--no-comparison', flag, str(out)])
         assert exc.value.code == 2

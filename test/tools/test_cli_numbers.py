@@ -97,8 +97,8 @@ TOOLS = {
         ('--runs', '--noise-levels', '--beta', '--steps', '--dt', '--seed', '--dropout',
          '--x2-0', '--cold-start', '--units-per-degree', '--x1-floor', '--fig9-beta',
          '--run-noise', '--dropout-levels', '--dropout-noise', '--dropout-beta', '--blocked'),
-        ('--algorithms', '--controller', '--json', '--png', '--fig8', '--fig9', '--pat-run',
-         '--dropout-png', '--dropout-json')),
+        ('--algorithms', '--controller', '--json', '--png', '--acquisition-png', '--fig8',
+         '--fig9', '--pat-run', '--dropout-png', '--dropout-json')),
     'alignment_ablation': Tool(alignment_ablation.main, lambda d: [
         '--runs', '2', '--steps', '3', '--noise-levels', '0.5', '--rows', 'ekf',
         '--workers', '1'],

@@ -257,6 +257,8 @@ def parser() -> argparse.ArgumentParser:
                    help='clip gamma_p of eq. (26) to [-gamma, gamma] (not in the paper)')
     p.add_argument('--json', type=Path, help='write the comparison as JSON')
     p.add_argument('--png', type=Path, help='write the comparison figure (Fig. 10)')
+    p.add_argument('--acquisition-png', type=Path,
+                   help="write the comparison's acquisition-time histograms (first noise level)")
     p.add_argument('--no-comparison', action='store_true', help='skip the noise-level sweep')
     p.add_argument('--fig8', type=Path, help='write the beta = --beta tracking run (Fig. 8)')
     p.add_argument('--fig9', type=Path, help='write the failing run (Fig. 9)')
@@ -299,9 +301,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         progress(f'note: {observable.message}')
     if not (math.isfinite(args.cold_start) and 0.0 <= args.cold_start <= 180.0):
         parser().error('--cold-start must be in [0, 180] deg')
-    if args.no_comparison and (args.json or args.png):
-        parser().error('--json and --png write the noise-level comparison, which '
-                       '--no-comparison skips')
+    if args.no_comparison and (args.json or args.png or args.acquisition_png):
+        parser().error('--json, --png and --acquisition-png write the noise-level comparison, '
+                       'which --no-comparison skips')
     if args.blocked and not (len(args.blocked) == 2 and args.blocked[0] < args.blocked[1]):
         parser().error(f'--blocked needs START,STOP in s with START < STOP, '
                        f'got {args.blocked}')
@@ -338,6 +340,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                       f' EKF controller {args.controller} (error bars: std / 5)')
             save_figure(fig, args.png)
             progress(f'wrote {args.png}')
+        if args.acquisition_png:
+            start = (f'cold start within +-{args.cold_start:g} deg' if args.cold_start
+                     else f'known start x2_0 = {args.x2_0:g} deg')
+            save_figure(alignment_pat.plot_acquisition(out['results'], title=(
+                f'Acquisition time, {start}, noise {args.noise_levels[0]:g} V, '
+                f'{args.runs} runs')), args.acquisition_png)
+            progress(f'wrote {args.acquisition_png}')
 
     for path, beta in ((args.fig8, args.beta), (args.fig9, args.fig9_beta)):
         if path is None:

@@ -198,6 +198,28 @@ def plot_pat_run(traj: led.Trajectory, record: Recorded, *, run: int = 0,
     return fig
 
 
-__all__ = ['plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'dark_steps', 'empty_record',
+def plot_acquisition(results: dict, *, level: int = 0, title: str) -> Figure:
+    """The acquisition-time histograms of record() (one noise level), one step line each."""
+    fig = Figure(figsize=(7.5, 4.5))
+    ax = fig.add_subplot()
+    for name, entry in results.items():
+        hist = entry['acquisition_s']['histogram'][level]
+        edges = np.asarray(hist['edges_s'])
+        counts = np.asarray(hist['counts'])
+        runs = counts.sum() + hist['censored']
+        if not runs:
+            continue
+        ax.stairs(counts / runs, edges, lw=1.3,
+                  label=f'{name} ({hist["censored"]} of {runs} runs not acquired)')
+    ax.set_xlabel('acquisition time: |phi| within 15 deg, held 1 s (s)')
+    ax.set_ylabel('fraction of runs per 0.25 s bin')
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc='upper right')
+    fig.tight_layout()
+    return fig
+
+
+__all__ = ['plot_acquisition', 'plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'dark_steps', 'empty_record',
            'evaluate', 'metrics',
            'MIN_NOISE', 'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']
