@@ -1,5 +1,6 @@
 """The LED alignment Monte Carlo experiment (tskf_ros.experiments.alignment_mc): its JSON."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -142,3 +143,20 @@ def test_metrics_of_a_scripted_trajectory():
     # one declared loss in run 1's 3 s (6 steps of 0.5 s) never out of the zone
     assert m['false_alarms_per_1000s'] == pytest.approx(1000.0 / 3.0)
     np.testing.assert_allclose(m['acquisition'].times, [0.0, 0.0])
+
+
+def test_workers_give_the_sequential_results_run_for_run():
+    # each point starts its own generator from the seed: the same numbers on any workers
+    link = led.TrackingLinkConfig(beta=1.2, steps=80)
+    common = {'runs': 5, 'link': link, 'seed': 3, 'response': led.IncidenceResponse(),
+              'ekf': led.EKFConfig(), 'algorithms': ('ekf', 'three_point', 'ekf_pat')}
+    one = alignment_mc.sweep('noise', [0.5, 2.0], workers=1, **common)['results']
+    two = alignment_mc.sweep('noise', [0.5, 2.0], workers=2, **common)['results']
+    assert json.dumps(one, sort_keys=True) == json.dumps(two, sort_keys=True)
+    points = [alignment_mc.Point(name, 5, dataclasses.replace(link, noise=1.5), 3,
+                                 led.IncidenceResponse(), led.EKFConfig(), False, 'p')
+              for name in ('ekf', 'hill_climbing_pat')]
+    for (a1, m1, _), (a2, m2, _) in zip(alignment_mc.run_points(points, 1),
+                                        alignment_mc.run_points(points, 2)):
+        np.testing.assert_array_equal(a1, a2)
+        np.testing.assert_array_equal(m1, m2)

@@ -78,9 +78,8 @@ def build(row: Row, runs: int, link: led.TrackingLinkConfig,
     """Build the aligner of `row` for `runs` runs on `link` (R = sigma^2: sigma >= MIN_NOISE)."""
     r = max(link.noise, alignment_pat.MIN_NOISE) ** 2 if row.matched_r else led.PAPER_R[0][0]
     if row.tracker == 'lqg':
-        lqg = led.LQGConfig(dt=link.dt, R=r, P0=(CLIPPED_P0[0][0] if row.prior else 100.0,
-                                                  CLIPPED_P0[1][1] if row.prior else 1000.0,
-                                                  LQG_B_VAR))
+        P0 = CLIPPED_P0 if row.prior else led.PAPER_P0
+        lqg = led.LQGConfig(dt=link.dt, R=r, P0=(P0[0][0], P0[1][1], LQG_B_VAR))
         return led.make_aligner('ekf', runs=runs, dt=link.dt, response=response,
                                 controller='lqg', lqg=lqg)
     ekf = led.EKFConfig(dt=link.dt, P0=CLIPPED_P0 if row.prior else led.PAPER_P0,

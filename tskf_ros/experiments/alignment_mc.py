@@ -1,12 +1,14 @@
 """Monte Carlo comparison of LED alignment algorithms (Solanki et al. 2018, Fig. 8-10)."""
 
 import argparse
+from concurrent.futures import ProcessPoolExecutor
 import dataclasses
 import math
+import os
 from pathlib import Path
 import sys
 import time
-from typing import Callable, Optional, Sequence
+from typing import Callable, Iterator, Optional, Sequence
 
 from matplotlib.figure import Figure
 import numpy as np
@@ -14,18 +16,12 @@ import numpy as np
 from tskf_ros import led
 from tskf_ros.bag.progress import bar
 from tskf_ros.experiments import alignment_pat, arguments, output
+from tskf_ros.experiments.alignment_figures import plot_run, plot_tracking
 
 DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
 DEFAULT_DROPOUTS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
 FAIL_BETA = 16.0        # deg/s: the EKF loses every run at 50 ms steps (8 deg/s still tracks)
 DROPOUT_BETA = 2.8      # deg/s: the disturbance of the paper's experiments (Fig. 14)
-LABELS = {'ekf': 'EKF', 'hill_climbing': 'Hill', 'three_point': '3Point',
-          'ekf_hold': 'EKF, last value held', 'ekf_pat': r'EKF+PAT ($R = \sigma^2$)',
-          'ekf_reset': 'EKF reset',
-          'hill_climbing_pat': 'Hill+PAT', 'three_point_pat': '3Point+PAT'}
-COLORS = {'ekf': 'tab:blue', 'hill_climbing': 'tab:orange', 'three_point': 'tab:green',
-          'ekf_hold': 'tab:purple', 'ekf_pat': 'navy', 'ekf_reset': 'tab:cyan',
-          'hill_climbing_pat': 'saddlebrown', 'three_point_pat': 'darkgreen'}
 # the supervised algorithms (acquire, track, detect loss, re-acquire): alignment_pat
 PAT_ALGORITHMS = tuple(alignment_pat.PAT_ALGORITHMS)
 Progress = Callable[[str], None]
@@ -86,31 +82,66 @@ def _record(results: dict, name: str, angular: np.ndarray, measure: np.ndarray) 
         results[name][metric]['std'].append(float(np.std(values)))
 
 
+@dataclasses.dataclass(frozen=True)
+class Point:
+    """One algorithm on one link: the task of one worker process."""
+
+    name: str
+    runs: int
+    link: led.TrackingLinkConfig
+    seed: int
+    response: led.IncidenceResponse
+    ekf: led.EKFConfig
+    clip: bool
+    controller: str
+
+
+def run_point(p: Point) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Simulate one point; return the tracking % per run (angular, measure) and the metrics."""
+    rng = np.random.default_rng(p.seed)     # common random numbers: the same draws
+    if p.name in PAT_ALGORITHMS:
+        angular, measure, m, _, _ = alignment_pat.evaluate(p.name, p.runs, p.link, rng,
+                                                           p.response, p.ekf, p.clip)
+        return angular, measure, m
+    aligner = build(p.name, p.runs, p.link, p.response, p.ekf, p.clip, p.controller)
+    traj = led.simulate_tracking(aligner, p.link, rng, p.response)
+    angular, measure = led.tracking(traj, threshold=led.TRACKING_LEVEL * p.link.max_intensity)
+    return angular, measure, alignment_pat.metrics(traj, None, None, blocked=p.link.blocked)
+
+
+def run_points(points: Sequence[Point], workers: int) -> Iterator[tuple]:
+    """Yield run_point of each point, in order, computed on `workers` processes."""
+    if workers <= 1 or len(points) <= 1:
+        yield from map(run_point, points)
+        return
+    with ProcessPoolExecutor(max_workers=min(workers, len(points))) as pool:
+        yield from pool.map(run_point, points)
+
+
 def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.TrackingLinkConfig,
           seed: int, response: led.IncidenceResponse, ekf: led.EKFConfig,
           algorithms: Sequence[str] = led.ALGORITHMS, clip: bool = False,
-          controller: str = 'p', progress: Optional[Progress] = None) -> dict:
-    """Run every algorithm at each value of a LinkConfig field ('noise' or 'dropout')."""
+          controller: str = 'p', progress: Optional[Progress] = None,
+          workers: int = 1) -> dict:
+    """
+    Run every algorithm at each value of a LinkConfig field ('noise' or 'dropout').
+
+    The points (value, algorithm) run on `workers` processes; each starts its own
+    generator from `seed`, so the results do not depend on the number of workers.
+    """
     results = _empty(algorithms)
     start = time.perf_counter()
     # a progress bar over values x algorithms (stderr, a terminal only)
     tick = bar(len(values) * len(algorithms), f'alignment_mc {parameter}', 'point',
                progress is not None)
+    points = [Point(name, runs, dataclasses.replace(link, **{parameter: float(value)}), seed,
+                    response, ekf, clip, controller) for value in values for name in algorithms]
+    done = run_points(points, workers)
     for i, value in enumerate(values):
         tic = time.perf_counter()
-        cfg = dataclasses.replace(link, **{parameter: float(value)})
         parts = []
         for name in algorithms:
-            rng = np.random.default_rng(seed)     # common random numbers: the same draws
-            if name in PAT_ALGORITHMS:
-                angular, measure, m, _, _ = alignment_pat.evaluate(name, runs, cfg, rng,
-                                                                   response, ekf, clip)
-            else:
-                aligner = build(name, runs, cfg, response, ekf, clip, controller)
-                traj = led.simulate_tracking(aligner, cfg, rng, response)
-                angular, measure = led.tracking(
-                    traj, threshold=led.TRACKING_LEVEL * cfg.max_intensity)
-                m = alignment_pat.metrics(traj, None, None, blocked=cfg.blocked)
+            angular, measure, m = next(done)
             _record(results, name, angular, measure)
             alignment_pat.record(results[name], m)
             parts.append(f'{name} {np.mean(angular):5.1f}%')
@@ -148,54 +179,6 @@ def save_figure(fig: Figure, path: Path) -> None:
     output.save_figure(fig, path, dpi=120)
 
 
-def plot_tracking(x: Sequence[float], results: dict, *, xlabel: str, title: str,
-                  std_scale: float = 5.0) -> Figure:
-    """Fig. 10 style: mean tracking % with error bars of std / std_scale, both metrics."""
-    fig = Figure(figsize=(7.5, 4.8))
-    ax = fig.add_subplot()
-    for name, res in results.items():
-        for metric, style in (('angular', '-o'), ('measure', '--s')):
-            mean = np.asarray(res[metric]['mean'])
-            std = np.asarray(res[metric]['std']) / std_scale
-            ax.errorbar(x, mean, yerr=std, fmt=style, ms=3.5, capsize=2, lw=1.2,
-                        color=COLORS.get(name), label=f'{LABELS.get(name, name)}-{metric}')
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel('tracking percentage (%)')
-    ax.set_ylim(0, 102)
-    ax.grid(alpha=0.3)
-    ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=8, ncol=2, loc='lower left')
-    fig.tight_layout()
-    return fig
-
-
-def plot_run(traj: led.Trajectory, *, title: str, threshold: float) -> Figure:
-    """Fig. 8/9 style: x1 and x1hat, x2 and x2hat (with phi), measured and clean intensity."""
-    fig = Figure(figsize=(7.5, 7.0))
-    axes = fig.subplots(3, 1, sharex=True)
-    t = traj.t
-    axes[0].plot(t, traj.x1[:, 0], 'k', lw=1.2, label='$x_1$')
-    axes[0].plot(t, traj.estimate[:, 0, 0], 'tab:blue', lw=1.0, label=r'$\hat{x}_1$')
-    axes[0].set_ylabel('$x_1$ (V)')
-    axes[1].plot(t, traj.phi[:, 0], color='0.7', lw=0.8, label=r'$\phi = x_2 + \psi$')
-    axes[1].plot(t, traj.x2[:, 0], 'k', lw=1.2, label='$x_2$')
-    axes[1].plot(t, traj.estimate[:, 0, 1], 'tab:blue', lw=1.0, label=r'$\hat{x}_2$')
-    for s in (-led.TRACKING_ANGLE, led.TRACKING_ANGLE):
-        axes[1].axhline(s, color='tab:red', ls=':', lw=0.8)
-    axes[1].set_ylabel('angle (deg)')
-    axes[2].plot(t, traj.z[:, 0], color='0.6', lw=0.7, label='measured')
-    axes[2].plot(t, traj.clean[:, 0], 'k', lw=1.0, label='clean')
-    axes[2].axhline(threshold, color='tab:red', ls=':', lw=0.8, label='20% of 3 V')
-    axes[2].set_ylabel('intensity (V)')
-    axes[2].set_xlabel('time (s)')
-    for ax in axes:
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc='upper right')
-    axes[0].set_title(title, fontsize=10)
-    fig.tight_layout()
-    return fig
-
-
 def single_run(beta: float, args: argparse.Namespace, response: led.IncidenceResponse,
                ekf: led.EKFConfig) -> tuple[led.Trajectory, float, float]:
     """Run the EKF once (default noise: R_sys); return it and its tracking %."""
@@ -227,6 +210,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--dt', type=arguments.number(0.0, arguments.MAX_DT, open_low=True),
                    default=led.PAPER_DT, help='time step, s (0.05)')
     p.add_argument('--seed', type=arguments.seed, default=0)
+    p.add_argument('--workers', type=arguments.count(1, 1024), default=os.cpu_count() or 1,
+                   help='processes the points run on (default: every core); the results do '
+                        'not depend on it')
     p.add_argument('--dropout', type=float, default=0.0,
                    help='probability that a measurement is missing (0)')
     p.add_argument('--x2-0', type=arguments.angle_deg,
@@ -319,7 +305,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                   blocked=tuple(args.blocked))
     common = {'runs': args.runs, 'seed': args.seed, 'response': response, 'ekf': ekf,
               'clip': args.clip_three_point, 'controller': args.controller,
-              'progress': progress}
+              'progress': progress, 'workers': args.workers}
     progress(f'g at {response.units_per_degree:.4g} fit units per degree; beta {args.beta:g} '
              f'deg/s; {args.steps} steps of {args.dt:g} s; {args.runs} runs per point')
 

@@ -199,7 +199,7 @@ def plot_pat_run(traj: led.Trajectory, record: Recorded, *, run: int = 0,
 
 
 def plot_acquisition(results: dict, *, level: int = 0, title: str) -> Figure:
-    """The acquisition-time histograms of record() (one noise level), one step line each."""
+    """Plot the acquisition-time histograms of record() (one noise level), one step line each."""
     fig = Figure(figsize=(7.5, 4.5))
     ax = fig.add_subplot()
     for name, entry in results.items():
@@ -220,6 +220,7 @@ def plot_acquisition(results: dict, *, level: int = 0, title: str) -> Figure:
     return fig
 
 
-__all__ = ['plot_acquisition', 'plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'dark_steps', 'empty_record',
+__all__ = ['plot_acquisition', 'plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'dark_steps',
+           'empty_record',
            'evaluate', 'metrics',
            'MIN_NOISE', 'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']
