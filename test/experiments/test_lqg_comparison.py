@@ -45,3 +45,16 @@ def test_p_with_the_clipped_prior_is_the_paper_p_but_for_p0():
                                rtol=1e-12)
     ratio = lqg_comparison.phi_ratio(phi_p, phi_p, 0)
     assert ratio == {'ratio': 1.0, 'ci95': [1.0, 1.0]}
+
+
+def test_workers_give_the_sequential_results(tmp_path, capsys):
+    outs = []
+    for workers in ('1', '2'):
+        out = tmp_path / f'w{workers}.json'
+        assert lqg_comparison.main(['--runs', '3', '--steps', '30', '--betas', '0,14',
+                                    '--ablation', '--workers', workers,
+                                    '--json', str(out)]) == 0
+        data = json.loads(out.read_text())
+        data.pop('elapsed_s')
+        outs.append(data)
+    assert outs[0] == outs[1]

@@ -93,10 +93,11 @@ TOOLS = {
         ('--out', '--only')),
     'alignment_mc': Tool(alignment_mc.main, lambda d: [
         '--runs', '2', '--steps', '3', '--noise-levels', '0.5', '--dropout-levels', '0.1',
-        '--algorithms', 'ekf'],
+        '--algorithms', 'ekf', '--workers', '1'],
         ('--runs', '--noise-levels', '--beta', '--steps', '--dt', '--seed', '--dropout',
          '--x2-0', '--cold-start', '--units-per-degree', '--x1-floor', '--fig9-beta',
-         '--run-noise', '--dropout-levels', '--dropout-noise', '--dropout-beta', '--blocked'),
+         '--run-noise', '--dropout-levels', '--dropout-noise', '--dropout-beta', '--blocked',
+         '--workers'),
         ('--algorithms', '--controller', '--json', '--png', '--acquisition-png', '--fig8',
          '--fig9', '--pat-run', '--dropout-png', '--dropout-json')),
     'alignment_ablation': Tool(alignment_ablation.main, lambda d: [
@@ -105,9 +106,9 @@ TOOLS = {
         ('--runs', '--noise-levels', '--beta', '--steps', '--seed', '--workers'),
         ('--rows', '--json', '--markdown', '--png')),
     'lqg_comparison': Tool(lqg_comparison.main, lambda d: [
-        '--runs', '2', '--steps', '3', '--betas', '1'],
+        '--runs', '2', '--steps', '3', '--betas', '1', '--workers', '1'],
         ('--runs', '--betas', '--noise', '--effort-noise', '--effort-beta', '--steps', '--dt',
-         '--seed', '--ablation-beta'), ('--json', '--png')),
+         '--seed', '--ablation-beta', '--workers'), ('--json', '--png')),
     'drogue': Tool(drogue.main, lambda d: ['--out', str(d), '--hours', '0.05'],
                    ('--seed', '--hours'), ('--out',)),
     'demo': Tool(lambda argv: demo.parse_args(argv) and 0, lambda d: [],

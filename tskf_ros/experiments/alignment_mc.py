@@ -283,8 +283,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except led.AlignmentError as exc:
         print(f'alignment_mc: {exc}', file=sys.stderr)
         return 2
-    if not observable.guaranteed:
-        progress(f'note: {observable.message}')
     if not (math.isfinite(args.cold_start) and 0.0 <= args.cold_start <= 180.0):
         parser().error('--cold-start must be in [0, 180] deg')
     if args.no_comparison and (args.json or args.png or args.acquisition_png):
@@ -306,6 +304,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     common = {'runs': args.runs, 'seed': args.seed, 'response': response, 'ekf': ekf,
               'clip': args.clip_three_point, 'controller': args.controller,
               'progress': progress, 'workers': args.workers}
+    if not observable.guaranteed:
+        progress(f'note: {observable.message}')
     progress(f'g at {response.units_per_degree:.4g} fit units per degree; beta {args.beta:g} '
              f'deg/s; {args.steps} steps of {args.dt:g} s; {args.runs} runs per point')
 

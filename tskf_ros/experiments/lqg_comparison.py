@@ -1,12 +1,14 @@
 """LQG against the paper's P controller on the scanning EKF: tracking % against beta, effort."""
 
 import argparse
+from concurrent.futures import ProcessPoolExecutor
 import dataclasses
 import math
+import os
 from pathlib import Path
 import sys
 import time
-from typing import Any, Optional, Sequence
+from typing import Any, Iterator, Optional, Sequence
 
 from matplotlib.figure import Figure
 import numpy as np
@@ -72,6 +74,28 @@ def run_point(controller: str, **kwargs: Any) -> dict:
     return simulate_point(controller, **kwargs)[0]
 
 
+@dataclasses.dataclass(frozen=True)
+class Task:
+    """One point of the comparison: a controller and simulate_point's keyword arguments."""
+
+    controller: str
+    kwargs: dict
+
+
+def run_task(task: Task) -> tuple[dict, np.ndarray]:
+    """Run simulate_point for one task (a worker process's job)."""
+    return simulate_point(task.controller, **task.kwargs)
+
+
+def run_tasks(tasks: Sequence[Task], workers: int) -> Iterator[tuple[dict, np.ndarray]]:
+    """Yield run_task of each task, in order, computed on `workers` processes."""
+    if workers <= 1 or len(tasks) <= 1:
+        yield from map(run_task, tasks)
+        return
+    with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
+        yield from pool.map(run_task, tasks)
+
+
 def phi_ratio(lqg: np.ndarray, p: np.ndarray, seed: int) -> dict:
     """Return mean|phi| of the LQG over that of P, with a paired 95 % bootstrap interval."""
     index = np.random.default_rng(seed + 2).integers(0, lqg.size, size=(BOOTSTRAP, lqg.size))
@@ -134,6 +158,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--dt', type=arguments.number(0.0, arguments.MAX_DT, open_low=True),
                    default=led.PAPER_DT, help='time step, s (0.05)')
     p.add_argument('--seed', type=arguments.seed, default=0)
+    p.add_argument('--workers', type=arguments.count(1, 1024), default=os.cpu_count() or 1,
+                   help='processes the points run on (default: every core); the results do '
+                        'not depend on it')
     p.add_argument('--ablation', action='store_true',
                    help='also run the LQG variants of ABLATIONS at --ablation-beta (noise '
                         '--noise) and at the effort point')
@@ -151,28 +178,36 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         parser().error('the noise levels must be >= 0')
     common = {'runs': args.runs, 'steps': args.steps, 'dt': args.dt, 'seed': args.seed}
     start = time.perf_counter()
+    # every point (controller, beta, noise): the sweep, the effort point, the ablation
+    tasks = [Task(name, {'beta': beta, 'noise': args.noise, **common})
+             for name in CONTROLLERS for beta in args.betas]
+    tasks += [Task(name, {'beta': args.effort_beta, 'noise': args.effort_noise, **common})
+              for name in CONTROLLERS]
+    points = ((args.noise, args.ablation_beta), (args.effort_noise, args.effort_beta))
+    if args.ablation:
+        tasks += [Task('lqg', {'beta': beta, 'noise': noise, 'lqg': config, **common})
+                  for config in ABLATIONS.values() for noise, beta in points]
+    done = run_tasks(tasks, args.workers)
     sweep: dict = {name: [] for name in CONTROLLERS}
     effort = {}
     phi: dict = {name: [] for name in CONTROLLERS}      # per-run mean |phi|, each point
     for name in CONTROLLERS:
         for beta in args.betas:
-            point, runs_phi = simulate_point(name, beta=beta, noise=args.noise, **common)
+            point, runs_phi = next(done)
             sweep[name].append(point)
             phi[name].append(runs_phi)
             print(f'[lqg_comparison] {name} beta {beta:g}: '
                   f'{sweep[name][-1]["angular"]["mean"]:.1f}%', file=sys.stderr, flush=True)
-        effort[name], runs_phi = simulate_point(name, beta=args.effort_beta,
-                                                noise=args.effort_noise, **common)
+    for name in CONTROLLERS:
+        effort[name], runs_phi = next(done)
         phi[name].append(runs_phi)
     # mean |phi| of the LQG over that of each P, at each beta and at the effort point
     ratios = {p: [phi_ratio(phi['lqg'][i], phi[p][i], args.seed) for i in range(len(phi[p]))]
               for p in ('p', 'p_prior')}
     ablation: dict = {}
     if args.ablation:
-        points = ((args.noise, args.ablation_beta), (args.effort_noise, args.effort_beta))
-        for name, config in ABLATIONS.items():
-            ablation[name] = [run_point('lqg', beta=beta, noise=noise, lqg=config, **common)
-                              for noise, beta in points]
+        for name in ABLATIONS:
+            ablation[name] = [next(done)[0] for _ in points]
     elapsed = time.perf_counter() - start
     print(table(sweep))
     print(table({name: [point] for name, point in effort.items()}))
