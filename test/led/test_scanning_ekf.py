@@ -64,11 +64,15 @@ def test_observability_is_guaranteed_up_to_one_over_91():
             warnings.simplefilter('error')
             led.check_observability(gain)
         led.ScanningEKF(led.EKFConfig(gain=gain))
-        # and det C_k written out stays away from 0 over |x2hat^f| < 180, both step signs
-        x2f = np.linspace(-179.9, 179.9, 3599)
+        # det C_k written out keeps its sign (never 0) while both angles of (17) stay where
+        # g'/g decreases, for both step signs
+        lo, hi = report.monotone
         for dpsi in (2.0, -2.0):
-            det = [_det_after_command(gain, x / (1 - gain), 0.0, dpsi)[0] for x in x2f[::37]]
-            assert np.all(np.abs(det) > 0.0)
+            # a1 = x2hat^f + dpsi, a2 = x2hat_{k-1} = x2hat^f / (1 - G): both in [lo, hi]
+            x2f = np.linspace(lo + 2.5, hi - 2.5, 2001)
+            det = np.array([_det_after_command(gain, x / (1 - gain), 0.0, dpsi)[0]
+                            for x in x2f])
+            assert np.all(det > 0.0) or np.all(det < 0.0)
     report = led.observability(1.0 / 91.0 + eps)
     assert not report.guaranteed
     # x2hat^f = (1 - G)/G * 2 = 90 * 2 / (1 + 91 eps) + O(eps^2): just inside 180
@@ -82,6 +86,27 @@ def test_observability_is_guaranteed_up_to_one_over_91():
     assert x2f == pytest.approx(want, rel=1e-12)
     scale = abs(_det_after_command(gain, 2.0 / gain + 1.0, 0.0, 2.0)[0])
     assert abs(det) <= 1e-9 * scale
+
+
+def test_beyond_the_monotone_range_det_vanishes_at_any_gain():
+    # with the default fit unit g'/g decreases only on about [-10.2, 11.7] deg (the two
+    # modes of eq. (4) cross further out), so even G <= 1/91 leaves zeros of det C_k there:
+    # the guarantee of (24) holds within that range only, and the report says so
+    report = led.observability(1.0 / 91.0)
+    lo, hi = report.monotone
+    assert lo == pytest.approx(-10.2, abs=0.05) and hi == pytest.approx(11.7, abs=0.05)
+    assert '[-10.2, 11.7] deg' in report.message
+    x2f = np.linspace(-30.0, 30.0, 6001)
+    det = np.array([_det_after_command(1.0 / 91.0, x * 91.0 / 90.0, 0.0, 2.0)[0]
+                    for x in x2f])
+    changes = x2f[np.nonzero(np.diff(np.sign(det)))[0]]
+    # the two angles of (17) there: a1 = x2hat^f + psi_k, a2 = x2hat_{k-1} + psi_{k-1}
+    a1, a2 = changes + 2.0, changes * 91.0 / 90.0
+    outside = (np.minimum(a1, a2) < lo) | (np.maximum(a1, a2) > hi)
+    assert changes.size >= 2 and np.all(outside)
+    # the printed unit (phi in degrees) is monotone over the whole +-180
+    literal = led.observability(0.5, response=led.IncidenceResponse(units_per_degree=1.0))
+    assert literal.monotone[0] == pytest.approx(-180.0) and literal.monotone[1] > 179.9
 
 
 def test_det_vanishes_at_the_paper_gain_at_two_degrees():

@@ -17,6 +17,7 @@ Not in the paper: a gap of missing measurements is predicted over with mu = elap
 """
 
 from dataclasses import dataclass
+import functools
 import math
 from typing import Optional, Protocol, Sequence, Union
 import warnings
@@ -65,12 +66,16 @@ class Observability:
     x2hat^f_k = (1 - G)/G (psi_k - psi_{k-1}) (eq. (24)).  `vanishing` lists those
     x2hat^f (deg) within |x2hat^f| < 180; none (guaranteed) when
     |(1 - G)/G| min|dpsi| >= 180, i.e. 0 < G <= 1/91 for 2 degree steps.  (The paper
-    prints the opposite inequality, G > 1/91; doc/design/lqr.md, erratum.)
+    prints the opposite inequality, G > 1/91; doc/design/lqr.md, erratum.)  The "iff"
+    needs g'/g strictly decreasing at both angles of (17); `monotone` is the interval of
+    angles (deg) around the peak where it is (with the default fit unit about -10.2 to
+    11.7 deg): beyond it det C_k can also vanish with the two angles apart, for any G.
     """
 
     gain: float
     max_gain: float                 # the largest G that guarantees det C_k != 0
     vanishing: tuple[float, ...]    # x2hat^f (deg) where det C_k = 0, |x2hat^f| < 180
+    monotone: tuple[float, float] = (-180.0, 180.0)   # deg: where g'/g decreases
 
     @property
     def guaranteed(self) -> bool:
@@ -80,15 +85,18 @@ class Observability:
     @property
     def message(self) -> str:
         """One line: what the gain guarantees, or where det C_k vanishes."""
+        lo, hi = self.monotone
+        where = f'while both angles of (17) are within [{lo:.1f}, {hi:.1f}] deg, where g\'/g ' \
+                'decreases'
         if self.guaranteed:
             return (f'P gain G = {self.gain:g} guarantees det C_k != 0 for |x2hat^f| < 180 '
-                    'deg (eq. (24), corrected)')
+                    f'deg (eq. (24), corrected) {where}')
         at = ', '.join(f'{v:+.4g}' for v in self.vanishing)
         return (f'P gain G = {self.gain:g} does not guarantee observability: det C_k = 0 '
                 f'where the predicted scan mean x2hat^f is {at} deg (there the command '
                 'cancels the scan step); only G <= '
                 f'{self.max_gain:.6g} (= 1/{1.0 / self.max_gain:g}) guarantees det C_k != 0 '
-                '(eq. (24), corrected)')
+                f'(eq. (24), corrected), and only {where}')
 
 
 class ObservabilityWarning(UserWarning):
@@ -110,7 +118,32 @@ def max_gain(scan: Sequence[float] = SCAN_ANGLES, *, max_angle: float = 180.0) -
     return 1.0 / (1.0 + max_angle / float(np.min(steps)))
 
 
-def observability(gain: float, scan: Sequence[float] = SCAN_ANGLES) -> Observability:
+def monotone_interval(response: Optional[IncidenceResponse] = None) -> tuple[float, float]:
+    """Return the interval of angles (deg) around g's peak where g'/g strictly decreases."""
+    response = response if response is not None else IncidenceResponse()
+    return _monotone(tuple(response.coefficients), response.units_per_degree)
+
+
+@functools.lru_cache(maxsize=16)
+def _monotone(coefficients: tuple[float, ...], units_per_degree: Optional[float],
+              step: float = 0.01) -> tuple[float, float]:
+    response = IncidenceResponse(coefficients, units_per_degree)
+    phi = np.arange(-180.0, 180.0 + step / 2, step)
+    r = response.dg(phi) / response.g(phi)
+    falling = np.diff(r) < 0.0
+    peak = int(np.argmax(response.g(phi)))
+    k = min(peak, falling.size - 1)
+    lo = k
+    while lo > 0 and falling[lo - 1]:
+        lo -= 1
+    hi = k
+    while hi < falling.size - 1 and falling[hi + 1]:
+        hi += 1
+    return float(phi[lo]), float(phi[hi + 1])
+
+
+def observability(gain: float, scan: Sequence[float] = SCAN_ANGLES,
+                  response: Optional[IncidenceResponse] = None) -> Observability:
     """
     Return where det C_k vanishes for this gain and scan (eq. (24), corrected).
 
@@ -128,10 +161,12 @@ def observability(gain: float, scan: Sequence[float] = SCAN_ANGLES) -> Observabi
     # (the relative 1e-12 keeps G = 1/91 itself, where x2hat^f = +-180, on the safe side)
     x2f = (1.0 - gain) / gain * steps
     vanishing = tuple(sorted({float(v) for v in x2f if abs(v) < 180.0 * (1.0 - 1e-12)}))
-    return Observability(gain=float(gain), max_gain=g_max, vanishing=vanishing)
+    return Observability(gain=float(gain), max_gain=g_max, vanishing=vanishing,
+                         monotone=monotone_interval(response))
 
 
-def check_observability(gain: float, scan: Sequence[float] = SCAN_ANGLES) -> Observability:
+def check_observability(gain: float, scan: Sequence[float] = SCAN_ANGLES,
+                        response: Optional[IncidenceResponse] = None) -> Observability:
     """
     Check the gain and scan (eq. (24), corrected); return the report.
 
@@ -139,7 +174,7 @@ def check_observability(gain: float, scan: Sequence[float] = SCAN_ANGLES) -> Obs
     warn (ObservabilityWarning) where det C_k can vanish, as at the paper's G = 0.5
     (x2hat^f = +-2 deg).
     """
-    report = observability(gain, scan)
+    report = observability(gain, scan, response)
     if not report.guaranteed:
         warnings.warn(report.message, ObservabilityWarning, stacklevel=2)
     return report
@@ -228,9 +263,9 @@ class ScanningEKF:
 
     def __init__(self, config: EKFConfig = EKFConfig(),
                  response: Optional[IncidenceResponse] = None, *, runs: int = 1) -> None:
-        observability(config.gain, config.scan)
-        self.config = config
         self.response = response if response is not None else IncidenceResponse()
+        observability(config.gain, config.scan, self.response)
+        self.config = config
         self.runs = int(runs)
         if self.runs < 1:
             raise AlignmentError(f'runs must be at least 1, got {runs}')
