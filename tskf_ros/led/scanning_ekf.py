@@ -86,8 +86,8 @@ class Observability:
     def message(self) -> str:
         """One line: what the gain guarantees, or where det C_k vanishes."""
         lo, hi = self.monotone
-        where = f'while both angles of (17) are within [{lo:.1f}, {hi:.1f}] deg, where g\'/g ' \
-                'decreases'
+        where = (f'while both angles of (17) are within [{lo:.1f}, {hi:.1f}] deg, where '
+                 "g'/g decreases")
         if self.guaranteed:
             return (f'P gain G = {self.gain:g} guarantees det C_k != 0 for |x2hat^f| < 180 '
                     f'deg (eq. (24), corrected) {where}')
