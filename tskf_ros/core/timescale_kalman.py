@@ -48,7 +48,8 @@ import scipy.integrate
 
 from tskf_ros.core import kalman
 from tskf_ros.core.matrices import as_matrix, as_vector, check_covariance, FilterError
-from tskf_ros.core.transitions import Transition, TransitionCache, TRANSITIONS
+from tskf_ros.core.transitions import (Transition, TransitionCache, TRANSITIONS,
+                                       Transitions)
 
 Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
@@ -242,6 +243,10 @@ class TimeScaleKalmanFilter:
         """Return (F, Q_d, B_d) for a jump of mu: Euler (I + mu A) or the exact sampled plant."""
         jump = self._jumps[mu]
         return jump.F, jump.Qd, jump.Bd
+
+    def transition_stack(self, mus: NDArray[np.float64]) -> Transitions:
+        """Return the transitions (F, Q_d, B_d, regressive) of every mu of mus, stacked."""
+        return self._jumps.stack(mus)
 
     def _jump(self, mu: float) -> Transition:
         """Return the transition over mu; raise NonRegressiveError where Definition 2.12 fails."""

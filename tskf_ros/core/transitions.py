@@ -15,6 +15,9 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+# the filter's matrix product: loops for small matrices, BLAS for large ones
+from tskf_ros.core.kalman import _mm
+
 Matrix = NDArray[np.float64]
 Stack = NDArray[np.float64]
 TRANSITIONS = ('euler', 'exact')
@@ -27,20 +30,6 @@ _TAYLOR_TERMS = 20
 _RTOL = 1e-12
 
 _jit = numba.njit(cache=True, error_model='numpy', nogil=True)
-
-
-@_jit
-def _mm(A: Matrix, B: Matrix) -> Matrix:
-    """Return A B as loops (the blocks here are small; BLAS's call costs more)."""
-    n, m = A.shape
-    p = B.shape[1]
-    out = np.zeros((n, p))
-    for i in range(n):
-        for k in range(m):
-            a = A[i, k]
-            for j in range(p):
-                out[i, j] += a * B[k, j]
-    return out
 
 
 @_jit
@@ -70,64 +59,74 @@ def _halvings(A: Matrix, mu: float) -> int:
 
 
 @_jit
-def van_loan_stack(A: Matrix, GQGt: Matrix, mus: NDArray[np.float64]) -> tuple[Stack, Stack]:
+def van_loan(A: Matrix, GQGt: Matrix, mu: float) -> tuple[Matrix, Matrix]:
     """
-    Return the exact (F, Q_d) of x' = A x + G w over each mu of mus, stacked (K, n, n).
+    Return the exact (F, Q_d) of x' = A x + G w over mu.
 
     F = e^{A mu}, Q_d = int_0^mu F(s) GQG^T F(s)^T ds.
-
     Van Loan (1978): expm([[-A, GQG^T], [0, A^T]] h) = [[., F(h)^-1 Q_d(h)], [0, F(h)^T]],
     taken over h = mu / 2^k small enough for the Taylor series and doubled k times,
     F(2h) = F(h)^2, Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T: the one-shot block exponential
     holds e^{-A mu}, which for a stable A and a long mu (60 s of a spring-mass system) is
     so large that F and Q_d lose every digit (F came out 1e10, Q_d indefinite).
     """
-    n, K = A.shape[0], mus.shape[0]
-    F_out, Qd_out = np.empty((K, n, n)), np.empty((K, n, n))
+    n = A.shape[0]
     M = np.zeros((2 * n, 2 * n))
     M[:n, :n] = -A
     M[:n, n:] = GQGt
     M[n:, n:] = A.T
-    for i in range(K):
-        k = _halvings(A, mus[i])
-        E = _expm_taylor(M * math.ldexp(mus[i], -k))
-        F = np.ascontiguousarray(E[n:, n:].T)
-        Qd = _mm(F, np.ascontiguousarray(E[:n, n:]))
-        for _ in range(k):
-            # Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T
-            Qd = Qd + _mm(_mm(F, Qd), F.T)
-            # F(2h) = F(h)^2
-            F = _mm(F, F)
-        F_out[i] = F
-        Qd_out[i] = Qd / 2 + Qd.T / 2
-    return F_out, Qd_out
+    k = _halvings(A, mu)
+    E = _expm_taylor(M * math.ldexp(mu, -k))
+    F = np.ascontiguousarray(E[n:, n:].T)
+    Qd = _mm(F, np.ascontiguousarray(E[:n, n:]))
+    for _ in range(k):
+        # Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T
+        Qd = Qd + _mm(_mm(F, Qd), np.ascontiguousarray(F.T))
+        # F(2h) = F(h)^2
+        F = _mm(F, F)
+    return F, Qd / 2 + Qd.T / 2
 
 
 @_jit
-def exact_input_stack(A: Matrix, B: Matrix, mus: NDArray[np.float64]) -> Stack:
+def exact_input_matrix(A: Matrix, B: Matrix, mu: float) -> Matrix:
     """
-    B_d = int_0^mu e^{A s} ds B for each mu, stacked (K, n, m).
+    Return B_d = int_0^mu e^{A s} ds B.
 
     expm([[A, B], [0, 0]] h) = [[F(h), B_d(h)], [0, I]] over h = mu / 2^k, doubled k times:
     B_d(2h) = B_d(h) + F(h) B_d(h), F(2h) = F(h)^2.
     """
     n, m = B.shape
-    K = mus.shape[0]
-    out = np.empty((K, n, m))
     M = np.zeros((n + m, n + m))
     M[:n, :n] = A
     M[:n, n:] = B
+    k = _halvings(A, mu)
+    E = _expm_taylor(M * math.ldexp(mu, -k))
+    F = np.ascontiguousarray(E[:n, :n])
+    Bd = np.ascontiguousarray(E[:n, n:])
+    for _ in range(k):
+        # B_d(2h) = B_d(h) + F(h) B_d(h)
+        Bd = Bd + _mm(F, Bd)
+        # F(2h) = F(h)^2
+        F = _mm(F, F)
+    return Bd
+
+
+@_jit
+def van_loan_stack(A: Matrix, GQGt: Matrix, mus: NDArray[np.float64]) -> tuple[Stack, Stack]:
+    """Return `van_loan` over each mu of mus, stacked (K, n, n)."""
+    n, K = A.shape[0], mus.shape[0]
+    F, Qd = np.empty((K, n, n)), np.empty((K, n, n))
     for i in range(K):
-        k = _halvings(A, mus[i])
-        E = _expm_taylor(M * math.ldexp(mus[i], -k))
-        F = np.ascontiguousarray(E[:n, :n])
-        Bd = np.ascontiguousarray(E[:n, n:])
-        for _ in range(k):
-            # B_d(2h) = B_d(h) + F(h) B_d(h)
-            Bd = Bd + _mm(F, Bd)
-            # F(2h) = F(h)^2
-            F = _mm(F, F)
-        out[i] = Bd
+        F[i], Qd[i] = van_loan(A, GQGt, mus[i])
+    return F, Qd
+
+
+@_jit
+def exact_input_stack(A: Matrix, B: Matrix, mus: NDArray[np.float64]) -> Stack:
+    """Return `exact_input_matrix` over each mu of mus, stacked (K, n, m)."""
+    out = np.empty((mus.shape[0],) + B.shape)
+    for i in range(mus.shape[0]):
+        out[i] = exact_input_matrix(A, B, mus[i])
     return out
 
 
@@ -153,35 +152,27 @@ def _invertible(F: Matrix) -> bool:
 
 
 @_jit
+def euler(A: Matrix, GQGt: Matrix, B: Matrix, mu: float
+          ) -> tuple[Matrix, Matrix, Matrix, bool]:
+    """Return the Euler jump over mu: (F, Q_d, B_d, whether F is invertible)."""
+    # x(sigma) = (I + mu A) x + mu B u + mu G w, Var(mu G w) = mu GQG^T
+    F = np.eye(A.shape[0]) + mu * A
+    Qd = mu * GQGt
+    Bd = mu * B
+    # Definition 2.12: I + mu A invertible
+    return F, Qd, Bd, _invertible(F)
+
+
+@_jit
 def euler_stack(A: Matrix, GQGt: Matrix, B: Matrix, mus: NDArray[np.float64]
                 ) -> tuple[Stack, Stack, Stack, NDArray[np.bool_]]:
-    """Return the Euler jump (F, Q_d, B_d, regressive) for each mu of mus, stacked (K, ...)."""
+    """Return `euler` over each mu of mus, stacked (K, ...)."""
     n, K = A.shape[0], mus.shape[0]
     F, Qd = np.empty((K, n, n)), np.empty((K, n, n))
     Bd, regressive = np.empty((K,) + B.shape), np.empty(K, dtype=np.bool_)
-    eye = np.eye(n)
     for i in range(K):
-        mu = mus[i]
-        # x(sigma) = (I + mu A) x + mu B u + mu G w, Var(mu G w) = mu GQG^T
-        F[i] = eye + mu * A
-        Qd[i] = mu * GQGt
-        Bd[i] = mu * B
-        # Definition 2.12: I + mu A invertible
-        regressive[i] = _invertible(F[i])
+        F[i], Qd[i], Bd[i], regressive[i] = euler(A, GQGt, B, mus[i])
     return F, Qd, Bd, regressive
-
-
-def van_loan(A: Matrix, GQGt: Matrix, mu: float) -> tuple[Matrix, Matrix]:
-    """Exact (F, Q_d) of x' = A x + G w over one mu (`van_loan_stack` of one)."""
-    F, Qd = van_loan_stack(np.ascontiguousarray(A, dtype=float),
-                           np.ascontiguousarray(GQGt, dtype=float), np.array([float(mu)]))
-    return F[0], Qd[0]
-
-
-def exact_input_matrix(A: Matrix, B: Matrix, mu: float) -> Matrix:
-    """B_d = int_0^mu e^{A s} ds B over one mu (`exact_input_stack` of one)."""
-    return exact_input_stack(np.ascontiguousarray(A, dtype=float),
-                             np.ascontiguousarray(B, dtype=float), np.array([float(mu)]))[0]
 
 
 class Transition(NamedTuple):
@@ -221,9 +212,13 @@ def transitions(kind: str, A: Matrix, GQGt: Matrix, B: Matrix, mus: NDArray[np.f
 
 def transition(kind: str, A: Matrix, GQGt: Matrix, B: Matrix, mu: float,
                *, input_matrix: bool = True) -> Transition:
-    """(F, Q_d, B_d) for a jump of mu: `transitions` of one."""
-    t = transitions(kind, A, GQGt, B, np.array([mu]), input_matrix=input_matrix)
-    return Transition(t.F[0], t.Qd[0], t.Bd[0], bool(t.regressive[0]))
+    """(F, Q_d, B_d) for a jump of mu: the paper's Euler form or the exact sampled plant."""
+    if kind == 'euler':
+        return Transition(*euler(A, GQGt, B, mu))
+    F, Qd = van_loan(A, GQGt, mu)
+    Bd = exact_input_matrix(A, B, mu) if input_matrix else np.zeros(B.shape)
+    # e^{A mu} is always invertible
+    return Transition(F, Qd, Bd, True)
 
 
 class TransitionCache(dict[float, Transition]):
@@ -252,6 +247,9 @@ class TransitionCache(dict[float, Transition]):
 def warm_up() -> None:
     """Compile the transition kernels for float64 arrays, or load them from numba's cache."""
     A, mus = np.eye(2), np.ones(1)
+    euler(A, A, A[:, :1], 1.0)
+    van_loan(A, A, 1.0)
+    exact_input_matrix(A, A[:, :1], 1.0)
     euler_stack(A, A, A[:, :1], mus)
     van_loan_stack(A, A, mus)
     exact_input_stack(A, A[:, :1], mus)
