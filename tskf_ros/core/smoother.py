@@ -181,17 +181,19 @@ def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], 
     kf = TimeScaleKalmanFilter(A, C, Q=Q, R=R, G=G, B=B, D=D, x0=x0, P0=P0,
                                transition=transition)
     n = kf.n
-    ys = _rows(y, K, kf.p, 'y')
-    us = _rows(u, K, kf.B.shape[1], 'u', missing=False)
     values, jump = np.unique(m, return_inverse=True)
     F = kf.transition_stack(values).F
-    if u is None and all(row is not None for row in ys):
-        z = np.asarray(y, dtype=float).reshape(K, kf.p)
+    z = _measured(y, K, kf.p) if u is None else None
+    if z is not None:
+        # every point measured, no input: one compiled run, no per-point rows
+        us: list[Optional[Vector]] = [None] * K
         res = kf.run(m, z)
         if res.steps < K:
-            _refused(kf, m, ys, us, res.steps)
+            _refused(kf, float(m[res.steps]), z[res.steps], res.steps)
         return Forward(res.x_corrected, res.P_corrected, res.x_predicted, res.P_predicted,
                        F, jump.astype(np.intp), us, kf)
+    ys = _rows(y, K, kf.p, 'y')
+    us = _rows(u, K, kf.B.shape[1], 'u', missing=False)
     x_f, x_p = np.empty((K, n)), np.empty((K, n))
     P_f, P_p = np.empty((K, n, n)), np.empty((K, n, n))
     for k in range(K):
@@ -205,12 +207,25 @@ def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], 
     return Forward(x_f, P_f, x_p, P_p, F, jump.astype(np.intp), us, kf)
 
 
-def _refused(kf: TimeScaleKalmanFilter, m: Vector, ys: list[Optional[Vector]],
-             us: list[Optional[Vector]], k: int) -> None:
-    """Raise the error `step` gives for point k, where a run stopped."""
-    mu_k = float(m[k])
+def _measured(y: Optional[ArrayLike], K: int, p: int) -> Optional[NDArray[np.float64]]:
+    """Return y as a finite (K, p) array, or None where `_rows` must check and split it."""
+    if y is None or isinstance(y, (list, tuple, np.ma.MaskedArray)):
+        return None
     try:
-        kf.step(mu_k, ys[k], us[k])
+        z = np.asarray(y, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    if z.ndim == 1 and p == 1:
+        z = z.reshape(-1, 1)
+    if z.shape != (K, p) or not np.isfinite(z).all():
+        return None
+    return z
+
+
+def _refused(kf: TimeScaleKalmanFilter, mu_k: float, y_k: Vector, k: int) -> None:
+    """Raise the error `step` gives for point k, where a run stopped."""
+    try:
+        kf.step(mu_k, y_k)
     except FilterError as exc:
         raise type(exc)(f'point {k} (mu = {mu_k}): {exc}') from None
     raise FilterError(f'point {k} (mu = {mu_k}): the step was refused')
