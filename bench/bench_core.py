@@ -17,6 +17,13 @@ of a part alternate within each repeat, so a load that comes and goes hits them 
    the smallest <= 2).
 3. One scanning-EKF step (runs = 1, as the live alignment node runs it), the alignment
    session's whole `add`, and a step of 1000 runs (the Monte-Carlo form); no goal.
+4. Exact stamps and stamps jittered by +-1 % and +-5 % of the period (a new mu every
+   call): `step` against FilterPy rebuilding F, Q_d, R_d each step (Euler, and the exact
+   transition with the same Van Loan kernel), n = 1, 2, 6, 20 (goals <= 0.5x, n = 20
+   <= 1.0x; exact within 1.2x of Euler); `kf.run` against FilterPy's `batch_filter` given
+   Fs, Qs, Rs, n = 2 (goal <= 0.2x). Results are checked equal; ratios of medians.
+5. `rts_smooth`, K = 1e6, n = 2, +-1 % jitter, in a fresh process: the growth of peak RSS
+   (ru_maxrss) over the call against the size of its output (goal <= 2x).
 
 Figures only; nothing is asserted.
 """
@@ -264,11 +271,141 @@ def goal_alignment(repeats: int, quick: bool) -> None:
           f'{min(got["batch"]) / 1000:.2f} us per run')
 
 
+JITTERS = (0.0, 0.01, 0.05)         # stamp jitter, +- a fraction of the period
+
+
+def jittered(rng: np.random.Generator, K: int, jitter: float) -> np.ndarray:
+    """Return K graininesses MU (1 +- jitter), uniform; exact stamps for jitter 0."""
+    return MU * (1.0 + rng.uniform(-jitter, jitter, K)) if jitter else np.full(K, MU)
+
+
+def goal_jitter(repeats: int, quick: bool) -> None:
+    """Step with a new mu per call, and kf.run, on exact and jittered stamps vs FilterPy."""
+    from tskf_ros.core.transitions import van_loan
+    print('\n4. Exact and jittered stamps (+-1 %, +-5 % of the period): a new mu every call')
+    print('   step vs FilterPy predict+update rebuilding F, Q_d, R_d each step '
+          '(Euler: I + mu A; exact: the same Van Loan kernel); ratio of medians')
+    print('   jitter  transition    n   step (us)   FilterPy (us)   ratio   goal')
+    rng = np.random.default_rng(1)
+    calls = 2000 // (10 if quick else 1)
+    for jitter in JITTERS:
+        for n in (1, 2, 6, 20):
+            m = random_model(rng, n)
+            mus = jittered(rng, calls, jitter)
+            A, GQGt, R = m['A'], m['Q'], np.array(m['R'])
+            got, cases, state = {}, {}, {}
+            for kind in ('euler', 'exact'):
+                kf = TimeScaleKalmanFilter(**m, transition=kind)
+                ref = KalmanFilter(dim_x=n, dim_z=1)
+                ref.H, ref.x, ref.P = m['C'], m['x0'].copy(), m['P0'].copy()
+                state[kind] = (kf, ref)
+
+                def ours(kf=kf, mus=mus) -> None:
+                    for mu in mus.tolist():
+                        kf.step(mu, 0.5)
+
+                def theirs(ref=ref, mus=mus, kind=kind) -> None:
+                    z = np.array([0.5])
+                    for mu in mus.tolist():
+                        # the step's order: the update at t (R_d = R / mu), then the
+                        # prediction over mu
+                        ref.R = R / mu
+                        ref.update(z)
+                        if kind == 'euler':
+                            ref.F, ref.Q = np.eye(n) + mu * A, mu * GQGt
+                        else:
+                            ref.F, ref.Q = van_loan(A, GQGt, mu)
+                        ref.predict()
+                cases[kind], cases[kind + ' ref'] = ours, theirs
+            got = alternate(cases, dict.fromkeys(cases, 1), repeats)
+            for kind in ('euler', 'exact'):
+                kf, ref = state[kind]
+                # the same filter, the same steps: the same prediction
+                assert np.allclose(kf.x, ref.x, rtol=1e-6, atol=1e-9), (kind, n)
+                ours_us = statistics.median(got[kind]) / calls
+                ref_us = statistics.median(got[kind + ' ref']) / calls
+                limit = 1.0 if n == 20 else 0.5
+                print(f'   {jitter:5.0%}   {kind:10s}  {n:3d}   {ours_us:9.2f}   {ref_us:13.2f}   '
+                      f'{ours_us / ref_us:5.2f}   <= {limit:.1f}x '
+                      f'{verdict(ours_us <= limit * ref_us)}')
+            e, x = statistics.median(got['euler']), statistics.median(got['exact'])
+            print(f'   {jitter:5.0%}   exact / euler {n:3d}   {x / e:5.2f}   <= 1.2x '
+                  f'{verdict(x <= 1.2 * e)}')
+
+    print('\n   kf.run vs FilterPy batch_filter (given Fs, Qs, Rs), n = 2, K = 2000, '
+          'the same model and measurements; ratio of medians')
+    print('   jitter  transition   run (us/step)   batch_filter (us/step)   ratio   goal')
+    K = 2000 // (10 if quick else 1)
+    m = random_model(rng, 2)
+    zs = rng.normal(size=(K, 1))
+    for jitter in JITTERS:
+        mus = jittered(rng, K, jitter)
+        for kind in ('euler', 'exact'):
+            kf = TimeScaleKalmanFilter(**m, transition=kind)
+            jumps = kf.transition_stack(mus)
+            Rs = np.array(m['R'])[None] / mus[:, None, None]
+            out = {}
+
+            def ours(kf=kf, mus=mus) -> None:
+                kf.x, kf.P = m['x0'].copy(), m['P0'].copy()
+                out['run'] = kf.run(mus, zs)
+
+            def theirs(jumps=jumps, Rs=Rs) -> None:
+                ref = KalmanFilter(dim_x=2, dim_z=1)
+                ref.H, ref.x, ref.P = m['C'], m['x0'].copy(), m['P0'].copy()
+                ref.F, ref.Q, ref.R = jumps.F[0], jumps.Qd[0], Rs[0]
+                # batch_filter updates then predicts: its (means, covariances) are our
+                # corrected rows
+                out['ref'] = ref.batch_filter(zs, Fs=jumps.F, Qs=jumps.Qd, Hs=[m['C']] * K,
+                                              Rs=Rs, update_first=True)
+
+            got = alternate({'run': ours, 'ref': theirs}, {'run': 1, 'ref': 1}, repeats)
+            np.testing.assert_allclose(out['run'].x_corrected, out['ref'][0], rtol=1e-8,
+                                       atol=1e-10)
+            r, f = statistics.median(got['run']) / K, statistics.median(got['ref']) / K
+            print(f'   {jitter:5.0%}   {kind:10s}   {r:13.2f}   {f:22.2f}   {r / f:5.2f}   '
+                  f'<= 0.2x {verdict(r <= 0.2 * f)}')
+
+
+RSS_SCRIPT = """
+import resource, sys
+import numpy as np
+from tskf_ros.core import rts_smooth
+K = int(sys.argv[1])
+rng = np.random.default_rng(0)
+mu = 0.01 * (1 + rng.uniform(-0.01, 0.01, K))
+y = rng.normal(size=(K, 1))
+kw = dict(Q=np.eye(2) * 0.1, R=[[0.5]], x0=[0.0, 0.0], P0=np.eye(2))
+A, C = [[0.0, 1.0], [-1.0, -0.3]], [[1.0, 0.0]]
+rts_smooth(A, C, mu[:10], y[:10], **kw)
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+out = rts_smooth(A, C, mu, y, **kw)
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(before, after, out.xs.nbytes + out.Ps.nbytes)
+"""
+
+
+def goal_rss(repeats: int, quick: bool) -> None:
+    """Peak RSS of rts_smooth, K = 1e6, n = 2, +-1 % jitter, in a fresh process."""
+    import subprocess
+    import sys
+    K = 100_000 if quick else 1_000_000
+    out = subprocess.run([sys.executable, '-c', RSS_SCRIPT, str(K)], check=True,
+                         capture_output=True, text=True).stdout.split()
+    before, after, size = int(out[0]) * 1024, int(out[1]) * 1024, int(out[2])
+    grew = after - before
+    print(f'\n5. rts_smooth, K = {K}, n = 2, +-1 % jitter (a fresh process, ru_maxrss)')
+    print(f'   peak RSS {after / 2**20:.0f} MB, {before / 2**20:.0f} MB before the call: '
+          f'grew {grew / 2**20:.0f} MB for an output of {size / 2**20:.0f} MB: '
+          f'{grew / size:.2f}x   <= 2x {verdict(grew <= 2 * size)}')
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--repeats', type=int, default=7, help='repeats (>= 5)')
     parser.add_argument('--quick', action='store_true', help='a tenth of the calls')
-    parser.add_argument('--only', nargs='+', choices=('step', 'session', 'alignment'),
+    parser.add_argument('--only', nargs='+',
+                        choices=('step', 'session', 'alignment', 'jitter', 'rss'),
                         help='run only these parts')
     args = parser.parse_args()
     load = os.getloadavg()
@@ -278,7 +415,8 @@ def main() -> None:
           f'{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}')
     print(f'thread CPU time per call, min / median over {args.repeats} repeats, '
           'cases alternated')
-    parts = {'step': goal_step, 'session': goal_session, 'alignment': goal_alignment}
+    parts = {'step': goal_step, 'session': goal_session, 'alignment': goal_alignment,
+             'jitter': goal_jitter, 'rss': goal_rss}
     for name in args.only or list(parts):
         parts[name](args.repeats, args.quick)
 

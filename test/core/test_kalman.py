@@ -1,6 +1,7 @@
 """tskf_ros.core.kalman's predict and update against FilterPy's KalmanFilter, to 1e-12."""
 
 from filterpy.kalman import KalmanFilter
+from hypothesis import assume, given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 
@@ -81,3 +82,81 @@ def test_update_batch_is_update_run_by_run(n, p):
         x_i, P_i, _, _, _ = kalman.update(m['x'], m['P'], m['z'], m['H'], m['R'], m['d'])
         np.testing.assert_array_equal(x[i], x_i)
         np.testing.assert_array_equal(P[i], P_i)
+
+
+# The covariance update under ill-conditioning.  P has eigenvalues spread log-uniformly
+# over cond(P) (up to 1e12, random orientation); R is a random SPD matrix scaled from
+# 1e-24 ||P|| (a near-perfect measurement: the exact posterior is then singular to
+# rounding, so only the arithmetic decides the sign of its smallest eigenvalue) to
+# 1e2 ||P||.  p < n: with p = n and R -> 0 the posterior is 0 and S is singular.
+
+def ill_conditioned(rng, n, p, log_cond, log_r):
+    """Return P (cond 10^log_cond, ||P|| = 1), a random H (p x n) and R = 10^log_r * SPD."""
+    U, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    ev = 10.0 ** rng.uniform(-log_cond, 0.0, n)
+    ev[0], ev[-1] = 1.0, 10.0 ** -log_cond
+    P = (U * ev) @ U.T
+    M = rng.normal(size=(p, p))
+    R = (M @ M.T + 0.1 * np.eye(p)) * 10.0 ** log_r
+    return P / 2 + P.T / 2, rng.normal(size=(p, n)), R / 2 + R.T / 2
+
+
+def expanded_joseph(P, H, R):
+    """Return the expanded Joseph form P - K (H P) - (P H^T) K^T + K S K^T, symmetrised."""
+    PHt = P @ H.T
+    S = H @ PHt + R
+    K = PHt @ np.linalg.inv(S)
+    out = P - K @ PHt.T - PHt @ K.T + K @ S @ K.T
+    return out / 2 + out.T / 2
+
+
+def lowest_eigenvalue(P_new, P):
+    """Return the smallest eigenvalue of P_new relative to ||P||_2."""
+    return np.linalg.eigvalsh(P_new)[0] / np.linalg.norm(P, 2)
+
+
+def kernel_update(P, H, R):
+    """Return kalman.update's P for x = 0, z = 0 (P does not depend on them)."""
+    n, p = P.shape[0], H.shape[0]
+    return kalman.update(np.zeros(n), P, np.zeros(p), H, R, np.zeros(p))[1]
+
+
+@settings(max_examples=2000, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 8), log_cond=st.floats(0.0, 12.0),
+       log_r=st.floats(-24.0, 2.0), data=st.data())
+def test_update_keeps_an_ill_conditioned_P_positive_semi_definite(
+        seed, n, log_cond, log_r, data):
+    p = data.draw(st.integers(1, n - 1))
+    P, H, R = ill_conditioned(np.random.default_rng(seed), n, p, log_cond, log_r)
+    S = H @ P @ H.T + R
+    assume(np.linalg.cond(S) < 1e14)           # S numerically invertible
+    P_new = kernel_update(P, H, R)
+    np.testing.assert_array_equal(P_new, P_new.T)
+    assert lowest_eigenvalue(P_new, P) >= -1e-12
+    if np.linalg.cond(S) < 1e6:
+        # and it is the Joseph form (I - K H) P (I - K H)^T + K R K^T, as FilterPy writes it
+        K = P @ H.T @ np.linalg.inv(S)
+        I_KH = np.eye(n) - K @ H
+        want = I_KH @ P @ I_KH.T + K @ R @ K.T
+        np.testing.assert_allclose(P_new, want, rtol=0, atol=1e-8)
+
+
+def test_update_is_more_robust_than_the_expanded_joseph_form():
+    # the regression guarded against: the expansion P - K(HP) - (PH^T)K^T + K S K^T, which
+    # the update used before, leaves eigenvalues below -1e-15 ||P|| (beyond the rounding
+    # of eigvalsh itself) in about 0.4 % of these near-perfect measurements, the product
+    # form in none (2000 cases: 8 against 0 when written)
+    rng = np.random.default_rng(30)
+    kernel, expanded, cases = 0, 0, 0
+    while cases < 2000:
+        n = int(rng.integers(2, 7))
+        p = int(rng.integers(1, n))
+        P, H, R = ill_conditioned(rng, n, p, rng.uniform(0.0, 12.0), rng.uniform(-24.0, -8.0))
+        if np.linalg.cond(H @ P @ H.T + R) >= 1e14:
+            continue
+        cases += 1
+        kernel += lowest_eigenvalue(kernel_update(P, H, R), P) < -1e-15
+        expanded += lowest_eigenvalue(expanded_joseph(P, H, R), P) < -1e-15
+    assert kernel == 0
+    assert expanded >= 5

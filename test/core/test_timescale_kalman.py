@@ -511,3 +511,23 @@ def test_a_run_stops_before_a_refused_step_or_a_failed_test(n, p):
     assert (res.steps, res.stopped) == (2, 'test')
     np.testing.assert_array_equal(res.x_predicted, free.x_predicted[:2])
     np.testing.assert_array_equal(kf.x, res.x_predicted[1])
+
+
+@pytest.mark.parametrize('transition', ['euler', 'exact'])
+def test_a_run_on_jittered_mu_is_the_step_loop_bit_for_bit(transition):
+    # every mu distinct (+-5 % jitter): the run builds them all in one call, the steps one
+    # at a time; both go through the same kernels, so the results are the same bits
+    rng = np.random.default_rng(31)
+    m = random_model(rng, 3, 2, 1)
+    mus = 0.01 * (1 + rng.uniform(-0.05, 0.05, 50))
+    ys = rng.normal(size=(50, 2))
+    u = rng.normal(size=1)
+    kf = TimeScaleKalmanFilter(**m, transition=transition)
+    twin = TimeScaleKalmanFilter(**m, transition=transition)
+    res = kf.run(mus, ys, u)
+    for k in range(50):
+        step = twin.step(float(mus[k]), ys[k], u)
+        np.testing.assert_array_equal(res.x_corrected[k], step.x_corrected)
+        np.testing.assert_array_equal(res.P_corrected[k], step.P_corrected)
+        np.testing.assert_array_equal(res.x_predicted[k], step.x_predicted)
+        np.testing.assert_array_equal(res.P_predicted[k], step.P_predicted)

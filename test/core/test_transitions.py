@@ -37,3 +37,33 @@ def test_an_overflowing_exponential_is_a_counted_reset_not_a_printed_warning():
         assert session.add(t0 + ns, 300.0).status == 'accepted'
         assert session.add(t0 + ns + 900_000 * ns, 300.0).status == 'reset'
     assert session.stats.resets['state_health'] == 1
+
+
+def test_the_stack_of_jittered_mu_is_scipys_expm_and_van_loans_block_exponential():
+    # +-5 % jitter around 1 ms and a few long jumps; the reference is scipy's expm of
+    # Van Loan's block matrix taken one mu at a time (Van Loan 1978, no doubling)
+    from tskf_ros.core.transitions import exact_input_stack, transitions, van_loan_stack
+    rng = np.random.default_rng(31)
+    A = np.array([[0.0, 1.0], [-40.0, -3.0]])
+    GQGt = np.array([[0.1, 0.02], [0.02, 2.0]])
+    B = np.array([[0.0], [1.0]])
+    mus = np.concatenate([1e-3 * (1 + rng.uniform(-0.05, 0.05, 200)), [0.3, 1.0]])
+    F, Qd = van_loan_stack(A, GQGt, mus)
+    Bd = exact_input_stack(A, B, mus)
+    for k, mu in enumerate(mus):
+        M = np.block([[-A, GQGt], [np.zeros((2, 2)), A.T]]) * mu
+        E = scipy.linalg.expm(M)
+        F_ref = E[2:, 2:].T
+        np.testing.assert_allclose(F[k], F_ref, rtol=0, atol=1e-13 * np.abs(F_ref).max())
+        Qd_ref = F_ref @ E[:2, 2:]
+        np.testing.assert_allclose(Qd[k], Qd_ref, rtol=0, atol=1e-12 * np.abs(Qd_ref).max())
+        Bd_ref = scipy.linalg.expm(np.block([[A, B], [np.zeros((1, 3))]]) * mu)[:2, 2:]
+        np.testing.assert_allclose(Bd[k], Bd_ref, rtol=0, atol=1e-13 * np.abs(Bd_ref).max())
+    # Euler: F = I + mu A, Q_d = mu GQG^T, B_d = mu B, exactly
+    eu = transitions('euler', A, GQGt, B, mus)
+    np.testing.assert_array_equal(eu.F, np.eye(2) + mus[:, None, None] * A)
+    np.testing.assert_array_equal(eu.Qd, mus[:, None, None] * GQGt)
+    np.testing.assert_array_equal(eu.Bd, mus[:, None, None] * B)
+    assert eu.regressive.all()
+    # I + mu A singular at mu = 1 for A = -I: not regressive (Definition 2.12)
+    assert not transitions('euler', -np.eye(2), GQGt, B, np.array([1.0, 0.5])).regressive[0]

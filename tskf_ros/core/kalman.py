@@ -134,12 +134,14 @@ def update(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
     K = _mm(PHt, _inv(S))
     # x = x + K y
     x = x + _mv(K, y)
-    # P = (I - K H) P (I - K H)^T + K R K^T: the Joseph form, right for any K, so that an
-    # error in K changes P only to second order (the short form (I - K H) P assumes the
-    # optimal K); expanded with S = H P H^T + R as P - K (H P) - (P H^T) K^T + K S K^T,
-    # which costs O(n^2 p) where the product form costs O(n^3)
-    KS = _mm(K, S)
-    P = P - _mm(K, PHt.T) - _mm(PHt, K.T) + _mm(KS, K.T)
+    # P = (I - K H) P (I - K H)^T + K R K^T: the Joseph form (Bucy & Joseph 1968; Simon
+    # eq. 5.19), right for any K, so that an error in K changes P only to second order.  It
+    # is evaluated as written, as congruences of P and R, which keeps P positive
+    # semi-definite when P is ill-conditioned; expanding it with S = H P H^T + R into
+    # P - K (H P) - (P H^T) K^T + K S K^T keeps the algebra but not that property
+    # (test/core/test_kalman.py measures both)
+    I_KH = np.eye(P.shape[0]) - _mm(K, H)
+    P = _mm(_mm(I_KH, P), I_KH.T) + _mm(_mm(K, R), K.T)
     return x, _symmetric(P), y, S, K
 
 

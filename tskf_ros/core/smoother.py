@@ -1,11 +1,14 @@
 """
 Rauch-Tung-Striebel smoother for the time-scale Kalman filter (Bohner & Wintz 2013, Table 3).
 
-Forward: the filter's own `step` at the points t_0 < ... < t_{K-1} of the time scale
-(t_{k+1} = t_k + mu_k); it keeps x(t_k|t_k), P(t_k|t_k), the prediction x(t_{k+1}|t_k),
-P(t_{k+1}|t_k) and the jump F_k (I + mu_k A, or e^{A mu_k}).  Backward (Rauch, Tung &
-Striebel, AIAA J. 3, 1965; Sarkka, Bayesian Filtering and Smoothing, 2013, Theorem 8.2),
-from x(t_{K-1}|T) = x(t_{K-1}|t_{K-1}):
+Forward: the filter at the points t_0 < ... < t_{K-1} of the time scale
+(t_{k+1} = t_k + mu_k), in compiled runs (`TimeScaleKalmanFilter.run`, the same bits as its
+`step`); it keeps x(t_k|t_k), P(t_k|t_k), the prediction x(t_{k+1}|t_k), P(t_{k+1}|t_k)
+and, per distinct mu, the jump F (I + mu A, or e^{A mu}) with each point's index into them.
+The backward pass writes x(t_k|T), P(t_k|T) over x(t_k|t_k), P(t_k|t_k) in place: the
+forward arrays are the output, and the pass needs only the predictions besides.
+Backward (Rauch, Tung & Striebel, AIAA J. 3, 1965; Sarkka, Bayesian Filtering and
+Smoothing, 2013, Theorem 8.2), from x(t_{K-1}|T) = x(t_{K-1}|t_{K-1}):
 
     G_k      = P(t_k|t_k) F_k^T P(t_{k+1}|t_k)^-1
     x(t_k|T) = x(t_k|t_k) + G_k (x(t_{k+1}|T) - x(t_{k+1}|t_k))
@@ -50,7 +53,8 @@ class Forward(NamedTuple):
     P_f: NDArray[np.float64]        # P(t_k|t_k)
     x_p: NDArray[np.float64]        # x(t_{k+1}|t_k)
     P_p: NDArray[np.float64]        # P(t_{k+1}|t_k)
-    F: NDArray[np.float64]          # the jump from t_k to t_{k+1}
+    F: NDArray[np.float64]          # the jumps of the distinct mu
+    jump: NDArray[np.intp]          # point k jumps by F[jump[k]]
     inputs: list[Optional[Vector]]  # u(t_k), held over the jump
     kf: TimeScaleKalmanFilter       # the filter that made them (for the partial jumps)
 
@@ -171,36 +175,76 @@ def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], 
              Q: ArrayLike, R: ArrayLike, G: Optional[ArrayLike], B: Optional[ArrayLike],
              u: Optional[ArrayLike], D: Optional[ArrayLike], x0: ArrayLike, P0: ArrayLike,
              transition: str) -> Forward:
-    """Run the filter's `step` at every point; keep what the backward pass needs."""
+    """Run the filter at every point (in runs between missing measurements); keep its rows."""
     m = _graininess(mu)
     K = m.size
     kf = TimeScaleKalmanFilter(A, C, Q=Q, R=R, G=G, B=B, D=D, x0=x0, P0=P0,
                                transition=transition)
     n = kf.n
+    values, jump = np.unique(m, return_inverse=True)
+    F = kf.transition_stack(values).F
+    z = _measured(y, K, kf.p) if u is None else None
+    if z is not None:
+        # every point measured, no input: one compiled run, no per-point rows
+        us: list[Optional[Vector]] = [None] * K
+        res = kf.run(m, z)
+        if res.steps < K:
+            _refused(kf, float(m[res.steps]), z[res.steps], res.steps)
+        return Forward(res.x_corrected, res.P_corrected, res.x_predicted, res.P_predicted,
+                       F, jump.astype(np.intp), us, kf)
     ys = _rows(y, K, kf.p, 'y')
     us = _rows(u, K, kf.B.shape[1], 'u', missing=False)
     x_f, x_p = np.empty((K, n)), np.empty((K, n))
-    P_f, P_p, F = np.empty((K, n, n)), np.empty((K, n, n)), np.empty((K, n, n))
+    P_f, P_p = np.empty((K, n, n)), np.empty((K, n, n))
     for k in range(K):
         mu_k = float(m[k])
         try:
-            res = kf.step(mu_k, ys[k], us[k])
+            res1 = kf.step(mu_k, ys[k], us[k])
         except FilterError as exc:
             raise type(exc)(f'point {k} (mu = {mu_k}): {exc}') from None
-        x_f[k], P_f[k] = res.x_corrected, res.P_corrected
-        x_p[k], P_p[k] = res.x_predicted, res.P_predicted
-        F[k] = kf.transition_matrices(mu_k)[0]
-    return Forward(x_f, P_f, x_p, P_p, F, us, kf)
+        x_f[k], P_f[k] = res1.x_corrected, res1.P_corrected
+        x_p[k], P_p[k] = res1.x_predicted, res1.P_predicted
+    return Forward(x_f, P_f, x_p, P_p, F, jump.astype(np.intp), us, kf)
+
+
+def _measured(y: Optional[ArrayLike], K: int, p: int) -> Optional[NDArray[np.float64]]:
+    """Return y as a finite (K, p) array, or None where `_rows` must check and split it."""
+    if y is None or isinstance(y, (list, tuple, np.ma.MaskedArray)):
+        return None
+    try:
+        z = np.asarray(y, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    if z.ndim == 1 and p == 1:
+        z = z.reshape(-1, 1)
+    if z.shape != (K, p) or not np.isfinite(z).all():
+        return None
+    return z
+
+
+def _refused(kf: TimeScaleKalmanFilter, mu_k: float, y_k: Vector, k: int) -> None:
+    """Raise the error `step` gives for point k, where a run stopped."""
+    try:
+        kf.step(mu_k, y_k)
+    except FilterError as exc:
+        raise type(exc)(f'point {k} (mu = {mu_k}): {exc}') from None
+    raise FilterError(f'point {k} (mu = {mu_k}): the step was refused')
+
+
+@_jit
+def _backward_in_place(x: NDArray[np.float64], P: NDArray[np.float64],
+                       x_p: NDArray[np.float64], P_p: NDArray[np.float64],
+                       F: NDArray[np.float64], jump: NDArray[np.intp]) -> None:
+    """Turn x(t_k|t_k), P(t_k|t_k) into x(t_k|T), P(t_k|T), from the last point back."""
+    for k in range(x.shape[0] - 2, -1, -1):
+        G = smoother_gain(P[k], F[jump[k]], P_p[k])
+        x[k], P[k] = smoothed_step(x[k], P[k], x_p[k], P_p[k], G, x[k + 1], P[k + 1])
 
 
 def _backward(fw: Forward) -> Smoothed:
     """Run the RTS recursion from the last point's corrected estimate back to t_0."""
-    K, n = fw.x_f.shape
-    G = np.empty((K, n, n))
-    for k in range(K - 1):
-        G[k] = smoother_gain(fw.P_f[k], fw.F[k], fw.P_p[k])
-    xs, Ps = np.empty((K, n)), np.empty((K, n, n))
-    backward_pass(fw.x_f, fw.P_f, fw.x_p, fw.P_p, G, 0, K, xs, Ps)
+    xs, Ps = fw.x_f.copy(), fw.P_f.copy()
+    _backward_in_place(xs, Ps, fw.x_p, fw.P_p, np.ascontiguousarray(fw.F), fw.jump)
     return Smoothed(xs, Ps)
 
 
@@ -220,7 +264,9 @@ def rts_smooth(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike]
     """
     fw = _forward(A, C, mu, y, Q=Q, R=R, G=G, B=B, u=u, D=D, x0=x0, P0=P0,
                   transition=transition)
-    return _backward(fw)
+    # the forward rows become the output: no copy of them
+    _backward_in_place(fw.x_f, fw.P_f, fw.x_p, fw.P_p, np.ascontiguousarray(fw.F), fw.jump)
+    return Smoothed(fw.x_f, fw.P_f)
 
 
 def _interpolate(fw: Forward, smooth: Smoothed, k: int, mu_k: float, mu1: float
@@ -295,3 +341,4 @@ def warm_up() -> None:
     G = smoother_gain(P, P, P)
     smoothed_step(x, P, x, P, G, x, P)
     backward_pass(x[None], P[None], x[None], P[None], G[None], 0, 1, x[None], P[None])
+    _backward_in_place(x[None], P[None], x[None], P[None], P[None], np.zeros(1, dtype=np.intp))

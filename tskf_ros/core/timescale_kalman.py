@@ -48,7 +48,8 @@ import scipy.integrate
 
 from tskf_ros.core import kalman
 from tskf_ros.core.matrices import as_matrix, as_vector, check_covariance, FilterError
-from tskf_ros.core.transitions import Transition, TransitionCache, TRANSITIONS
+from tskf_ros.core.transitions import (Transition, TransitionCache, TRANSITIONS,
+                                       Transitions)
 
 Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
@@ -206,9 +207,10 @@ class TimeScaleKalmanFilter:
     def _prepare(self) -> None:
         """Derive what every step reuses from the (checked) model matrices."""
         self.GQGt = self._G @ self._Q @ self._G.T
-        self._jumps = TransitionCache(self._transition, self._A, self.GQGt, self._B)
         self._zero = np.zeros(self.n)
         self._uses_B = bool(np.any(self._B))
+        self._jumps = TransitionCache(self._transition, self._A, self.GQGt, self._B,
+                                      input_matrix=self._uses_B)
 
     @property
     def transition(self) -> str:
@@ -241,6 +243,10 @@ class TimeScaleKalmanFilter:
         """Return (F, Q_d, B_d) for a jump of mu: Euler (I + mu A) or the exact sampled plant."""
         jump = self._jumps[mu]
         return jump.F, jump.Qd, jump.Bd
+
+    def transition_stack(self, mus: NDArray[np.float64]) -> Transitions:
+        """Return the transitions (F, Q_d, B_d, regressive) of every mu of mus, stacked."""
+        return self._jumps.stack(mus)
 
     def _jump(self, mu: float) -> Transition:
         """Return the transition over mu; raise NonRegressiveError where Definition 2.12 fails."""
@@ -342,19 +348,16 @@ class TimeScaleKalmanFilter:
         z = np.asarray(y, dtype=float).reshape(K, p)
         bad = ~((mus > 0.0) & (mus < _INF)) | ~np.isfinite(z).all(axis=1)
         values, jump = np.unique(mus, return_inverse=True)
-        F, Q, Bu = [], [], []
-        Bu_of = u is not None and self._uses_B
-        uv = self._zero if u is None or not Bu_of else as_vector(u, self._B.shape[1], 'u')
-        for i, m in enumerate(values.tolist()):
-            if not 0.0 < m < _INF:
-                t = self._jumps[1.0]            # never used: the step before it stops
-            else:
-                t = self._jumps[m]
-                if not t.regressive and not self.allow_nonregressive:
-                    bad |= jump == i
-            F.append(t.F)
-            Q.append(t.Qd)
-            Bu.append(t.Bd @ uv if Bu_of else self._zero)
+        # the transitions of the run's distinct mu in one call (a mu that is not a
+        # graininess gets mu = 1, never used: the run stops at the step before it)
+        jumps = self._jumps.stack(np.where((values > 0.0) & (values < _INF), values, 1.0))
+        if not self.allow_nonregressive:
+            bad |= ~jumps.regressive[jump]
+        if u is not None and self._uses_B:
+            uv = as_vector(u, self._B.shape[1], 'u')
+            Bu = np.array([Bd @ uv for Bd in jumps.Bd])     # as `step` makes B_d u
+        else:
+            Bu = np.zeros((values.size, self.n))
         limit = int(np.argmax(bad)) if bad.any() else K
         if test is None:
             z_test, R_test, limit2 = z, self._R, -1.0
@@ -363,7 +366,7 @@ class TimeScaleKalmanFilter:
         x_c, P_c, x_p, P_p, count, status = kalman.update_predict_run(
             self.x, self.P, z[:limit], self._C,
             self._noise_over(mus[:limit, None, None], self._R),
-            self._D, np.array(F), np.array(Q), np.array(Bu), jump[:limit].astype(np.intp),
+            self._D, jumps.F, jumps.Qd, Bu, jump[:limit].astype(np.intp),
             np.asarray(z_test, dtype=float), R_test, limit2)
         if count:
             self.x, self.P = x_p[count - 1], P_p[count - 1]

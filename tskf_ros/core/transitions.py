@@ -4,73 +4,175 @@ The jump of the time-scale filter over one graininess mu: F, Q_d and B_d.
 Euler (Bohner & Wintz 2013, Table 3): F = I + mu A, Q_d = mu G Q G^T, B_d = mu B.
 Exact (a continuous plant sampled at irregular instants): F = e^{A mu}, Q_d by Van Loan's
 method (Van Loan, "Computing integrals involving the matrix exponential", IEEE TAC 1978),
-B_d = int_0^mu e^{A s} ds B.
+B_d = int_0^mu e^{A s} ds B.  The transitions of many mu (the distinct graininesses of a run
+of jittered stamps) are made in one compiled call; a single mu is a stack of one.
 """
 
+import math
 from typing import NamedTuple
-import warnings
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
-import scipy.linalg
 
-from tskf_ros.core.matrices import is_invertible
+# the filter's matrix product: loops for small matrices, BLAS for large ones
+from tskf_ros.core.kalman import _mm
 
 Matrix = NDArray[np.float64]
+Stack = NDArray[np.float64]
 TRANSITIONS = ('euler', 'exact')
 # transitions kept per filter, keyed by mu (a stream at a fixed rate reuses a few)
 CACHE_SIZE = 64
+# terms of the Taylor series of e^X for ||X|| <= 1/2: the first term left out is below
+# 2^-15 / 15! = 2.3e-17, under a rounding of the leading I
+_TAYLOR_TERMS = 14
+# Hadamard's test of I + mu A (Definition 2.12): |det F| > _RTOL prod_i |row_i of F|
+_RTOL = 1e-12
+
+_jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
 
+@_jit
+def _expm_taylor(X: Matrix) -> Matrix:
+    """
+    Return e^X for ||X|| <= 1/2 by its Taylor series, in Horner's form.
+
+    e^X = I + X (I + X/2 (I + X/3 (... (I + X/N)))) (Moler & Van Loan, "Nineteen dubious
+    ways to compute the exponential of a matrix", SIAM Review 2003, method 3; the scaling
+    and squaring around it is the caller's).
+    """
+    eye = np.eye(X.shape[0])
+    E = eye.copy()
+    for k in range(_TAYLOR_TERMS, 0, -1):
+        E = eye + _mm(X, E) / k
+    return E
+
+
+@_jit
+def _halvings(A: Matrix, mu: float) -> int:
+    """Return k with max(||A||_1, ||A||_inf) mu / 2^k <= 1/2: the halvings of mu."""
+    norm = max(np.abs(A).sum(axis=0).max(), np.abs(A).sum(axis=1).max())
+    if not 2.0 * norm * mu > 1.0:
+        return 0
+    # in logarithms: norm * mu may overflow where mu / 2^k does not
+    return int(np.ceil(np.log2(2.0 * norm) + np.log2(mu)))
+
+
+@_jit
 def van_loan(A: Matrix, GQGt: Matrix, mu: float) -> tuple[Matrix, Matrix]:
     """
-    Exact (F, Q_d) of x' = A x + G w over mu: F = e^{A mu}, Q_d = int_0^mu F(s) GQG^T F(s)^T.
+    Return the exact (F, Q_d) of x' = A x + G w over mu.
 
+    F = e^{A mu}, Q_d = int_0^mu F(s) GQG^T F(s)^T ds.
     Van Loan (1978): expm([[-A, GQG^T], [0, A^T]] h) = [[., F(h)^-1 Q_d(h)], [0, F(h)^T]],
-    taken over h = mu / 2^k with ||A||_1 h <= 1 and doubled k times,
+    taken over h = mu / 2^k small enough for the Taylor series and doubled k times,
     F(2h) = F(h)^2, Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T: the one-shot block exponential
     holds e^{-A mu}, which for a stable A and a long mu (60 s of a spring-mass system) is
     so large that F and Q_d lose every digit (F came out 1e10, Q_d indefinite).
     """
     n = A.shape[0]
-    reach = float(np.linalg.norm(A, 1)) * mu
-    k = int(np.ceil(np.log2(reach))) if reach > 1 else 0
-    h = mu / 2.0 ** k
     M = np.zeros((2 * n, 2 * n))
     M[:n, :n] = -A
     M[:n, n:] = GQGt
     M[n:, n:] = A.T
-    E = _expm(M * h)
-    F = E[n:, n:].T
-    Qd = F @ E[:n, n:]
-    with np.errstate(over='ignore', invalid='ignore'):
-        for _ in range(k):
-            # Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T, F(2h) = F(h)^2
-            Qd = Qd + F @ Qd @ F.T
-            F = F @ F
-    return np.ascontiguousarray(F), (Qd + Qd.T) / 2
+    k = _halvings(A, mu)
+    E = _expm_taylor(M * math.ldexp(mu, -k))
+    F = np.ascontiguousarray(E[n:, n:].T)
+    Qd = _mm(F, np.ascontiguousarray(E[:n, n:]))
+    for _ in range(k):
+        # Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T
+        Qd = Qd + _mm(_mm(F, Qd), np.ascontiguousarray(F.T))
+        # F(2h) = F(h)^2
+        F = _mm(F, F)
+    return F, Qd / 2 + Qd.T / 2
 
 
+@_jit
 def exact_input_matrix(A: Matrix, B: Matrix, mu: float) -> Matrix:
-    """B_d = int_0^mu e^{A s} ds B, from the block exponential expm([[A, B], [0, 0]] mu)."""
+    """
+    Return B_d = int_0^mu e^{A s} ds B.
+
+    expm([[A, B], [0, 0]] h) = [[F(h), B_d(h)], [0, I]] over h = mu / 2^k, doubled k times:
+    B_d(2h) = B_d(h) + F(h) B_d(h), F(2h) = F(h)^2.
+    """
     n, m = B.shape
     M = np.zeros((n + m, n + m))
     M[:n, :n] = A
     M[:n, n:] = B
-    return _expm(M * mu)[:n, n:]
+    k = _halvings(A, mu)
+    E = _expm_taylor(M * math.ldexp(mu, -k))
+    F = np.ascontiguousarray(E[:n, :n])
+    Bd = np.ascontiguousarray(E[:n, n:])
+    for _ in range(k):
+        # B_d(2h) = B_d(h) + F(h) B_d(h)
+        Bd = Bd + _mm(F, Bd)
+        # F(2h) = F(h)^2
+        F = _mm(F, F)
+    return Bd
 
 
-def _expm(M: Matrix) -> Matrix:
+@_jit
+def van_loan_stack(A: Matrix, GQGt: Matrix, mus: NDArray[np.float64]) -> tuple[Stack, Stack]:
+    """Return `van_loan` over each mu of mus, stacked (K, n, n)."""
+    n, K = A.shape[0], mus.shape[0]
+    F, Qd = np.empty((K, n, n)), np.empty((K, n, n))
+    for i in range(K):
+        F[i], Qd[i] = van_loan(A, GQGt, mus[i])
+    return F, Qd
+
+
+@_jit
+def exact_input_stack(A: Matrix, B: Matrix, mus: NDArray[np.float64]) -> Stack:
+    """Return `exact_input_matrix` over each mu of mus, stacked (K, n, m)."""
+    out = np.empty((mus.shape[0],) + B.shape)
+    for i in range(mus.shape[0]):
+        out[i] = exact_input_matrix(A, B, mus[i])
+    return out
+
+
+@_jit
+def _invertible(F: Matrix) -> bool:
     """
-    Return scipy's expm(M), an overflow left in it (inf or nan), not printed as a warning.
+    Tell whether F is numerically invertible.
 
-    An exponential that overflows (e^{A mu} of an unstable A over a long jump) is a
-    non-finite F that the filter refuses and the session counts as a reset; scipy's
-    RuntimeWarning would only add two raw lines to a node's log.
+    |det F| > _RTOL prod_i |row_i| (Hadamard's bound: |det F| <= prod_i |row_i|, with
+    equality for orthogonal rows; the test is scale-free).
     """
-    with np.errstate(all='ignore'), warnings.catch_warnings():
-        warnings.simplefilter('ignore', RuntimeWarning)
-        return np.asarray(scipy.linalg.expm(M), dtype=float)
+    n = F.shape[0]
+    if n == 1:
+        return F[0, 0] != 0.0
+    if n == 2:
+        det = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+    else:
+        det = np.linalg.det(F)
+    bound = 1.0
+    for i in range(n):
+        bound *= np.sqrt((F[i] * F[i]).sum())
+    return bound > 0.0 and abs(det) > _RTOL * bound
+
+
+@_jit
+def euler(A: Matrix, GQGt: Matrix, B: Matrix, mu: float
+          ) -> tuple[Matrix, Matrix, Matrix, bool]:
+    """Return the Euler jump over mu: (F, Q_d, B_d, whether F is invertible)."""
+    # x(sigma) = (I + mu A) x + mu B u + mu G w, Var(mu G w) = mu GQG^T
+    F = np.eye(A.shape[0]) + mu * A
+    Qd = mu * GQGt
+    Bd = mu * B
+    # Definition 2.12: I + mu A invertible
+    return F, Qd, Bd, _invertible(F)
+
+
+@_jit
+def euler_stack(A: Matrix, GQGt: Matrix, B: Matrix, mus: NDArray[np.float64]
+                ) -> tuple[Stack, Stack, Stack, NDArray[np.bool_]]:
+    """Return `euler` over each mu of mus, stacked (K, ...)."""
+    n, K = A.shape[0], mus.shape[0]
+    F, Qd = np.empty((K, n, n)), np.empty((K, n, n))
+    Bd, regressive = np.empty((K,) + B.shape), np.empty(K, dtype=np.bool_)
+    for i in range(K):
+        F[i], Qd[i], Bd[i], regressive[i] = euler(A, GQGt, B, mus[i])
+    return F, Qd, Bd, regressive
 
 
 class Transition(NamedTuple):
@@ -82,27 +184,72 @@ class Transition(NamedTuple):
     regressive: bool
 
 
-def transition(kind: str, A: Matrix, GQGt: Matrix, B: Matrix, mu: float) -> Transition:
+class Transitions(NamedTuple):
+    """The jumps over the mu of a run, stacked: F, Q_d, B_d (K, ...) and regressive (K,)."""
+
+    F: Stack
+    Qd: Stack
+    Bd: Stack
+    regressive: NDArray[np.bool_]
+
+
+def transitions(kind: str, A: Matrix, GQGt: Matrix, B: Matrix, mus: NDArray[np.float64],
+                *, input_matrix: bool = True) -> Transitions:
+    """
+    Return the jumps over every mu of mus in one compiled call: Euler or the exact plant.
+
+    input_matrix=False leaves B_d at zero for the exact transition (a model without an
+    input needs no second exponential).
+    """
+    mus = np.ascontiguousarray(mus, dtype=float)
+    if kind == 'euler':
+        return Transitions(*euler_stack(A, GQGt, B, mus))
+    F, Qd = van_loan_stack(A, GQGt, mus)
+    Bd = exact_input_stack(A, B, mus) if input_matrix else np.zeros((mus.size,) + B.shape)
+    # e^{A mu} is always invertible
+    return Transitions(F, Qd, Bd, np.ones(mus.size, dtype=np.bool_))
+
+
+def transition(kind: str, A: Matrix, GQGt: Matrix, B: Matrix, mu: float,
+               *, input_matrix: bool = True) -> Transition:
     """(F, Q_d, B_d) for a jump of mu: the paper's Euler form or the exact sampled plant."""
     if kind == 'euler':
-        # x(sigma) = (I + mu A) x + mu B u + mu G w, Var(mu G w) = mu GQG^T
-        F = np.eye(A.shape[0]) + mu * A
-        return Transition(F, mu * GQGt, mu * B, is_invertible(F))
+        return Transition(*euler(A, GQGt, B, mu))
     F, Qd = van_loan(A, GQGt, mu)
+    Bd = exact_input_matrix(A, B, mu) if input_matrix else np.zeros(B.shape)
     # e^{A mu} is always invertible
-    return Transition(F, Qd, exact_input_matrix(A, B, mu), True)
+    return Transition(F, Qd, Bd, True)
 
 
 class TransitionCache(dict[float, Transition]):
     """The transitions of one model by mu, computed on first use, the last CACHE_SIZE kept."""
 
-    def __init__(self, kind: str, A: Matrix, GQGt: Matrix, B: Matrix) -> None:
+    def __init__(self, kind: str, A: Matrix, GQGt: Matrix, B: Matrix, *,
+                 input_matrix: bool = True) -> None:
         super().__init__()
-        self.kind, self.A, self.GQGt, self.B = kind, A, GQGt, B
+        self.kind, self.input_matrix = kind, input_matrix
+        self.A, self.GQGt, self.B = (np.ascontiguousarray(M, dtype=float) for M in (A, GQGt, B))
 
     def __missing__(self, mu: float) -> Transition:
-        jump = transition(self.kind, self.A, self.GQGt, self.B, mu)
+        jump = transition(self.kind, self.A, self.GQGt, self.B, mu,
+                          input_matrix=self.input_matrix)
         if len(self) >= CACHE_SIZE:
             del self[next(iter(self))]
         self[mu] = jump
         return jump
+
+    def stack(self, mus: NDArray[np.float64]) -> Transitions:
+        """Return the transitions of every mu of mus (a run's distinct values) in one call."""
+        return transitions(self.kind, self.A, self.GQGt, self.B, mus,
+                           input_matrix=self.input_matrix)
+
+
+def warm_up() -> None:
+    """Compile the transition kernels for float64 arrays, or load them from numba's cache."""
+    A, mus = np.eye(2), np.ones(1)
+    euler(A, A, A[:, :1], 1.0)
+    van_loan(A, A, 1.0)
+    exact_input_matrix(A, A[:, :1], 1.0)
+    euler_stack(A, A, A[:, :1], mus)
+    van_loan_stack(A, A, mus)
+    exact_input_stack(A, A[:, :1], mus)
