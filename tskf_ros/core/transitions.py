@@ -12,7 +12,6 @@ import warnings
 
 import numpy as np
 from numpy.typing import NDArray
-import scipy.linalg
 
 from tskf_ros.core.matrices import is_invertible
 
@@ -70,6 +69,7 @@ def _expm(M: Matrix) -> Matrix:
     """
     with np.errstate(all='ignore'), warnings.catch_warnings():
         warnings.simplefilter('ignore', RuntimeWarning)
+        import scipy.linalg    # noqa: I900 - on first use: 0.4 s a node may not need
         return np.asarray(scipy.linalg.expm(M), dtype=float)
 
 

@@ -14,6 +14,7 @@ from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 from threadpoolctl import threadpool_limits
 
+from tskf_ros.core import jit
 from tskf_ros.messages.context import end_context
 from tskf_ros.messages.parameter_schema import ParameterError, SchemaFormatError
 from tskf_ros.messages.parameters import parameters_for_node
@@ -138,6 +139,10 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
     except ValueError as exc:
         print(f'{name}: cannot start: {exc}', file=sys.stderr)
         sys.exit(1)
+    # the kernels run interpreted until numba has them compiled: the node starts at once,
+    # whatever the state of numba's cache (unless $TSKF_JIT says otherwise)
+    if not os.environ.get(jit.MODE_VARIABLE):
+        jit.set_mode('background')
     rclpy.init(args=args)
     node = executor = None
     try:
