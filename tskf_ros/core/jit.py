@@ -31,8 +31,7 @@ from typing import Any, Callable, Optional
 
 MODES = ('wait', 'background', 'off')
 MODE_VARIABLE = 'TSKF_JIT'
-# numba.njit's options for every kernel
-OPTIONS = {'cache': True, 'error_model': 'numpy', 'nogil': True}
+# numba.njit's options for every kernel: cache=True, error_model='numpy', nogil=True
 
 _lock = threading.RLock()
 _mode: Optional[str] = None
@@ -42,7 +41,7 @@ _worker: Optional[threading.Thread] = None
 
 
 def mode() -> str:
-    """Return the mode: set_mode()'s, else $TSKF_JIT's, else 'wait'."""
+    """Return the mode in force: the one set, else $TSKF_JIT's, else 'wait'."""
     if _mode is not None:
         return _mode
     chosen = os.environ.get(MODE_VARIABLE) or 'wait'
@@ -68,6 +67,7 @@ class Kernel:
 
     def __init__(self, func: Callable, interpreted: Optional[Callable] = None) -> None:
         functools.update_wrapper(self, func)
+        self.name: str = func.__name__
         self.py_func = func
         self.interpreted = interpreted or func
         self.dispatcher: Any = None
@@ -82,7 +82,7 @@ class Kernel:
     def __repr__(self) -> str:
         """Say which kernel, and whether it runs compiled."""
         state = 'compiled' if self._call is self.dispatcher else 'interpreted'
-        return f'<kernel {self.py_func.__module__}.{self.__name__} ({state})>'
+        return f'<kernel {self.py_func.__module__}.{self.name} ({state})>'
 
     @property
     def compiled(self) -> bool:
@@ -112,7 +112,7 @@ class Kernel:
 
 def kernel(func: Optional[Callable] = None, *,
            interpreted: Optional[Callable] = None) -> Any:
-    """Mark a kernel (`@kernel`, or `@kernel(interpreted=...)`): see Kernel."""
+    """Mark a function as a kernel, bare or with `interpreted=` (see Kernel)."""
     if func is None:
         return lambda f: Kernel(f, interpreted)
     return Kernel(func, interpreted)
@@ -141,8 +141,8 @@ def _dispatchers(kernels: list[Kernel], module: str) -> None:
         copy = types.FunctionType(f.__code__, space, f.__name__, f.__defaults__,
                                   f.__closure__)
         copy.__qualname__, copy.__doc__ = f.__qualname__, f.__doc__
-        k.dispatcher = numba.njit(**OPTIONS)(copy)
-        space[k.__name__] = k.dispatcher
+        k.dispatcher = numba.njit(copy, cache=True, error_model='numpy', nogil=True)
+        space[k.name] = k.dispatcher
 
 
 def _compile_queued() -> None:
@@ -165,7 +165,7 @@ def _compile_queued() -> None:
             _compile_in_background(k, args)
             done.append(k)
         except Exception as exc:  # noqa: B902 - the interpreted source keeps running
-            print(f'tskf_ros: {k.__name__} stays interpreted: numba could not compile it '
+            print(f'tskf_ros: {k.name} stays interpreted: numba could not compile it '
                   f'({type(exc).__name__}: {exc})', file=sys.stderr)
 
 
