@@ -209,10 +209,9 @@ def startup_table(driver: Driver, executor: SingleThreadedExecutor, repeats: int
 
 
 def rss_table(driver: Driver, executor: SingleThreadedExecutor, seconds: float,
-              jitter: float) -> dict:
+              jitter: float, jit: str) -> dict:
     """Run each node `seconds` under the stream, exact then jittered stamps; peak RSS MiB."""
-    env = dict(os.environ)
-    env.pop('TSKF_JIT', None)
+    env = dict(os.environ, TSKF_JIT=jit)
     peaks: dict = {}
     for stamps, j in (('exact', 0.0), ('jittered', jitter)):
         driver.jitter = j
@@ -246,7 +245,8 @@ def plot(path: Path, times: dict, peaks: dict, title_note: str) -> None:
     ax1.set_ylabel('spawn to first estimate (s), median')
     ax1.set_xlabel('numba cache / install tree')
     ax1.set_title('Start-up')
-    ax1.legend(fontsize=8)
+    ax1.set_ylim(0, ax1.get_ylim()[1] * 1.4)
+    ax1.legend(fontsize=8, ncol=2, loc='upper left')
     stamps = list(peaks)
     for i, node in enumerate(nodes):
         ax2.bar(np.arange(len(stamps)) + (i - 1) * width, [peaks[s][node] for s in stamps],
@@ -257,7 +257,8 @@ def plot(path: Path, times: dict, peaks: dict, title_note: str) -> None:
     ax2.set_ylabel('peak resident size VmHWM (MiB)')
     ax2.set_xlabel('input stamps')
     ax2.set_title('Peak memory under the stream')
-    ax2.legend(fontsize=8)
+    ax2.set_ylim(0, ax2.get_ylim()[1] * 1.4)
+    ax2.legend(fontsize=8, ncol=2, loc='upper left')
     fig.suptitle(f'tskf_ros nodes against a minimal rclpy relay ({title_note})')
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -276,8 +277,16 @@ def main() -> None:
                         help='stamp jitter, fraction of the period (the jittered cases)')
     parser.add_argument('--plot', type=Path, default=None, help='PNG to write')
     parser.add_argument('--json', type=Path, default=None, help='write the figures here')
+    parser.add_argument('--jit', default='background', choices=['background', 'off', 'wait'],
+                        help="the nodes' $TSKF_JIT in the RSS runs (default: the nodes' own)")
     parser.add_argument('--nodes', nargs='+', default=list(NODES), choices=list(NODES))
+    parser.add_argument('--replot', type=Path, default=None,
+                        help='only redraw --plot from a --json file of an earlier run')
     args = parser.parse_args()
+    if args.replot:
+        saved = json.loads(args.replot.read_text())
+        plot(args.plot, saved['startup'], saved['peak_rss_mib'], saved['note'])
+        return
     for node in set(NODES) - set(args.nodes) - {'relay'}:
         del NODES[node]
     if os.geteuid() != 0 or not shutil.which('unshare'):
@@ -291,8 +300,9 @@ def main() -> None:
     ro_cache = tempfile.mkdtemp(prefix='tskf_bench_numba_ro_')
     try:
         warm_cache(ro_cache, dict(os.environ))
-        times = startup_table(driver, executor, args.repeats, ro_cache)
-        peaks = rss_table(driver, executor, args.rss_seconds, args.jitter) \
+        times = startup_table(driver, executor, args.repeats, ro_cache) \
+            if args.repeats > 0 else {}
+        peaks = rss_table(driver, executor, args.rss_seconds, args.jitter, args.jit) \
             if args.rss_seconds > 0 else {}
     finally:
         driver.running = False
@@ -309,17 +319,18 @@ def main() -> None:
                  f'({statistics.median(row[n]) / relay:4.2f}x)' for n in NODES]
         print(f'{case:18s}' + ''.join(f'{c:>22s}' for c in cells))
     if peaks:
-        print(f'\npeak RSS over {args.rss_seconds:g} s at {args.rate:g} Hz (ratio to the '
-              'relay; goal <= 2)')
+        print(f'\npeak RSS over {args.rss_seconds:g} s at {args.rate:g} Hz, TSKF_JIT={args.jit} '
+              '(ratio to the relay; goal <= 2)')
         for stamps, row in peaks.items():
             cells = [f'{row[n]:6.1f} MiB ({row[n] / row["relay"]:4.2f}x)' for n in NODES]
             print(f'{stamps:18s}' + ''.join(f'{c:>22s}' for c in cells))
     print(f'load average at the end {os.getloadavg()[0]:.2f}')
+    note = f'{args.rate:g} Hz, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}'
     if args.json:
-        args.json.write_text(json.dumps({'startup': times, 'peak_rss_mib': peaks}, indent=1))
-    if args.plot and peaks:
-        plot(args.plot, times, peaks, f'{args.rate:g} Hz, {os.cpu_count()} CPUs, load '
-             f'{os.getloadavg()[0]:.1f}')
+        args.json.write_text(json.dumps({'startup': times, 'peak_rss_mib': peaks,
+                                         'note': note}, indent=1))
+    if args.plot and peaks and times:
+        plot(args.plot, times, peaks, note)
 
 
 if __name__ == '__main__':
