@@ -139,10 +139,13 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
     except ValueError as exc:
         print(f'{name}: cannot start: {exc}', file=sys.stderr)
         sys.exit(1)
-    # the kernels run interpreted until numba has them compiled: the node starts at once,
-    # whatever the state of numba's cache (unless $TSKF_JIT says otherwise)
-    if not os.environ.get(jit.MODE_VARIABLE):
-        jit.set_mode('background')
+    try:
+        # the kernels run interpreted until numba has them compiled: the node starts at
+        # once, whatever the state of numba's cache (unless $TSKF_JIT says otherwise)
+        jit.set_mode(os.environ.get(jit.MODE_VARIABLE) or 'background')
+    except ValueError as exc:
+        print(f'{name}: cannot start: {jit.MODE_VARIABLE}: {exc}', file=sys.stderr)
+        sys.exit(1)
     rclpy.init(args=args)
     node = executor = None
     try:
