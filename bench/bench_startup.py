@@ -4,7 +4,7 @@
 Benchmark: start-up and peak memory of the nodes against a minimal rclpy relay.
 
     python bench/bench_startup.py [--repeats 3] [--rss-seconds 60] [--rate 1000]
-                                  [--jitter 0.01] [--plot docs/benchmarks/startup_rss.png]
+                                  [--jitter 0.01] [--plot docs/startup_rss.png]
 
 A driver in this process publishes sensor_msgs/msg/Illuminance at `--rate` Hz (stamps on a
 grid of 1 / rate, each moved by up to +-`--jitter` of the period with `--jitter`, or
@@ -310,9 +310,10 @@ def main() -> None:
         executor.shutdown()
         driver.destroy_node()
         rclpy.try_shutdown()
-    print(f'\nspawn to first estimate, median of {args.repeats} (ratio to the relay of the '
-          'same case; goal <= 1.5)')
-    print(f'{"case":18s}' + ''.join(f'{n:>22s}' for n in NODES))
+    if times:
+        print(f'\nspawn to first estimate, median of {args.repeats} (ratio to the relay of '
+              'the same case; goal <= 1.5)')
+        print(f'{"case":18s}' + ''.join(f'{n:>22s}' for n in NODES))
     for case, row in times.items():
         relay = statistics.median(row['relay'])
         cells = [f'{statistics.median(row[n]):6.2f} s '
