@@ -19,8 +19,9 @@ the relay (bench/minimal_relay.py) to that first message, for each of:
   own: `unshare --mount`, as root), numba's cache in NUMBA_CACHE_DIR (warmed beforehand,
   or empty), so nothing can be written next to the sources.
 
-The cases alternate (relay, estimator, alignment, relay, ...) over `--repeats` rounds;
-medians are printed with their ratio to the relay's of the same round.  Then each process
+The cases alternate (relay, estimator, alignment, relay, ...) over `--repeats` rounds, on
+the jittered stamps; medians are printed with their ratio to the relay's median in the
+same set-up.  Then each process
 runs `--rss-seconds` under the stream, with exact and with jittered stamps, and its peak
 resident size (VmHWM) is printed against the relay's.  `--plot` writes both as a PNG.
 """
