@@ -22,6 +22,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile
 
+from tskf_ros.core import jit
 from tskf_ros.nodes import node_runner
 from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
@@ -123,6 +124,16 @@ def test_an_unknown_executor_is_refused_in_one_line():
     assert proc.returncode == 1
     assert proc.stderr.strip() == ('timescale_estimator: cannot start: executor must be one '
                                    "of single, events, got 'threads'")
+
+
+def test_an_unknown_jit_mode_ends_the_node_with_one_line():
+    env = dict(os.environ)
+    env[jit.MODE_VARIABLE] = 'fast'
+    proc = subprocess.run([sys.executable, '-m', 'tskf_ros.nodes.timescale_estimator'],
+                          cwd=REPO, env=env, capture_output=True, text=True, timeout=TIMEOUT)
+    assert proc.returncode == 1
+    assert proc.stderr.strip() == ('timescale_estimator: cannot start: TSKF_JIT: jit mode must '
+                                   "be one of wait, background, off, got 'fast'")
 
 
 def test_the_default_executor_and_the_environment(monkeypatch):

@@ -1,15 +1,42 @@
 """
 The papers' mathematics: the time-scale Kalman filter, time scales, irregular sampling, models.
 
-No I/O and no ROS: every module here imports only numpy, scipy and this folder.
+No I/O and no ROS: every module here imports only numpy, scipy and this folder.  The names
+below are imported from their modules when first used (a node imports only what it runs).
 """
 
-from tskf_ros.core.fixed_lag import FixedLagSmoother
-from tskf_ros.core.lqg import TimeScaleLQG
-from tskf_ros.core.lqr import LQRError, LQRGains, NotInvertibleError, TimeScaleLQR
-from tskf_ros.core.smoother import rts_smooth, smooth_at, Smoothed
-from tskf_ros.core.timescale_kalman import FilterError, TimeScaleKalmanFilter
+import importlib
+from typing import Any, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from tskf_ros.core.fixed_lag import FixedLagSmoother
+    from tskf_ros.core.lqg import TimeScaleLQG
+    from tskf_ros.core.lqr import LQRError, LQRGains, NotInvertibleError, TimeScaleLQR
+    from tskf_ros.core.smoother import rts_smooth, smooth_at, Smoothed
+    from tskf_ros.core.timescale_kalman import FilterError, TimeScaleKalmanFilter
+
+# each name and the module it comes from
+_SOURCES = {
+    'FixedLagSmoother': 'fixed_lag', 'TimeScaleLQG': 'lqg', 'LQRError': 'lqr',
+    'LQRGains': 'lqr', 'NotInvertibleError': 'lqr', 'TimeScaleLQR': 'lqr',
+    'rts_smooth': 'smoother', 'smooth_at': 'smoother', 'Smoothed': 'smoother',
+    'FilterError': 'timescale_kalman', 'TimeScaleKalmanFilter': 'timescale_kalman',
+}
 
 __all__ = ['FilterError', 'FixedLagSmoother', 'LQRError', 'LQRGains', 'NotInvertibleError',
            'rts_smooth', 'smooth_at', 'Smoothed', 'TimeScaleKalmanFilter', 'TimeScaleLQG',
            'TimeScaleLQR']
+
+
+def __getattr__(name: str) -> Any:
+    """Import a name of __all__ from its module on first use."""
+    if name not in _SOURCES:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    value = getattr(importlib.import_module(f'{__name__}.{_SOURCES[name]}'), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    """List the module's names, those not imported yet included."""
+    return sorted(set(globals()) | set(_SOURCES))

@@ -17,9 +17,10 @@ these; `update_batch` and `predict_batch` run them over a leading axis of indepe
 as robot_localization's rejection threshold) is d^2 = y^T S^-1 y (`mahalanobis2`).
 """
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
+
+from tskf_ros.core.jit import kernel
 
 Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
@@ -27,10 +28,11 @@ Matrix = NDArray[np.float64]
 # matrix products up to this many multiply-adds run as loops: BLAS's call costs more there
 _LOOP_FLOPS = 4096
 
-_jit = numba.njit(cache=True, error_model='numpy', nogil=True)
+# compiled with numba on demand (tskf_ros.core.jit), each kernel's source run until then
+_jit = kernel
 
 
-@_jit
+@kernel(interpreted=np.matmul)     # interpreted, the loops cost more than numpy's
 def _mm(A: Matrix, B: Matrix) -> Matrix:
     """Return A B: loops for small matrices, BLAS for large ones."""
     n, m = A.shape
@@ -46,7 +48,7 @@ def _mm(A: Matrix, B: Matrix) -> Matrix:
     return out
 
 
-@_jit
+@kernel(interpreted=np.matmul)
 def _mv(A: Matrix, x: Vector) -> Vector:
     """Return A x."""
     n, m = A.shape

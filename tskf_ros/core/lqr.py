@@ -27,8 +27,6 @@ from typing import Callable, Iterator, NamedTuple, Optional
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-import scipy.integrate
-import scipy.linalg
 
 from tskf_ros.core.matrices import as_matrix, check_covariance, FilterError, is_invertible
 
@@ -178,6 +176,7 @@ class TimeScaleLQR:
             dS = -(A.T @ S + S @ A - S @ BRinvBt @ S + Q)
             return _symmetric(dS).reshape(-1)
 
+        import scipy.integrate    # noqa: I900 - here: 0.3 s a node never needs
         sol = scipy.integrate.solve_ivp(rhs, (duration, 0.0), S_end.reshape(-1),
                                         method='DOP853', rtol=rtol, atol=atol,
                                         dense_output=True)
@@ -236,6 +235,7 @@ class TimeScaleLQR:
             return cache[mu]
         A, B, Q, R = self.A, self.B, self.Q, self.R
         n = self.n
+        import scipy.linalg    # noqa: I900 - here: 0.4 s a node may not need
         try:
             if mu > 0:
                 S = scipy.linalg.solve_discrete_are(np.eye(n) + mu * A, mu * B, mu * Q, mu * R)

@@ -24,11 +24,11 @@ Derivation and conventions: doc/design/smoother.md.
 import math
 from typing import NamedTuple, Optional
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tskf_ros.core import kalman
+from tskf_ros.core.jit import kernel
 from tskf_ros.core.matrices import FilterError
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 
@@ -59,7 +59,7 @@ class Forward(NamedTuple):
     kf: TimeScaleKalmanFilter       # the filter that made them (for the partial jumps)
 
 
-_jit = numba.njit(cache=True, error_model='numpy', nogil=True)
+_jit = kernel
 
 
 @_jit

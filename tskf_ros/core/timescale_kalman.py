@@ -44,7 +44,6 @@ from typing import Callable, NamedTuple, Optional, overload, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-import scipy.integrate
 
 from tskf_ros.core import kalman
 from tskf_ros.core.matrices import as_matrix, as_vector, check_covariance, FilterError
@@ -406,6 +405,7 @@ class TimeScaleKalmanFilter:
             return np.concatenate([dx, ((dP + dP.T) / 2).reshape(-1)])
 
         z0 = np.concatenate([self.x, self.P.reshape(-1)])
+        import scipy.integrate    # noqa: I900 - here: 0.3 s that a node never needs
         sol = scipy.integrate.solve_ivp(rhs, (0.0, duration), z0, method='RK45',
                                         rtol=rtol, atol=atol)
         if not sol.success:

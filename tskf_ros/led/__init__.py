@@ -5,23 +5,53 @@ intensity_model (eq. 1-5), scanning_ekf (eq. 7-24), baselines (Section V, eq. 26
 lqg_alignment (an LQG controller, not in the paper) and tracking_simulation (eq. 25,
 Table I) are re-exported here, as filterpy.kalman does; led_link (the live plant),
 alignment_config and alignment_session (behind the alignment node) are imported from
-their modules.
+their modules.  The names are imported from their modules when first used.
 """
 
-from tskf_ros.led.baselines import (ALGORITHMS, AnyAligner, CONTROLLERS, HILL_STEP, HillClimbing,
-                                    make_aligner, ThreePointAveraging)
-from tskf_ros.led.intensity_model import (AlignmentError, attenuation, IncidenceResponse,
-                                          irradiance, LITERAL_UNITS_PER_DEGREE, MAX_INTENSITY,
-                                          PAPER_G_COEFFICIENTS, TRACKING_ANGLE, TRACKING_LEVEL,
-                                          wrap_degrees, zone_units_per_degree)
-from tskf_ros.led.lqg_alignment import LQGAligner, LQGConfig, triangle_scan
-from tskf_ros.led.scanning_ekf import (Aligner, as_measurement, check_observability, EKFConfig,
-                                       max_gain, Measurement, Observability, observability,
-                                       ObservabilityError, ObservabilityWarning, PAPER_DT,
-                                       PAPER_GAIN, PAPER_P0, PAPER_Q, PAPER_Q_SYS, PAPER_R,
-                                       PAPER_R_SYS, PAPER_X0, SCAN_ANGLES, ScanningEKF, StampClock)
-from tskf_ros.led.tracking_simulation import (simulate_tracking, tracking, TrackingLinkConfig,
-                                              Trajectory)
+import importlib
+from typing import Any, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from tskf_ros.led.baselines import (ALGORITHMS, AnyAligner, CONTROLLERS, HILL_STEP,
+                                        HillClimbing, make_aligner, ThreePointAveraging)
+    from tskf_ros.led.intensity_model import (AlignmentError, attenuation, IncidenceResponse,
+                                              irradiance, LITERAL_UNITS_PER_DEGREE, MAX_INTENSITY,
+                                              PAPER_G_COEFFICIENTS, TRACKING_ANGLE, TRACKING_LEVEL,
+                                              wrap_degrees, zone_units_per_degree)
+    from tskf_ros.led.lqg_alignment import (LQGAligner, LQGConfig, triangle_scan)
+    from tskf_ros.led.scanning_ekf import (Aligner, as_measurement, check_observability, EKFConfig,
+                                           max_gain, Measurement, Observability, observability,
+                                           ObservabilityError, ObservabilityWarning, PAPER_DT,
+                                           PAPER_GAIN, PAPER_P0, PAPER_Q, PAPER_Q_SYS, PAPER_R,
+                                           PAPER_R_SYS, PAPER_X0, SCAN_ANGLES, ScanningEKF,
+                                           StampClock)
+    from tskf_ros.led.tracking_simulation import (simulate_tracking, tracking, TrackingLinkConfig,
+                                                  Trajectory)
+
+# each name and the module it comes from
+_SOURCES = {
+    'ALGORITHMS': 'baselines', 'AnyAligner': 'baselines', 'CONTROLLERS': 'baselines',
+    'HILL_STEP': 'baselines', 'HillClimbing': 'baselines', 'make_aligner': 'baselines',
+    'ThreePointAveraging': 'baselines', 'AlignmentError': 'intensity_model',
+    'attenuation': 'intensity_model', 'IncidenceResponse': 'intensity_model',
+    'irradiance': 'intensity_model', 'LITERAL_UNITS_PER_DEGREE': 'intensity_model',
+    'MAX_INTENSITY': 'intensity_model', 'PAPER_G_COEFFICIENTS': 'intensity_model',
+    'TRACKING_ANGLE': 'intensity_model', 'TRACKING_LEVEL': 'intensity_model',
+    'wrap_degrees': 'intensity_model', 'zone_units_per_degree': 'intensity_model',
+    'LQGAligner': 'lqg_alignment', 'LQGConfig': 'lqg_alignment',
+    'triangle_scan': 'lqg_alignment', 'Aligner': 'scanning_ekf',
+    'as_measurement': 'scanning_ekf', 'check_observability': 'scanning_ekf',
+    'EKFConfig': 'scanning_ekf', 'Measurement': 'scanning_ekf', 'max_gain': 'scanning_ekf',
+    'Observability': 'scanning_ekf', 'observability': 'scanning_ekf',
+    'ObservabilityWarning': 'scanning_ekf',
+    'ObservabilityError': 'scanning_ekf', 'PAPER_DT': 'scanning_ekf',
+    'PAPER_GAIN': 'scanning_ekf', 'PAPER_P0': 'scanning_ekf', 'PAPER_Q': 'scanning_ekf',
+    'PAPER_Q_SYS': 'scanning_ekf', 'PAPER_R': 'scanning_ekf', 'PAPER_R_SYS': 'scanning_ekf',
+    'PAPER_X0': 'scanning_ekf', 'SCAN_ANGLES': 'scanning_ekf', 'ScanningEKF': 'scanning_ekf',
+    'StampClock': 'scanning_ekf', 'simulate_tracking': 'tracking_simulation',
+    'tracking': 'tracking_simulation', 'TrackingLinkConfig': 'tracking_simulation',
+    'Trajectory': 'tracking_simulation',
+}
 
 __all__ = [
     'ALGORITHMS', 'Aligner', 'AlignmentError', 'AnyAligner', 'as_measurement', 'attenuation',
@@ -34,3 +64,17 @@ __all__ = [
     'StampClock', 'ThreePointAveraging', 'tracking', 'TRACKING_ANGLE', 'TRACKING_LEVEL',
     'TrackingLinkConfig', 'Trajectory', 'triangle_scan', 'wrap_degrees', 'zone_units_per_degree',
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """Import a name of __all__ from its module on first use."""
+    if name not in _SOURCES:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    value = getattr(importlib.import_module(f'{__name__}.{_SOURCES[name]}'), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    """List the module's names, those not imported yet included."""
+    return sorted(set(globals()) | set(_SOURCES))

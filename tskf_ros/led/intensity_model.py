@@ -18,7 +18,6 @@ from typing import Optional, overload, Sequence, Union
 
 import numpy as np
 from numpy.typing import NDArray
-import scipy.optimize
 
 FloatArray = NDArray[np.float64]
 # an angle or an array of angles: the functions of eq. (4) keep the kind they are given
@@ -81,6 +80,7 @@ def _fit_peak(coefficients: Sequence[float]) -> tuple[float, float]:
     """Return (u, g(u)) at the maximum of eq. (4), in fit units."""
     b1, b2 = coefficients[1], coefficients[4]
     lo, hi = min(b1, b2), max(b1, b2)
+    import scipy.optimize    # noqa: I900 - here: 0.5 s to import, for a cached fit
     res = scipy.optimize.minimize_scalar(lambda u: -float(_fit(u, coefficients)),
                                          bounds=(lo, hi), method='bounded',
                                          options={'xatol': 1e-10})
@@ -101,6 +101,7 @@ def zone_units_per_degree(coefficients: tuple[float, ...] = PAPER_G_COEFFICIENTS
         mean = 0.5 * (_fit(angle * scale, coefficients) + _fit(-angle * scale, coefficients))
         return float(mean) / peak - level
 
+    import scipy.optimize    # noqa: I900 - here: 0.5 s to import, for a cached fit
     return float(scipy.optimize.brentq(excess, 1e-3, 1e3, xtol=1e-12))
 
 

@@ -6,6 +6,7 @@ from tskf_ros.led.alignment_session import (MISSING_REASONS,
                                             REJECT_REASONS as ALIGN_REJECT_REASONS,
                                             RESET_REASONS as ALIGN_RESET_REASONS)
 from tskf_ros.messages.interface_spec import DiagnosticTask, KeyRow, LevelRow
+from tskf_ros.messages.names import OUTPUT_FREQUENCY, POWER_METER
 from tskf_ros.owc.meter_settings import SKIP_REASONS
 from tskf_ros.owc.session.diagnostics import FILTER_HEALTH
 from tskf_ros.owc.session.outcome import REJECT_REASONS, RESET_REASONS
@@ -14,9 +15,6 @@ __all__ = ['ALIGNER_TASK', 'ALIGNMENT_TIME_SCALE_TASK', 'ESTIMATOR_TIME_SCALE_TA
            'FILTER_HEALTH_TASK', 'INPUT_FREQUENCY_TASK', 'OUTPUT_FREQUENCY',
            'POINTING_TASK', 'POWER_METER', 'POWER_METER_TASK', 'readings_frequency_task',
            'samples_frequency_task', 'TIMESTAMP_DELAY_TASK']
-
-OUTPUT_FREQUENCY = 'output frequency'
-POWER_METER = 'power meter'
 
 
 def _reasons(reasons: tuple[str, ...]) -> str:

@@ -11,6 +11,7 @@ from tskf_ros.messages.diagnostic_tasks import (ALIGNER_TASK, ALIGNMENT_TIME_SCA
                                                 samples_frequency_task, TIMESTAMP_DELAY_TASK)
 from tskf_ros.messages.interface_spec import (IN, LIFECYCLE_SERVICES, NodeInterface, OUT,
                                               qos_summary, Service, Topic, TRANSITION_EVENT)
+from tskf_ros.messages.names import RESET_SERVICE, TRUTH_TOPIC
 from tskf_ros.messages.qos import (DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, reliable_qos,
                                    SENSOR_OUTPUT_QOS, TRUTH_QOS)
 
@@ -20,11 +21,7 @@ __all__ = ['ALIGNMENT', 'INTERFACES', 'interface', 'LED_LINK_SIMULATOR', 'POWER_
 
 # the stamped scalar of the power meters and the photodiode (doc/interfaces.md: why)
 SENSOR_TYPE = 'sensor_msgs/msg/Illuminance'
-# the evaluation truth of both simulators
-TRUTH_TOPIC = 'true_angle'
 TRUTH_TYPE = STATES_TYPE
-# every filtering node's and the driver's: restart the session
-RESET_SERVICE = '~/reset'
 RESET_TYPE = 'std_srvs/srv/Trigger'
 
 SENSOR_QOS = qos_summary(SENSOR_OUTPUT_QOS) + ' (sensor data)'

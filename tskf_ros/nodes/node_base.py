@@ -16,8 +16,7 @@ from std_srvs.srv import Trigger
 from tskf_ros.core.diagnostic_status import FrequencyParams, FrequencyStatus, Status
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
-from tskf_ros.messages.diagnostic_tasks import OUTPUT_FREQUENCY
-from tskf_ros.messages.node_interfaces import RESET_SERVICE, TRUTH_TOPIC
+from tskf_ros.messages.names import OUTPUT_FREQUENCY, RESET_SERVICE, TRUTH_TOPIC
 from tskf_ros.messages.parameter_schema import load_schema, ParameterSchema
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
 from tskf_ros.nodes.status_line import StatusLine

@@ -14,6 +14,7 @@ from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 from threadpoolctl import threadpool_limits
 
+from tskf_ros.core import jit
 from tskf_ros.messages.context import end_context
 from tskf_ros.messages.parameter_schema import ParameterError, SchemaFormatError
 from tskf_ros.messages.parameters import parameters_for_node
@@ -137,6 +138,13 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
         kind = executor_kind(options.executor)
     except ValueError as exc:
         print(f'{name}: cannot start: {exc}', file=sys.stderr)
+        sys.exit(1)
+    try:
+        # the kernels run interpreted until numba has them compiled: the node starts at
+        # once, whatever the state of numba's cache (unless $TSKF_JIT says otherwise)
+        jit.set_mode(os.environ.get(jit.MODE_VARIABLE) or 'background')
+    except ValueError as exc:
+        print(f'{name}: cannot start: {jit.MODE_VARIABLE}: {exc}', file=sys.stderr)
         sys.exit(1)
     rclpy.init(args=args)
     node = executor = None

@@ -11,7 +11,6 @@ from typing import Optional
 
 import numpy as np
 from numpy.typing import NDArray
-import scipy.linalg
 
 from tskf_ros.core import kalman
 from tskf_ros.core.irregular.common import interval, IrregularError
@@ -69,6 +68,7 @@ def steady_covariance(model: LinearModel, period: float, *, transition: str = 'e
     F, Qd = _transition(kf, period)
     C, Rd = kf.C, kf.R / period
     try:
+        import scipy.linalg    # noqa: I900 - on first use: 0.4 s a node may not need
         P = scipy.linalg.solve_discrete_are(F.T, C.T, Qd, Rd)
         P = (P + P.T) / 2
         resid = _predict(_correct(P, C, Rd), F, Qd) - P

@@ -11,7 +11,6 @@ from typing import Optional, Sequence, TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-import scipy.linalg
 
 from tskf_ros.core.irregular.common import (CLUSTER_TOL, CRITERIA, interval, IrregularError,
                                             MODULUS_RTOL, NULL_TOL, RANK_TOL)
@@ -44,6 +43,7 @@ def distinct_eigenvalues(A: ArrayLike, *, cluster_tol: float = CLUSTER_TOL
     of size 3 or more (eps^(1/3) = 6e-6).
     """
     A = as_matrix(A, 'A')
+    import scipy.linalg    # noqa: I900 - on first use: 0.4 s a node may not need
     lam = scipy.linalg.eigvals(A)
     tol = cluster_tol * max(1.0, float(np.linalg.norm(A, 2)))
     parent = list(range(lam.size))

@@ -1,0 +1,44 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+"""The modules a node's start imports: only what its path runs (start-up time, memory)."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+# what no node imports to start: slow or heavy, and used elsewhere (numba: in the
+# background, once the first kernel has run)
+NEVER = ('scipy.stats', 'scipy.integrate', 'scipy.optimize', 'matplotlib', 'dask', 'numba',
+         'mcap', 'rosbags', 'tskf_ros.experiments', 'tskf_ros.bag.reader',
+         'tskf_ros.tools.plot_bag')
+# the estimator's path has no LED code
+ESTIMATOR_NEVER = NEVER + ('tskf_ros.led',)
+
+
+def _imported(module: str) -> set[str]:
+    code = f'import sys, {module}; print("\\n".join(sys.modules))'
+    result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                            env=dict(os.environ), timeout=300)
+    assert result.returncode == 0, result.stderr
+    return set(result.stdout.split())
+
+
+def _offending(modules: set[str], never: tuple) -> list[str]:
+    return sorted(m for m in modules if any(m == n or m.startswith(n + '.') for n in never))
+
+
+@pytest.mark.parametrize('module, never', [
+    ('tskf_ros.nodes.timescale_estimator', ESTIMATOR_NEVER),
+    # what the console script `timescale_estimator` imports before main()
+    ('tskf_ros.tools.console, tskf_ros.nodes.timescale_estimator', ESTIMATOR_NEVER),
+    ('tskf_ros.nodes.alignment', NEVER),
+])
+def test_a_node_module_imports_only_its_path(module, never):
+    assert _offending(_imported(module), never) == []
+
+
+def test_the_check_sees_a_forbidden_module():
+    assert _offending({'scipy.stats._stats_py', 'scipy'}, ('scipy.stats',)) == \
+        ['scipy.stats._stats_py']
