@@ -62,8 +62,8 @@ def illuminance_cdr(stamp_ns: int, value: float, variance: float) -> bytes:
     return head + b'\0' * pad + struct.pack('<dd', value, variance)
 
 
-def make_bag(path: Path, n: int, seed: int = 0) -> None:
-    """Write n messages at 1 kHz, stamps jittered +-1 % of the period (a block at a time)."""
+def make_bag(path: Path, n: int, seed: int = 0, jitter_ns: int = PERIOD_NS // 100) -> None:
+    """Write n messages at 1 kHz, stamps jittered +-jitter_ns, uniform (a block at a time)."""
     from tskf_ros.bag.writer import BagWriter
     rng = np.random.default_rng(seed)
     with BagWriter(path) as w:
@@ -71,8 +71,7 @@ def make_bag(path: Path, n: int, seed: int = 0) -> None:
         block = 100_000
         for start in range(0, n, block):
             k = np.arange(start, min(n, start + block))
-            stamps = T0 + k * PERIOD_NS + rng.integers(-PERIOD_NS // 100, PERIOD_NS // 100 + 1,
-                                                       len(k))
+            stamps = T0 + k * PERIOD_NS + rng.integers(-jitter_ns, jitter_ns + 1, len(k))
             values = 300.0 + 20.0 * np.sin(k / 700.0) + rng.normal(0.0, 2.0, len(k))
             for t, v in zip(stamps.tolist(), values.tolist()):
                 w.write('/received_power', t + 200_000, illuminance_cdr(t, v, 4.0))

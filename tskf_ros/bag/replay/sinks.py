@@ -37,8 +37,8 @@ def _iso(ns: int) -> str:
 def check_stamp(topic: str, stamp_ns: int) -> None:
     """Raise StampRangeError if a message on `topic` cannot be stamped at stamp_ns."""
     if not 0 <= stamp_ns <= LAST_STAMP_NS:
-        way = ('replay with --no-diagnostics (the estimates carry their stamps as float64 '
-               'and are written) or to --npz' if topic == DIAGNOSTICS_TOPIC
+        way = ('replay with --no-diagnostics or to --npz (samples stamped after it are '
+               'rejected as stamp_range, as the node rejects them)' if topic == DIAGNOSTICS_TOPIC
                else 'this output cannot be written for this bag')
         raise StampRangeError(
             f'{topic} at {_iso(stamp_ns)}: past {_iso(LAST_STAMP_NS)}, the last instant a ROS 2 '
