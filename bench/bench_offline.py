@@ -151,7 +151,7 @@ def read_deserialize(decoders):
 
 
 def rosbags_read_deserialize(ctx):
-    """rosbags alone: its Reader over every message, each deserialized by its typestore."""
+    """Read with rosbags alone: its Reader over every message, deserialized by its typestore."""
     des = typestore().deserialize_cdr
     n = 0
     with Reader(ctx['bag']) as reader:
@@ -291,7 +291,8 @@ def context(bag: Path, tmp: Path, params: Path = PARAMS) -> dict:
             stretch = []
         if args is not None:
             runs.append((1, args))
-    return {'bag': bag, 'tmp': tmp, 'params': params, 'rclpy': rclpy_decoders, 'rosbags': rosbags_decoders,
+    return {'bag': bag, 'tmp': tmp, 'params': params, 'rclpy': rclpy_decoders,
+            'rosbags': rosbags_decoders,
             'writes': writes, 'samples': samples, 'runs': runs, 'count': memory.read,
             'config': est.config,
             'written': sum(memory.written.values()), 'n_samples': memory.samples}

@@ -11,7 +11,7 @@ from rosbags.rosbag2 import Reader
 
 from tskf_ros.bag.message_types import message_class
 from tskf_ros.bag.reader import BagReader, EXIT_DAMAGED
-from tskf_ros.bag.replay import cli, columns
+from tskf_ros.bag.replay import columns
 from tskf_ros.bag.replay.cli import main
 from tskf_ros.bag.replay.loop import replay_arrays
 from tskf_ros.bag.writer import BagWriter

@@ -42,7 +42,7 @@ def long_bag(path, n, start_ns=T0):
 
 @pytest.fixture(scope='module')
 def big(tmp_path_factory):
-    """A bag long enough that replaying it takes seconds: (bag, params file)."""
+    """Return a bag long enough that replaying it takes seconds, and its params file."""
     folder = tmp_path_factory.mktemp('big')
     (folder / 'params.yaml').write_text(PARAMS)
     return long_bag(folder / 'bag', 150_000), folder / 'params.yaml'

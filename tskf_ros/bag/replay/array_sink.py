@@ -148,7 +148,7 @@ class ArraySink:
         return out
 
     def arrays(self, result: ReplayResult) -> dict[str, NDArray]:
-        """Return the dict of numpy arrays (a MemoryStore's), keys as the class doc says."""
+        """Return the numpy arrays of a sink in memory (keys: see the class doc)."""
         if not isinstance(self.store, MemoryStore):
             raise TypeError('arrays() is for a sink in memory; a FileStore writes the .npz')
         self.flush()

@@ -117,8 +117,8 @@ class FileStore(ColumnStore):
     def write_npz(self, path: Path, extra: dict[str, NDArray],
                   order: Optional[Sequence[str]] = None) -> None:
         """Write every column (in `order`), then the `extra` arrays, as one .npz at path."""
-        with open(path, 'wb') as f, zipfile.ZipFile(f, 'w', zipfile.ZIP_STORED,
-                                                     allowZip64=True) as zf:
+        with open(path, 'wb') as f, \
+                zipfile.ZipFile(f, 'w', zipfile.ZIP_STORED, allowZip64=True) as zf:
             for key in order or list(self.files):
                 dtype, shape = self.specs[key]
                 n, raw = self.lengths[key], self.files[key]

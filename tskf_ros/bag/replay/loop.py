@@ -15,11 +15,11 @@ from tskf_ros.bag.progress import DeferredInterrupt, wrap
 from tskf_ros.bag.reader import BagReader, Damage
 from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
                                           UNDECODABLE)
+from tskf_ros.bag.replay.array_sink import ArraySink
+from tskf_ros.bag.replay.columns import ColumnStore
 from tskf_ros.bag.replay.gathered import GATHER, Gathered
 from tskf_ros.bag.replay.model_check import check_model
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
-from tskf_ros.bag.replay.array_sink import ArraySink
-from tskf_ros.bag.replay.columns import ColumnStore
 from tskf_ros.bag.replay.sinks import BagSink, Collector, ReplayResult, Sink, SMOOTHED_TOPIC
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic, InputError
 from tskf_ros.bag.writer import BagWriter

@@ -10,7 +10,7 @@ from tskf_ros.bag.cdr import serialize
 from tskf_ros.bag.reader import Damage, RawMessage
 from tskf_ros.bag.replay.adapters import AnyOutcome, ESTIMATE_TOPICS, OfflineEstimator
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
-from tskf_ros.bag.writer import BagWriter, BagWriteError
+from tskf_ros.bag.writer import BagWriteError, BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.messages.estimator_interface import DIAGNOSTICS_TOPIC
 
