@@ -58,6 +58,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from legacy_reader import LegacyReader  # noqa: E402
 import numpy as np  # noqa: E402
 from rclpy.serialization import deserialize_message  # noqa: E402
+from rosbags.rosbag2 import Reader  # noqa: E402
 
 from tskf_ros.bag.cdr import EstimateEncoder, serialize  # noqa: E402
 from tskf_ros.bag.message_types import message_class, typestore  # noqa: E402
@@ -149,9 +150,20 @@ def read_deserialize(decoders):
     return run
 
 
+def rosbags_read_deserialize(ctx):
+    """Read with rosbags alone: its Reader over every message, deserialized by its typestore."""
+    des = typestore().deserialize_cdr
+    n = 0
+    with Reader(ctx['bag']) as reader:
+        for conn, _, data in reader.messages():
+            des(data, conn.msgtype)
+            n += 1
+    return n
+
+
 def write_only(ctx):
     """Write what replay writes, pre-serialized, through BagWriter (see the module doc)."""
-    _, est, _ = loop.prepare(ctx['bag'], PARAMS, None, 'estimator', None, quiet)
+    _, est, _ = loop.prepare(ctx['bag'], ctx['params'], None, 'estimator', None, quiet)
     with BagWriter(ctx['tmp'] / 'written', overwrite=True) as writer:
         loop.add_topics(writer, BagReader(ctx['bag']), est, True, quiet)
         write = writer.write
@@ -161,7 +173,8 @@ def write_only(ctx):
 
 
 def replay_bag(ctx):
-    res = loop.replay(ctx['bag'], ctx['tmp'] / 'replayed', params_file=PARAMS, overwrite=True)
+    res = loop.replay(ctx['bag'], ctx['tmp'] / 'replayed', params_file=ctx['params'],
+                      overwrite=True)
     return res.read
 
 
@@ -171,7 +184,7 @@ def replay_bag_library(ctx):
 
 
 def replay_arrays(ctx):
-    loop.replay_arrays(ctx['bag'], PARAMS)
+    loop.replay_arrays(ctx['bag'], ctx['params'])
     return ctx['count']
 
 
@@ -223,7 +236,8 @@ def session_runs(ctx):
     return ctx['count']
 
 
-CASES = [('read (old)', read_only(LegacyReader)),
+CASES = [('rosbags read + deserialize', rosbags_read_deserialize),
+         ('read (old)', read_only(LegacyReader)),
          ('read', read_only(BagReader)),
          ('read + deserialize', read_deserialize('rclpy')),
          ('read + rosbags deserialize', read_deserialize('rosbags')),
@@ -240,9 +254,9 @@ CASES = [('read (old)', read_only(LegacyReader)),
          ('session only, in runs (add_many)', session_runs)]
 
 
-def context(bag: Path, tmp: Path) -> dict:
+def context(bag: Path, tmp: Path, params: Path = PARAMS) -> dict:
     """Everything the cases need, prepared untimed: the writes, the decoded samples."""
-    reader, est, result = loop.prepare(bag, PARAMS, None, 'estimator', None, quiet)
+    reader, est, result = loop.prepare(bag, params, None, 'estimator', None, quiet)
     store = typestore()
     types = {result.topic: result.msgtype}
     if result.input_topic:
@@ -251,7 +265,7 @@ def context(bag: Path, tmp: Path) -> dict:
                       for t, m in types.items()}
     rosbags_decoders = {t: (lambda d, m=m: store.deserialize_cdr(d, m))
                         for t, m in types.items()}
-    memory = loop.replay(bag, None, params_file=PARAMS)
+    memory = loop.replay(bag, None, params_file=params)
     writes, encoded = [], {}
     for topic, log_ns, item in memory.outputs:
         if isinstance(item, RawMessage):
@@ -277,20 +291,26 @@ def context(bag: Path, tmp: Path) -> dict:
             stretch = []
         if args is not None:
             runs.append((1, args))
-    return {'bag': bag, 'tmp': tmp, 'rclpy': rclpy_decoders, 'rosbags': rosbags_decoders,
+    return {'bag': bag, 'tmp': tmp, 'params': params, 'rclpy': rclpy_decoders,
+            'rosbags': rosbags_decoders,
             'writes': writes, 'samples': samples, 'runs': runs, 'count': memory.read,
             'config': est.config,
             'written': sum(memory.written.values()), 'n_samples': memory.samples}
 
 
-def measure(ctx: dict, repeats: int) -> dict:
-    """Run every case `repeats` times, alternating; return {name: [(cpu s, wall s, n)]}."""
-    runs = {name: [] for name, _ in CASES}
+def measure(ctxs: list, repeats: int, cases: list) -> list:
+    """
+    Run every case on every bag `repeats` times, interleaved (repeat, bag, case).
+
+    Return, per bag, {name: [(cpu s, wall s, n)]}.
+    """
+    runs = [{name: [] for name, _ in cases} for _ in ctxs]
     for _ in range(repeats):
-        for name, case in CASES:
-            c0, w0 = time.thread_time(), time.perf_counter()
-            n = case(ctx)
-            runs[name].append((time.thread_time() - c0, time.perf_counter() - w0, n))
+        for ctx, got in zip(ctxs, runs):
+            for name, case in cases:
+                c0, w0 = time.thread_time(), time.perf_counter()
+                n = case(ctx)
+                got[name].append((time.thread_time() - c0, time.perf_counter() - w0, n))
     return runs
 
 
@@ -339,80 +359,113 @@ def profile(ctx: dict) -> None:
 
 
 def report(runs: dict, ctx: dict, serial: dict) -> None:
-    """Print the table and the goals."""
+    """Print the table and the goals of one bag."""
     count = ctx['count']
-    print(f"{ctx['bag']}: {count:,} messages, {ctx['n_samples']:,} samples; replay "
+    print(f"\n{ctx['bag']}: {count:,} messages, {ctx['n_samples']:,} samples; replay "
           f"writes {ctx['written']:,} output messages besides the {count:,} inputs")
-    print(f"{'case':36s} {'CPU us/msg min':>15s} {'median':>8s} {'wall msgs/s':>12s}")
-    cpu = {}
+    print(f"{'case':40s} {'CPU us/msg min':>15s} {'median':>8s} {'wall msgs/s':>12s}")
+    cpu, med = {}, {}
     for name, rows in runs.items():
         per = [c / n * 1e6 for c, _, n in rows]
         walls = [n / w for _, w, n in rows]
-        cpu[name] = min(per)
-        print(f'{name:36s} {min(per):15.2f} {statistics.median(per):8.2f} '
+        cpu[name], med[name] = min(per), statistics.median(per)
+        print(f'{name:40s} {min(per):15.2f} {med[name]:8.2f} '
               f'{statistics.median(walls):12,.0f}')
-    ref = cpu['read + deserialize']
-
-    def ratio(name, base=ref):
-        return base / cpu[name]
-    print("\nserialization of one step's two estimates (Float64MultiArray), min CPU us:")
-    for name, us in serial.items():
-        print(f'  {name:48s} {us:7.2f}')
+    if serial:
+        print("\nserialization of one step's two estimates (Float64MultiArray), min CPU us:")
+        for name, us in serial.items():
+            print(f'  {name:48s} {us:7.2f}')
+    rosbags, ours = 'rosbags read + deserialize', 'read + deserialize'
     goals = [
-        ('replay -> bag / read + deserialize (>= 0.2)', ratio('replay -> bag'), 0.2),
+        ('replay -> arrays / rosbags read + deserialize (>= 0.7)', 'replay -> arrays',
+         rosbags, 0.7),
+        ('replay -> bag / rosbags read + deserialize', 'replay -> bag', rosbags, None),
+        ('replay -> bag / read + deserialize (>= 0.2)', 'replay -> bag', ours, 0.2),
         ('  the same with rosbags serializing the estimates (no EstimateEncoder)',
-         ratio('replay -> bag, rosbags serializer'), None),
+         'replay -> bag, rosbags serializer', ours, None),
         ('  the same with rosbags deserializing the measurements (no fixed_decoder)',
-         ratio('replay -> bag, rosbags deserialize'), None),
-        ("  the writer's share of replay -> bag (write only / replay -> bag)",
-         cpu['write only'] / cpu['replay -> bag'], None),
+         'replay -> bag, rosbags deserialize', ours, None),
         ('  the same, the session taking one sample at a time (add)',
-         ratio('replay -> bag, one sample at a time'), None),
-        ('replay -> arrays / read + deserialize (>= 0.7)', ratio('replay -> arrays'), 0.7),
+         'replay -> bag, one sample at a time', ours, None),
+        ('replay -> arrays / read + deserialize', 'replay -> arrays', ours, None),
         ('  the same, the session taking one sample at a time (add)',
-         ratio('replay -> arrays, one sample at a time'), None),
+         'replay -> arrays, one sample at a time', ours, None),
         ('  the same with rosbags deserializing the measurements (no fixed_decoder)',
-         ratio('replay -> arrays, rosbags deserialize'), None),
+         'replay -> arrays, rosbags deserialize', ours, None),
         ('  the same with rclpy deserializing the measurements',
-         ratio('replay -> arrays, rclpy deserialize'), None),
-        ('  read + rosbags deserialize / read + deserialize',
-         ratio('read + rosbags deserialize'), None),
-        ('  read / read (old)', cpu['read (old)'] / cpu['read'], None),
-        ('  EstimateEncoder vs rosbags serialize_cdr (times faster)',
-         serial["rosbags' classes (reused) + serialize_cdr"]
-         / serial['fixed layout (cdr.EstimateEncoder)'], None),
-        ("  the session's share of replay -> bag",
-         cpu['session only, in runs (add_many)'] / cpu['replay -> bag'], None),
-        ("  the session's share of replay -> arrays",
-         cpu['session only, in runs (add_many)'] / cpu['replay -> arrays'], None),
+         'replay -> arrays, rclpy deserialize', ours, None),
+        ('read + deserialize / rosbags read + deserialize', ours, rosbags, None),
+        ('  read / read (old)', 'read', 'read (old)', None),
+        ("  the writer's share of replay -> bag (write only / replay -> bag)",
+         'replay -> bag', 'write only', None),
+        ("  the session's share of replay -> arrays", 'replay -> arrays',
+         'session only, in runs (add_many)', None),
         ('  session: add one at a time / add_many in runs (times faster)',
-         cpu['session only'] / cpu['session only, in runs (add_many)'], None),
+         'session only, in runs (add_many)', 'session only', None),
     ]
-    print('\ngoals (ratios on min CPU per message):')
-    for text, value, goal in goals:
-        verdict = '' if goal is None else ('  met' if value >= goal else '  NOT met')
-        print(f'  {text:76s} {value:7.3f}{verdict}')
+    print('\ngoals: rate ratios (reference CPU per message / case CPU per message), '
+          'on the min and on the median over the repeats')
+    for text, case, base, goal in goals:
+        if case not in cpu or base not in cpu:
+            continue
+        value, middle = cpu[base] / cpu[case], med[base] / med[case]
+        verdict = '' if goal is None else ('  met' if middle >= goal else '  NOT met')
+        print(f'  {text:76s} {value:7.3f} {middle:7.3f}{verdict}')
+    if serial:
+        faster = (serial["rosbags' classes (reused) + serialize_cdr"]
+                  / serial['fixed layout (cdr.EstimateEncoder)'])
+        print(f"  {'EstimateEncoder vs rosbags serialize_cdr (times faster)':76s} {faster:7.3f}")
+
+
+SYNTHETIC_PARAMS = """/**:
+  ros__parameters:
+    period: 0.001
+"""
+# the stamps of the --synthetic bags: name -> jitter (ns, +-), uniform
+JITTERS = {'exact': 0, 'jitter 1 % of the period': 10_000, 'jitter 50 us': 50_000}
 
 
 def main() -> None:
     """Run the benchmark."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('--bag', type=Path, default=REPO / 'bags' / 'owc_ge_1khz')
+    parser.add_argument('--bag', type=Path, nargs='+', default=[REPO / 'bags' / 'owc_ge_1khz'],
+                        help='bags to run (interleaved within each repeat)')
+    parser.add_argument('--synthetic', type=int, metavar='N',
+                        help='instead: three bags of N Illuminance messages at 1 kHz, stamps '
+                        'exact, jittered +-1 %% of the period and +-50 us (the node defaults, '
+                        'period 1 ms)')
+    parser.add_argument('--cases', nargs='+', metavar='NAME',
+                        help='only these cases (names as printed; default all)')
     parser.add_argument('--repeats', type=int, default=5)
     parser.add_argument('--profile', action='store_true',
                         help='also profile one replay -> bag with cProfile')
     args = parser.parse_args()
     print(f'{platform.node()}: {platform.processor() or platform.machine()}, '
           f'{os.cpu_count()} CPUs, Python {platform.python_version()}, '
-          f'{args.repeats} repeats', flush=True)
+          f'{args.repeats} repeats; load average {os.getloadavg()[0]:.2f}', flush=True)
+    cases = [c for c in CASES if args.cases is None or c[0] in args.cases]
     tmp = Path(tempfile.mkdtemp(prefix='bench_offline_'))
     try:
-        ctx = context(args.bag, tmp)
-        runs = measure(ctx, args.repeats)
-        serial = serialization_routes(args.repeats)
-        report(runs, ctx, serial)
+        bags, params = args.bag, PARAMS
+        if args.synthetic:
+            from bench_replay_memory import make_bag
+            params = tmp / 'params.yaml'
+            params.write_text(SYNTHETIC_PARAMS)
+            bags = []
+            for name, jitter in JITTERS.items():
+                bags.append(tmp / name.replace(' ', '_').replace('%', 'pct'))
+                make_bag(bags[-1], args.synthetic, jitter_ns=jitter)
+        ctxs = []
+        for k, bag in enumerate(bags):
+            (tmp / str(k)).mkdir()
+            ctxs.append(context(bag, tmp / str(k), params))
+        runs = measure(ctxs, args.repeats, cases)
+        serial = serialization_routes(args.repeats) if args.cases is None else {}
+        for ctx, got in zip(ctxs, runs):
+            report(got, ctx, serial)
+        print(f'load average at the end {os.getloadavg()[0]:.2f}')
         if args.profile:
-            profile(ctx)
+            profile(ctxs[0])
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

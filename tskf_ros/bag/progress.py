@@ -8,7 +8,7 @@ from typing import Generator, Iterable, Optional, TypeVar
 
 from tqdm import tqdm
 
-__all__ = ['bar', 'Interrupts', 'wrap']
+__all__ = ['bar', 'DeferredInterrupt', 'Interrupts', 'wrap']
 
 T = TypeVar('T')
 
@@ -63,5 +63,45 @@ class Interrupts:
 
     def check(self) -> None:
         """Raise KeyboardInterrupt if a SIGINT came (whatever became of its exception)."""
+        if self.seen:
+            raise KeyboardInterrupt
+
+
+class DeferredInterrupt:
+    """
+    Ctrl-C taken at a safe point: SIGINT sets `seen`, and `check()` raises KeyboardInterrupt.
+
+    While active (in the main thread), the first SIGINT raises nothing where it lands: a
+    KeyboardInterrupt raised inside a lock's acquire or release, an import, or a compiled
+    kernel's dispatch can leave a lock held (the next acquire then waits forever) or turn
+    into another error.  The work calls `check()` between its steps (each few thousand
+    messages), where nothing is held.  A second SIGINT raises at once (a step that does not
+    end).  The previous handler is restored on the way out.
+    """
+
+    def __init__(self) -> None:
+        self.seen = False
+        self._previous: object = None
+
+    def _handler(self, signum: int, frame: Optional[FrameType]) -> None:
+        if self.seen:
+            raise KeyboardInterrupt
+        self.seen = True
+
+    def __enter__(self) -> 'DeferredInterrupt':
+        """Install the handler (the main thread only; elsewhere `check` never raises)."""
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, kind: Optional[type], exc: Optional[BaseException],
+                 tb: Optional[TracebackType]) -> None:
+        """Restore the previous handler."""
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
+
+    def check(self) -> None:
+        """Raise KeyboardInterrupt if a SIGINT came."""
         if self.seen:
             raise KeyboardInterrupt

@@ -17,6 +17,7 @@ from tskf_ros.bag.bag_metadata import (add_custom_data, METADATA_MARKER, METADAT
                                        write_metadata)
 from tskf_ros.bag.mcap_file import McapStats, NO_HASH, OutputFile, scan_mcap, seal_mcap
 from tskf_ros.bag.message_types import BagTypeError, typestore
+from tskf_ros.bag.partials import remove_stale, work_dir
 from tskf_ros.bag.reader import BagError, resolved, TopicInfo
 
 import yaml
@@ -95,11 +96,15 @@ class BagWriter:
     deletes it.  `compress` zstd-compresses the MCAP chunks (rosbag2's storage compression).
     After a failed write (`error` set, DiskFullError on ENOSPC) `write` raises the error
     again; `close` keeps and seals what reached the disk (doc/design/bags.md).
+    disposable: an output that can be made again (replay_offline's): its hidden directory
+    names the process (partials.work_dir), and `open` deletes those of processes gone.
     """
 
     def __init__(self, path: PathLike, *, overwrite: bool = False, compress: bool = False,
-                 storage: str = 'mcap', chunk_size: int = CHUNK_SIZE) -> None:
+                 storage: str = 'mcap', chunk_size: int = CHUNK_SIZE,
+                 disposable: bool = False) -> None:
         self.path = Path(path)
+        self.disposable = disposable
         self.overwrite = overwrite
         self.compress = compress
         self.storage = storage
@@ -154,8 +159,12 @@ class BagWriter:
         parent = self.path.parent
         try:
             parent.mkdir(parents=True, exist_ok=True)
-            self._tmp = Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.partial-',
-                                              dir=parent))
+            if self.disposable:
+                remove_stale(self.path)
+                self._tmp = work_dir(self.path)
+            else:
+                self._tmp = Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.partial-',
+                                                  dir=parent))
             bagdir = self._tmp / self.path.name
             if self.storage == 'sqlite3':
                 self._writer = Writer(bagdir, version=METADATA_VERSION,

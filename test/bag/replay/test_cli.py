@@ -11,7 +11,7 @@ from rosbags.rosbag2 import Reader
 
 from tskf_ros.bag.message_types import message_class
 from tskf_ros.bag.reader import BagReader, EXIT_DAMAGED
-from tskf_ros.bag.replay import cli
+from tskf_ros.bag.replay import columns
 from tskf_ros.bag.replay.cli import main
 from tskf_ros.bag.replay.loop import replay_arrays
 from tskf_ros.bag.writer import BagWriter
@@ -198,9 +198,10 @@ def test_an_undecodable_measurement_is_damage_with_one_line(tmp_path, capsys):
 def test_the_arrays_file_is_whole_or_absent(tmp_path, monkeypatch, capsys):
     out = tmp_path / 'a.npz'
 
-    def fail(*args, **kwargs):
+    def fail(source, target, length):     # the disk fills while a column is copied in
+        target.write(source.read(100))
         raise OSError(28, 'No space left on device')
-    monkeypatch.setattr(cli.np, 'savez', fail)
+    monkeypatch.setattr(columns.shutil, 'copyfileobj', fail)
     assert main([str(BAGS / 'owc_cai_td_1hz'), '--npz', str(out), '-q']) == 1
     assert 'No space left on device' in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []

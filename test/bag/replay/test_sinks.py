@@ -1,10 +1,13 @@
 """The sinks: the arrays of the analysis mode hold what the output bag holds (rosbags)."""
 
 import numpy as np
+from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader
+from std_msgs.msg import Float64
 
 from tskf_ros.bag.message_types import typestore
 from tskf_ros.bag.replay.cli import main
+from tskf_ros.bag.writer import BagWriter
 
 from ..helpers import BAGS, CONFIG, NS
 
@@ -63,3 +66,36 @@ def test_replay_arrays_hold_what_the_output_bag_holds(tmp_path, capsys):
     assert main([str(bag), '--npz', str(tmp_path / 'a.npz'), '-q']) == 1
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and 'exists already' in err
+
+
+def test_far_future_log_times_replay_but_diagnostics_past_2038_are_refused(tmp_path, capsys):
+    """A bag logged in 2200 (int64 ns holds it; a ROS 2 stamp's int32 seconds do not)."""
+    t0 = 7_258_118_400 * NS         # 2200-01-01T00:00:00Z
+    times = [t0 + k * 1_000_000 for k in range(2500)]       # 2.5 s at 1 kHz
+    with BagWriter(tmp_path / 'bag') as w:
+        w.add_topic('/received_power', 'std_msgs/msg/Float64')
+        for k, t in enumerate(times):
+            w.write('/received_power', t, serialize_message(Float64(data=300.0 + k % 3)))
+    (tmp_path / 'p.yaml').write_text('/**:\n  ros__parameters:\n    period: 0.001\n')
+    bag, args = str(tmp_path / 'bag'), ['--params-file', str(tmp_path / 'p.yaml'), '-q']
+    assert main([bag, str(tmp_path / 'out'), *args]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines()
+           if not line.startswith('replay_offline: WARNING: std_msgs/msg/Float64 has no header')]
+    assert len(err) == 1 and err[0].startswith('replay_offline: error: ')
+    err = err[0]
+    assert '/diagnostics at 2200-01-01T00:00:01Z: past 2038-01-19T03:14:07Z' in err
+    assert '--no-diagnostics' in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag', 'p.yaml']    # nothing left
+    # without /diagnostics the bag is written: the inputs copied at their int64 log times,
+    # every sample rejected as the node rejects a stamp past 2038 (stamp_range)
+    assert main([bag, str(tmp_path / 'out'), *args, '--no-diagnostics']) == 0
+    with Reader(tmp_path / 'out') as r:
+        logged = [t for c, t, _ in r.messages() if c.topic == '/received_power']
+        assert r.topics.keys() >= {'/received_power', '/estimate/corrected'}
+    assert logged == times
+    # the arrays hold every int64 stamp, and the reason of each rejection
+    assert main([bag, *args, '--npz', str(tmp_path / 'a.npz')]) == 0
+    with np.load(tmp_path / 'a.npz') as f:
+        assert f['sample.stamp_ns'].tolist() == times
+        assert set(f['sample.reason'].tolist()) == {'stamp_range'}
+        assert f['diagnostics.log_ns'][0] == t0 + NS

@@ -1,12 +1,10 @@
 """replay_offline: the command line of the offline replay (bag in, bag or .npz arrays out)."""
 
 import argparse
-from collections import Counter
 import os
 from pathlib import Path
 import sys
 import tempfile
-import time
 from typing import Callable, Optional
 
 import numpy as np
@@ -14,10 +12,9 @@ from numpy.typing import NDArray
 
 from tskf_ros.bag.bag_errors import run_main
 from tskf_ros.bag.message_types import BagTypeError
-from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.reader import BagError, error_exit, EXIT_DAMAGED, exit_status
-from tskf_ros.bag.replay.loop import FILTER_INPUT, FILTERS, replay, replay_arrays
-from tskf_ros.bag.writer import BagExistsError
+from tskf_ros.bag.replay.loop import FILTER_INPUT, FILTERS, replay
+from tskf_ros.bag.replay.npz_output import replay_npz
 from tskf_ros.messages import alignment_interface as aligner
 from tskf_ros.messages.estimator_interface import (BAG_INPUT_TOPIC, BAG_POWER_TOPIC,
                                                    INPUT_TYPE, INPUT_TYPES, ParamsError)
@@ -120,29 +117,21 @@ def main(argv: Optional[list[str]] = None) -> int:
 
 
 def _npz_main(args: argparse.Namespace, log: Callable[[str], None]) -> int:
-    """Analysis mode (--npz): write the arrays of replay_arrays into one .npz file."""
+    """Analysis mode (--npz): stream the arrays of replay_arrays into one .npz file."""
     path = args.npz if args.npz.suffix == '.npz' else args.npz.with_name(args.npz.name + '.npz')
-    t0 = time.perf_counter()
     try:
-        check_outputs([path], [args.bag])
-        if path.exists() and not args.overwrite:
-            raise BagExistsError(f'{path}: exists already, not overwriting (use --overwrite)')
-        arrays = replay_arrays(args.bag, args.params_file, topic=args.topic,
-                               input_topic=args.input_topic,
-                               diagnostics=not args.no_diagnostics, log=log,
-                               smooth=args.smooth, progress=not args.quiet)
-        save_npz(path, arrays)
+        res = replay_npz(args.bag, path, args.params_file, overwrite=args.overwrite,
+                         topic=args.topic, input_topic=args.input_topic,
+                         diagnostics=not args.no_diagnostics, log=log, smooth=args.smooth,
+                         progress=not args.quiet)
     except (BagError, ParamsError, BagTypeError, OSError) as exc:
         return error_exit(PROG, exc, path)
-    seconds = time.perf_counter() - t0
-    statuses = Counter(arrays['sample.status'].tolist())
-    log(f"{len(arrays['sample.log_ns'])} samples on {arrays['meta.topic']} ("
-        + ', '.join(f'{k} {v}' for k, v in sorted(statuses.items()))
-        + f'); {seconds:.2f} s')
+    log(f'{res.samples} samples on {res.topic} ('
+        + ', '.join(f'{k} {v}' for k, v in sorted(res.statuses.items()))
+        + f'); {res.seconds:.2f} s')
     log(f'wrote {path}')
-    damage = str(arrays['meta.damage'])
-    if damage:
-        print(f'{PROG}: input damaged; the arrays hold what came before: {damage}',
+    if res.damage is not None:
+        print(f'{PROG}: input damaged; the arrays hold what came before: {res.damage}',
               file=sys.stderr)
         return EXIT_DAMAGED
     return 0

@@ -7,7 +7,8 @@ import numpy as np
 
 from tskf_ros.bag.reader import RawMessage
 from tskf_ros.bag.replay.adapters import OfflineEstimator, Sample
-from tskf_ros.bag.replay.sinks import ArraySink, Sink
+from tskf_ros.bag.replay.array_sink import ArraySink
+from tskf_ros.bag.replay.sinks import Sink
 from tskf_ros.owc.session import Outcome
 from tskf_ros.owc.session.outcome import Run
 
@@ -47,11 +48,12 @@ class Gathered:
         sampled, logs = self.sampled, self.logs
         items: list[Union[Run, Outcome]] = []
         if sampled:
-            stamps, values, variances = zip(*sampled)
-            items = est.session.add_many(np.array(stamps, dtype=np.int64),
-                                         np.array(values, dtype=float),
-                                         np.array(variances, dtype=float),
-                                         np.array(logs, dtype=np.int64))
+            columns = zip(*sampled)
+            stamps = np.array(next(columns), dtype=np.int64)
+            values = np.array(next(columns), dtype=float)
+            variances = np.array(next(columns), dtype=float)
+            log_array = np.array(logs, dtype=np.int64)
+            items = est.session.add_many(stamps, values, variances, log_array)
         rows = isinstance(sink, ArraySink) and sink.smoother is None and not self.held
         outcomes: list[Outcome] = []
         k = 0
@@ -66,8 +68,10 @@ class Gathered:
                 continue
             statuses['accepted'] += item.count
             if rows:
-                sink.run_rows(item, logs[k:k + item.count], sampled[k:k + item.count])
-                k += item.count
+                end = k + item.count
+                sink.run_rows(item, log_array[k:end], stamps[k:end], values[k:end],
+                              variances[k:end])
+                k = end
             else:
                 outcomes += item.outcomes()
         if not rows:

@@ -11,15 +11,16 @@ from numpy.typing import NDArray
 
 from tskf_ros.bag.message_types import qos_from_rclpy, typestore
 from tskf_ros.bag.outputs import check_outputs
-from tskf_ros.bag.progress import wrap
+from tskf_ros.bag.progress import DeferredInterrupt, wrap
 from tskf_ros.bag.reader import BagReader, Damage
 from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
                                           UNDECODABLE)
+from tskf_ros.bag.replay.array_sink import ArraySink
+from tskf_ros.bag.replay.columns import ColumnStore
 from tskf_ros.bag.replay.gathered import GATHER, Gathered
 from tskf_ros.bag.replay.model_check import check_model
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
-from tskf_ros.bag.replay.sinks import (ArraySink, BagSink, Collector, ReplayResult, Sink,
-                                       SMOOTHED_TOPIC)
+from tskf_ros.bag.replay.sinks import BagSink, Collector, ReplayResult, Sink, SMOOTHED_TOPIC
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic, InputError
 from tskf_ros.bag.writer import BagWriter
 from tskf_ros.messages import alignment_interface as aligner
@@ -27,7 +28,8 @@ from tskf_ros.messages import estimator_interface as estimator
 from tskf_ros.messages.estimator_interface import (BAG_POWER_TOPIC, DIAGNOSTICS_TOPIC,
                                                    DIAGNOSTICS_TYPE, INPUT_TYPE, load_config)
 
-__all__ = ['add_topics', 'FILTER_INPUT', 'FILTERS', 'prepare', 'replay', 'replay_arrays']
+__all__ = ['add_topics', 'array_sink', 'FILTER_INPUT', 'FILTERS', 'prepare', 'replay',
+           'replay_arrays', 'run_replay']
 
 PathLike = Union[str, os.PathLike]
 Log = Callable[[str], None]
@@ -37,8 +39,16 @@ FILTER_INPUT = {'estimator': (BAG_POWER_TOPIC, '_estimated'),
                 'alignment': (aligner.BAG_INPUT_TOPIC, '_aligned')}
 
 
+# the replay loop calls its check every CHECK_EVERY + 1 messages (a power of two, less one)
+CHECK_EVERY = 1023
+
+
 def _quiet(line: str) -> None:
     """Log nothing."""
+
+
+def _nothing() -> None:
+    """Do nothing."""
 
 
 def prepare(bag: PathLike, config: Union[AnyConfig, PathLike, None], topic: Optional[str],
@@ -94,16 +104,27 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
         _check_output(Path(bag), Path(output), overwrite)
     if smooth and (filter != 'estimator' or output is None):
         raise ValueError('smoothing is for the estimator written into a bag (or arrays)')
-    reader, est, result = prepare(bag, params_file, topic, filter, input_topic, log)
-    if output is None:
-        result.damage = _run(reader, est, Collector(result), result, diagnostics, progress)
-        result.seconds = time.perf_counter() - t0
-        return result
-    writer = BagWriter(output, overwrite=overwrite, compress=compress)
+    with DeferredInterrupt() as interrupt:
+        reader, est, result = prepare(bag, params_file, topic, filter, input_topic, log)
+        if output is None:
+            result.damage = run_replay(reader, est, Collector(result), result, diagnostics,
+                                       progress, interrupt.check)
+        else:
+            _write_bag(reader, est, result, Path(output), overwrite, compress, diagnostics,
+                       smooth, progress, interrupt, log)
+    result.seconds = time.perf_counter() - t0
+    return result
+
+
+def _write_bag(reader: BagReader, est: OfflineEstimator, result: ReplayResult, output: Path,
+               overwrite: bool, compress: bool, diagnostics: bool, smooth: bool,
+               progress: bool, interrupt: DeferredInterrupt, log: Log) -> None:
+    """Replay into a new bag at `output`: whole, or (on any error or Ctrl-C) not at all."""
+    writer = BagWriter(output, overwrite=overwrite, compress=compress, disposable=True)
     writer.open()
     try:
         add_topics(writer, reader, est, diagnostics, log)
-        if filter == 'alignment':
+        if isinstance(est, OfflineAligner):
             writer.set_custom_data('tskf_ros.open_loop', aligner.OPEN_LOOP_NOTE)
         smoother = None
         if smooth:
@@ -111,17 +132,17 @@ def replay(bag: PathLike, output: Optional[PathLike] = None, *,
             writer.add_topic(SMOOTHED_TOPIC, estimator.ESTIMATE_TYPE,
                              qos=[qos_from_rclpy(est.output_topics()[0][2])])
         sink = BagSink(writer, result, smoother)
-        with _gc_paused(filter == 'estimator'):
-            result.damage = _run(reader, est, sink, result, diagnostics, progress)
+        with _gc_paused(not isinstance(est, OfflineAligner)):
+            result.damage = run_replay(reader, est, sink, result, diagnostics, progress,
+                                       interrupt.check)
             sink.finish(est)
         if result.damage is not None:
             writer.set_custom_data('tskf_ros.input_damage', str(result.damage))
+        interrupt.check()       # the last moment a Ctrl-C leaves nothing
         writer.close()
     except BaseException:
         writer.abort()
         raise
-    result.seconds = time.perf_counter() - t0
-    return result
 
 
 def replay_arrays(bag: PathLike, config: Union[AnyConfig, PathLike, None] = None, *,
@@ -137,13 +158,22 @@ def replay_arrays(bag: PathLike, config: Union[AnyConfig, PathLike, None] = None
     that stopped the reading (the rows are what came before it).  smooth=True adds the
     RTS-smoothed estimates (estimate/smoothed.*).  Raises as replay().
     """
-    reader, est, result = prepare(bag, config, topic, 'estimator', input_topic, log)
-    sink = ArraySink(est, SmoothingRecorder(est.config.session) if smooth else None)
-    with _gc_paused():
-        result.damage = _run(reader, est, sink, result, diagnostics, progress)
-        arrays = sink.arrays(result)
-        del sink            # its rows go now, before the collector would scan them
-    return arrays
+    with DeferredInterrupt() as interrupt:
+        reader, est, result = prepare(bag, config, topic, 'estimator', input_topic, log)
+        sink = array_sink(reader, est, result, smooth)
+        with _gc_paused():
+            result.damage = run_replay(reader, est, sink, result, diagnostics, progress,
+                                       interrupt.check)
+            interrupt.check()
+            return sink.arrays(result)
+
+
+def array_sink(reader: BagReader, est: OfflineEstimator, result: ReplayResult,
+               smooth: bool, store: Optional[ColumnStore] = None) -> ArraySink:
+    """Return the ArraySink of a replay (its columns sized for the bag's measurements)."""
+    count = reader.topics[result.topic].count if result.topic in reader.topics else None
+    return ArraySink(est, SmoothingRecorder(est.config.session) if smooth else None,
+                     store=store, inputs=bool(result.input_topic), capacity=count or 0)
 
 
 @contextmanager
@@ -187,8 +217,9 @@ def _check_output(bag: Path, output: Path, overwrite: bool) -> None:
     BagWriter(output, overwrite=overwrite).check_target()
 
 
-def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayResult,
-         diagnostics: bool, progress: bool = False) -> Optional[Damage]:
+def run_replay(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayResult,
+               diagnostics: bool, progress: bool = False,
+               check: Callable[[], None] = _nothing) -> Optional[Damage]:
     """
     Read, estimate, hand the outputs to the sink; return the damage that stopped it.
 
@@ -196,7 +227,8 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
     due or GATHER messages and taken by the session in runs (EstimatorSession.add_many);
     the sink gets every message and outcome in storage order, as one at a time, and first
     (at the first message's log time) what the node publishes as it starts.  progress: a
-    bar of the messages read (a terminal only).
+    bar of the messages read (a terminal only).  check: called every CHECK_EVERY messages
+    (DeferredInterrupt.check: a Ctrl-C stops the replay there).
     """
     topic, input_topic = result.topic, result.input_topic
     process_input = est.process_input
@@ -223,6 +255,8 @@ def _run(reader: BagReader, est: OfflineEstimator, sink: Sink, result: ReplayRes
     try:
         for raw in messages:
             read += 1
+            if not read & CHECK_EVERY:
+                check()
             log_ns = raw.log_time_ns
             if start is not None:
                 for name, msg in start():

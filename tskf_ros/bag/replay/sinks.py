@@ -1,33 +1,49 @@
-"""Where a replay's outputs go: kept in memory, written to a bag, or kept as numpy arrays."""
+"""Where a replay's outputs go: kept in memory or written to a bag (arrays: array_sink)."""
 
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any, Optional, Protocol, Sequence
-
-import numpy as np
-from numpy.typing import NDArray
+from datetime import datetime, timezone
+import struct
+from typing import Any, Optional, Protocol
 
 from tskf_ros.bag.cdr import serialize
 from tskf_ros.bag.reader import Damage, RawMessage
-from tskf_ros.bag.replay.adapters import AnyOutcome, ESTIMATE_TOPICS, OfflineEstimator, Sample
+from tskf_ros.bag.replay.adapters import AnyOutcome, ESTIMATE_TOPICS, OfflineEstimator
 from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
-from tskf_ros.bag.writer import BagWriter
+from tskf_ros.bag.writer import BagWriteError, BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.messages.estimator_interface import DIAGNOSTICS_TOPIC
-from tskf_ros.owc.session.outcome import Run
 
-__all__ = ['ArraySink', 'BagSink', 'Collector', 'ReplayResult', 'Sink', 'SMOOTHED_TOPIC']
+__all__ = ['BagSink', 'check_stamp', 'Collector', 'LAST_STAMP_NS', 'ReplayResult', 'Sink',
+           'SMOOTHED_TOPIC', 'StampRangeError']
 
 # the RTS-smoothed estimates x(t|T) of replay_offline --smooth (the live node's fixed-lag
 # smoothed topic, which has the same layout)
 SMOOTHED_TOPIC = ESTIMATE_TOPICS['smoothed']
-# (kind, revised) -> the name of its arrays (ArraySink): one set per kind of estimate
-ARRAY_NAMES = {('predicted', False): 'estimate/predicted',
-               ('corrected', False): 'estimate/corrected',
-               ('mu', False): 'estimate/mu',
-               ('predicted', True): 'estimate/revised/predicted',
-               ('corrected', True): 'estimate/revised/corrected',
-               ('mu', True): 'estimate/revised/mu'}
+# the last instant a ROS 2 message stamp holds (builtin_interfaces/Time: int32 sec, uint32
+# nanosec): 2038-01-19T03:14:07.999999999Z.  A bag's log times are int64 ns (to 2262).
+LAST_STAMP_NS = (2**31 - 1) * NS + NS - 1
+
+
+class StampRangeError(BagWriteError):
+    """An output message whose header stamp a ROS 2 message cannot hold (after 2038)."""
+
+
+def _iso(ns: int) -> str:
+    """Return a time in ns since the epoch as ISO 8601 UTC, to the second."""
+    return datetime.fromtimestamp(ns // NS, timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ')
+
+
+def check_stamp(topic: str, stamp_ns: int) -> None:
+    """Raise StampRangeError if a message on `topic` cannot be stamped at stamp_ns."""
+    if not 0 <= stamp_ns <= LAST_STAMP_NS:
+        way = ('replay with --no-diagnostics or to --npz (samples stamped after it are '
+               'rejected as stamp_range, as the node rejects them)' if topic == DIAGNOSTICS_TOPIC
+               else 'this output cannot be written for this bag')
+        raise StampRangeError(
+            f'{topic} at {_iso(stamp_ns)}: past {_iso(LAST_STAMP_NS)}, the last instant a ROS 2 '
+            'message stamp (builtin_interfaces/Time, int32 seconds) holds, although the '
+            f"bag's log times (int64 ns) reach 2262: {way}")
 
 
 @dataclass
@@ -117,7 +133,11 @@ class BagSink:
     def outcome(self, est: OfflineEstimator, log_ns: int, sample: tuple, out: AnyOutcome,
                 is_input: bool) -> None:
         """Write the messages the live node publishes for out, at the input's log time."""
-        pairs = est.encoded(out)
+        try:
+            pairs = est.encoded(out)
+        except struct.error:        # rosbags' serializer: a header stamp past 2038
+            check_stamp(est.output_topics()[0][0], log_ns)
+            raise
         written = self.written
         for topic, _ in pairs:
             written[topic] += 1
@@ -147,131 +167,6 @@ class BagSink:
 
     def message(self, topic: str, log_ns: int, msg: Any) -> None:
         """Write the message, serialized to canonical CDR."""
+        check_stamp(topic, log_ns)
         self.written[topic] += 1
         self.writer.write(topic, log_ns, serialize(msg))
-
-
-class ArraySink:
-    """
-    The estimator's outputs as numpy arrays, one row per message of the output bag.
-
-    Keys ('<topic>.<field>', the topic without its leading '/'):
-
-    - sample.{log_ns, stamp_ns, value, variance, status, reason}: every measurement read
-      (status accepted / inserted / gap / rejected / reset; reason why, or '');
-    - input.{log_ns, stamp_ns, status}: every input u read (if the bag has one);
-    - estimate/{predicted,corrected}.{log_ns, stamp_ns, x (rows x n), P (rows x n x n)},
-      and estimate/revised/{predicted,corrected} for the estimates revised by a late
-      sample (the messages of the topics estimate/predicted, estimate/corrected and
-      estimate/revised);
-    - estimate/mu.{log_ns, stamp_ns, sigma_ns, mu} (mu in s) and estimate/revised/mu: the
-      steps t -> sigma(t) the filter took (the mu the estimate messages carry);
-    - diagnostics.{log_ns, level, message}: per message, its worst task's level (0 OK ..
-      3 STALE) and '<node>: <task>: <message>' (the first task at that level);
-    - meta.{topic, input_topic, damage, assumptions}: strings;
-    - with a smoother (replay_offline --smooth): estimate/smoothed.{stamp_ns, x, P,
-      segment}, the RTS estimates x(t|T) at every stepped point, and the segment (0 first,
-      a reset starts the next) each belongs to.
-    """
-
-    copies = False      # copy() does nothing: the loop need not call it
-
-    def __init__(self, est: OfflineEstimator,
-                 smoother: Optional[SmoothingRecorder] = None) -> None:
-        self.smoother = smoother
-        self.n = len(est.config.session.model.state_names)
-        self.samples: list[tuple] = []
-        self.inputs: list[tuple] = []
-        self.estimates: dict[tuple, list] = {key: [] for key in ARRAY_NAMES}
-        self.diag: list[tuple] = []
-
-    def copy(self, raw: RawMessage) -> None:
-        """Keep nothing of the inputs."""
-
-    def outcome(self, est: OfflineEstimator, log_ns: int, sample: tuple, out: AnyOutcome,
-                is_input: bool) -> None:
-        """Keep a row of the sample and a row of each estimate and jump."""
-        if is_input:
-            self.inputs.append((log_ns, sample[0], out.status))
-        else:
-            self.samples.append((log_ns, *sample, out.status, out.reason))
-        rows = self.estimates
-        for e in out.estimates:
-            rows[e.kind, e.revised].append((log_ns, e.stamp_ns, e.x, e.P))
-        if self.smoother is not None:
-            self.smoother.outcome(out)
-        for j in out.jumps:
-            rows['mu', j.revised].append((log_ns, j.stamp_ns, j.sigma_ns))
-
-    def message(self, topic: str, log_ns: int, msg: Any) -> None:
-        """Keep nothing: the estimator publishes no message outside an outcome."""
-
-    def run_rows(self, run: Run, logs: Sequence[int], sampled: Sequence[Sample]) -> None:
-        """Keep the rows `outcome` keeps for each sample of a run (all accepted, in order)."""
-        self.samples += [(log_ns, *sample, 'accepted', '')
-                         for log_ns, sample in zip(logs, sampled)]
-        rows = self.estimates
-        stamps, previous = run.stamps_ns.tolist(), run.previous_ns.tolist()
-        rows['corrected', False] += zip(logs, previous, run.x_corrected, run.P_corrected)
-        rows['predicted', False] += zip(logs, stamps, run.x_predicted, run.P_predicted)
-        rows['mu', False] += zip(logs, previous, stamps)
-
-    def diagnostics(self, stamp_ns: int, msg: Any) -> None:
-        """Keep a row of the /diagnostics message: the level and message of its worst task."""
-        levels = [s.level[0] if isinstance(s.level, bytes) else int(s.level)
-                  for s in msg.status]
-        worst = max(range(len(levels)), key=levels.__getitem__)
-        self.diag.append((stamp_ns, levels[worst],
-                          f'{msg.status[worst].name}: {msg.status[worst].message}'))
-
-    def arrays(self, result: ReplayResult) -> dict[str, NDArray]:
-        """Return the dict of numpy arrays, keys as the class doc says."""
-        out = {}
-        i8, f8, n = np.int64, np.float64, self.n
-        _columns(out, 'sample', self.samples, (('log_ns', i8), ('stamp_ns', i8),
-                                               ('value', f8), ('variance', f8),
-                                               ('status', str), ('reason', str)))
-        if result.input_topic:
-            _columns(out, 'input', self.inputs, (('log_ns', i8), ('stamp_ns', i8),
-                                                 ('status', str)))
-        for key, rows in self.estimates.items():
-            name = ARRAY_NAMES[key]
-            if key[0] == 'mu':
-                _columns(out, name, rows, (('log_ns', i8), ('stamp_ns', i8),
-                                           ('sigma_ns', i8)))
-                out[f'{name}.mu'] = (out[f'{name}.sigma_ns'] - out[f'{name}.stamp_ns']) / NS
-            else:
-                cols = list(zip(*rows)) if rows else [(), (), (), ()]
-                _columns(out, name, cols[:2], (('log_ns', i8), ('stamp_ns', i8)), zipped=True)
-                out[f'{name}.x'] = _stacked(cols[2], (-1, n))
-                out[f'{name}.P'] = _stacked(cols[3], (-1, n, n))
-        _columns(out, 'diagnostics', self.diag, (('log_ns', i8), ('level', np.int8),
-                                                 ('message', str)))
-        if self.smoother is not None:
-            smoothed = self.smoother.smoothed()
-            name = SMOOTHED_TOPIC.lstrip('/')
-            for column in smoothed._fields:
-                out[f'{name}.{column}'] = getattr(smoothed, column)
-        out['meta.topic'] = np.array(result.topic)
-        out['meta.input_topic'] = np.array(result.input_topic)
-        out['meta.damage'] = np.array(str(result.damage or ''))
-        out['meta.assumptions'] = np.array(result.assumptions, dtype=str)
-        return out
-
-
-def _columns(out: dict[str, NDArray], name: str, rows: list, columns: tuple,
-             zipped: bool = False) -> None:
-    """Store the columns of `rows` (tuples) as out['name.column'] arrays of their dtypes."""
-    if zipped:
-        cols = rows
-    else:
-        cols = list(zip(*rows)) if rows else [()] * len(columns)
-    for (column, dtype), values in zip(columns, cols):
-        out[f'{name}.{column}'] = np.array(values, dtype=dtype)
-
-
-def _stacked(arrays: tuple[NDArray, ...], shape: tuple[int, ...]) -> NDArray[np.float64]:
-    """Return the arrays (each of the same size) as one float64 array of `shape`."""
-    if not arrays:
-        return np.zeros(0, dtype=np.float64).reshape(shape)
-    return np.concatenate(arrays, dtype=np.float64).reshape(shape)    # along their axis 0
