@@ -29,7 +29,12 @@ release = '0.1.0'
 
 extensions = ['myst_parser', 'parameter_tables', 'interface_tables', 'overview_tables']
 root_doc = 'index'
-exclude_patterns = ['_build', '_ext', 'Thumbs.db', '.DS_Store']
+exclude_patterns = [str(HERE / '_build'), str(HERE / '_ext'), 'Thumbs.db', '.DS_Store']
+if HERE != Path():
+    # rosdoc2's project: not the pages of the docs/ link, nor the index.rst it writes into a
+    # folder of doc/ that has an index.md already (the nodes' overview)
+    exclude_patterns += ['docs'] + [str(index) for index in HERE.rglob('index.rst')
+                                    if index.with_suffix('.md').is_file()]
 # `figures` is a link to ../docs (the figures the README shows too); its markdown notes
 # are pages of their own, listed in the toctrees
 myst_enable_extensions = ['colon_fence', 'deflist', 'dollarmath']
