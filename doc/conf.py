@@ -2,16 +2,25 @@
 Sphinx configuration of the tskf_ros documentation (MyST Markdown, the furo theme).
 
 Build: `./run docs` (python -m sphinx -W -n --keep-going -b html doc doc/_build/html).
-rosdoc2 finds this `doc/` folder by itself, copies it and executes this file from its own
-conf.py; the one path here (`_ext`) is relative to the folder Sphinx executes it in.
+rosdoc2 (`rosdoc2 build --package-path .`) finds this `doc/` folder by itself, copies it
+into its own Sphinx project (beside a copy of the README) and executes this file from that
+project's conf.py, in that project's folder: the paths below work from both folders.
 """
 
 import os
+from pathlib import Path
 import sys
 
-# doc/_ext: the parameter-table directive (node pages from config/schema/*.yaml).  Sphinx
-# runs this file in its own folder, under sphinx-build and under rosdoc2 alike.
-sys.path.insert(0, os.path.abspath('_ext'))
+# This folder: where Sphinx executes this file (sphinx-build), or doc/ below it (rosdoc2's
+# project, whose folder holds the copies of doc/ and of the README).
+HERE = Path('doc') if (Path('doc') / '_ext').is_dir() and not Path('_ext').is_dir() else Path()
+# doc/_ext: the directives of the generated tables (parameters from config/schema/*.yaml,
+# topics, services, diagnostics and overviews from tskf_ros.messages)
+sys.path.insert(0, os.path.abspath(HERE / '_ext'))
+if HERE != Path() and not Path('docs').exists():
+    # rosdoc2's copy of the README shows the figures as docs/NAME.png, as in the repository
+    # (figures/ is a copy of docs/ there)
+    Path('docs').symlink_to(HERE / 'figures', target_is_directory=True)
 
 project = 'tskf_ros'
 author = 'tskf_ros maintainers'
@@ -20,7 +29,12 @@ release = '0.1.0'
 
 extensions = ['myst_parser', 'parameter_tables', 'interface_tables', 'overview_tables']
 root_doc = 'index'
-exclude_patterns = ['_build', '_ext', 'Thumbs.db', '.DS_Store']
+exclude_patterns = [str(HERE / '_build'), str(HERE / '_ext'), 'Thumbs.db', '.DS_Store']
+if HERE != Path():
+    # rosdoc2's project: not the pages of the docs/ link, nor the index.rst it writes into a
+    # folder of doc/ that has an index.md already (the nodes' overview)
+    exclude_patterns += ['docs'] + [str(index) for index in HERE.rglob('index.rst')
+                                    if index.with_suffix('.md').is_file()]
 # `figures` is a link to ../docs (the figures the README shows too); its markdown notes
 # are pages of their own, listed in the toctrees
 myst_enable_extensions = ['colon_fence', 'deflist', 'dollarmath']
@@ -32,5 +46,6 @@ suppress_warnings = ['myst.header']
 html_theme = 'furo'
 html_title = 'tskf_ros'
 
-# rosdoc2: keep this theme when furo is installed (its default replaces it)
-rosdoc2_settings = {'override_theme': False}
+# rosdoc2: keep this theme when furo is installed (its default replaces it), and keep the
+# extensions above (its default removes those it does not know: every generated table)
+rosdoc2_settings = {'override_theme': False, 'allow_other_extensions': True}

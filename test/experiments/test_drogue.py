@@ -56,7 +56,7 @@ def test_drogue_main_writes_figure_and_summary(tmp_path, capsys):
 
 
 def test_drogue_estimator_yaml_is_the_drogue_model():
-    yaml = pytest.importorskip('yaml')
+    yaml = pytest.importorskip('yaml', reason='PyYAML is not installed')
     path = Path(__file__).resolve().parents[2] / 'config' / 'drogue_estimator.yaml'
     p = yaml.safe_load(path.read_text())['/**/timescale_estimator']['ros__parameters']
     kf = TimeScaleKalmanFilter(np.reshape(p['A'], (2, 2)), [p['C']], Q=[p['Q']], R=[p['R']],

@@ -1,8 +1,11 @@
 """The docs build (-W -n), show every node's parameters, interface and tasks, mention no issues."""
 
 import html
+import importlib.util
+import os
 from pathlib import Path
 import re
+import shutil
 import subprocess
 import sys
 
@@ -35,6 +38,62 @@ def site(tmp_path_factory) -> Path:
     assert build.returncode == 0, \
         f'sphinx-build failed (exit {build.returncode}):\n{build.stderr}{build.stdout}'
     return out
+
+
+# the generated tables of the pages, by their css class (doc/_ext)
+TABLE_CLASSES = ('parameter-table', 'topic-table', 'service-table', 'diagnostic-table',
+                 'node-overview', 'diagnostic-overview', 'diagnostic-levels')
+
+
+def tables(page: str) -> dict:
+    """Return {css class: count} of a page's tables, every table under the key 'all'."""
+    counts = {name: len(re.findall(rf'<table[^>]*class="[^"]*\b{name}\b', page))
+              for name in TABLE_CLASSES}
+    return {'all': page.count('<table'), **counts}
+
+
+def pages(html_root: Path) -> list:
+    """Return the documentation pages of an HTML build, relative (no index or search page)."""
+    return sorted(str(path.relative_to(html_root)) for path in html_root.rglob('*.html')
+                  if path.name not in ('genindex.html', 'search.html', 'py-modindex.html')
+                  and not {'_static', '_sources', '_modules'} & set(path.parts))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(importlib.util.find_spec('rosdoc2') is None,
+                    reason='rosdoc2 is not installed (docs.ros.org runs it on the package)')
+def test_rosdoc2_builds_every_page_with_every_table(site, tmp_path):
+    # rosdoc2 on a copy of the package, as docs.ros.org runs it (no ROS_DISTRO: offline)
+    package = tmp_path / 'src' / 'tskf_ros'
+    shutil.copytree(REPO_ROOT, package, symlinks=True, ignore=shutil.ignore_patterns(
+        '.git', '.venv', '.pytest_cache', '.mypy_cache', '_build', 'results', 'build',
+        'install', 'log', '__pycache__', '*.egg-info'))
+    env = {k: v for k, v in os.environ.items() if k != 'ROS_DISTRO'}
+    build = subprocess.run(
+        [sys.executable, '-c', 'import sys; from rosdoc2.main import main; sys.exit(main())',
+         'build', '--package-path', str(package), '--output-directory', str(tmp_path / 'out'),
+         '--cross-reference-directory', str(tmp_path / 'xref'),
+         '--doc-build-directory', str(tmp_path / 'docs_build')],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1800)
+    log = build.stdout + build.stderr
+    assert build.returncode == 0, log[-20000:]
+    for refused in ('not supported', 'Unknown directive', 'image file not readable',
+                    'multiple files found', 'conf.py for package'):
+        assert refused not in log, [line for line in log.splitlines() if refused in line]
+    # every page of ./run docs, below doc/ there, with the same tables
+    ours = tmp_path / 'out' / 'tskf_ros' / 'doc'
+    missing = [name for name in pages(site) if not (ours / name).is_file()]
+    assert not missing, f'pages rosdoc2 does not build: {missing}'
+    differ = {name: (tables((site / name).read_text()), tables((ours / name).read_text()))
+              for name in pages(site)
+              if tables((site / name).read_text()) != tables((ours / name).read_text())}
+    assert not differ, differ
+    node_tables = tables((ours / 'nodes' / 'timescale_estimator.html').read_text())
+    assert node_tables['parameter-table'] and node_tables['topic-table']
+    # the README (rosdoc2's front page) shows its figures
+    readme = (tmp_path / 'out' / 'tskf_ros' / '__README.html').read_text()
+    images = re.findall(r'<img [^>]*src="([^"]+)"', readme)
+    assert images and all((tmp_path / 'out' / 'tskf_ros' / src).is_file() for src in images)
 
 
 def test_the_documentation_builds_without_a_warning(site):

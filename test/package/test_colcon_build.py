@@ -190,3 +190,38 @@ def test_installed_driver_publishes_from_the_installed_simulated_meter(install):
     assert len(got) >= 3, out
     # 0.24804 W, the simulated meter's default reading, in mW
     assert all(abs(m.illuminance - 248.04) < 1e-9 for m in got), out
+
+
+def test_colcon_test_passes_in_the_workspace(install):
+    """
+    `colcon test` of the built workspace passes, as a ROS user runs it (no ./run, no .venv).
+
+    Its fast part (-m "not slow", so that this test does not run itself again); the README's
+    `./run test` runs everything.  The tests that need the ./run environment skip there,
+    saying why, and the launch files are started where launch_ros is installed.
+    """
+    import xml.etree.ElementTree as ET
+
+    workspace = install.parent
+    env = {k: v for k, v in build_env(workspace).items()
+           if not k.startswith('PYTEST') and k != 'VIRTUAL_ENV'}
+    result = subprocess.run(
+        [sys.executable, '-m', 'colcon', '--log-base', str(workspace / 'log'), 'test',
+         '--base-paths', str(workspace / 'src'),
+         '--build-base', str(workspace / 'build'),
+         '--install-base', str(workspace / 'install'),
+         '--event-handlers', 'console_cohesion+',
+         # (colcon takes an argument that starts with a space as pytest's, not its own)
+         '--pytest-args', ' -m', 'not slow', ' -p', 'no:cacheprovider', ' -rs'],
+        cwd=workspace, env=env, capture_output=True, text=True, timeout=3600)
+    output = result.stdout[-20000:] + result.stderr[-5000:]
+    assert result.returncode == 0, output
+    report = ET.parse(workspace / 'build' / PACKAGE / 'pytest.xml').getroot()
+    suite = report if report.tag == 'testsuite' else report.find('testsuite')
+    counts = {key: int(suite.get(key, 0)) for key in ('tests', 'failures', 'errors', 'skipped')}
+    assert counts['tests'] > 1000, (counts, output)
+    assert counts['failures'] == counts['errors'] == 0, (counts, output)
+    # every skip says why
+    for case in suite.iter('testcase'):
+        for skipped in case.iter('skipped'):
+            assert (skipped.get('message') or '').strip(), (case.get('name'), output)

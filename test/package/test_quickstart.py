@@ -31,12 +31,15 @@ def test_the_quickstart_is_one_shell_then_commands():
 def test_the_quickstart_works_pasted_into_a_fresh_clone(tmp_path):
     if not (REPO / '.git').exists():
         pytest.skip('not a git checkout: no clone to make')
-    clone = tmp_path / 'clone'
-    subprocess.run(['git', 'clone', '--quiet', str(REPO), str(clone)], check=True,
-                   timeout=120)
     # the venv of this checkout, copied, so that the test needs no download; ./run installs
     # the clone into it (the package stamp is removed) as on a first run
     venv = Path(os.environ.get('VIRTUAL_ENV') or REPO / '.venv')
+    if not (venv / '.requirements.sha256').is_file():
+        pytest.skip(f'needs the venv that ./run makes (none at {venv}: a ROS workspace or '
+                    'another venv), to copy into the clone; run it with ./run test')
+    clone = tmp_path / 'clone'
+    subprocess.run(['git', 'clone', '--quiet', str(REPO), str(clone)], check=True,
+                   timeout=120)
     shutil.copytree(venv, clone / '.venv', symlinks=True)
     for stale in ('.package.sha256', 'pip.log'):
         (clone / '.venv' / stale).unlink(missing_ok=True)

@@ -62,3 +62,95 @@ def test_the_documented_example_runs_with_only_the_installed_plugin(tmp_path):
                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=300)
     assert proc.returncode == 0, proc.stdout
     assert '2 passed' in proc.stdout
+
+
+ISOLATION = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')
+
+# An unrelated package's test: it records, as JSON into $RECORD, whether the plugin is
+# loaded, the environment and which rclpy modules are imported.
+UNRELATED_TEST = """
+import json
+import os
+import sys
+
+
+def test_record(request):
+    record = {
+        'plugin': getattr(request.config.pluginmanager.get_plugin('tskf_ros'), '__name__', None),
+        'environ': {k: v for k, v in os.environ.items()
+                    if k not in ('PYTEST_CURRENT_TEST', 'RECORD')},
+        'rclpy': sorted(m for m in sys.modules if m.split('.')[0] == 'rclpy'),
+    }
+    with open(os.environ['RECORD'], 'w') as f:
+        json.dump(record, f)
+"""
+
+
+def pytest_elsewhere(tmp_path, *args, env_extra=None):
+    """Run pytest in a folder of its own (no conftest or ini of this repository)."""
+    (tmp_path / 'pytest.ini').write_text('[pytest]\n')
+    env = {k: v for k, v in os.environ.items()
+           if k not in ISOLATION and not k.startswith('PYTEST')}
+    env.update(env_extra or {})
+    return subprocess.run([sys.executable, '-m', 'pytest', '-p', 'no:cacheprovider', *args],
+                          cwd=tmp_path, env=env, text=True, stdout=subprocess.PIPE,
+                          stderr=subprocess.STDOUT, timeout=300)
+
+
+def test_the_plugin_changes_nothing_in_a_session_that_uses_none_of_its_fixtures(tmp_path):
+    import json
+
+    (tmp_path / 'test_unrelated.py').write_text(UNRELATED_TEST)
+    records = {}
+    for name, extra in (('with', []), ('without', ['-p', 'no:tskf_ros'])):
+        record = tmp_path / f'{name}.json'
+        proc = pytest_elsewhere(tmp_path, '-q', *extra, 'test_unrelated.py',
+                                env_extra={'RECORD': str(record)})
+        assert proc.returncode == 0, proc.stdout
+        records[name] = json.loads(record.read_text())
+    assert records['with']['plugin'] == 'tskf_ros.testing.plugin'   # it was loaded
+    assert records['without']['plugin'] is None
+    assert records['with']['rclpy'] == [] == records['without']['rclpy']
+    assert records['with']['environ'] == records['without']['environ']
+    assert not set(ISOLATION) & set(records['with']['environ'])
+    # no option or ini value of its own: pytest's help is the same with and without it
+    helps = [pytest_elsewhere(tmp_path, '--help', *extra).stdout
+             for extra in ([], ['-p', 'no:tskf_ros'])]
+    assert helps[0] == helps[1]
+
+
+# The plugin's fixtures: the ROS environment inside the test, none after it; the
+# environment's own ROS_DOMAIN_ID is kept.
+FIXTURE_TEST = """
+import os
+
+NAMES = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')
+WANT = os.environ.get('WANT_DOMAIN') or str(os.getpid() % 100 + 1)
+
+
+def test_before():
+    assert 'rclpy' not in __import__('sys').modules
+    assert 'ROS_AUTOMATIC_DISCOVERY_RANGE' not in os.environ
+
+
+def test_inside(ros_context, ros_environment):
+    assert os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+    assert os.environ['ROS_DOMAIN_ID'] == WANT
+    assert ros_context.get_domain_id() == int(WANT)
+    assert ros_environment['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+    assert ('ROS_DOMAIN_ID' in ros_environment) == (not os.environ.get('WANT_DOMAIN'))
+
+
+def test_after():
+    assert 'ROS_AUTOMATIC_DISCOVERY_RANGE' not in os.environ
+    assert os.environ.get('ROS_DOMAIN_ID') == (os.environ.get('WANT_DOMAIN') or None)
+"""
+
+
+@pytest.mark.parametrize('domain', [None, '42'])
+def test_the_fixtures_set_the_ros_environment_for_their_test_only(tmp_path, domain):
+    (tmp_path / 'test_fixtures.py').write_text(FIXTURE_TEST)
+    extra = {'WANT_DOMAIN': domain, 'ROS_DOMAIN_ID': domain} if domain else {}
+    proc = pytest_elsewhere(tmp_path, '-q', 'test_fixtures.py', env_extra=extra)
+    assert proc.returncode == 0, proc.stdout
+    assert '3 passed' in proc.stdout, proc.stdout

@@ -2,14 +2,30 @@
 Test your own code against tskf_ros's nodes in-process: a pytest plugin and its helpers.
 
 Installed with the package and loaded by pytest through the ``pytest11`` entry point, so a
-test file needs no conftest.  The fixtures: ``ros_context`` (a fresh rclpy Context of the
-test's own), ``executor_kind`` ('single' by default; parametrize it to run on both),
-``ros_executor`` (an executor of that kind in that context) and ``start_node`` (a node of
-this package, or any Node class, started in that context with parameter overrides and
-added to the executor).  ``spin_until`` waits on a condition with a deadline.
+test file needs no conftest; loaded, it changes nothing until a test uses a fixture.  The
+fixtures: ``ros_environment`` (localhost and a ROS domain of the test's own, restored
+after), ``ros_context`` (a fresh rclpy Context of the test's own), ``executor_kind``
+('single' by default; parametrize it to run on both), ``ros_executor`` (an executor of
+that kind in that context) and ``start_node`` (a node of this package, or any Node class,
+started in that context with parameter overrides and added to the executor).
+``spin_until`` waits on a condition with a deadline.
+
+The helpers are imported on first use (they import rclpy), so that pytest loading the
+plugin (this package's ``plugin`` module) imports no rclpy.
 """
 
-from tskf_ros.testing.nodes import node_class, NODES, start_in_process
-from tskf_ros.testing.spin import spin_until
+import importlib
+from typing import Any
 
 __all__ = ['NODES', 'node_class', 'spin_until', 'start_in_process']
+
+# public name -> the module of this package that defines it
+_HOMES = {'NODES': 'nodes', 'node_class': 'nodes', 'start_in_process': 'nodes',
+          'spin_until': 'spin'}
+
+
+def __getattr__(name: str) -> Any:
+    """Import a helper's module on first access (PEP 562)."""
+    if name not in _HOMES:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    return getattr(importlib.import_module(f'{__name__}.{_HOMES[name]}'), name)

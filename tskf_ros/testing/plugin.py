@@ -1,34 +1,47 @@
 """
-The pytest plugin of tskf_ros (entry point pytest11): ROS isolation and in-process fixtures.
+The pytest plugin of tskf_ros (entry point pytest11): in-process ROS fixtures.
 
-At start the run is kept on this machine and in a ROS domain of its own, unless the
-environment already says otherwise (ROS_AUTOMATIC_DISCOVERY_RANGE, ROS_DOMAIN_ID) or the
-ini option ``tskf_ros_isolate = false`` turns this off.
+Loaded into every pytest session where tskf_ros is installed, it changes nothing there
+until a test asks for one of its fixtures: no environment variable, no option, and no
+rclpy import at load.  The ROS environment is set inside ``ros_environment`` (which
+``ros_context`` uses), for that test only, and put back afterwards.
 """
 
 import os
-from typing import Any, Callable, Iterator, List
+from typing import Any, Callable, Dict, Iterator, List
 
 import pytest
 
-
-def pytest_addoption(parser: pytest.Parser) -> None:
-    """Declare the ini option tskf_ros_isolate."""
-    parser.addini('tskf_ros_isolate', type='bool', default=True,
-                  help='tskf_ros: keep ROS 2 traffic on localhost and in a ROS_DOMAIN_ID of '
-                  "this run's own where the environment does not set them (default true)")
+# environment variable -> the value ros_environment gives it where the environment does not
+# set it (the domain: one of this process's own, so that parallel runs do not meet)
+ISOLATION = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')
 
 
-def pytest_configure(config: pytest.Config) -> None:
-    """Isolate the run's ROS 2 traffic before any test imports rclpy (see the module)."""
-    if config.getini('tskf_ros_isolate'):
-        os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-        if not os.environ.get('ROS_DOMAIN_ID'):
-            os.environ['ROS_DOMAIN_ID'] = str(os.getpid() % 100 + 1)
+def isolated_values(environ: Dict[str, str]) -> Dict[str, str]:
+    """Return the variables ros_environment sets: those of ISOLATION that environ lacks."""
+    wanted = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+              'ROS_DOMAIN_ID': str(os.getpid() % 100 + 1)}
+    return {name: value for name, value in wanted.items() if not environ.get(name)}
 
 
 @pytest.fixture
-def ros_context() -> Iterator[Any]:
+def ros_environment() -> Iterator[Dict[str, str]]:
+    """
+    Keep the test's ROS 2 traffic on this machine and in a domain of its own.
+
+    Sets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and a ROS_DOMAIN_ID where the environment
+    does not set them, for this test (and the processes it starts) only; yields the
+    variables it set and restores the environment afterwards.
+    """
+    added = isolated_values(dict(os.environ))
+    with pytest.MonkeyPatch.context() as patch:
+        for name, value in added.items():
+            patch.setenv(name, value)
+        yield added
+
+
+@pytest.fixture
+def ros_context(ros_environment: Dict[str, str]) -> Iterator[Any]:
     """Yield an initialized rclpy Context of the test's own; shut it down afterwards."""
     import rclpy
     from rclpy.context import Context

@@ -1,0 +1,64 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""launch_testing: launch/owc_pipeline.launch.py starts the simulator and the estimator."""
+
+import unittest
+
+from launch_checks import launch_file, NAMESPACE, receive, skip_unless_runnable
+import pytest
+
+skip_unless_runnable()
+
+import launch  # noqa: E402, I100 - imported only where skip_unless_runnable lets the module run
+from launch.actions import IncludeLaunchDescription  # noqa: E402
+from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
+import launch_testing  # noqa: E402
+import launch_testing.actions  # noqa: E402
+import launch_testing.asserts  # noqa: E402
+from sensor_msgs.msg import Illuminance  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+from tskf_ros.messages import estimator_interface as estimator  # noqa: E402
+
+
+@pytest.mark.launch_test
+def generate_test_description():
+    """Start the launch file in a namespace of its own, as `ros2 launch` would."""
+    return launch.LaunchDescription([
+        IncludeLaunchDescription(
+            PythonLaunchDescriptionSource(launch_file('owc_pipeline.launch.py')),
+            launch_arguments={'namespace': NAMESPACE, 'log_level': 'warn'}.items()),
+        launch_testing.actions.ReadyToTest(),
+    ])
+
+
+class TestThePipelineRuns(unittest.TestCase):
+    """While it runs: the simulator's samples reach the estimator, which publishes."""
+
+    def test_the_estimator_publishes_estimates_of_the_simulated_power(self):
+        topics = {f'/{NAMESPACE}/{estimator.POWER_TOPIC}': Illuminance,
+                  f'/{NAMESPACE}/{estimator.OUTPUT_TOPICS["corrected"]}': Float64MultiArray}
+        got = receive(topics)
+        for topic, messages in got.items():
+            self.assertGreaterEqual(len(messages), 3, topic)
+
+
+@launch_testing.post_shutdown_test()
+class TestShutdown(unittest.TestCase):
+    """After the launch is shut down (SIGINT), both nodes exited cleanly."""
+
+    def test_every_node_exits_with_status_0(self, proc_info):
+        launch_testing.asserts.assertExitCodes(proc_info)
