@@ -12,7 +12,6 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
-from threadpoolctl import threadpool_limits
 
 from tskf_ros.messages.context import end_context
 from tskf_ros.messages.parameter_schema import ParameterError, SchemaFormatError
@@ -142,7 +141,9 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
     node = executor = None
     try:
         node = factory()
-        limit_blas_threads()
+        warning = limit_blas_threads()
+        if warning:
+            node.get_logger().warning(warning)
         warning = unused_parameter_file(node, sys.argv if args is None else args)
         if warning:
             node.get_logger().error(warning)
@@ -162,10 +163,24 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
         end_context()
 
 
-def limit_blas_threads() -> None:
-    """Run BLAS/OpenMP on one thread: a node filters one sample at a time (small matrices)."""
+def limit_blas_threads() -> str:
+    """
+    Run BLAS/OpenMP on one thread: a node filters one sample at a time (small matrices).
+
+    threadpoolctl is optional (the extra `threads`): without it, and with no
+    OPENBLAS_NUM_THREADS / OMP_NUM_THREADS in the environment, return a warning.
+    """
     # without a limit OpenBLAS runs small products on every core: about 10 ms per sample
     # of a jittered 1 kHz stream against 0.5 ms on one, under `ros2 run` (where nothing
     # sets OPENBLAS_NUM_THREADS); called once the node is built, so that the libraries it
     # loaded are covered
+    try:
+        from threadpoolctl import threadpool_limits
+    except ModuleNotFoundError:
+        if any(os.environ.get(v) for v in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS')):
+            return ''
+        return ('threadpoolctl is not installed, so BLAS may use every core for small '
+                "products (slower): pip install 'tskf_ros[threads]', or set "
+                'OPENBLAS_NUM_THREADS=1 before starting the node')
     threadpool_limits(limits=1)
+    return ''
