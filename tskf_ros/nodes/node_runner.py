@@ -1,6 +1,7 @@
 """How a node runs: its executor, `--help` without ROS, the Jazzy main loop, one-line errors."""
 
 import argparse
+import difflib
 import os
 import re
 import sys
@@ -15,7 +16,7 @@ from rclpy.utilities import remove_ros_args
 
 from tskf_ros.messages.context import end_context
 from tskf_ros.messages.parameter_schema import ParameterError, SchemaFormatError
-from tskf_ros.messages.parameters import parameters_for_node
+from tskf_ros.messages.parameters import given_parameters, parameters_for_node
 
 import yaml
 
@@ -147,6 +148,8 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
         warning = unused_parameter_file(node, sys.argv if args is None else args)
         if warning:
             node.get_logger().error(warning)
+        for warning in unknown_parameters(node, sys.argv if args is None else args):
+            node.get_logger().warning(warning)
         executor = make_executor(kind)
         executor.add_node(node)
         spin(executor)
@@ -161,6 +164,26 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
         if node is not None:
             node.destroy_node()
         end_context()
+
+
+def unknown_parameters(node: Node, argv: Sequence[str]) -> list:
+    """
+    Return one warning for each parameter the command line gives that node does not declare.
+
+    rclpy ignores such a value without a word (a misspelt `perod`); the warning names
+    where it was given and the closest declared name (difflib), if one is close.
+    """
+    declared = node.list_parameters([], 0).names
+    warnings = []
+    for name, where in given_parameters(argv, node.get_name(),
+                                        node.get_fully_qualified_name()).items():
+        if name in declared:
+            continue
+        close = difflib.get_close_matches(name, declared, n=1)
+        warnings.append(f'parameter {name!r} ({where}) is not a parameter of '
+                        f'{node.get_fully_qualified_name()} and is ignored'
+                        + (f': did you mean {close[0]!r}?' if close else ''))
+    return warnings
 
 
 def limit_blas_threads() -> str:
