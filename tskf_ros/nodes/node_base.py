@@ -26,6 +26,8 @@ from tskf_ros.nodes.status_line import StatusLine
 MAX_BATCH = 10_000
 # its output frequency is WARN outside rate * (1 -/+ this): it catches up in batches
 SIMULATOR_RATE_TOLERANCE = 0.5
+# the parameter of diagnostic_updater's Updater: status names '<fully qualified name>: task'
+USE_FQN = 'diagnostic_updater.use_fqn'
 # a link config dataclass of the core (OwcLinkConfig, LedLinkConfig)
 LinkConfig = TypeVar('LinkConfig')
 
@@ -218,6 +220,17 @@ def parameter_values(node: Node, schema: ParameterSchema,
     return values
 
 
+def diagnostic_name(node: Node) -> str:
+    """
+    Return the node name the /diagnostics statuses carry (and the default hardware_id).
+
+    As diagnostic_updater's Updater (C++): the node's fully qualified name (/ns/node) if
+    diagnostic_updater.use_fqn is true, else its name alone.
+    """
+    use_fqn = node.has_parameter(USE_FQN) and node.get_parameter(USE_FQN).value
+    return node.get_fully_qualified_name() if use_fqn else node.get_name()
+
+
 def link_config(config_cls: type[LinkConfig], values: dict,
                 error: type[Exception]) -> LinkConfig:
     """Build a link config dataclass from parameter values (its fields); raise `error` if bad."""
@@ -279,8 +292,8 @@ class LinkSimulatorNode(Node):
         now = self.get_clock().now().nanoseconds
         self.frequency.count = self.count()
         stat = self.frequency.run(Status(OUTPUT_FREQUENCY), now)
-        msg = conversions.diagnostics_to_msg(now, self.get_name(), [stat],
-                                             hardware_id=self.get_name())
+        name = diagnostic_name(self)
+        msg = conversions.diagnostics_to_msg(now, name, [stat], hardware_id=name)
         self.diag_pub.publish(msg)
         return msg
 

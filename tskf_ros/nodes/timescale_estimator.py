@@ -16,7 +16,7 @@ from tskf_ros.messages.estimator_interface import (ConfigError, diagnostics_mess
                                                    OutcomeMessages, output_qos, OUTPUT_TOPICS,
                                                    parameters_to_config)
 from tskf_ros.messages.qos import overridable, sensor_input_qos
-from tskf_ros.nodes.node_base import ReconfigurableNode
+from tskf_ros.nodes.node_base import diagnostic_name, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.owc.lagged_estimates import LaggedEstimate, LaggedEstimates
 from tskf_ros.owc.session import EstimatorSession, Outcome
@@ -154,7 +154,7 @@ class TimescaleEstimator(ReconfigurableNode):
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""
         return diagnostics_message(self.session, self.config, stamp_ns,
-                                   node_name=self.get_name())
+                                   node_name=diagnostic_name(self))
 
 
 DESCRIPTION = ('Time-scale Kalman filter on received power. Parameters '
