@@ -16,7 +16,7 @@ from tskf_ros.messages.estimator_interface import (ConfigError, diagnostics_mess
                                                    OutcomeMessages, output_qos, OUTPUT_TOPICS,
                                                    parameters_to_config)
 from tskf_ros.messages.qos import overridable, sensor_input_qos
-from tskf_ros.nodes.node_base import diagnostic_name, ReconfigurableNode
+from tskf_ros.nodes.node_base import diagnostic_name, InputWatch, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.owc.lagged_estimates import LaggedEstimate, LaggedEstimates
 from tskf_ros.owc.session import EstimatorSession, Outcome
@@ -43,6 +43,8 @@ class TimescaleEstimator(ReconfigurableNode):
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
         self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
                                                   qos_in)
+        # the measurements (the inputs u are optional): named if nobody publishes them
+        self.input_watch = InputWatch(self, [self.sub])
         # reliable, volatile, depth 10, each overridable by qos_overrides.<topic>.publisher.*
         # parameters (history, depth, reliability, durability)
         # (rclpy applies an override to the profile given: one profile per publisher)
