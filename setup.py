@@ -34,7 +34,18 @@ setup(
         ('share/' + package_name + '/launch', _files('launch/*.launch.py')),
         ('share/' + package_name + '/urdf', _files('urdf/*.urdf')),
     ] + _tree('bags'),
+    # Tier 1 (the nodes, launch files, bags, experiments) comes from package.xml through
+    # rosdep (system packages on Ubuntu 24.04, plus mcap and rosbags from pip), or from
+    # requirements.txt in ./run's venv. The optional features are extras, imported only
+    # when used (tskf_ros/core/optional_dependencies.py, the same table; doc/installation.md):
+    # pip install './src/tskf_ros[analysis,foxglove,visa,threads]'
     install_requires=['setuptools'],
+    extras_require={
+        'analysis': ['dask[distributed]'],      # sweep --workers/--scheduler
+        'foxglove': ['foxglove-sdk'],           # foxglove_bridge
+        'visa': ['pyvisa', 'pyvisa-py', 'pyusb', 'libusb-package'],   # power_meter_driver
+        'threads': ['threadpoolctl'],           # the nodes' BLAS on one thread
+    },
     zip_safe=True,
     maintainer='tskf_ros maintainers',
     maintainer_email='tskf-ros@example.org',

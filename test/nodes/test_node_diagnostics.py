@@ -112,3 +112,31 @@ def test_simulators_report_their_output_frequency_and_log_a_status_line(loop, ro
         assert name == f'{node.get_name()}: output frequency'
         assert 'Events since startup' in got[name]
         assert 'taken' in node.status.log()
+
+
+def test_use_fqn_puts_the_namespace_in_every_status_name_and_hardware_id(loop, ros_context):
+    # two estimators in /left and /right: diagnostic_updater.use_fqn (as upstream's Updater)
+    # tells them apart; without it both say 'timescale_estimator: ...'
+    executor, _, nodes = loop
+    made = {}
+    for ns, use_fqn in (('/left', True), ('/right', True), ('/plain', False)):
+        overrides = [Parameter('diagnostic_updater.use_fqn', value=use_fqn)]
+        for cls in (TimescaleEstimator, PowerMeterSimulator, Alignment):
+            node = cls(context=ros_context, namespace=ns, parameter_overrides=overrides)
+            nodes.append(node)
+            made[ns, cls] = node
+    for (ns, cls), node in made.items():
+        msg = node.publish_diagnostics()
+        want = f'{ns}/{node.get_name()}' if ns != '/plain' else node.get_name()
+        assert msg.status and all(s.name.startswith(f'{want}: ') for s in msg.status), (
+            [s.name for s in msg.status])
+        # the default hardware_id is the same name (the filter nodes: unless frame_id given)
+        frame = '' if cls is PowerMeterSimulator else node.config.frame_id
+        assert {s.hardware_id for s in msg.status} == {frame or want}
+    left, right = (made[ns, TimescaleEstimator].publish_diagnostics()
+                   for ns in ('/left', '/right'))
+    assert not {s.name for s in left.status} & {s.name for s in right.status}
+    # read-only, as the period: given at start
+    node = made['/left', TimescaleEstimator]
+    assert not node.set_parameters([Parameter('diagnostic_updater.use_fqn',
+                                              value=False)])[0].successful

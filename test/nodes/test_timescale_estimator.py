@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Illuminance
 from std_msgs.msg import Float64MultiArray
@@ -448,6 +448,31 @@ def test_outputs_keep_ten_and_a_qos_override_takes_effect(make):
     for t in (1.0, 2.0, 3.0):
         h.send(t, 200.0)
     h.expect(predicted=3)
+
+
+def test_a_durability_override_latches_the_output_for_a_late_subscriber(make):
+    h = make(yaml_parameters(
+        'owc_estimator.yaml',
+        **{'qos_overrides./estimate/corrected.publisher.durability': 'transient_local'}))
+    pubs = h.node.pubs
+    assert pubs['corrected'].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert pubs['predicted'].qos_profile.durability == DurabilityPolicy.VOLATILE
+    # nobody subscribes to estimate/corrected while the samples come
+    for sub in [s for s in h.client.subscriptions if s.topic_name == '/estimate/corrected']:
+        h.client.destroy_subscription(sub)
+    h.spin_until(lambda: pubs['corrected'].get_subscription_count() == 0, 'no subscriber')
+    for t in (1.0, 2.0, 3.0, 4.0):
+        h.send(t, 200.0)
+    h.expect(predicted=4)
+    # a subscriber that comes afterwards gets the corrected estimates kept (t = 1, 2, 3:
+    # the estimate at t_k goes out with sample k + 1)
+    late = []
+    h.client.create_subscription(
+        Float64MultiArray, 'estimate/corrected', late.append,
+        QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    h.spin_until(lambda: len(late) >= 3, 'the latched estimates')
+    assert [conversions.msg_to_state_estimate(m).stamp_ns for m in late] == [
+        k * NS for k in (1, 2, 3)]
 
 
 # -- fixed-lag smoothing: x(t_j|t_{j+L}) equals the full smoother on that prefix ---------

@@ -17,6 +17,7 @@ import sys
 import xml.etree.ElementTree as ET
 
 import pytest
+from tskf_ros.core.optional_dependencies import extra_of, EXTRAS
 import yaml
 
 REPO = Path(__file__).resolve().parents[2]
@@ -27,7 +28,8 @@ DISTRIBUTION = 'jazzy/distribution.yaml'
 # top-level import -> the package.xml key that provides it (ROS packages: their own name)
 KEYS = {
     'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'matplotlib': 'python3-matplotlib',
-    'yaml': 'python3-yaml', 'zstandard': 'python3-zstandard-pip',
+    # zstandard: a requirement of mcap's own (mcap reads zstd chunks with it)
+    'yaml': 'python3-yaml', 'zstandard': 'python3-mcap-pip',
     'mcap': 'python3-mcap-pip', 'rosbags': 'python3-rosbags-pip',
     'pytest': 'python3-pytest', 'hypothesis': 'python3-hypothesis',
     'mcap_ros2': 'mcap-ros2-support',
@@ -40,6 +42,8 @@ KEYS = {
 }
 RUN = ('exec_depend', 'depend')
 TEST = RUN + ('test_depend',)
+# the tier-1 keys that are pip-only: the bag libraries, which no distribution packages
+PIP_ONLY_RUNTIME = {'python3-rosbags-pip', 'python3-mcap-pip'}
 
 
 def declared(kinds):
@@ -75,12 +79,34 @@ def missing(imports, kinds):
 PYTEST_PLUGIN = REPO / 'tskf_ros' / 'testing' / 'plugin.py'
 
 
-def test_every_runtime_import_is_an_exec_depend():
+def test_every_runtime_import_is_an_exec_depend_or_of_an_optional_tier():
     code = sorted(path for path in (REPO / 'tskf_ros').rglob('*.py') if path != PYTEST_PLUGIN)
     code += sorted((REPO / 'launch').glob('*.py'))
     imports = top_level_imports(code)
-    assert {'rclpy', 'rcl_interfaces', 'numpy', 'launch_ros', 'mcap'} <= set(imports)
-    assert missing(imports, RUN) == {}
+    assert {'rclpy', 'rcl_interfaces', 'numpy', 'launch_ros', 'mcap', 'dask'} <= set(imports)
+    required = {top: where for top, where in imports.items() if extra_of(top) is None}
+    assert missing(required, RUN) == {}
+    # an optional library is no exec_depend: its extra's keys are test_depends (its tests)
+    optional = {KEYS[top] for top in imports if extra_of(top)}
+    assert optional & declared(RUN) == set()
+    assert optional <= declared(('test_depend',))
+
+
+def test_the_optional_tiers_are_test_depends_only_and_resolve():
+    keys = {key for extra in EXTRAS.values() for key in extra.rosdep_keys}
+    snap, shipped = snapshot(), shipped_rules()
+    known = {key for name in ROSDEP_FILES for key in snap[name]} | set(shipped)
+    assert keys <= known
+    assert keys & declared(RUN) == set()
+    assert keys <= declared(('test_depend',))
+    comment = (REPO / 'package.xml').read_text()
+    assert all(key in comment for key in keys)   # the tier table in package.xml's comment
+
+
+def test_tier_one_has_no_pip_key_but_the_bag_libraries():
+    run = declared(RUN)
+    assert {key for key in run if key.endswith('-pip')} == PIP_ONLY_RUNTIME
+    assert 'ros2launch' in run
 
 
 def test_every_test_import_is_declared():
@@ -115,7 +141,7 @@ def test_every_key_resolves_in_rosdistro_or_the_shipped_rules():
     assert unresolved == set()
     # no key of the shipped file shadows one of rosdistro's, and neither lists a key unused
     assert known & set(shipped) == set()
-    assert known | set(shipped) == set(package_keys())
+    assert set(shipped) <= set(package_keys())
 
 
 def test_the_shipped_rules_are_pip_rules_of_installed_distributions():
@@ -139,10 +165,14 @@ def test_the_rosdep_file_is_installed_and_documented():
     assert 'config/rosdep/tskf_ros.yaml' in doc and 'rosdep update' in doc
 
 
-def test_package_xml_names_its_maintainer_and_urls():
+def test_package_xml_names_its_maintainer_author_and_urls():
     root = ET.parse(REPO / 'package.xml').getroot()
     maintainer = root.find('maintainer')
     assert re.fullmatch(r'[\w.+-]+@[\w-]+(\.[\w-]+)+', maintainer.get('email'))
+    assert root.find('author').text.strip()
+    # the maintainer and URLs are placeholders until a release: package.xml says so
+    assert 'PLACEHOLDERS' in (REPO / 'package.xml').read_text()
+    assert (REPO / 'CHANGELOG.rst').is_file()
     urls = {url.get('type'): url.text for url in root.iter('url')}
     assert set(urls) == {'website', 'repository'}
     assert all(url.startswith('https://') for url in urls.values())

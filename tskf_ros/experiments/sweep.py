@@ -15,6 +15,8 @@ import numpy as np
 
 from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.reader import BagError, error_exit
+from tskf_ros.core.optional_dependencies import (EXIT_MISSING_DEPENDENCY, MissingDependency,
+                                                 require)
 from tskf_ros.experiments.bag_analysis import METRICS
 from tskf_ros.experiments.fit_noise import EXIT_INTERRUPTED
 from tskf_ros.experiments.output import save_figure
@@ -301,6 +303,12 @@ def main(argv: Optional[list] = None) -> int:
     args = parser.parse_args(argv)
     if not 0 <= args.workers <= MAX_WORKERS:
         parser.error(f'--workers must be between 0 and {MAX_WORKERS}')
+    if args.workers or args.scheduler:
+        try:
+            require('distributed', 'sweep --workers/--scheduler (a Dask cluster)')
+        except MissingDependency as exc:
+            print(f'{PROG}: error: {exc}; --workers 0 runs without Dask', file=sys.stderr)
+            return EXIT_MISSING_DEPENDENCY
     try:
         defaults = default_parameters()
         sets = [parse_setting(s, defaults) for s in args.sets]

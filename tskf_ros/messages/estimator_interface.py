@@ -122,9 +122,9 @@ def output_qos(config: NodeConfig) -> QoSProfile:
     """
     Return the default QoS of the estimate publishers: reliable, keep last 10.
 
-    The node lets `qos_overrides.<topic>.publisher.*` parameters change it (rclpy's
-    QoSOverridingOptions.with_default_policies(): depth, durability, history,
-    reliability), as robot_localization does.
+    The node lets `qos_overrides.<topic>.publisher.*` parameters change it (depth,
+    durability, history, reliability: messages/qos.py's overridable()), as
+    robot_localization does.
     """
     return reliable_qos(DEFAULT_DEPTH)
 

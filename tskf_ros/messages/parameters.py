@@ -3,7 +3,7 @@
 from dataclasses import dataclass
 from pathlib import Path
 import re
-from typing import Any, Optional, TYPE_CHECKING, Union
+from typing import Any, Optional, Sequence, TYPE_CHECKING, Union
 
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
 
@@ -12,9 +12,9 @@ import yaml
 if TYPE_CHECKING:
     from tskf_ros.messages.parameter_schema import ParameterSchema
 
-__all__ = ['descriptor', 'float_range', 'IGNORED', 'IGNORED_PREFIX', 'NodeConfig',
-           'parameters_for_node', 'ParamsError', 'parameter_values', 'read_params_yaml',
-           'section_applies']
+__all__ = ['descriptor', 'float_range', 'given_parameters', 'IGNORED', 'IGNORED_PREFIX',
+           'NodeConfig', 'parameters_for_node', 'ParamsError', 'parameter_values',
+           'read_params_yaml', 'section_applies']
 
 
 class _RclLoader(yaml.SafeLoader):
@@ -178,3 +178,33 @@ def parameters_for_node(params_file: Union[str, Path], node_fqn: str) -> set:
         return set()
     return set().union(*(_names(params) for key, params in _sections(doc)
                          if section_applies(key, node_fqn)))
+
+
+def given_parameters(argv: Sequence[str], node_name: str, node_fqn: str) -> dict:
+    """
+    Return {name: where it was given} of the parameters a command line sets for a node.
+
+    Read as rcl reads them: in each `--ros-args ... [--]` section, `--params-file FILE`
+    (the sections of FILE that apply to node_fqn) and `-p`/`--param NAME:=VALUE` (or
+    `NODE:NAME:=VALUE`, for the node named NODE only).  A file that cannot be read is
+    left out (rcl refuses it before the node starts).
+    """
+    given: dict = {}
+    ros = False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            ros = True
+        elif arg == '--':
+            ros = False
+        elif ros and i + 1 < len(argv) and arg == '--params-file':
+            try:
+                names = parameters_for_node(argv[i + 1], node_fqn)
+            except (OSError, yaml.YAMLError):
+                continue
+            given.update({name: argv[i + 1] for name in names if name not in given})
+        elif ros and i + 1 < len(argv) and arg in ('-p', '--param') and ':=' in argv[i + 1]:
+            name = argv[i + 1].split(':=', 1)[0]
+            node, _, name = name.rpartition(':')
+            if node in ('', node_name, node_fqn):
+                given.setdefault(name, f'{arg} {argv[i + 1]}')
+    return given

@@ -2,11 +2,12 @@
 
 from typing import Sequence
 
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
-                       ReliabilityPolicy)
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSPolicyKind,
+                       QoSProfile, ReliabilityPolicy)
+from rclpy.qos_overriding_options import QoSOverridingOptions
 
-__all__ = ['DEFAULT_DEPTH', 'DIAGNOSTICS_TOPIC', 'matching_qos', 'reliable_qos',
-           'SENSOR_OUTPUT_QOS', 'sensor_input_qos', 'TRUTH_QOS']
+__all__ = ['DEFAULT_DEPTH', 'DIAGNOSTICS_TOPIC', 'matching_qos', 'overridable',
+           'reliable_qos', 'SENSOR_OUTPUT_QOS', 'sensor_input_qos', 'TRUTH_QOS']
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
 # rclpy's system default depth: what /diagnostics and forward_command_controller use
@@ -30,6 +31,18 @@ def reliable_qos(depth: int) -> QoSProfile:
     """Return the QoS of an output every sample of which matters: reliable, keep last depth."""
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                       reliability=ReliabilityPolicy.RELIABLE)
+
+
+def overridable() -> QoSOverridingOptions:
+    """
+    Return the options that let `qos_overrides.<topic>.publisher.*` parameters set a QoS.
+
+    History, depth, reliability (rclpy's with_default_policies()) and durability, so that
+    a late subscriber can be served with transient_local.
+    """
+    return QoSOverridingOptions(policy_kinds=(
+        QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, QoSPolicyKind.RELIABILITY,
+        QoSPolicyKind.DURABILITY))
 
 
 # the evaluation truth of both simulators: reliable, so that a plot has every point

@@ -17,7 +17,7 @@ from tskf_ros.messages.alignment_interface import (diagnostics_message, INPUT_TO
                                                    parameters_to_config, pat_state_message,
                                                    pat_state_qos, PAT_STATE_TOPIC)
 from tskf_ros.messages.qos import sensor_input_qos
-from tskf_ros.nodes.node_base import ReconfigurableNode
+from tskf_ros.nodes.node_base import diagnostic_name, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
 
 
@@ -159,7 +159,7 @@ class Alignment(ReconfigurableNode):
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""
         return diagnostics_message(self.session, self.config, stamp_ns,
-                                   node_name=self.get_name())
+                                   node_name=diagnostic_name(self))
 
 
 DESCRIPTION = ('LED active alignment (Solanki et al.): scanning EKF, hill-climbing or '

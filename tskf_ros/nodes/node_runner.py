@@ -1,6 +1,7 @@
 """How a node runs: its executor, `--help` without ROS, the Jazzy main loop, one-line errors."""
 
 import argparse
+import difflib
 import os
 import re
 import sys
@@ -12,12 +13,11 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
-from threadpoolctl import threadpool_limits
 
 from tskf_ros.core import jit
 from tskf_ros.messages.context import end_context
 from tskf_ros.messages.parameter_schema import ParameterError, SchemaFormatError
-from tskf_ros.messages.parameters import parameters_for_node
+from tskf_ros.messages.parameters import given_parameters, parameters_for_node
 
 import yaml
 
@@ -150,10 +150,14 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
     node = executor = None
     try:
         node = factory()
-        limit_blas_threads()
+        warning = limit_blas_threads()
+        if warning:
+            node.get_logger().warning(warning)
         warning = unused_parameter_file(node, sys.argv if args is None else args)
         if warning:
             node.get_logger().error(warning)
+        for warning in unknown_parameters(node, sys.argv if args is None else args):
+            node.get_logger().warning(warning)
         executor = make_executor(kind)
         executor.add_node(node)
         spin(executor)
@@ -170,10 +174,44 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
         end_context()
 
 
-def limit_blas_threads() -> None:
-    """Run BLAS/OpenMP on one thread: a node filters one sample at a time (small matrices)."""
+def unknown_parameters(node: Node, argv: Sequence[str]) -> list:
+    """
+    Return one warning for each parameter the command line gives that node does not declare.
+
+    rclpy ignores such a value without a word (a misspelt `perod`); the warning names
+    where it was given and the closest declared name (difflib), if one is close.
+    """
+    declared = node.list_parameters([], 0).names
+    warnings = []
+    for name, where in given_parameters(argv, node.get_name(),
+                                        node.get_fully_qualified_name()).items():
+        if name in declared:
+            continue
+        close = difflib.get_close_matches(name, declared, n=1)
+        warnings.append(f'parameter {name!r} ({where}) is not a parameter of '
+                        f'{node.get_fully_qualified_name()} and is ignored'
+                        + (f': did you mean {close[0]!r}?' if close else ''))
+    return warnings
+
+
+def limit_blas_threads() -> str:
+    """
+    Run BLAS/OpenMP on one thread: a node filters one sample at a time (small matrices).
+
+    threadpoolctl is optional (the extra `threads`): without it, and with no
+    OPENBLAS_NUM_THREADS / OMP_NUM_THREADS in the environment, return a warning.
+    """
     # without a limit OpenBLAS runs small products on every core: about 10 ms per sample
     # of a jittered 1 kHz stream against 0.5 ms on one, under `ros2 run` (where nothing
     # sets OPENBLAS_NUM_THREADS); called once the node is built, so that the libraries it
     # loaded are covered
+    try:
+        from threadpoolctl import threadpool_limits
+    except ModuleNotFoundError:
+        if any(os.environ.get(v) for v in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS')):
+            return ''
+        return ('threadpoolctl is not installed, so BLAS may use every core for small '
+                "products (slower): pip install 'tskf_ros[threads]', or set "
+                'OPENBLAS_NUM_THREADS=1 before starting the node')
     threadpool_limits(limits=1)
+    return ''

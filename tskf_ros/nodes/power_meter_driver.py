@@ -13,7 +13,7 @@ from tskf_ros.messages.context import end_context
 from tskf_ros.messages.diagnostic_tasks import POWER_METER
 from tskf_ros.messages.power_meter_interface import (DriverConfig, MeterError, NODE_NAME,
                                                      POWER_TOPIC, SENSOR_OUTPUT_QOS)
-from tskf_ros.nodes.node_base import ReconfigurableNode
+from tskf_ros.nodes.node_base import diagnostic_name, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.owc.meter_settings import MeterConfig
 from tskf_ros.owc.power_meter import Opener, PowerMeter
@@ -266,10 +266,10 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
         if self.session is None:
             idle = Status(POWER_METER, WARN, f'{self.state}: not reading',
                           [KeyValue('Lifecycle state', self.state)])
-            return conversions.diagnostics_to_msg(stamp_ns, self.get_name(), [idle],
+            return conversions.diagnostics_to_msg(stamp_ns, diagnostic_name(self), [idle],
                                                   hardware_id=self.config.session.resource)
         msg = interface.diagnostics_message(self.session, self.config, stamp_ns,
-                                            self.frequency, node_name=self.get_name())
+                                            self.frequency, node_name=diagnostic_name(self))
         if self.state != 'active':
             for status in msg.status:
                 status.message = f'{self.state}: {status.message}'

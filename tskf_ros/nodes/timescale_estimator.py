@@ -5,7 +5,7 @@ from typing import Any, Optional
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
-from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.qos import DurabilityPolicy
 from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.core.timescale_kalman import FilterError
@@ -15,8 +15,8 @@ from tskf_ros.messages.estimator_interface import (ConfigError, diagnostics_mess
                                                    MEASUREMENT_TOPIC, NODE_NAME, NodeConfig,
                                                    OutcomeMessages, output_qos, OUTPUT_TOPICS,
                                                    parameters_to_config)
-from tskf_ros.messages.qos import sensor_input_qos
-from tskf_ros.nodes.node_base import ReconfigurableNode
+from tskf_ros.messages.qos import overridable, sensor_input_qos
+from tskf_ros.nodes.node_base import diagnostic_name, InputWatch, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.owc.lagged_estimates import LaggedEstimate, LaggedEstimates
 from tskf_ros.owc.session import EstimatorSession, Outcome
@@ -43,14 +43,17 @@ class TimescaleEstimator(ReconfigurableNode):
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
         self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
                                                   qos_in)
-        # reliable, depth 10, each overridable by qos_overrides.<topic>.publisher.* parameters
+        # the measurements (the inputs u are optional): named if nobody publishes them
+        self.input_watch = InputWatch(self, [self.sub])
+        # reliable, volatile, depth 10, each overridable by qos_overrides.<topic>.publisher.*
+        # parameters (history, depth, reliability, durability)
         # (rclpy applies an override to the profile given: one profile per publisher)
         self.smoothing_lag = self.get_parameter('smoothing_lag').value
         self.lagged = (LaggedEstimates(self.smoothing_lag, self.config.session)
                        if self.smoothing_lag else None)
         self.pubs = {key: self.create_publisher(
             Float64MultiArray, topic, output_qos(self.config),
-            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+            qos_overriding_options=overridable())
             for key, topic in OUTPUT_TOPICS.items() if key != 'smoothed' or self.lagged}
         self.outputs = OutcomeMessages(self.config)
         self.start_diagnostics()
@@ -119,7 +122,8 @@ class TimescaleEstimator(ReconfigurableNode):
 
     def _publish(self, out: Outcome) -> None:
         # each message is reused: published (serialized) before the next one is filled; an
-        # output nobody subscribes to (its topic is volatile) is neither filled nor published
+        # output nobody subscribes to (unless made transient_local) is neither filled nor
+        # published
         for key, msg in self.outputs.messages(out, self._subscribed):
             self.pubs[key].publish(msg)
         if self.lagged is not None:
@@ -131,7 +135,10 @@ class TimescaleEstimator(ReconfigurableNode):
             pub.publish(self.outputs.smoothed(e.stamp_ns, e.mu, e.x, e.P))
 
     def _subscribed(self, key: str) -> bool:
-        return self.pubs[key].get_subscription_count() > 0
+        # a transient_local output (a durability override) is kept for late subscribers
+        pub = self.pubs[key]
+        return (pub.get_subscription_count() > 0
+                or pub.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL)
 
     def restart(self, why: str, reason: str = 'clock_jump') -> None:
         """Re-initialise the filter, saying why (nothing to do before a sample)."""
@@ -149,7 +156,7 @@ class TimescaleEstimator(ReconfigurableNode):
     def diagnostics_message(self, stamp_ns: int) -> DiagnosticArray:
         """Return the session's counters as a /diagnostics message."""
         return diagnostics_message(self.session, self.config, stamp_ns,
-                                   node_name=self.get_name())
+                                   node_name=diagnostic_name(self))
 
 
 DESCRIPTION = ('Time-scale Kalman filter on received power. Parameters '

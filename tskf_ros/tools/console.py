@@ -44,7 +44,7 @@ def run(tool: str) -> NoReturn:
     def entry() -> object:
         module, _, name = TOOLS[tool].partition(':')
         return getattr(importlib.import_module(module), name)()
-    _quietly(entry)
+    _quietly(entry, tool)
 
 
 def run_as_main(main: Callable[[], object]) -> NoReturn:
@@ -57,7 +57,7 @@ def run_as_main(main: Callable[[], object]) -> NoReturn:
     rclpy), which happens before this is called: Python prints its KeyboardInterrupt
     traceback and dies of SIGINT.  The console scripts (run) cover that phase too.
     """
-    _quietly(main)
+    _quietly(main, main.__module__.rpartition('.')[2])
 
 
 class SigintFlag:
@@ -90,19 +90,34 @@ class SigintFlag:
             signal.signal(signal.SIGINT, self.previous)
 
 
-def _quietly(entry: Callable[[], object]) -> NoReturn:
+def _quietly(entry: Callable[[], object], tool: str) -> NoReturn:
     interrupted = SigintFlag()
     try:
         status = entry()
     except KeyboardInterrupt:
         status = EXIT_INTERRUPTED
-    except Exception:  # noqa: B902 - only after a Ctrl-C, which it then is
-        if not interrupted.is_set():
-            raise
-        status = EXIT_INTERRUPTED
+    except Exception as exc:  # noqa: B902 - after a Ctrl-C, which it then is
+        if interrupted.is_set():
+            status = EXIT_INTERRUPTED
+        else:
+            status = _missing_dependency(exc, tool)
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)    # the exit itself is not interrupted
     sys.exit(status)
+
+
+def _missing_dependency(exc: Exception, tool: str) -> int:
+    """Print the one line of an optional library not installed; re-raise any other error."""
+    if not isinstance(exc, ImportError):
+        raise exc
+    from tskf_ros.core.optional_dependencies import (EXIT_MISSING_DEPENDENCY, missing,
+                                                     MissingDependency)
+    error = exc if isinstance(exc, MissingDependency) else (
+        missing(exc) if isinstance(exc, ModuleNotFoundError) else None)
+    if error is None:
+        raise exc
+    print(f'{tool}: error: {error}', file=sys.stderr)
+    return EXIT_MISSING_DEPENDENCY
 
 
 def entry_point(tool: str) -> Callable[[], NoReturn]:

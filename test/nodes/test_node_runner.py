@@ -1,0 +1,72 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+"""How a node runs: unknown parameter names said once each, BLAS threads without threadpoolctl."""
+
+import sys
+
+import pytest
+import rclpy
+
+from tskf_ros.nodes import node_runner
+from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
+
+
+@pytest.fixture
+def node_with_args(tmp_path):
+    """Build the estimator under a command line, as run_node does; destroy it after."""
+    made = []
+
+    def factory(argv):
+        context = rclpy.context.Context()
+        rclpy.init(context=context, args=argv)
+        node = TimescaleEstimator(context=context)
+        made.append((context, node))
+        return node
+    yield factory
+    for context, node in made:
+        node.destroy_node()
+        context.try_shutdown()
+
+
+def test_each_unknown_parameter_gets_one_warning_with_the_closest_name(
+        node_with_args, tmp_path):
+    params = tmp_path / 'p.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    queue_dept: 5\n    history_size: 20\n'
+                      '    frobnicate: 1\nother_node:\n  ros__parameters:\n    nonsense: 1\n')
+    argv = ['timescale_estimator', '--ros-args', '--params-file', str(params),
+            '-p', 'status_perod:=2.0', '-p', 'timescale_estimator:frame_idd:=x',
+            '-p', 'other_node:period:=1.0', '-p', 'status_period:=3.0',
+            '-p', 'qos_overrides./estimate/correctd.publisher.depth:=3']
+    node = node_with_args(argv)
+    assert node.get_parameter('history_size').value == 20     # the file is read
+    warnings = node_runner.unknown_parameters(node, argv)
+    assert len(warnings) == 5, warnings
+    by_name = {w.split("'")[1]: w for w in warnings}
+    assert set(by_name) == {'queue_dept', 'frobnicate', 'status_perod', 'frame_idd',
+                            'qos_overrides./estimate/correctd.publisher.depth'}
+    assert by_name['queue_dept'].endswith("did you mean 'queue_depth'?")
+    assert f'({params})' in by_name['queue_dept']
+    assert by_name['status_perod'].endswith("did you mean 'status_period'?")
+    assert '(-p status_perod:=2.0)' in by_name['status_perod']
+    assert by_name['frame_idd'].endswith("did you mean 'frame_id'?")
+    assert by_name['qos_overrides./estimate/correctd.publisher.depth'].endswith(
+        "did you mean 'qos_overrides./estimate/corrected.publisher.depth'?")
+    assert 'did you mean' not in by_name['frobnicate']
+    assert all('/timescale_estimator and is ignored' in w for w in warnings)
+
+
+def test_declared_parameters_and_other_nodes_parameters_are_not_warned(node_with_args):
+    argv = ['x', '--ros-args', '-p', 'queue_depth:=5', '-p', 'other:nonsense:=1', '--',
+            '-p', 'not_a_ros_argument:=1']
+    node = node_with_args(argv)
+    assert node_runner.unknown_parameters(node, argv) == []
+
+
+def test_without_threadpoolctl_the_node_warns_unless_blas_is_told(monkeypatch):
+    monkeypatch.setitem(sys.modules, 'threadpoolctl', None)   # import: ModuleNotFoundError
+    for name in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS'):
+        monkeypatch.delenv(name, raising=False)
+    warning = node_runner.limit_blas_threads()
+    assert 'threadpoolctl is not installed' in warning and 'tskf_ros[threads]' in warning
+    monkeypatch.setenv('OPENBLAS_NUM_THREADS', '1')
+    assert node_runner.limit_blas_threads() == ''
