@@ -4,7 +4,8 @@ import argparse
 import os
 import re
 import sys
-from typing import Callable, Optional, Sequence
+import threading
+from typing import Callable, NoReturn, Optional, Sequence
 
 import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
@@ -39,6 +40,9 @@ ROS_PARAMETER_ERRORS = (InvalidParameterTypeException, InvalidParameterValueExce
                         ParameterError, SchemaFormatError)
 # exit status of a command line the node cannot parse (as argparse's usage errors)
 EXIT_USAGE = 2
+# s the clean-up after the spin (executor, node, context) may take before the process
+# ends anyway: a node ends within a bound of SIGINT or SIGTERM whatever rcl does meanwhile
+CLEANUP_BOUND = 3.0
 # rcl's source locations in its error strings (", at /project/src/parse.c:935")
 RCL_LOCATION = re.compile(r',? at \S+:\d+')
 
@@ -131,6 +135,14 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
     An exception of `startup_errors` (bad parameters) ends the process with its message
     on stderr and exit code 1, not a traceback.  `--executor single|events` chooses the
     executor (see EXECUTORS).
+
+    SIGINT or SIGTERM ends the process within about CLEANUP_BOUND seconds of the spin's
+    end, in any state: an rcl error that a callback meets because the signal handler
+    shut the context down under it is the shutdown, not a failure (no traceback); after
+    the clean-up the process exits at once (os._exit, stdout and stderr flushed), without
+    the interpreter's teardown, which takes seconds of a loaded machine's CPU (the
+    collection of numpy's, scipy's and numba's module objects); and a clean-up that takes
+    longer than CLEANUP_BOUND is cut short the same way, with one line saying so.
     """
     options = parse_args(name, description, args)
     try:
@@ -140,6 +152,7 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
         sys.exit(1)
     rclpy.init(args=args)
     node = executor = None
+    status = 0
     try:
         node = factory()
         limit_blas_threads()
@@ -153,13 +166,37 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
         pass
     except startup_errors + ROS_PARAMETER_ERRORS as exc:
         print(f'{name}: cannot start: {exc}', file=sys.stderr)
-        sys.exit(1)
+        status = 1
+    except Exception:  # noqa: B902 - re-raised unless the signal handler caused it
+        if rclpy.ok():
+            raise           # a failure of the node itself: its traceback
     finally:
+        watchdog = threading.Timer(CLEANUP_BOUND, _cleanup_overran, args=(name, status))
+        watchdog.daemon = True
+        watchdog.start()
         if executor is not None:
             executor.shutdown()
         if node is not None:
             node.destroy_node()
         end_context()
+        watchdog.cancel()       # (a failure goes on to its traceback and the usual exit)
+    _exit(status)
+
+
+def _cleanup_overran(name: str, status: int) -> None:
+    print(f'{name}: the shutdown took longer than {CLEANUP_BOUND:g} s; exiting without '
+          'waiting for it', file=sys.stderr)
+    _exit(status)
+
+
+def _exit(status: int) -> NoReturn:
+    """End the process now (stdout and stderr flushed), without the interpreter's teardown."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):   # a closed or broken pipe: nothing more to say
+            pass
+    os._exit(status)
 
 
 def limit_blas_threads() -> None:
