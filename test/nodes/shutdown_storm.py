@@ -1,5 +1,7 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
 """
-Signals to node processes under a flowing input: does each end within the bound?
+Signals to node processes under a flowing input: each must end within a bound.
 
 Shared by test/nodes/test_node_shutdown.py (the slow test) and a run by hand:
 
