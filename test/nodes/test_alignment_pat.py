@@ -225,3 +225,38 @@ def test_acquire_without_the_supervisor_says_so(ros_context):
         assert not result.successful and 'exceeds max_step' in result.reason
     finally:
         node.destroy_node()
+
+
+def test_repeated_acquire_while_searching_does_not_walk_the_search_away(make):
+    # over DDS before: ten requests once a second moved the base to 360 deg and the
+    # search stayed there, the light at -60 deg beyond its +-90 deg
+    loop = make()
+    requests = 0
+    for _ in range(10):
+        loop.run_for(1.0)
+        if loop.node.session.pat_state != 'acquiring':
+            break
+        assert loop.service(Trigger, 'acquire', Trigger.Request()).success
+        requests += 1
+    sup = loop.node.session.supervisor
+    assert requests >= 1 and sup.sweep.center[0] == 0.0      # where the cold search began
+    assert abs(loop.node.session.base) <= 90.0 + 1e-9
+    loop.until_state('tracking')
+
+
+def test_a_gate_change_reaches_the_supervisors_nis_band_at_once(make):
+    # before: 'new parameters in use', the band kept the old gate until ~/reset
+    from tskf_ros.led.lock_detector import nis_band
+    loop = make()
+    loop.until_state('tracking')
+    result = loop.node.set_parameters([Parameter('gate', value=2.0)])[0]
+    assert result.successful, result.reason
+    sup = loop.node.session.supervisor
+    cfg = sup.config.lock
+    assert cfg.gate == 2.0 and loop.node.session.pat_state == 'tracking'
+    np.testing.assert_allclose(sup.lock.bands, [nis_band(k, cfg.nis_alpha, 2.0)
+                                                for k in range(cfg.window + 1)], rtol=1e-12)
+    _, values = loop.pointing()
+    aligner = conversions.msg_to_diagnostics(loop.diagnostics[-1])['alignment: aligner']
+    assert aligner['Messages lost (transport)'] == '0'
+    assert 'Samples missed (stamps)' in aligner

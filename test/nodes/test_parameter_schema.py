@@ -160,6 +160,35 @@ def test_a_bad_value_at_start_is_one_parameter_error(ros_context, override, why)
     assert str(info.value) == why
 
 
+@pytest.mark.parametrize('node, override, why', [
+    (TimescaleEstimator, Parameter('smoothing_lag', value=True),
+     'smoothing_lag must be an integer, got True'),
+    (Alignment, Parameter('pat.hold_samples', value=True),
+     'pat.hold_samples must be an integer, got True'),
+    # the number printed with every digit: 1e8 would hide why it is out of range
+    (Alignment, Parameter('pat.hold_samples', value=100000001),
+     'pat.hold_samples = 100000001 is out of range: it must be within [0, 1e8]')])
+def test_a_bool_for_an_integer_and_a_number_just_out_of_range_are_refused_at_start(
+        ros_context, node, override, why):
+    # before: `-p pat.hold_samples:=true` and `-p smoothing_lag:=true` started (exit 0)
+    with pytest.raises(ParameterError) as info:
+        node(context=ros_context, parameter_overrides=[override])
+    assert str(info.value) == why
+
+
+@pytest.mark.parametrize('name', sorted(NODES))
+def test_every_integer_parameter_refuses_a_bool(name):
+    # Python's bool is an int, and rclpy's INTEGER type check takes it
+    schema = load_schema(name)
+    ints = [p for p in schema.parameters.values() if p.type_name in ('int', 'int_array')]
+    assert ints
+    for spec in ints:
+        value, kind = (True, 'an integer') if spec.type_name == 'int' else \
+            ([True, False], 'a list of integers')
+        assert spec.problem(value) == f'{spec.name} must be {kind}, got {value!r}'
+        assert schema.refusal([Parameter(spec.name, value=value)])
+
+
 def test_a_read_only_parameter_stays_read_only(ros_context):
     node = PowerMeterSimulator(context=ros_context)
     try:

@@ -11,6 +11,7 @@ from lifecycle_msgs.msg import State, Transition, TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetState
 import pytest
 import rclpy
+from std_srvs.srv import Trigger
 
 from test_power_meter_driver import Loop, TIMEOUT
 from tskf_ros.testing import spin_until
@@ -184,3 +185,60 @@ def test_autostart_comes_back_through_the_lifecycle_after_a_lost_device(loop, tm
     start = len(loop.power)
     loop.until(lambda: len(loop.power) >= start + 2, 'readings again')
     assert driver.session.connects == 2 and driver.session.disconnects == 1
+
+
+# every transition id of lifecycle_msgs/msg/Transition that a client may request
+REQUESTABLE = (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_CLEANUP,
+               Transition.TRANSITION_ACTIVATE, Transition.TRANSITION_DEACTIVATE,
+               Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
+               Transition.TRANSITION_INACTIVE_SHUTDOWN, Transition.TRANSITION_ACTIVE_SHUTDOWN)
+# the transitions from each primary state (rcl_lifecycle's default state machine)
+VALID = {UNCONFIGURED: {Transition.TRANSITION_CONFIGURE,
+                        Transition.TRANSITION_UNCONFIGURED_SHUTDOWN},
+         INACTIVE: {Transition.TRANSITION_CLEANUP, Transition.TRANSITION_ACTIVATE,
+                    Transition.TRANSITION_INACTIVE_SHUTDOWN},
+         ACTIVE: {Transition.TRANSITION_DEACTIVATE, Transition.TRANSITION_ACTIVE_SHUTDOWN},
+         FINALIZED: set()}
+
+
+def test_a_transition_requested_in_the_wrong_state_fails_and_the_driver_stays_up(
+        loop, tmp_path):
+    # rclpy lets rcl's "Transition is not registered" escape the executor: over DDS the
+    # driver died (exit 1) at each of these; rclcpp answers success = false
+    b, opener, driver, lc = managed(loop, tmp_path)
+    refused = 0
+    for state, into in [(UNCONFIGURED, Transition.TRANSITION_CONFIGURE),
+                        (INACTIVE, Transition.TRANSITION_ACTIVATE),
+                        (ACTIVE, Transition.TRANSITION_ACTIVE_SHUTDOWN), (FINALIZED, None)]:
+        assert lc.state() == state
+        for wrong in sorted(set(REQUESTABLE) - VALID[state]):
+            assert not lc.transition(wrong)
+            assert lc.state() == state
+            refused += 1
+        if into is not None:
+            assert lc.transition(into)
+    assert refused == 5 + 4 + 5 + 7
+    assert driver.context.ok()
+
+
+def test_reset_outside_a_session_says_so(loop, tmp_path):
+    b, opener, driver, lc = managed(loop, tmp_path)
+    node = loop.add(rclpy.create_node('reset_client', context=loop.context))
+    client = node.create_client(Trigger, f'{NODE}/reset')
+    loop.until(client.service_is_ready, 'the ~/reset service')
+
+    def reset():
+        future = client.call_async(Trigger.Request())
+        loop.until(future.done, 'the answer of ~/reset')
+        return future.result()
+    answer = reset()
+    assert not answer.success and 'unconfigured' in answer.message
+    assert lc.transition(Transition.TRANSITION_CONFIGURE)
+    assert lc.transition(Transition.TRANSITION_ACTIVATE)
+    loop.until(lambda: len(loop.power) >= 1, 'a reading')
+    assert reset().success
+    start = len(loop.power)
+    loop.until(lambda: len(loop.power) >= start + 2, 'readings after the reset')
+    assert lc.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
+    answer = reset()
+    assert not answer.success and 'finalized' in answer.message

@@ -103,3 +103,27 @@ def test_input_only_points_use_the_prediction_into_them():
     for j, e in enumerate(got):
         xs, _ = reference(model, stamps, y, j + 4, u, config.transition)
         np.testing.assert_allclose(e.x, xs[j], rtol=0, atol=1e-9)
+
+
+def test_a_late_sample_after_a_change_of_r_repeats_no_stamp():
+    # R changes at run time after t = 12 (the window is flushed), then t = 11.5 arrives
+    # late: its re-run must not output again a stamp already out (47.5 after 48 over DDS)
+    y = measurements(owc(), STAMPS)[:, 0]
+    config = load_config(CONFIG / 'owc_estimator.yaml')
+    session, lagged = EstimatorSession(config.session), LaggedEstimates(2, config.session)
+    stamps = []
+    for t, yi in zip(STAMPS[:10], y[:10]):
+        stamps += [e.stamp_ns for e in lagged.outcome(session.add(int(t * NS), float(yi)))]
+    model = config.session.model
+    new = load_config(CONFIG / 'owc_estimator.yaml',
+                      {'R': (4.0 * np.asarray(model.R)).ravel().tolist()}).session
+    assert session.reconfigure(new).status == 'accepted'
+    stamps += [e.stamp_ns for e in lagged.reconfigure(new)]
+    assert stamps[-1] == int(STAMPS[8] * NS)    # the flush: up to the newest step's start
+    for t, yi in [(11.5, 0.3)] + list(zip(STAMPS[10:], y[10:])):
+        out = session.add(int(t * NS), float(yi))
+        stamps += [e.stamp_ns for e in lagged.outcome(out)]
+    assert np.all(np.diff(stamps) > 0), np.array(stamps) / NS
+    # every point after the flushed ones comes out once, the late one too (lag 2: up to
+    # the point two steps before the newest one)
+    assert [s / NS for s in stamps if s > STAMPS[8] * NS] == [11.5] + STAMPS[9:-3].tolist()

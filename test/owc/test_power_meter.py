@@ -60,7 +60,9 @@ def test_replies_convert_to_milliwatts(reply, unit, expected):
     ('-1.0E-03', 'W', 'negative'), ('-5e-12', 'MW', 'negative'),
     ('10.0001', 'W', 'above_max'), ('40.1', 'DBM', 'above_max'),
     ('', 'W', 'unparseable'), ('OVER', 'W', 'unparseable'), ('1 W 2', 'W', 'unparseable'),
-    ('0x1p-3', 'W', 'unparseable'),
+    ('0x1p-3', 'W', 'unparseable'), ('1_0', 'W', 'unparseable'), ('1_0 W', 'W', 'unparseable'),
+    ('\u0661\u0660', 'W', 'unparseable'), ('1e', 'W', 'unparseable'), ('.', 'W', 'unparseable'),
+    ('1.5.', 'W', 'unparseable'), ('nan1', 'W', 'unparseable'),
     ('1.0', None, 'wrong_unit'), ('1.0 A', 'W', 'wrong_unit'), ('1.0 MA', 'W', 'wrong_unit'),
 ])
 def test_replies_that_are_not_a_power_are_refused_with_the_reason(reply, unit, reason):

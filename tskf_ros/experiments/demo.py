@@ -8,6 +8,9 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
+import time
+from types import FrameType
 from typing import Optional, Union
 
 import numpy as np
@@ -22,6 +25,9 @@ LED_NAMESPACE = '/led'
 # the largest ROS_DOMAIN_ID of ROS 2 on Linux (its ports must stay below 65536)
 MAX_DOMAIN_ID = 232
 LED_DT = PAPER_DT          # s: the LED link's sample period (config/led_link_simulator.yaml)
+# s the demo's children have, together, to end after its SIGINT before they are killed
+# (a node ends within 5 s of a signal in any state: test/nodes/test_node_shutdown.py)
+STOP_TIMEOUT = 10.0
 
 
 @dataclass
@@ -127,6 +133,56 @@ def replay_sample_bag(out: Path) -> int:
     return rc
 
 
+class Children:
+    """
+    The demo's child processes, each the leader of its own process group, and its monitors.
+
+    A Ctrl-C reaches the demo alone (a terminal's goes to the foreground group, which no
+    longer holds the children), and `stop` passes one SIGINT on to each child's group, as
+    a Ctrl-C to that child alone would be: the same end whether the signal went to the
+    demo's group or to the demo process only, and no child signalled twice mid-shutdown.
+    """
+
+    def __init__(self) -> None:
+        self.procs: list[subprocess.Popen] = []
+        self.monitors: list[dict] = []      # the LED loop's monitor (start_alignment)
+        self.lock = threading.Lock()
+        self.stopping = False
+
+    def start(self, cmd: list) -> Optional[subprocess.Popen]:
+        """Start cmd in its own process group; None once stop() has begun (nothing started)."""
+        with self.lock:
+            if self.stopping:
+                return None
+            proc = subprocess.Popen(cmd, env=dict(os.environ), process_group=0)
+            self.procs.append(proc)
+            return proc
+
+    def stop(self, procs: Optional[list] = None) -> None:
+        """SIGINT to the children (all, or procs) still running; kill those that hang."""
+        with self.lock:
+            if procs is None:
+                self.stopping = True
+            procs = list(self.procs if procs is None else procs)
+        for p in procs:
+            if p.poll() is None:
+                _signal_group(p, signal.SIGINT)
+        deadline = time.monotonic() + STOP_TIMEOUT
+        for p in procs:
+            try:
+                p.wait(timeout=max(deadline - time.monotonic(), 0.0))
+            except subprocess.TimeoutExpired:
+                _signal_group(p, signal.SIGKILL)
+                p.wait()
+
+
+def _signal_group(proc: subprocess.Popen, sig: int) -> None:
+    try:
+        os.killpg(proc.pid, sig)
+    except ProcessLookupError:      # ended (and its group with it) meanwhile
+        pass
+
+
 def node_command(module: str, params_file: Path,
                  **params: Union[bool, int, float, str]) -> list:
     """
@@ -142,33 +198,31 @@ def node_command(module: str, params_file: Path,
     return cmd
 
 
-def run_processes(args: argparse.Namespace) -> Summary:
+def run_processes(args: argparse.Namespace, children: Children) -> Summary:
     """Start both nodes as processes, collect in this process, stop them; summarise."""
     from tskf_ros.tools.demo_collector import collect
 
     cfg = config_dir()
     time_factor = 1.0 / args.duration_scale
-    env = dict(os.environ)
     procs = []
 
     def start_simulator() -> None:
-        procs.append(subprocess.Popen(node_command(
+        procs.append(children.start(node_command(
             'power_meter_simulator', cfg / 'power_meter_simulator.yaml',
             rate=float(args.rate), seed=args.seed, duration=float(args.duration),
             time_factor=float(time_factor), start_time=1.0, wait_for_subscribers=2,
-            blockage=args.blockage, drop_probability=float(args.drop_probability)),
-            env=env))
+            blockage=args.blockage, drop_probability=float(args.drop_probability))))
 
     # the estimator's neutral `measurement` is the power meter's received_power here
-    procs.append(subprocess.Popen(node_command(
+    procs.append(children.start(node_command(
         'timescale_estimator', cfg / 'owc_estimator.yaml', transition=args.transition)
-        + ['-r', 'measurement:=received_power'], env=env))
+        + ['-r', 'measurement:=received_power']))
     try:
         samples = int(round(args.duration * args.rate))
         timeout = args.duration * args.duration_scale * 3 + 30
         record = collect(samples, timeout=timeout, on_ready=start_simulator)
     finally:
-        _stop(procs)
+        children.stop([p for p in procs if p is not None])
     return summarise(record, period=1.0 / args.rate)
 
 
@@ -186,49 +240,57 @@ class AlignmentSummary:
     diagnostics: dict
 
 
-def start_alignment(args: argparse.Namespace) -> dict:
+def start_alignment(args: argparse.Namespace, children: Children) -> dict:
     """
     Start the LED loop (led_link_simulator + alignment in /led) beside the estimator demo.
 
-    The monitor runs on its own thread and context; `finish_alignment` joins it.
+    The monitor runs on its own thread and context; `finish_alignment` joins it, and
+    `stop_alignment` ends it at once (a Ctrl-C): a thread still inside rclpy when the
+    interpreter exits aborts the process ("terminate called without an active exception").
     """
-    import threading
-
     from tskf_ros.tools.alignment_monitor import monitor
 
     cfg = config_dir()
     ns = ['-r', f'__ns:={LED_NAMESPACE}']
     samples = int(round(args.led_duration / LED_DT))
-    procs = [subprocess.Popen(node_command(
+    procs = [children.start(node_command(
         'alignment', cfg / 'alignment.yaml', algorithm=args.led_algorithm,
-        **{'diagnostic_updater.period': 0.25}) + ns, env=dict(os.environ))]
-    out: dict = {'procs': procs, 'args': args, 'samples': samples}
+        **{'diagnostic_updater.period': 0.25}) + ns)]
+    out: dict = {'procs': procs, 'args': args, 'samples': samples, 'children': children,
+                 'stop': threading.Event()}
 
     def start_simulator() -> None:
-        procs.append(subprocess.Popen(node_command(
+        procs.append(children.start(node_command(
             'led_link_simulator', cfg / 'led_link_simulator.yaml', seed=args.seed,
             beta=float(args.led_beta), noise=float(args.led_noise),
             blockage=args.led_blockage, duration=float(args.led_duration),
             time_factor=float(args.led_time_factor), start_time=1.0,
-            wait_for_subscribers=2) + ns, env=dict(os.environ)))
+            wait_for_subscribers=2) + ns))
 
     def run() -> None:
         try:
             out['record'] = monitor(samples, namespace=LED_NAMESPACE,
                                     timeout=args.led_duration / args.led_time_factor * 3 + 30,
-                                    on_ready=start_simulator)
+                                    on_ready=start_simulator, stop=out['stop'])
         except Exception as exc:  # noqa: B902 - reported by finish_alignment
             out['error'] = exc
 
-    out['thread'] = threading.Thread(target=run, name='alignment-monitor', daemon=True)
+    out['thread'] = threading.Thread(target=run, name='alignment-monitor')
+    children.monitors.append(out)
     out['thread'].start()
     return out
+
+
+def stop_alignment(handle: dict) -> None:
+    """End the LED loop's monitor thread now (its waits return); its processes stay."""
+    handle['stop'].set()
+    handle['thread'].join()
 
 
 def finish_alignment(handle: dict) -> AlignmentSummary:
     """Wait for the LED loop, stop its processes, and summarise its tracking."""
     handle['thread'].join()
-    _stop(handle['procs'])
+    handle['children'].stop([p for p in handle['procs'] if p is not None])
     if 'error' in handle:
         raise handle['error']
     r = handle['record']
@@ -254,23 +316,14 @@ def format_alignment(s: AlignmentSummary, args: argparse.Namespace) -> str:
             f'gaps {d.get("Gaps", "?")}, largest mu {float(d.get("mu max", "nan")):g}')
 
 
-def _stop(procs: list) -> None:
-    """Stop the node processes with SIGINT (a clean shutdown), killing any that hang."""
-    for p in procs:
-        if p.poll() is None:
-            p.send_signal(signal.SIGINT)
-    for p in procs:
-        try:
-            p.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
-
-
-def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
-    """Command line of the demo."""
+def make_parser() -> argparse.ArgumentParser:
+    """Return the demo's argument parser."""
     parser = argparse.ArgumentParser(
-        prog='python -m tskf_ros.experiments.demo', description=__doc__.split('\n')[0])
+        prog='python -m tskf_ros.experiments.demo', description=__doc__.split('\n')[0],
+        epilog="`./run demo [ARG...]` is this demo with --reproduce [ARG...]: the papers' "
+        'numerical examples into results/ first (ARG... go to python -m '
+        'tskf_ros.experiments.reproduce; `./run demo --help` prints this). Ctrl-C in any '
+        'phase stops every process the demo started, exit status 130.')
     number = arguments.number
     seconds = number(0.0, 86_400.0, open_low=True)      # of stamped data: at most a day
     parser.add_argument('--duration', type=seconds, default=300.0,
@@ -308,12 +361,76 @@ def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
                         help='skip replaying the sample bag')
     parser.add_argument('--no-alignment', action='store_true',
                         help='run the estimator demo only')
-    return parser.parse_args(argv)
+    parser.add_argument('--reproduce', nargs=argparse.REMAINDER, metavar='ARG',
+                        help='first run python -m tskf_ros.experiments.reproduce --out '
+                        'results/ ARG... (every argument after --reproduce goes there)')
+    return parser
+
+
+def parse_args(argv: Optional[list] = None) -> argparse.Namespace:
+    """Command line of the demo (`--reproduce -h` is the demo's own --help too)."""
+    parser = make_parser()
+    args = parser.parse_args(argv)
+    if args.reproduce is not None and {'-h', '--help'} & set(args.reproduce):
+        parser.print_help()
+        parser.exit(0)
+    return args
+
+
+def run_reproduce(extra: list, children: Children) -> int:
+    """Run the papers' numerical examples into results/ as a child process; its status."""
+    cmd = ['--out', 'results/', *extra]
+    print(f'demo: python -m tskf_ros.experiments.reproduce {" ".join(cmd)}', flush=True)
+    proc = children.start([sys.executable, '-c', 'from tskf_ros.tools.console import '
+                           'reproduce; reproduce()', *cmd])
+    return 0 if proc is None else proc.wait()
+
+
+def where_to_look(args: argparse.Namespace) -> str:
+    """Return the three lines that end the demo: where its results are."""
+    figures = ("results/: the papers' figures (a PNG and a JSON per run), explained in "
+               'doc/papers_reproduced.md' if args.reproduce is not None else
+               "the papers' figures: `./run demo` (or python -m "
+               'tskf_ros.experiments.reproduce) writes them into results/')
+    bag = (f'{args.out / "bag"}/: the sample bag replayed through the estimator and its '
+           'plot (estimator.png)' if not args.no_bag else
+           'the sample bags in bags/: tskf_replay_offline and tskf_plot_bag (doc/bags.md)')
+    return '\n'.join([
+        f'where to look: {figures}',
+        f'               {bag}',
+        '               the numbers above are the live run over DDS; the nodes, topics and '
+        'parameters: doc/nodes/ (or ./run docs)'])
+
+
+def _interrupt(signum: int, frame: Optional[FrameType]) -> None:
+    raise KeyboardInterrupt
 
 
 def main(argv: Optional[list] = None) -> int:
-    """Run the demo and print the summary."""
+    """Run the demo and print the summary; a Ctrl-C or SIGTERM stops every child first."""
     args = parse_args(argv)
+    children = Children()
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _interrupt) if main_thread else None
+    try:
+        return _run(args, children)
+    finally:
+        if main_thread:     # the cleanup itself is not interrupted
+            before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        for handle in children.monitors:
+            stop_alignment(handle)
+        children.stop()
+        if main_thread:
+            signal.signal(signal.SIGINT, before)
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args: argparse.Namespace, children: Children) -> int:
+    if args.reproduce is not None:
+        rc = run_reproduce(args.reproduce, children)
+        if rc:
+            return rc
     # every process of the demo talks only on this machine and in one domain
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     if args.domain_id is not None:
@@ -326,14 +443,15 @@ def main(argv: Optional[list] = None) -> int:
           f'`ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]} ./run shell -c tskf_foxglove_bridge` '
           'in another terminal and open ws://localhost:8765 in Foxglove with the layout '
           'config/foxglove_owc_live.json', flush=True)
-    led = None if args.no_alignment else start_alignment(args)
-    summary = run_processes(args)
+    led = None if args.no_alignment else start_alignment(args, children)
+    summary = run_processes(args, children)
     print(format_summary(summary), flush=True)
     if led is not None:
         print(format_alignment(finish_alignment(led), args), flush=True)
-    if not args.no_bag:
-        return replay_sample_bag(args.out / 'bag')
-    return 0
+    rc = 0 if args.no_bag else replay_sample_bag(args.out / 'bag')
+    if rc == 0:
+        print(where_to_look(args), flush=True)
+    return rc
 
 
 if __name__ == '__main__':

@@ -73,14 +73,18 @@ class ExpandingSweep:
         self.direction[mask] = 1.0
         self.legs[mask] = 0
 
+    def end_leg(self, mask: Mask) -> None:
+        """End the current leg of the runs in mask where they are: turn around, widen."""
+        self.direction[mask] = -self.direction[mask]
+        self.amplitude[mask] = np.minimum(self.amplitude[mask] + self.config.pitch,
+                                          self.config.half_width)
+        self.legs[mask] += 1
+
     def turn(self, base: FloatArray, mask: Mask) -> FloatArray:
         """Return the next turn in degrees toward each leg's end for the runs in mask, else 0."""
         c = self.config
         target = self.center + self.direction * self.amplitude
         turn = np.clip(target - base, -c.speed, c.speed)
         # a run that reaches its leg's end turns around and widens the next leg
-        done = mask & (np.abs(target - base) <= c.speed)
-        self.direction[done] = -self.direction[done]
-        self.amplitude[done] = np.minimum(self.amplitude[done] + c.pitch, c.half_width)
-        self.legs[done] += 1
+        self.end_leg(mask & (np.abs(target - base) <= c.speed))
         return np.where(mask, turn, 0.0)

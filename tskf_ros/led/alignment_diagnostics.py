@@ -49,6 +49,8 @@ def aligner_status(st: 'AlignStats', cfg: AlignmentConfig, base: float, health_e
         stat.merge_summary(ERROR, f'aligner restarted itself: {health_error}')
     for key, value in (('Algorithm', cfg.algorithm), ('Paused', 'yes' if paused else 'no'),
                        ('Samples received', st.received),
+                       ('Samples missed (stamps)', st.missed),
+                       ('Messages lost (transport)', st.messages_lost),
                        ('Samples received while paused', st.paused),
                        ('Samples used', st.used), ('Commands', st.commands),
                        ('Commands clamped', st.clamped), ('Base command (deg)', base)):

@@ -69,6 +69,12 @@ class AlignStats:
     resets: Counter[str] = field(default_factory=Counter)
     gaps: int = 0
     gap_max: float = 0.0
+    # samples the stamps say never came (a gap of mu dt: round(mu) - 1 of them), wherever
+    # they were lost: in transport, in a full subscription queue (bursts), at the sensor
+    missed: int = 0
+    # the middleware's count of intensities lost in transport (the node's message_lost
+    # event: a gap in the publisher's sequence, not a queue overflow)
+    messages_lost: int = 0
     mu_current: float = 0.0
     mu_max: float = 0.0
     singular: int = 0
@@ -182,6 +188,10 @@ class AlignmentSession:
         tracking = self.tracking
         if not math.isfinite(z):
             status, reason, message = 'missing', 'non_finite', f'intensity {z} is not finite'
+        elif abs(z) > cfg.state_limit:
+            # no light the aligner can follow (x1 would pass state_limit): not even dark
+            status, reason = 'missing', 'out_of_range'
+            message = f'intensity {z:g} V is beyond state_limit {cfg.state_limit:g} V'
         elif z < 0 and cfg.negative_is_missing:
             status, reason, message = 'missing', 'negative', f'intensity {z:g} V < 0'
         elif cfg.intensity_range and not (
@@ -214,8 +224,9 @@ class AlignmentSession:
             # restart the aligner, so numpy's warnings would only repeat them
             with np.errstate(over='ignore', invalid='ignore'):
                 if self.supervisor is not None and reason == 'negative':
-                    # missing to the tracker, but the dark the detectors need to see
-                    turn = float(self.supervisor.step(t, z, used)[0])
+                    # missing to the tracker (NaN: None would mean z), but the dark the
+                    # detectors need to see
+                    turn = float(self.supervisor.step(t, z, math.nan)[0])
                 else:
                     turn = float(self.aligner.step(t, used)[0])
         except (led.AlignmentError, np.linalg.LinAlgError) as exc:
@@ -293,6 +304,8 @@ class AlignmentSession:
         if changed - set(TUNABLE):
             self.reset('reconfigured')
             return f'aligner restarted ({", ".join(sorted(changed - set(TUNABLE)))} changed)'
+        if self.supervisor is not None:     # its gate, noise (sqrt R_11) and max_step
+            self.supervisor.reconfigure(config.supervisor())
         a = self.tracker
         if isinstance(a, led.ScanningEKF):
             ekf = config.ekf()
@@ -356,6 +369,7 @@ class AlignmentSession:
         st.mu_max = max(st.mu_max, mu)
         if mu > GAP_FACTOR:
             st.gaps += 1
+            st.missed += max(int(round(mu)) - 1, 0)
             st.gap_max = max(st.gap_max, interval)
             if interval > cfg.max_gap:
                 st.gaps_over_bound += 1

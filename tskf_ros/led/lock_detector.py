@@ -108,6 +108,15 @@ class LockDetector:
         self.bands = np.array([nis_band(k, config.nis_alpha, config.gate)
                                for k in range(n + 1)])
 
+    def retune(self, config: LockConfig) -> None:
+        """Take new thresholds (the same window size) in place: the windows are kept."""
+        if config.window != self.config.window:
+            raise AlignmentError('the lock window size changes only by a restart')
+        if config.gate != self.config.gate or config.nis_alpha != self.config.nis_alpha:
+            self.bands = np.array([nis_band(k, config.nis_alpha, config.gate)
+                                   for k in range(config.window + 1)])
+        self.config = config
+
     def reset(self, mask: Mask) -> None:
         """Empty the windows of the runs in mask (after a hand-over or a reset)."""
         self.low[mask] = False

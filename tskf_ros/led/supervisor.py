@@ -137,19 +137,45 @@ class Supervisor:
         return isinstance(self.tracker, ScanningEKF)
 
     def acquire(self, mask: Optional[Mask] = None) -> None:
-        """Force a new search around the current base angle (all runs, or those in mask)."""
+        """
+        Force a new cold search around the current base angle (all runs, or those in mask).
+
+        A run already searching keeps its search's centre: repeated requests restart the
+        sweep there, and cannot walk it away, one leg at a time, from where it began.
+        """
         mask = np.ones(self.runs, dtype=bool) if mask is None else np.asarray(mask, bool)
         old = self.state.copy()
+        center = np.where(self.steering, self.base, self.sweep.center)
         self.state[mask] = ACQUIRING
         self.held[mask] = 0
-        self.sweep.start(mask, self.base, cold=True)
+        self.sweep.start(mask, center, cold=True)
         self.finder.reset(mask)
         self.changed = old != self.state
 
+    def reconfigure(self, config: SupervisorConfig) -> None:
+        """
+        Take new settings in place (the session's gate, noise and max_step: its TUNABLE).
+
+        The state, the sweep and the windows are kept; the NIS band follows the new gate.
+        The sweep's and the detector's settings must be the ones in use (a change of
+        those is a restart).
+        """
+        if (config.scan, config.detector) != (self.config.scan, self.config.detector) \
+                or config.lock.window != self.config.lock.window:
+            raise AlignmentError('the search and the window size change only by a restart')
+        self.config = config
+        self.lock.retune(config.lock)
+
     def correct_last_turn(self, delta: FloatArray) -> None:
-        """Account for a base that turned delta more than the last command (clamped)."""
+        """
+        Account for a base that turned delta more than the last command (clamped).
+
+        A searching run whose turn was cut short (the joint limits) ends its leg there:
+        a leg reaching beyond the limit would never end.
+        """
         delta = np.asarray(delta, dtype=float)
         self.base = self.base + delta
+        self.sweep.end_leg(~self.steering & (delta != 0.0))
         self.tracker.correct_last_turn(delta)
 
     def step(self, stamp: float, z: Measurement,

@@ -115,6 +115,11 @@ ALIGNER_TASK = DiagnosticTask(
      KeyRow(('Samples received', 'Samples received while paused', 'Samples used'),
             'intensities received (paused or not), those received while paused, those '
             'used'),
+     KeyRow(('Samples missed (stamps)',), 'samples the stamps say never came: round(mu) - 1 '
+            'for each gap of mu `dt`, wherever they were lost (in transport, in a full '
+            'subscription queue `queue_depth` under a burst, at the sensor)'),
+     KeyRow(('Messages lost (transport)',), "the middleware's count of intensities lost in "
+            'transport'),
      KeyRow(('Commands', 'Commands clamped', 'Base command (deg)'),
             'base commands sent, those limited by `max_step` or `base_limits`, the last'),
      KeyRow(('Missing (<reason>)',), 'samples treated as missing, by reason: '

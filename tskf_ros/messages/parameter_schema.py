@@ -102,11 +102,16 @@ class ParameterSpec:
         Return value as this parameter's type, or raise ParameterError.
 
         An integer is taken for a double (`-p rate:=5`), integers for a double array, and an
-        empty list for any array; nothing else changes type.
+        empty list for any array; nothing else changes type (a bool is no integer).
         """
         t = self.type_name
         if t == 'double' and type(value) is int:
             return float(value)
+        # Python's bool is an int, and rclpy's type check takes True for an integer: refused
+        if (t == 'int' and isinstance(value, bool)) or (
+                t == 'int_array' and isinstance(value, (list, tuple))
+                and any(isinstance(e, bool) for e in value)):
+            raise ParameterError(f'{self.name} must be {_article(t)}, got {value!r}')
         if t.endswith('_array') and isinstance(value, (list, tuple)):
             value = list(value)
             if t == 'double_array' and all(type(e) in (int, float) for e in value):

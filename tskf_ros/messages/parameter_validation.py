@@ -1,16 +1,38 @@
 """generate_parameter_library's validation functions (bounds<>, one_of<>, ...) and their texts."""
 
 from dataclasses import dataclass
+import math
 from typing import Any, Callable, Sequence
 
 __all__ = ['format_number', 'RANGES', 'Validator', 'VALIDATORS']
 
 
 def format_number(value: Any) -> str:
-    """Return a number as the docs and messages write it (1e-06 -> 1e-6, 3600.0 -> 3600)."""
+    """
+    Return a number as the docs and messages write it (1e-06 -> 1e-6, 3600.0 -> 3600).
+
+    With the fewest significant digits that are the number exactly (1e8, 0.1), so never
+    rounded: 100000001 (not 1e8), 0.1 + 0.2 as 0.30000000000000004.
+    """
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return repr(value) if isinstance(value, str) else str(value)
-    text = f'{value:g}'
+    if isinstance(value, int):
+        try:
+            text = f'{value:g}'
+        except OverflowError:       # beyond a double: every digit
+            return str(value)
+        if float(text) != value:
+            return str(value)
+        return _exponent(text)
+    # the fewest digits that are the number; %g's six where as short (3600, not 3.6e3)
+    if not math.isfinite(value):
+        return str(value)
+    fewest = next(t for t in (f'{value:.{p}g}' for p in range(1, 18)) if float(t) == value)
+    six = f'{value:g}'
+    return _exponent(six if float(six) == value and len(six) <= len(fewest) else fewest)
+
+
+def _exponent(text: str) -> str:
     mantissa, _, exponent = text.partition('e')
     return f'{mantissa}e{int(exponent)}' if exponent else text
 

@@ -3,6 +3,7 @@
 from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from sensor_msgs.msg import Illuminance
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
@@ -33,8 +34,9 @@ class Alignment(ReconfigurableNode):
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
         qos_in = sensor_input_qos(self.config.queue_depth)
-        self.sub = self.create_subscription(Illuminance, INPUT_TOPIC, self._on_intensity,
-                                            qos_in)
+        self.sub = self.create_subscription(
+            Illuminance, INPUT_TOPIC, self._on_intensity, qos_in,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
         # every output (the estimates and the command) is a std_msgs/msg/Float64MultiArray
         self.pubs = {key: self.create_publisher(Float64MultiArray, topic,
                                                 output_qos(self.config, key))
@@ -88,6 +90,10 @@ class Alignment(ReconfigurableNode):
         self._publish(out)
         if self.session.pointing.pending:
             self._report_transitions()
+
+    def _on_lost(self, info: QoSMessageLostInfo) -> None:
+        # the middleware's count of intensities lost in transport (diagnostics: aligner)
+        self.session.stats.messages_lost = info.total_count
 
     def _report_transitions(self) -> None:
         """Log each state transition once (a loss at WARN) and publish it on pat_state."""

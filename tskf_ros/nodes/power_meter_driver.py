@@ -2,9 +2,12 @@
 
 from typing import Callable, Optional
 
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import Illuminance
+from std_srvs.srv import Trigger
 
 from tskf_ros.core.diagnostic_status import KeyValue, Status, WARN
 from tskf_ros.messages import conversions
@@ -20,6 +23,10 @@ from tskf_ros.owc.power_meter import Opener, PowerMeter
 
 SUCCESS, FAILURE, ERROR = (TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE,
                            TransitionCallbackReturn.ERROR)
+# lifecycle_msgs/msg/Transition's ids -> the labels `ros2 lifecycle set` takes
+TRANSITIONS = {getattr(Transition, f'TRANSITION_{name.upper()}'): name for name in (
+    'configure', 'cleanup', 'activate', 'deactivate', 'unconfigured_shutdown',
+    'inactive_shutdown', 'active_shutdown')}
 
 
 def _built_at_configure(config: MeterConfig) -> None:
@@ -68,6 +75,7 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
         self.frequency = interface.readings_frequency(self.config)
         self.start_diagnostics()
         self.start_services()
+        self._guard_change_state()
         if self.config.autostart:       # a backend that cannot load ends the start here
             try:
                 self._bring_up(at_start=True)
@@ -154,6 +162,37 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
         if self.config.autostart:
             self._schedule_recovery()
         return SUCCESS
+
+    def _guard_change_state(self) -> None:
+        """
+        Answer a ~/change_state request that is no transition from the state with a failure.
+
+        rclpy's lifecycle service lets rcl's refusal ("Transition is not registered")
+        escape the executor, which ends the process; rclcpp answers success = false and
+        stays up, and so does this node, with one warning line.  The state machine has not
+        moved when rcl refuses: nothing is undone.
+        """
+        for service in self.services:
+            if service.srv_name.endswith('/change_state'):
+                service.callback = self._change_state_or_refuse(service.callback)
+
+    def _change_state_or_refuse(self, callback: Callable) -> Callable:
+        def change_state(request: ChangeState.Request,
+                         response: ChangeState.Response) -> ChangeState.Response:
+            before = self.state
+            try:
+                return callback(request, response)
+            except RuntimeError as exc:     # rclpy's RCLError
+                if not self.context.ok():
+                    raise
+                t = request.transition
+                name = t.label or TRANSITIONS.get(t.id, f'transition {t.id}')
+                self.get_logger().warning(
+                    f'~/change_state refused: {name} is not a transition from {before} '
+                    f'({str(exc).split(",")[0]})')
+                response.success = False
+                return response
+        return change_state
 
     # -- autostart ---------------------------------------------------------------------------
 
@@ -254,6 +293,16 @@ class PowerMeterDriver(ReconfigurableNode, LifecycleNode):
         if self.session is None:
             return 'applied at the next configure'
         return self.session.reconfigure(config.session)
+
+    def _on_reset(self, request: Trigger.Request,
+                  response: Trigger.Response) -> Trigger.Response:
+        if self.session is None or self.state not in ('inactive', 'active'):
+            response.success = False
+            response.message = (f'no session to restart: the driver is {self.state} '
+                                '(configure it first)')
+            self.get_logger().warning(f'~/reset refused: {response.message}')
+            return response
+        return super()._on_reset(request, response)
 
     def restart(self, why: str, reason: str = 'service') -> None:
         """Close the connection and reconnect at the next poll."""

@@ -85,8 +85,7 @@ class TimescaleEstimator(ReconfigurableNode):
         self.outputs = OutcomeMessages(config)
         message = self.session.reconfigure(config.session).message
         if self.lagged is not None:     # the window of the old model ends here
-            self._publish_smoothed(self.lagged.flush())
-            self.lagged = LaggedEstimates(self.smoothing_lag, config.session)
+            self._publish_smoothed(self.lagged.reconfigure(config.session))
         return message
 
     # -- data -----------------------------------------------------------------------------

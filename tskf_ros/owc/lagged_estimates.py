@@ -91,6 +91,20 @@ class LaggedEstimates:
                 done.append(self._estimate(got, 0))
         return done
 
+    def reconfigure(self, config: EstimatorConfig) -> list[LaggedEstimate]:
+        """
+        Take a new model (a run-time parameter change): return the window's points, flushed.
+
+        The next window starts empty on the new model; the stamps output still only
+        increase (a late sample re-run across the change outputs nothing already out).
+        """
+        done = self.flush()
+        last = self.last_ns
+        self.kf = config.model.make_filter(config.transition)
+        self._restart()
+        self.last_ns = last
+        return done
+
     def flush(self) -> list[LaggedEstimate]:
         """Return the window's points not yet output, smoothed on what it holds."""
         first = self.added - len(self.steps)        # the number of the window's oldest

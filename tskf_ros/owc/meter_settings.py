@@ -2,6 +2,7 @@
 
 from dataclasses import dataclass, field, fields
 import math
+import re
 import string
 import sys
 from typing import Optional
@@ -14,6 +15,11 @@ DBM = 'DBM'
 UNITS = {'W': 'W', 'mW': 'MW', 'dBm': DBM}      # the unit parameter -> its SCPI word
 # SCPI's overflow (+-9.9E37) and not-a-number (9.91E37) sentinels
 SCPI_OVERFLOW = 9.9e37
+# a reply's number: SCPI's decimal numeric data (NR1, NR2, NR3: 12, 1.5, -2.480400E-01),
+# and the words NAN and INF some meters send (refused later as not finite); Python's float
+# takes more (1_0, 0x1p-3 as float.fromhex, Unicode digits), which no meter means
+SCPI_NUMBER = re.compile(r'[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?'
+                         r'|[+-]?(?:nan|inf|infinity)', re.ASCII | re.IGNORECASE)
 # why a reading was not published; 'no_clock': the stamping clock read 0 (a node on
 # use_sim_time before /clock arrives), a stamp the estimator would reject
 # 'negative' includes -0.0 in W (a sign the meter gave); 'underflow': a positive reading so
@@ -160,7 +166,7 @@ def to_milliwatts(reply: str, unit: Optional[str], max_power: float
     if len(parts) == 2:
         unit = parse_unit(parts[1])
     try:
-        if not 1 <= len(parts) <= 2:
+        if not 1 <= len(parts) <= 2 or not SCPI_NUMBER.fullmatch(parts[0]):
             raise ValueError(reply)
         value = float(parts[0])
     except ValueError:

@@ -1,6 +1,7 @@
 """The demo's client for the LED alignment loop: collect the truth, commands and diagnostics."""
 
 from dataclasses import dataclass, field
+import threading
 from typing import Callable, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -68,24 +69,36 @@ class AlignmentMonitor(Node):
 
 
 def monitor(samples: int, *, namespace: str, timeout: float, on_ready: Callable[[], None],
-            discovery_timeout: float = 30.0) -> AlignmentRecord:
-    """Collect the loop in its own context: call on_ready() once the alignment node is seen."""
+            discovery_timeout: float = 30.0,
+            stop: Optional[threading.Event] = None) -> AlignmentRecord:
+    """
+    Collect the loop in its own context: call on_ready() once the alignment node is seen.
+
+    stop (set from another thread: the demo's Ctrl-C) ends every wait at once and returns
+    what was collected, so that the thread ends before the process does.
+    """
+    stop = stop or threading.Event()
     context = Context()
     rclpy.init(context=context)
     executor = SingleThreadedExecutor(context=context)
     node = AlignmentMonitor(context=context, namespace=namespace)
     executor.add_node(node)
     try:
-        if not spin_until(executor, node.peers_ready, discovery_timeout):
+        if not spin_until(executor, lambda: stop.is_set() or node.peers_ready(),
+                          discovery_timeout):
             raise TimeoutError('the alignment process was not discovered')
+        if stop.is_set():
+            return node.record
         on_ready()
-        if not spin_until(executor, lambda: len(node.record.phi) >= samples, timeout):
+        if not spin_until(executor, lambda: stop.is_set() or len(node.record.phi) >= samples,
+                          timeout):
             raise TimeoutError(f'the alignment loop did not finish {samples} samples in '
                                f'{timeout} s (saw {len(node.record.phi)})')
         # the answer to the last sample, and a diagnostics report after it
-        spin_until(executor, lambda: node.record.commands >= len(node.record.intensity)
-                   and node.record.diagnostics.get('Samples received') == str(
-                       len(node.record.intensity)), 3.0)
+        spin_until(executor, lambda: stop.is_set() or (
+            node.record.commands >= len(node.record.intensity)
+            and node.record.diagnostics.get('Samples received') == str(
+                len(node.record.intensity))), 3.0)
         return node.record
     finally:
         executor.shutdown()
