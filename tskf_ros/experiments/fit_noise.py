@@ -188,6 +188,11 @@ def main(argv: Optional[list] = None) -> int:
     with Interrupts() as interrupts:
         try:
             return _run(args, outputs, interrupts)
+        except Exception:  # noqa: B902 - after a Ctrl-C, what a library made of it
+            if not interrupts.seen:     # (numba's dispatcher: a SystemError)
+                raise
+            print(f'{PROG}: interrupted; nothing written', file=sys.stderr)
+            return EXIT_INTERRUPTED
         except KeyboardInterrupt:
             print(f'{PROG}: interrupted; nothing written', file=sys.stderr)
             return EXIT_INTERRUPTED
