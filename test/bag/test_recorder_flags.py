@@ -279,8 +279,8 @@ def test_regex_exclusions_and_qos_overrides_decide_what_is_subscribed(
     ['/typed:sensor_msgs/msg/Illuminance'],
     ['/typed:sensor_msgs/msg/Illuminance', '/named'],
 ])
-def test_topics_of_the_name_type_form_are_the_only_ones_recorded(ros_context, tmp_path,
-                                                                  topics):
+def test_topics_of_the_name_type_form_are_the_only_ones_recorded(
+        ros_context, tmp_path, topics):
     # NAME:TYPE is a topic asked for, as NAME is: another topic of the graph is not recorded
     source = rclpy.create_node('typed_source', context=ros_context)
     for name in ('/typed', '/named', '/other'):

@@ -122,7 +122,7 @@ class _SigintSeen:
         sys.unraisablehook = self._unraisable
 
     def came(self, flag: SigintFlag) -> bool:
-        """Tell whether a SIGINT came (the wakeup pipe or the flag)."""
+        """Say whether a SIGINT has come: a byte in the wakeup pipe, or the flag set."""
         try:
             while data := os.read(self.read_fd, 512):
                 self.seen = self.seen or signal.SIGINT in data
