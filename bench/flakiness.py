@@ -147,9 +147,9 @@ def main(argv=None):
                     print('    ' + tail.replace('\n', '\n    '), flush=True)
     finally:
         stop_load(load)
-    print(f'\n{passed}/{opts.runs} runs passed under '
-          f'{"load" if load else "no load"} (run time {min(times):.0f}-{max(times):.0f} s)'
-          if times else 'no runs')
+    where = f'{len(load)} busy loops' if load else "the machine's own load"
+    print(f'\n{passed}/{opts.runs} runs passed under {where} (run time {min(times):.0f}-'
+          f'{max(times):.0f} s)' if times else 'no runs')
     for test_id, count in failures.most_common():
         print(f'  {count}x {test_id}')
     return 0 if passed == opts.runs else 1
