@@ -275,6 +275,36 @@ def test_regex_exclusions_and_qos_overrides_decide_what_is_subscribed(
         rec.destroy_node()
 
 
+@pytest.mark.parametrize('topics', [
+    ['/typed:sensor_msgs/msg/Illuminance'],
+    ['/typed:sensor_msgs/msg/Illuminance', '/named'],
+])
+def test_topics_of_the_name_type_form_are_the_only_ones_recorded(
+        ros_context, tmp_path, topics):
+    # NAME:TYPE is a topic asked for, as NAME is: another topic of the graph is not recorded
+    source = rclpy.create_node('typed_source', context=ros_context)
+    for name in ('/typed', '/named', '/other'):
+        source.create_publisher(Illuminance, name, RELIABLE)
+    rec = recorder.Recorder(tmp_path / 'r', context=ros_context,
+                            **parsed('--topics', *topics, '-p', '20'))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(rec)
+    executor.add_node(source)
+    wanted = {t.partition(':')[0] for t in topics}
+    try:
+        # once the recorder has seen /other in the graph, it has had its chance to take it
+        wait_for(executor, lambda: '/other' in dict(rec.get_topic_names_and_types())
+                 and wanted <= set(rec.subs),
+                 lambda: f'the graph and the subscriptions (has {sorted(rec.subs)})', TIMEOUT)
+        rec.discover()
+        assert set(rec.subs) == wanted
+        assert not rec.wanted('/other')
+    finally:
+        executor.shutdown()
+        rec.destroy_node()
+        source.destroy_node()
+
+
 @pytest.mark.parametrize('text, error', [
     ('/x:\n  reliability: sometimes\n', "/x: reliability 'sometimes' is not one of"),
     ('/x:\n  speed: 3\n', "/x: unexpected key 'speed' for a QoS profile"),

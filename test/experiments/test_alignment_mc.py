@@ -89,6 +89,18 @@ def test_a_blocked_beam_is_lost_by_every_run_and_recorded(noise, tmp_path, capsy
     assert got['lost_at_end'] == [0.0]
 
 
+@pytest.mark.parametrize('blocked', ['50,60', '20,21'])
+def test_a_blocked_interval_outside_the_run_is_refused(blocked, capsys):
+    # 400 steps of 0.05 s: the run is 0 to 20 s; a block from 20 s on never happens
+    with pytest.raises(SystemExit) as info:
+        alignment_mc.main(['--runs', '2', '--steps', '400', '--dt', '0.05',
+                           '--blocked', blocked])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.endswith(f'--blocked {blocked}: the blocked interval lies outside the run '
+                        '(400 steps of 0.05 s: 0 to 20 s)'), err
+
+
 @pytest.mark.parametrize('blocked', ['5', '8,5', '1,2,3'])
 def test_a_blocked_interval_needs_start_before_stop(blocked, capsys):
     with pytest.raises(SystemExit) as exc:

@@ -328,6 +328,37 @@ def test_ctrl_c_while_reading_is_an_interrupt_not_damage(sim, tmp_path, capsys, 
     assert signal.getsignal(signal.SIGINT) is handler
 
 
+@pytest.mark.parametrize('swallowed', ['swallowed', 'system_error'])
+def test_ctrl_c_in_the_compiled_kernels_ends_the_fit_at_once(sim, tmp_path, capsys,
+                                                             monkeypatch, swallowed):
+    # numba's dispatcher (C) may drop the KeyboardInterrupt of a Ctrl-C that lands in
+    # the Python it calls, or return it as a SystemError: the fit ends at the next
+    # evaluation, with the one line, not minutes later or with a traceback
+    import signal
+    from tskf_ros.core import noise_fit
+    d = sim[0]
+    real, calls = noise_fit.negative_log_likelihood, []
+
+    def interrupted_inside(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            try:
+                signal.raise_signal(signal.SIGINT)
+            except KeyboardInterrupt:
+                if swallowed == 'system_error':
+                    raise SystemError('CPUDispatcher(<function update_predict>) returned '
+                                      'a result with an exception set') from None
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(noise_fit, 'negative_log_likelihood', interrupted_inside)
+    out = tmp_path / 'o'
+    rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                         '--out', str(out / 'f.yaml'), '--json', str(out / 'f.json')])
+    assert rc == 130 and len(calls) == 3
+    one_line(capsys.readouterr().err, '', 'interrupted', 'nothing written')
+    assert not out.exists()
+
+
 def test_ctrl_c_while_writing_writes_nothing(sim, tmp_path, capsys, monkeypatch):
     d = sim[0]
     import tskf_ros.experiments.output as output

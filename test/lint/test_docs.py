@@ -213,3 +213,51 @@ def test_no_page_mentions_issues():
              for path, text in documentation().items()
              for number, line in enumerate(text.splitlines(), 1) if ISSUE.search(line)]
     assert not found, 'user-facing text mentions issues:\n' + '\n'.join(found)
+
+
+def markdown_pages() -> dict:
+    """Return {path: text} of the documentation's markdown sources and the README."""
+    pages = {path: path.read_text() for path in sorted(DOC.rglob('*.md'))
+             if '_build' not in path.parts and 'figures' not in path.parts}
+    pages[REPO_ROOT / 'README.md'] = (REPO_ROOT / 'README.md').read_text()
+    return pages
+
+
+def test_no_line_of_a_paragraph_starts_a_block_quote_by_accident():
+    # markdown: a paragraph's line that begins with '>' (say '> 0)' after a line break)
+    # starts a block quote in the middle of the sentence
+    found = []
+    for path, text in markdown_pages().items():
+        previous, fenced = '', False
+        for number, line in enumerate(text.splitlines(), 1):
+            if line.lstrip().startswith(('```', '~~~')):
+                fenced = not fenced
+            elif not fenced and line.startswith('>') and previous.strip() \
+                    and not previous.startswith('>'):
+                found.append(f'{path.relative_to(REPO_ROOT)}:{number}: {line}')
+            previous = line
+    assert not found, 'a line starts a block quote inside a paragraph:\n' + '\n'.join(found)
+
+
+def toctree_entries(text: str) -> list:
+    """Return the entries (document names) of every toctree of a page."""
+    entries = []
+    for block in re.findall(r'```\{toctree\}\n(.*?)```', text, re.DOTALL):
+        entries += [line.strip() for line in block.splitlines()
+                    if line.strip() and not line.startswith(':')]
+    return entries
+
+
+def test_no_draft_is_in_the_navigation():
+    # a draft design note is an orphan page (built, linked, not in the navigation); every
+    # other page of doc/design/ is in the navigation
+    listed = set(toctree_entries((DOC / 'index.md').read_text()))
+    assert not any('*' in entry for entry in listed), 'a glob would list the drafts'
+    for path in sorted((DOC / 'design').glob('*.md')):
+        text = path.read_text()
+        draft = '(draft)' in next(line for line in text.splitlines() if line.startswith('# '))
+        name = f'design/{path.stem}'
+        if draft:
+            assert name not in listed and text.startswith('---\norphan: true\n---\n'), name
+        else:
+            assert name in listed, f'{name} is in no toctree'

@@ -20,6 +20,7 @@ import signal
 import subprocess
 import sys
 import time
+import weakref
 
 from bag.helpers import make_bag, TIMEOUT
 from entry_points import console_script_targets
@@ -212,6 +213,98 @@ def test_an_error_after_a_ctrl_c_is_the_interrupt(tmp_path, monkeypatch, interru
         # the same error with no Ctrl-C is a real error: it is raised
         with pytest.raises(ImportError, match='PyCapsule_Import'):
             console.run('fake')
+
+
+def test_an_error_after_a_ctrl_c_taken_by_the_tools_own_handler_is_the_interrupt(
+        capsys, sigint_restored):
+    # the tool's own SIGINT handler replaces the wrapper's (fit_noise's reader does), and a
+    # library turns the KeyboardInterrupt into another error (numba's dispatcher: a
+    # SystemError "returned a result with an exception set"): still exit 130, nothing said
+    def main() -> int:
+        def own(signum, frame):
+            raise KeyboardInterrupt
+        previous = signal.signal(signal.SIGINT, own)
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except KeyboardInterrupt:
+            raise SystemError('CPUDispatcher(<function update_predict>) returned a result '
+                              'with an exception set') from None
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        return 0
+    with pytest.raises(SystemExit) as exit_:
+        console.run_as_main(main)
+    assert exit_.value.code == INTERRUPTED and capsys.readouterr().err == ''
+
+
+def test_the_same_error_with_no_ctrl_c_is_raised(sigint_restored):
+    def main() -> int:
+        raise SystemError('a real bug')
+    with pytest.raises(SystemError, match='a real bug'):
+        console.run_as_main(main)
+
+
+def test_a_ctrl_c_swallowed_by_a_weakref_callback_is_delivered_again(capsys, sigint_restored):
+    # a Ctrl-C that lands in a weakref callback (importlib's _get_module_lock.<locals>.cb
+    # while modules load) is only reported by Python ("Exception ignored in ...") and lost:
+    # the wrapper drops the report and interrupts the tool again, which then ends with 130
+    ended = []
+
+    def main() -> int:
+        class Thing:
+            pass
+        thing = Thing()
+        ref = weakref.ref(thing, lambda _: signal.raise_signal(signal.SIGINT))
+        del thing                                   # the callback runs: SIGINT inside it
+        assert ref() is None
+        deadline = time.monotonic() + TIMEOUT
+        while time.monotonic() < deadline:          # until the interrupt comes again
+            pass
+        ended.append('the interrupt never came again')
+        return 0
+    with pytest.raises(SystemExit) as exit_:
+        console.run_as_main(main)
+    assert exit_.value.code == INTERRUPTED and ended == []
+    assert capsys.readouterr().err == ''
+
+
+def test_the_wrapper_gives_the_wakeup_fd_and_the_unraisable_hook_back(sigint_restored):
+    hook = sys.unraisablehook
+    with pytest.raises(SystemExit):
+        console.run_as_main(lambda: 0)
+    assert sys.unraisablehook is hook
+    assert signal.set_wakeup_fd(-1) == -1           # none was set before: none is now
+
+
+NUMBA_TOOL = """
+import sys
+from pathlib import Path
+import numpy as np
+from tskf_ros.bag.progress import Interrupts
+from tskf_ros.core import kalman
+
+def main():
+    x, P, d, Bu = np.zeros(2), np.eye(2), np.zeros(1), np.zeros(2)
+    F, Q, H, R = np.eye(2), np.eye(2), np.ones((1, 2)), np.eye(1)
+    with Interrupts():                              # its own handler, as fit_noise's
+        kalman.warm_up()
+        Path(sys.argv[1]).write_text('running')
+        while True:                                 # the compiled kernels, until Ctrl-C
+            kalman.update_predict(x, P, np.zeros(1), H, R, d, F, Q, Bu)
+"""
+
+
+def test_ctrl_c_while_the_compiled_kernels_run_under_the_tools_own_handler(tmp_path):
+    (tmp_path / 'numba_tool.py').write_text(NUMBA_TOOL)
+    ready, err = tmp_path / 'ready', tmp_path / 'numba_tool.err'
+    code = ('import sys; sys.path.insert(0, sys.argv[2]); from tskf_ros.tools import console; '
+            "console.TOOLS['numba_tool'] = 'numba_tool:main'; console.run('numba_tool')")
+    with open(err, 'w') as f:
+        proc = subprocess.Popen([sys.executable, '-c', code, str(ready), str(tmp_path)],
+                                cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=f)
+    assert wait_for(ready.exists, proc), err.read_text()
+    code, text = interrupt(proc, err)
+    assert code == INTERRUPTED and text == '', (code, text)
 
 
 def main_blocks() -> dict:

@@ -297,3 +297,14 @@ def test_a_port_in_use_is_one_line_and_exit_1(ros_context, capsys):
             and '\n' not in err, err
     finally:
         first.destroy_node()
+
+
+@pytest.mark.parametrize('depth', [0, 100_001, 4611686018427387904, 2 ** 63 - 1])
+def test_a_depth_out_of_range_is_one_line_and_exit_1(depth, capsys):
+    # refused at start, not when the first topic is served (rmw's QoS takes no 2**62)
+    with pytest.raises(SystemExit) as info:
+        main(['foxglove_bridge', '--ros-args', '-p', f'depth:={depth}', '-p', 'port:=0'])
+    assert info.value.code == 1
+    err = capsys.readouterr().err.strip()
+    assert err == ('foxglove_bridge: cannot start: port must be in 0..65535 and depth in '
+                   f'1..100000, got port 0, depth {depth}'), err

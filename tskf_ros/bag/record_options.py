@@ -153,7 +153,8 @@ def recorder_options(opts: argparse.Namespace) -> dict:
     if opts.storage != STORAGE_ID:
         raise OptionError(f'--storage {opts.storage}: this recorder writes mcap only')
     names, types = parse_topics(opts.topics)
-    topic_filter = TopicFilter(topics=[] if opts.all else names,
+    # a NAME:TYPE topic is one of those asked for, as a bare NAME is
+    topic_filter = TopicFilter(topics=[] if opts.all else names + list(types),
                                regex=None if opts.all else compile_regex('--regex', opts.regex),
                                exclude_topics=parse_topics(opts.exclude_topics)[0],
                                exclude_regex=compile_regex('--exclude-regex',

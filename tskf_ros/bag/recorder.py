@@ -84,7 +84,7 @@ class Recorder(Node):
         self.everything = topics is None and topic_filter is None
         self.filter = topic_filter if topic_filter is not None else TopicFilter(
             topics=list(topics or []) + list(types or {}))
-        self.named = set(self.filter.topics)
+        self.named = set(self.filter.topics) | set(types or {})
         self.qos_overrides = dict(qos_overrides or {})
         self.sim_time = self.get_parameter('use_sim_time').value
         self.before_clock = 0           # messages not written: no /clock yet (sim time)

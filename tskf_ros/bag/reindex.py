@@ -12,6 +12,7 @@ from tskf_ros.bag.bag_metadata import file_metadata, merge_metadata, write_yaml
 from tskf_ros.bag.mcap_file import scan_mcap, seal_mcap
 from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.reader import MCAP_MAGIC
+from tskf_ros.bag.split_bag import adopt_split_files, RESERVE
 
 import yaml
 
@@ -23,8 +24,10 @@ EPILOG = """examples:
 A file that was never closed is cut after its last whole record and sealed (DataEnd with
 the data section's CRC, Footer, magic); nothing readable is dropped.  A bag of several
 files (NAME_0.mcap, NAME_1.mcap, ..., as rosbag2 names them) gets one metadata.yaml that
-lists them in that order.  Exit status: 0 done; 1 nothing to reindex; 2 usage; 3 a file is
-damaged before its end (metadata.yaml lists the messages up to the damage)."""
+lists them in that order; in the .partial directory of a split recording, the file that
+was being written when it stopped (in a directory of its own) is taken in too.  Exit
+status: 0 done; 1 nothing to reindex; 2 usage; 3 a file is damaged before its end
+(metadata.yaml lists the messages up to the damage)."""
 PARTIAL = re.compile(r'^\.(?P<name>.+)\.partial-[^/]+$')
 # a file of a bag of several, as rosbag2's reindexer matches them: NAME_<n>.<ext>
 NUMBERED = re.compile(r'.+_(\d+)\.mcap')
@@ -94,6 +97,9 @@ def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optio
     bagdir, target = locate(Path(path))
     if output is not None:
         target = Path(output)
+    if PARTIAL.match(bagdir.parent.name):
+        # a split recording: the file in progress may still be in a directory of its own
+        adopt_split_files(bagdir.parent, bagdir)
     files = mcap_files(bagdir)
     same = resolved(target) == resolved(bagdir)
     if output is not None and not same:
@@ -126,6 +132,7 @@ def reindex(path: Path, output: Optional[Path] = None) -> tuple[Path, int, Optio
         os.replace(bagdir, target)
         partial = bagdir.parent
         if PARTIAL.match(partial.name):
+            (partial / RESERVE).unlink(missing_ok=True)     # the recorder's spare room
             try:
                 partial.rmdir()     # only if empty: nothing else is ever deleted
             except OSError:

@@ -2,13 +2,15 @@
 
 import os
 from pathlib import Path
+import re
 import shutil
 import tempfile
 from typing import Optional, Sequence, Union
 
 from rosbags.interfaces import Qos
 
-from tskf_ros.bag.bag_metadata import merge_metadata, write_yaml
+from tskf_ros.bag.bag_metadata import file_metadata, merge_metadata, write_yaml
+from tskf_ros.bag.mcap_file import scan_mcap, seal_mcap
 from tskf_ros.bag.reader import BagError
 from tskf_ros.bag.writer import BagWriteError, BagWriter, check_replaceable, CHUNK_SIZE
 
@@ -18,6 +20,49 @@ PathLike = Union[str, os.PathLike]
 # bytes of an MCAP Message record besides its payload: opcode 1, length 8, channel 2,
 # sequence 4, log time 8, publish time 8
 MESSAGE_RECORD_OVERHEAD = 31
+# disk space held back while recording (a file of zeros in the hidden directory) and given
+# back before the bag is finished: when the disk fills, the last file's summary and the
+# metadata still fit (the summary of 1000 chunks is about 100 kB)
+RESERVE = '.reserve'
+RESERVE_BYTES = 1 << 20
+# the file of a split bag that a failed split left in the hidden directory: the file being
+# finished (BagWriter's own hidden directory) or finished but not yet moved into the bag
+_NUMBERED_PART = re.compile(r'^(?:\.(?P<hidden>.+_\d+)\.partial-[^/]+|(?P<done>.+_\d+))$')
+
+
+def adopt_split_files(partial: Path, bagdir: Path) -> list[Path]:
+    """
+    Move into bagdir the files of a split bag left beside it in its hidden directory.
+
+    A split bag is written in partial (`.NAME.partial-XXXX`) as the bag directory NAME and,
+    for the file in progress, a bag NAME_<n> of its own (in BagWriter's hidden
+    `.NAME_<n>.partial-YYYY`, then moved beside NAME once closed, then its file moved into
+    NAME).  A crash or a full disk between these steps leaves NAME_<n>.mcap in one of them;
+    this moves each such file into bagdir (never over a file there) and removes the
+    directories it leaves empty (their metadata.yaml of the one file too).  Returns the
+    files moved, in the order of n.
+    """
+    moved = []
+    for entry in sorted(partial.iterdir()) if partial.is_dir() else []:
+        match = _NUMBERED_PART.match(entry.name)
+        name = match and (match['hidden'] or match['done'])
+        if not name or not entry.is_dir() or entry == bagdir \
+                or not re.fullmatch(rf'{re.escape(bagdir.name)}_\d+', name):
+            continue
+        inner = entry / name if match['hidden'] else entry
+        source, target = inner / f'{name}.mcap', bagdir / f'{name}.mcap'
+        if not source.is_file() or target.exists():
+            continue
+        os.replace(source, target)
+        moved.append(target)
+        for leftover in (inner / 'metadata.yaml', inner / '.metadata.yaml.tmp'):
+            leftover.unlink(missing_ok=True)
+        for folder in (inner, entry):
+            try:
+                folder.rmdir()          # only if empty: nothing else is deleted
+            except OSError:
+                pass
+    return sorted(moved, key=lambda p: int(p.stem.rpartition('_')[2]))
 
 
 class SplitBagWriter:
@@ -67,7 +112,23 @@ class SplitBagWriter:
             self.abort()
             raise BagWriteError(f'{self.path}: cannot create the bag: '
                                 f'{exc.strerror or exc}') from None
+        self._hold_reserve()
         self._start_file()
+
+    def _hold_reserve(self) -> None:
+        """Hold RESERVE_BYTES of the disk back (not on a disk too full for it already)."""
+        try:
+            fd = os.open(self._tmp / RESERVE, os.O_WRONLY | os.O_CREAT, 0o600)
+            try:
+                os.posix_fallocate(fd, 0, RESERVE_BYTES)
+            finally:
+                os.close(fd)
+        except OSError:
+            (self._tmp / RESERVE).unlink(missing_ok=True)
+
+    def _release_reserve(self) -> None:
+        if self._tmp is not None:
+            (self._tmp / RESERVE).unlink(missing_ok=True)
 
     def _start_file(self) -> None:
         name = f'{self.path.name}_{len(self.files)}'
@@ -89,7 +150,14 @@ class SplitBagWriter:
     def _finish_file(self) -> None:
         """Close the current file, move it into the bag, rewrite metadata.yaml."""
         writer, self._current = self._current, None
-        done = writer.close()                   # a bag directory <name>_i with one file
+        try:
+            done = writer.close()               # a bag directory <name>_i with one file
+        except BagWriteError as exc:            # its file is left for close() to take in
+            if writer.error is not None:
+                raise self._outer(writer.error) from None
+            cause = re.search(r'could not finish the bag \((.*?)\); ', str(exc))
+            raise BagWriteError(f'{self.path}: could not finish {writer.path.name} when '
+                                f'splitting ({cause[1] if cause else exc})') from None
         if writer.error is not None and self.error is None:
             self.error = writer.error
         info = yaml.safe_load((done / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
@@ -99,6 +167,12 @@ class SplitBagWriter:
         shutil.rmtree(done)
         self._infos.append(info)
         self._write_metadata()
+
+    def _outer(self, exc: BagWriteError) -> BagWriteError:
+        """Return a file's error said of the bag (the file's hidden path tells a user nothing)."""
+        if not str(exc).startswith(str(self._tmp)):
+            return exc
+        return type(exc)(f'{self.path}: {str(exc).split(": ", 1)[-1]}')
 
     def _write_metadata(self) -> None:
         data = dict(self.custom_data)
@@ -147,8 +221,8 @@ class SplitBagWriter:
             self._current.write(topic, t, data)
         except BagWriteError as exc:
             if self.error is None:
-                self.error = exc
-            raise
+                self.error = self._outer(exc)
+            raise self.error from None
         except (OSError, BagError) as exc:
             self.error = BagWriteError(f'{self.path}: could not split the bag ({exc})')
             raise self.error from None
@@ -163,8 +237,8 @@ class SplitBagWriter:
             try:
                 self._current.flush()
             except BagWriteError as exc:
-                self.error = exc
-                raise
+                self.error = self._outer(exc)
+                raise self.error from None
 
     def close(self) -> Path:
         """
@@ -175,10 +249,15 @@ class SplitBagWriter:
         """
         if self._tmp is None:
             return self.path
+        self._release_reserve()             # the room to finish in, on a full disk
         try:
             if self._current is not None:
-                self._finish_file()
-            elif not self._infos:
+                try:
+                    self._finish_file()
+                except BagWriteError as exc:    # kept in the hidden directory: adopted
+                    self.error = self.error or exc
+            self._adopt_leftovers()
+            if not self._infos:
                 raise BagWriteError('no file was written')
             self._write_metadata()
             if self.error is not None:
@@ -196,6 +275,15 @@ class SplitBagWriter:
                                 f'written is in {keep}') from None
         self._tmp = None
         return self.path
+
+    def _adopt_leftovers(self) -> None:
+        """Take into the bag the file that a failed split or close left (sealed)."""
+        from tskf_ros.bag.reindex import is_closed     # reindex imports this module
+        for mcap in adopt_split_files(self._tmp, self.bagdir):
+            if not is_closed(mcap):
+                seal_mcap(mcap)
+            self.files.append(mcap.name)
+            self._infos.append(file_metadata(mcap, stats=scan_mcap(mcap)))
 
     def abort(self) -> None:
         """Delete everything written (nothing is left under the final name)."""

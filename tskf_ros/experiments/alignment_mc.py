@@ -291,6 +291,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.blocked and not (len(args.blocked) == 2 and args.blocked[0] < args.blocked[1]):
         parser().error(f'--blocked needs START,STOP in s with START < STOP, '
                        f'got {args.blocked}')
+    if args.blocked and args.blocked[0] >= args.steps * args.dt:
+        parser().error(f'--blocked {args.blocked[0]:g},{args.blocked[1]:g}: the blocked '
+                       f'interval lies outside the run ({args.steps} steps of {args.dt:g} s: '
+                       f'0 to {args.steps * args.dt:g} s)')
     names = args.algorithms or (led.ALGORITHMS + PAT_ALGORITHMS if args.controller == 'p'
                                 else led.ALGORITHMS)
     unknown = set(names) - set(led.ALGORITHMS + PAT_ALGORITHMS)

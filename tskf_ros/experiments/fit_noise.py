@@ -188,6 +188,11 @@ def main(argv: Optional[list] = None) -> int:
     with Interrupts() as interrupts:
         try:
             return _run(args, outputs, interrupts)
+        except Exception:  # noqa: B902 - after a Ctrl-C, what a library made of it
+            if not interrupts.seen:     # (numba's dispatcher: a SystemError)
+                raise
+            print(f'{PROG}: interrupted; nothing written', file=sys.stderr)
+            return EXIT_INTERRUPTED
         except KeyboardInterrupt:
             print(f'{PROG}: interrupted; nothing written', file=sys.stderr)
             return EXIT_INTERRUPTED
@@ -208,6 +213,9 @@ def _run(args: argparse.Namespace, outputs: list, interrupts: Interrupts) -> int
         bar = progress.bar(None, 'fitting Q, R', 'eval', show)
 
         def improved(evaluations: int, log_likelihood: float) -> None:
+            # after each evaluation: a Ctrl-C that C code swallowed (numba's dispatcher,
+            # numpy) ends the fit here instead of after it
+            interrupts.check()
             bar.update(1)
             bar.set_postfix_str(f'log L {log_likelihood:.4f}', refresh=False)
         try:

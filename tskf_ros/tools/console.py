@@ -1,11 +1,13 @@
 """The console scripts' and `python -m` entry: run a tool, end quietly (exit 130) on Ctrl-C."""
 
+import _thread
 import importlib
+import os
 import signal
 import sys
 import threading
 from types import FrameType
-from typing import Callable, NoReturn, Optional
+from typing import Any, Callable, NoReturn, Optional
 
 from tskf_ros.bag.bag_errors import EXIT_INTERRUPTED
 
@@ -90,19 +92,76 @@ class SigintFlag:
             signal.signal(signal.SIGINT, self.previous)
 
 
+class _SigintSeen:
+    """
+    Notice every SIGINT of the process, whichever Python handler takes it.
+
+    A tool may install its own SIGINT handler over the wrapper's (fit_noise's reader,
+    sweep's Dask loop) and a library may turn the KeyboardInterrupt into another error
+    (numba's dispatcher: "SystemError: CPUDispatcher(...) returned a result with an
+    exception set"), so the wrapper's own flag may never be set.  Python's C-level handler
+    writes the number of every signal that has a Python handler into the wakeup fd
+    (signal.set_wakeup_fd), whoever's Python handler then runs: a pipe read once the tool
+    has ended tells whether a SIGINT came.  A library that takes the wakeup fd for itself
+    leaves the flag of SigintFlag as the only witness.
+
+    A KeyboardInterrupt raised where Python can only report it (a weakref callback, such
+    as importlib's `_get_module_lock.<locals>.cb` while modules load: "Exception ignored
+    in ...") is swallowed by the interpreter and the Ctrl-C lost; the unraisable hook
+    installed here drops that report and delivers the interrupt again, from a helper
+    thread (`_thread.interrupt_main`), so that it lands once the callback has returned.
+    """
+
+    def __init__(self) -> None:
+        self.read_fd, self.write_fd = os.pipe()
+        os.set_blocking(self.read_fd, False)
+        os.set_blocking(self.write_fd, False)
+        self.seen = False
+        self.previous_fd = signal.set_wakeup_fd(self.write_fd, warn_on_full_buffer=False)
+        self.previous_hook = sys.unraisablehook
+        sys.unraisablehook = self._unraisable
+
+    def came(self, flag: SigintFlag) -> bool:
+        """Say whether a SIGINT has come: a byte in the wakeup pipe, or the flag set."""
+        try:
+            while data := os.read(self.read_fd, 512):
+                self.seen = self.seen or signal.SIGINT in data
+        except (BlockingIOError, OSError):
+            pass
+        return self.seen or flag.is_set()
+
+    def _unraisable(self, unraisable: Any) -> None:
+        if issubclass(unraisable.exc_type, KeyboardInterrupt):
+            _thread.start_new_thread(_thread.interrupt_main, ())
+            return
+        self.previous_hook(unraisable)
+
+    def close(self) -> None:
+        """Give the wakeup fd and the unraisable hook back; close the pipe."""
+        current = signal.set_wakeup_fd(self.previous_fd)
+        if current != self.write_fd:                # a library's own: it keeps it
+            signal.set_wakeup_fd(current)
+        sys.unraisablehook = self.previous_hook
+        os.close(self.read_fd)
+        os.close(self.write_fd)
+
+
 def _quietly(entry: Callable[[], object], tool: str) -> NoReturn:
     interrupted = SigintFlag()
+    seen = _SigintSeen() if interrupted.main else None
     try:
         status = entry()
     except KeyboardInterrupt:
         status = EXIT_INTERRUPTED
     except Exception as exc:  # noqa: B902 - after a Ctrl-C, which it then is
-        if interrupted.is_set():
+        if interrupted.is_set() or (seen is not None and seen.came(interrupted)):
             status = EXIT_INTERRUPTED
         else:
             status = _missing_dependency(exc, tool)
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)    # the exit itself is not interrupted
+        if seen is not None:
+            seen.close()
     sys.exit(status)
 
 

@@ -32,6 +32,9 @@ NODE_NAME = 'foxglove_bridge'
 SUBPROTOCOL = 'foxglove.sdk.v1'
 MESSAGE_ENCODING = 'cdr'
 SCHEMA_ENCODING = 'ros2msg'
+# the largest queue depth taken: the nodes' queue_depth bound (rmw's depth is a size_t, and
+# a depth of 2**62 is refused only when the first topic is served)
+MAX_DEPTH = 100_000
 DEFAULTS = {'host': '127.0.0.1', 'port': 8765, 'topics': ['*'], 'discovery_period': 1.0,
             'depth': DEFAULT_DEPTH}
 HELP = {
@@ -43,8 +46,8 @@ HELP = {
                "'*': every topic", None, ParameterType.PARAMETER_STRING_ARRAY),
     'discovery_period': ('s between two looks at the ROS graph for new or gone topics',
                          (0.01, 3600.0), ParameterType.PARAMETER_DOUBLE),
-    'depth': ('queue depth (keep last) of each subscription; its QoS matches every '
-              'publisher of the topic', None, ParameterType.PARAMETER_INTEGER),
+    'depth': (f'queue depth (keep last, 1 to {MAX_DEPTH}) of each subscription; its QoS '
+              'matches every publisher of the topic', None, ParameterType.PARAMETER_INTEGER),
 }
 DESCRIPTION = (
     'Serve ROS 2 topics over the Foxglove WebSocket protocol (foxglove-sdk): open '
@@ -76,9 +79,9 @@ class FoxgloveBridge(Node):
         for name, (text, rng, type_) in HELP.items():
             self.declare_parameter(name, DEFAULTS[name], descriptor(text, rng, type_))
         values = {name: self.get_parameter(name).value for name in HELP}
-        if not 0 <= values['port'] <= 65535 or values['depth'] < 1:
-            raise BridgeError('port must be in 0..65535 and depth >= 1, got port '
-                              f"{values['port']}, depth {values['depth']}")
+        if not 0 <= values['port'] <= 65535 or not 1 <= values['depth'] <= MAX_DEPTH:
+            raise BridgeError(f'port must be in 0..65535 and depth in 1..{MAX_DEPTH}, got '
+                              f"port {values['port']}, depth {values['depth']}")
         self.patterns = list(values['topics'])
         self.depth = values['depth']
         self.bridged: dict[str, Bridged] = {}
