@@ -12,9 +12,6 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-
-# Copyright 2026 The tskf_ros authors
-# SPDX-License-Identifier: Apache-2.0
 """
 Benchmark: start-up and peak memory of the nodes against a minimal rclpy relay.
 

@@ -12,9 +12,6 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-
-# Copyright 2026 The tskf_ros authors
-# SPDX-License-Identifier: Apache-2.0
 """
 How the compiled kernels run: numba on demand, and the same source interpreted until then.
 
@@ -151,6 +148,14 @@ def _dispatchers(kernels: list[Kernel], module: str) -> None:
     # (numba types a call of a dispatcher, not of a Kernel); the code objects are the
     # same, so numba's cache (keyed by file, name and line) is shared with py_func's
     space = dict(sys.modules[module].__dict__)
+    # a kernel imported from another module (kalman's _mm in transitions) is typed as that
+    # module's dispatcher
+    for name, value in list(space.items()):
+        if isinstance(value, Kernel) and value.py_func.__module__ != module:
+            other = value.py_func.__module__
+            if value.dispatcher is None:
+                _dispatchers(_kernels[other], other)
+            space[name] = value.dispatcher
     for k in kernels:
         f = k.py_func
         copy = types.FunctionType(f.__code__, space, f.__name__, f.__defaults__,

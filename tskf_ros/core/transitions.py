@@ -26,11 +26,11 @@ of jittered stamps) are made in one compiled call; a single mu is a stack of one
 import math
 from typing import NamedTuple
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
 # the filter's matrix product: loops for small matrices, BLAS for large ones
+from tskf_ros.core.jit import kernel
 from tskf_ros.core.kalman import _mm
 
 Matrix = NDArray[np.float64]
@@ -44,7 +44,7 @@ _TAYLOR_TERMS = 14
 # Hadamard's test of I + mu A (Definition 2.12): |det F| > _RTOL prod_i |row_i of F|
 _RTOL = 1e-12
 
-_jit = numba.njit(cache=True, error_model='numpy', nogil=True)
+_jit = kernel
 
 
 @_jit
