@@ -202,15 +202,20 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
             raise           # a failure of the node itself: its traceback
         _quiet_unraisable()
     finally:
+        # the bound and the immediate exit are the process's (argv its own); a caller that
+        # passes args (a test, in-process) gets SystemExit and keeps its interpreter
         watchdog = threading.Timer(CLEANUP_BOUND, _cleanup_overran, args=(name, status))
         watchdog.daemon = True
-        watchdog.start()
+        if args is None:
+            watchdog.start()
         if executor is not None:
             executor.shutdown()
         if node is not None:
             node.destroy_node()
         end_context()
         watchdog.cancel()       # (a failure goes on to its traceback and the usual exit)
+    if args is not None:
+        sys.exit(status)
     _exit(status)
 
 
