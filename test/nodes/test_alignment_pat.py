@@ -183,7 +183,10 @@ def test_blocked_beam_is_lost_and_reacquired(make):
     found = loop.until_state('tracking')
     print(f're-acquired {found - cleared:.2f} s after the beam was cleared')
     assert found - cleared <= ACQUIRED_WITHIN
-    assert loop.states == ['acquiring', 'tracking', 'lost', 'tracking']
+    # pat_state is latched with depth 1: a subscriber matched after the cold start's
+    # hand-over gets 'tracking' only (the supervisor's own count below has the acquisition)
+    assert loop.states[-2:] == ['lost', 'tracking']
+    assert loop.states[:-2] in (['acquiring', 'tracking'], ['tracking'])
     p = loop.node.session.pointing
     assert (p.losses, p.reacquisitions, p.acquisitions) == (1, 1, 1)
 
@@ -203,7 +206,9 @@ def test_acquire_forces_a_search_and_a_late_subscriber_gets_the_state(make):
     loop.spin_until(lambda: late[-1:] == ['tracking'], 'the late subscriber')
     # latched: the late subscriber got the state then, not the history
     assert late[0] in ('acquiring', 'tracking') and len(late) <= 2
-    assert loop.states == ['acquiring', 'tracking', 'acquiring', 'tracking']
+    # (latched with depth 1: a late-matched subscriber may get 'tracking' first)
+    assert loop.states[-2:] == ['acquiring', 'tracking']
+    assert loop.states[:-2] in (['acquiring', 'tracking'], ['tracking'])
 
 
 def test_enable_false_pauses_the_supervisor_too(make):
@@ -222,7 +227,9 @@ def test_enable_false_pauses_the_supervisor_too(make):
     assert level == OK and 'paused' in values['message']
     assert loop.service(SetBool, 'enable', SetBool.Request(data=True)).message == 'enabled'
     loop.until_state('lost')
-    assert loop.states == ['acquiring', 'tracking', 'lost']
+    # (latched with depth 1: a late-matched subscriber may get 'tracking' first)
+    assert loop.states[-1:] == ['lost']
+    assert loop.states[:-1] in (['acquiring', 'tracking'], ['tracking'])
 
 
 def test_acquire_without_the_supervisor_says_so(ros_context):

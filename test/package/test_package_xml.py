@@ -78,7 +78,8 @@ def top_level_imports(paths):
             for name in names:
                 top = name.split('.')[0]
                 local = (any((REPO / 'test').rglob(f'{top}.py'))
-                         or (REPO / 'test' / top / '__init__.py').is_file())
+                         or (REPO / 'test' / top / '__init__.py').is_file()
+                         or (REPO / 'bench' / f'{top}.py').is_file())
                 if top not in sys.stdlib_module_names and top != 'tskf_ros' and not local:
                     found.setdefault(top, path.name)
     return found
