@@ -1,0 +1,88 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+"""
+Where a pan-tilt receiver points, on the sphere and in the small-angle tangent plane.
+
+A two-joint mount turns by azimuth a (pan, about the vertical) and elevation e (tilt);
+its boresight is the unit vector b(a, e) = [cos e cos a, cos e sin a, sin e].  The LED is
+seen along s(a_s, e_s).  The simulation measures the exact off-axis angle
+theta = atan2(|b x s|, b . s) on the sphere; the filter and the controllers work in the
+tangent plane at the source, with the pointing error
+
+    d = [d_c, d_e] = [wrap(a - a_s) cos e_s, e - e_s]          (degrees)
+
+(cross-elevation and elevation), where theta ~ |d| to second order in the angles.  A
+turn of the boresight by [du_c, du_e] in that plane is the joint turn
+[du_c / cos e, du_e]: a pan axis near the zenith needs large turns for small
+cross-elevation steps (the keyhole), so the elevations are kept within +-MAX_ELEVATION.
+"""
+
+import math
+from typing import Union
+
+import numpy as np
+
+from tskf_ros.led.intensity_model import AlignmentError, FloatArray, wrap_degrees
+
+Angles = Union[float, FloatArray]
+
+MAX_ELEVATION = 80.0            # degrees: the keyhole limit of the tilt joint
+
+
+def boresight(azimuth: Angles, elevation: Angles) -> FloatArray:
+    """Return the unit vectors b(a, e), shape (..., 3), for angles in degrees."""
+    a = np.radians(np.asarray(azimuth, dtype=float))
+    e = np.radians(np.asarray(elevation, dtype=float))
+    return np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1)
+
+
+def off_axis_angle(azimuth: Angles, elevation: Angles, source_azimuth: Angles,
+                   source_elevation: Angles) -> FloatArray:
+    """Return the exact angle (degrees) between the boresight and the source direction."""
+    b = boresight(azimuth, elevation)
+    s = boresight(source_azimuth, source_elevation)
+    # atan2(|b x s|, b . s): accurate at small and at large angles, unlike arccos(b . s)
+    cross = np.linalg.norm(np.cross(b, s), axis=-1)
+    return np.degrees(np.arctan2(cross, np.sum(b * s, axis=-1)))
+
+
+def tangent_error(azimuth: Angles, elevation: Angles, source_azimuth: Angles,
+                  source_elevation: Angles) -> FloatArray:
+    """Return d = [wrap(a - a_s) cos e_s, e - e_s] (degrees), shape (..., 2)."""
+    a = np.asarray(azimuth, dtype=float)
+    e = np.asarray(elevation, dtype=float)
+    a_s = np.asarray(source_azimuth, dtype=float)
+    e_s = np.asarray(source_elevation, dtype=float)
+    cross = wrap_degrees(a - a_s) * np.cos(np.radians(e_s))
+    return np.stack(np.broadcast_arrays(cross, e - e_s), axis=-1)
+
+
+def joint_turn(turn: FloatArray, elevation: Angles) -> FloatArray:
+    """Return the joint turns [da, de] (degrees) for tangent-plane turns [du_c, du_e]."""
+    turn = np.asarray(turn, dtype=float)
+    cos_e = np.cos(np.radians(np.asarray(elevation, dtype=float)))
+    return np.stack([turn[..., 0] / cos_e, turn[..., 1]], axis=-1)
+
+
+def conical_scan(radius: float, points: int) -> FloatArray:
+    """
+    Return the scan offsets r [cos phi_j, sin phi_j], phi_j = 2 pi j / points, shape (points, 2).
+
+    The receiver visits them cyclically around its mean pointing (a conical scan, as in
+    conical-scan radar and free-space optical trackers); the phase of each sample is known
+    because the controller commands it.
+    """
+    if not (math.isfinite(radius) and radius > 0.0):
+        raise AlignmentError(f'the scan radius must be positive, got {radius}')
+    if points < 3:
+        raise AlignmentError(f'a conical scan needs at least 3 points per turn, got {points}')
+    phase = 2.0 * np.pi * np.arange(points) / points
+    return radius * np.stack([np.cos(phase), np.sin(phase)], axis=-1)
+
+
+def uniform_in_cone(half_angle: float, runs: int, rng: np.random.Generator) -> FloatArray:
+    """Return tangent-plane offsets (runs, 2) uniform in area within a cone (degrees)."""
+    # area-uniform in a disc: radius half_angle sqrt(U), direction uniform
+    radius = half_angle * np.sqrt(rng.random(runs))
+    phase = rng.uniform(0.0, 2.0 * np.pi, runs)
+    return radius[:, None] * np.stack([np.cos(phase), np.sin(phase)], axis=-1)

@@ -1,0 +1,84 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+"""
+The photodiode's response to the off-axis angle theta, for a receiver pointed in two axes.
+
+Solanki et al. (IEEE/ASME T-Mech 2018) fit g(phi) of eq. (4) to a signed angle in one plane;
+its two Gaussians are centred a little off zero (b1 = 7.752, b2 = -13.57 fit units), so
+g(+phi) != g(-phi).  Off axis in two dimensions only the angle theta >= 0 between the
+boresight and the source is defined, and a response that depends on the direction around
+the boresight as well would need a fit the paper does not give.  We take the mean of the
+two sides,
+
+    g_r(theta) = (g(theta) + g(-theta)) / 2
+               = sum_i a_i e^{-(s^2 theta^2 + b_i^2) / c_i^2} cosh(kappa_i theta),
+      kappa_i = 2 s b_i / c_i^2,   s = fit units per degree,
+
+which is even and smooth in theta (so smooth in the two pointing errors at theta = 0), has
+its maximum at theta = 0, and keeps the tracking zone of the one-axis model exactly: the
+unit s is chosen so that the mean of g(+-15 deg) is 20 % of the peak, which is
+g_r(15 deg) = 0.2 g_r(0) (`intensity_model.zone_units_per_degree`).
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tskf_ros.led.intensity_model import FloatArray, IncidenceResponse, TRACKING_ANGLE
+
+
+def _sinhc(x: FloatArray) -> FloatArray:
+    """Return sinh(x) / x, 1 at x = 0 (a Taylor series below |x| = 1e-3)."""
+    small = np.abs(x) < 1e-3
+    safe = np.where(small, 1.0, x)
+    return np.where(small, 1.0 + x * x / 6.0, np.sinh(safe) / safe)
+
+
+@dataclass(frozen=True)
+class RadialResponse:
+    """g_r(theta) of the one-axis fit, theta in degrees; `peak` is g_r(0)."""
+
+    response: IncidenceResponse = field(default_factory=IncidenceResponse)
+
+    @property
+    def peak(self) -> float:
+        """Return g_r(0), the maximum."""
+        return float(self.g(np.zeros(1))[0])
+
+    def _terms(self, theta: FloatArray) -> tuple[FloatArray, ...]:
+        """Per Gaussian i: (a_i e^{-(s^2 th^2 + b^2)/c^2}, s^2 / c^2, kappa_i), broadcast."""
+        a1, b1, c1, a2, b2, c2 = self.response.coefficients
+        s = float(self.response.units_per_degree or 1.0)
+        a = np.array([a1, a2])
+        b = np.array([b1, b2])
+        c = np.array([c1, c2])
+        th = np.asarray(theta, dtype=float)[..., None]
+        weight = a * np.exp(-(s * s * th * th + b * b) / (c * c))
+        return weight, s * s / (c * c), 2.0 * s * b / (c * c), th
+
+    def g(self, theta: FloatArray) -> FloatArray:
+        """g_r(theta) = sum_i a_i e^{-(s^2 theta^2 + b_i^2)/c_i^2} cosh(kappa_i theta)."""
+        weight, _, kappa, th = self._terms(theta)
+        return np.sum(weight * np.cosh(kappa * th), axis=-1)
+
+    def slope_over_theta(self, theta: FloatArray) -> FloatArray:
+        """
+        g_r'(theta) / theta, finite at theta = 0 (where it is g_r''(0)).
+
+        d/dtheta of each term: a e^{..} (-2 s^2 theta / c^2 cosh(kappa theta)
+        + kappa sinh(kappa theta)); divided by theta, sinh(kappa theta) / theta is
+        kappa sinhc(kappa theta).
+        """
+        weight, s2c2, kappa, th = self._terms(theta)
+        return np.sum(weight * (-2.0 * s2c2 * np.cosh(kappa * th)
+                                + kappa * kappa * _sinhc(kappa * th)), axis=-1)
+
+    def gradient(self, error: FloatArray) -> FloatArray:
+        """d g_r(|e|) / d e for tangent-plane errors e (..., 2): g_r'(theta)/theta e."""
+        error = np.asarray(error, dtype=float)
+        theta = np.hypot(error[..., 0], error[..., 1])
+        return self.slope_over_theta(theta)[..., None] * error
+
+    def zone_level(self, angle: float = TRACKING_ANGLE) -> float:
+        """Return g_r(angle) / g_r(0): 0.2 at 15 degrees in the tracking-zone unit."""
+        return float(self.g(np.array([angle]))[0]) / self.peak
