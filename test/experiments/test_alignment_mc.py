@@ -189,7 +189,6 @@ def test_workers_give_the_sequential_results_run_for_run():
         np.testing.assert_array_equal(m1, m2)
 
 
-
 def test_a_point_in_parts_is_the_same_on_any_workers_and_its_first_part_is_the_seeds():
     # 7 runs in parts of 3 (3, 3, 1): the parts are the tasks; joined in order they give
     # the same numbers on one process or two, and the first part draws what an

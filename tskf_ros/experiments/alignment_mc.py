@@ -118,7 +118,7 @@ class Point:
 
 
 def parts(p: Point, size: int) -> list[Point]:
-    """Split a point's runs into parts of at most `size` runs (the first keeps the seed's draws)."""
+    """Split a point's runs into parts of at most `size` runs (the first draws the seed's)."""
     return [dataclasses.replace(p, runs=min(size, p.runs - start), part=k)
             for k, start in enumerate(range(0, p.runs, size))]
 

@@ -140,8 +140,8 @@ def join_metrics(parts: Sequence[dict]) -> dict:
         return parts[0]
     runs = sum(p['runs'] for p in parts)
     lost = sum(p['lost_runs'] for p in parts)
-    out = {'lost_at_end': lost / runs, 'lost_runs': lost, 'duration_s': parts[0]['duration_s'], 'runs': runs, 'dt': parts[0]['dt'],
-           'steps': parts[0]['steps']}
+    out = {'lost_at_end': lost / runs, 'lost_runs': lost, 'duration_s': parts[0]['duration_s'],
+           'runs': runs, 'dt': parts[0]['dt'], 'steps': parts[0]['steps']}
     for key in ('acquisition', 'reacquisition'):
         out[key] = pointing_metrics.Durations.join([p[key] for p in parts])
     if parts[0]['latency'] is None:
