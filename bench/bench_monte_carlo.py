@@ -42,11 +42,38 @@ import sys
 import tempfile
 import time
 
-import psutil
-
 MODULE = 'tskf_ros.experiments.alignment_mc'
 GOAL_DEFAULT_S = 5.0
 GOAL_1E5_S = 60.0
+
+
+PAGE = os.sysconf('SC_PAGE_SIZE')
+
+
+def tree_rss(root: int) -> list[int]:
+    """Return the RSS (bytes) of process root and of its descendants, from /proc (Linux)."""
+    parent: dict[int, int] = {}
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            try:
+                with open(f'/proc/{entry}/stat') as f:
+                    # pid (comm) state ppid ...: comm may hold spaces, so split after ')'
+                    parent[int(entry)] = int(f.read().rsplit(')', 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue            # the process ended meanwhile
+    tree, grew = {root}, True
+    while grew:
+        more = {pid for pid, ppid in parent.items() if ppid in tree} - tree
+        tree |= more
+        grew = bool(more)
+    rss = []
+    for pid in tree:
+        try:
+            with open(f'/proc/{pid}/statm') as f:
+                rss.append(int(f.read().split()[1]) * PAGE)
+        except (OSError, ValueError, IndexError):
+            continue
+    return rss
 
 
 @dataclass
@@ -68,13 +95,9 @@ def measure(args: list[str]) -> Measured:
         start = time.perf_counter()
         proc = subprocess.Popen([sys.executable, '-m', MODULE, *args], cwd=tmp,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        root = psutil.Process(proc.pid)
         peak_sum = peak_one = 0
         while proc.poll() is None:
-            try:
-                rss = [p.memory_info().rss for p in [root, *root.children(recursive=True)]]
-            except psutil.Error:        # a worker ended between the listing and the read
-                rss = []
+            rss = tree_rss(proc.pid)
             if rss:
                 peak_sum, peak_one = max(peak_sum, sum(rss)), max(peak_one, max(rss))
             time.sleep(0.1)
