@@ -120,7 +120,7 @@ class PanTiltStream:
             message = f'intensity {z:g} V outside intensity_range {list(cfg.intensity_range)}'
         last = self.session.last_ns
         out = self.session.add(stamp_ns, None if reason else z)
-        if reason and out.status == 'used':
+        if reason and out.status in ('used', 'missing'):
             out = replace(out, status='missing', reason=reason, message=message)
         mu = 0.0
         if out.status == 'rejected':
