@@ -181,8 +181,8 @@ class PanTiltStream:
         joints = self.joints
         lo, hi = config.session.tilt_limits
         session = replace(config.session, joints0=(joints[0], min(max(joints[1], lo), hi)))
-        self.config = config
         self.session = PanTiltSession(session)
+        self.config = config
         self.stats.resets['reconfigured'] += 1
         self.pointing.enter(self.session.state, 'restarted (reconfigured)',
                             self.stats.last_stamp_ns or None)

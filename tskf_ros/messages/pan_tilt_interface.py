@@ -65,6 +65,7 @@ def pan_tilt_config(values: dict) -> NodeConfig:
         joints0=tuple(values['pan_tilt.initial']), max_step=values['max_step'],
         tilt_limits=tuple(values['pan_tilt.tilt_limits']),
         max_backward=values['max_backward'], state_limit=values['state_limit'])
+    session.make_aligner()      # a method the core does not provide yet fails here, at once
     stream = PanTiltStreamConfig(session, values['algorithm'], values['negative_is_missing'],
                                  tuple(values['intensity_range']), values['max_gap'],
                                  values['expected_rate'], values['rate_tolerance'])
