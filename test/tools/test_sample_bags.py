@@ -76,7 +76,7 @@ def assert_same_messages(got, want, rtol=1e-9):
                 assert a == b, f'message {k} {key}: {a!r} != {b!r}'
 
 
-@pytest.mark.parametrize('name', ['owc_cai_td_1hz', 'led_alignment', 'drogue'])
+@pytest.mark.parametrize('name', ['owc_cai_td_1hz', 'led_alignment', 'led_pan_tilt', 'drogue'])
 def test_regenerating_a_sample_bag_gives_the_same_messages(tmp_path, name):
     path = sample_bags.make(name, tmp_path, readme_seed(name))
     assert_same_messages(messages(path), messages(BAGS / name))
