@@ -166,7 +166,7 @@ def test_an_empty_joint_name_is_refused_in_one_line(ros_context, node, joints):
 
 
 @pytest.mark.parametrize('extra, why', [
-    ({'algorithm': 'hill_climbing'}, "axes 2 runs the conical-scan EKF: algorithm must be "
+    ({'algorithm': 'hill_climbing'}, 'axes 2 runs the conical-scan EKF: algorithm must be '
      "'ekf', got 'hill_climbing'"),
     ({'pan_tilt.initial': [0.0, 85.0]}, 'tilt_limits must be within +-80 deg and hold '
      'joints0'),

@@ -157,7 +157,8 @@ def bag_outcome_messages(out: AlignOutcome, config: NodeConfig) -> list[tuple[st
     return [(BAG_OUTPUT_TOPICS[key], msg) for key, msg in outcome_messages(out, config)]
 
 
-def diagnostics_message(session: Union[AlignmentSession, PanTiltStream], config: NodeConfig, stamp_ns: int, *,
+def diagnostics_message(session: Union[AlignmentSession, PanTiltStream], config: NodeConfig,
+                        stamp_ns: int, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""
     # like the estimator's, with its receiver frame as the hardware id

@@ -23,8 +23,8 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64MultiArray
 
-from tskf_ros.core.units import NS
 from tskf_ros import led
+from tskf_ros.core.units import NS
 from tskf_ros.led.led_link import LedLink, LedLinkConfig, LedLinkError, LedSample, sample_offset_ns
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLink, PanTiltLinkConfig, PanTiltSample
 from tskf_ros.led.two_axis.radial_response import RadialResponse
@@ -63,7 +63,7 @@ def pan_tilt_link_config(link: LedLinkConfig, values: dict) -> PanTiltLinkConfig
         raise LedLinkError('axes 2 takes blockage none or bernoulli (the two-axis link drops '
                            'samples independently), got gilbert_elliott')
     if not abs(link.phi0) < 90.0:
-        raise LedLinkError(f'axes 2: phi0, the source\'s angle off the boresight at sample 0, '
+        raise LedLinkError(f"axes 2: phi0, the source's angle off the boresight at sample 0, "
                            f'must be within +-90 deg, got {link.phi0:g}')
     if link.max_speed > 0:
         raise LedLinkError('axes 2: the mount reaches each command within a sample; '

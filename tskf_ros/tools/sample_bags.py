@@ -31,10 +31,10 @@ from tskf_ros.bag.writer import BagError, BagWriter
 from tskf_ros.core.time_scales import cai_td
 from tskf_ros.core.units import NS
 from tskf_ros.experiments import drogue as drogue_sim
-from tskf_ros.messages import alignment_interface as aligner_interface
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_session import (pan_tilt_closed_loop, PanTiltSession,
                                                     PanTiltSessionConfig)
+from tskf_ros.messages import alignment_interface as aligner_interface
 from tskf_ros.messages import conversions
 from tskf_ros.messages.pan_tilt_messages import (pan_tilt_command_to_msg, pan_tilt_state_to_msg,
                                                  pan_tilt_truth_to_msg)
