@@ -251,3 +251,14 @@ def test_axes_3_exits_1_with_one_line():
     assert proc.returncode == 1
     lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and 'axes must be one of 1, 2, got 3' in lines[0], proc.stderr
+
+
+def test_the_offline_replay_refuses_a_two_axis_parameter_file_in_one_line(tmp_path, capsys):
+    from tskf_ros.bag.replay.cli import main
+    out = tmp_path / 'out'
+    assert main(['--filter', 'alignment', str(REPO / 'bags' / 'led_pan_tilt'), str(out),
+                 '--params-file', str(LOOP_FILE)]) == 1
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert lines == [f'replay_offline: error: {LOOP_FILE}: axes 2: the offline tools replay '
+                     'one axis; the two-axis loop runs live (pan_tilt_loop.launch.py)']
+    assert not out.exists()

@@ -102,13 +102,18 @@ def load_config(params_file: Optional[Union[str, Path]] = None,
 
     The file's `alignment`, `/alignment`, `/**/alignment` or `/**` ros__parameters override
     the defaults, each checked against the node's schema.  Raises ParamsError naming the
-    file and the problem.
+    file and the problem.  The offline tools that read it replay one axis: a file with
+    `axes: 2` is refused.
     """
     values = parameter_values(params_file, load_schema(NODE_NAME), overrides)
     try:
-        return parameters_to_config(values)
+        config = parameters_to_config(values)
     except (led.AlignmentError, ValueError, TypeError, KeyError) as exc:
         raise ParamsError(f'{params_file or "defaults"}: {exc}') from None
+    if not isinstance(config.session, AlignmentConfig):
+        raise ParamsError(f'{params_file or "defaults"}: axes 2: the offline tools replay one '
+                          'axis; the two-axis loop runs live (pan_tilt_loop.launch.py)')
+    return config
 
 
 def output_qos(config: NodeConfig, output: str) -> QoSProfile:
