@@ -133,7 +133,7 @@ def test_plot_bag_on_an_offline_alignment_replay(tmp_path, capsys):
 def test_foxglove_layout_refers_to_topics_the_bags_have():
     layout = json.loads((REPO / 'config' / 'foxglove_layout.json').read_text())
     topics = set()
-    for name in ('owc_cai_td_1hz', 'led_alignment'):
+    for name in ('owc_cai_td_1hz', 'led_alignment', 'led_pan_tilt'):
         topics |= set(BagReader(BAGS / name).topics)
     topics |= {'/estimate/predicted', '/estimate/corrected', '/diagnostics'}
     for panel in layout['configById'].values():
