@@ -35,7 +35,7 @@ import rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 
 from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_session import AlignmentSession
@@ -44,7 +44,8 @@ from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_session import pan_tilt_closed_loop, PanTiltSession
 from tskf_ros.led.two_axis.pan_tilt_session import PanTiltSessionConfig
 from tskf_ros.messages import conversions
-from tskf_ros.messages.alignment_interface import COMMAND_TOPIC, OUTPUT_TOPICS
+from tskf_ros.messages.alignment_interface import (COMMAND_TOPIC, OUTPUT_TOPICS,
+                                                   pat_state_qos, PAT_STATE_TOPIC)
 from tskf_ros.messages.pan_tilt_messages import (msg_to_pan_tilt_state, msg_to_pan_tilt_truth,
                                                  STATE_LABELS)
 from tskf_ros.messages.parameter_schema import load_schema, ParameterError
@@ -71,12 +72,18 @@ def loop_parameters(node, **extra):
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-# (simulator overrides, largest off-axis angle after convergence in deg, for the record)
-@pytest.mark.parametrize('link', [
-    {'seed': 3, 'blockage': 'none'},
-    {'seed': 5, 'blockage': 'bernoulli', 'drop_probability': 0.3, 'noise': 1.0},
-])
-def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_kind, link):
+# (simulator overrides, alignment overrides, samples after which the light is tracked):
+# the P law from a known prior, with dropouts and noise 1 V, the LQR per axis, and the
+# supervisor's cold search from 20 deg off the boresight
+@pytest.mark.parametrize('link, aligner, converged', [
+    ({'seed': 3, 'blockage': 'none'}, {}, CONVERGED),
+    ({'seed': 5, 'blockage': 'bernoulli', 'drop_probability': 0.3, 'noise': 1.0}, {},
+     CONVERGED),
+    ({'seed': 4}, {'controller': 'lqg'}, CONVERGED),
+    ({'seed': 3, 'phi0': 20.0}, {'pat.enabled': True}, 100),
+], ids=['p', 'p_dropouts_noise_1V', 'lqg', 'supervisor_cold_start'])
+def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_kind, link,
+                                                         aligner, converged):
     steps = 300
     sim = LedLinkSimulator(context=ros_context, parameter_overrides=loop_parameters(
         'led_link_simulator', **link, time_factor=0.0, duration=steps * DT, start_time=1.0,
@@ -84,7 +91,8 @@ def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_k
     # negative_is_missing false: the reference session takes every reading as it is (with
     # noise 1 V some are negative)
     node = Alignment(context=ros_context, parameter_overrides=loop_parameters(
-        'alignment', negative_is_missing=False, **{'pan_tilt.noise': sim.config.link.noise}))
+        'alignment', negative_is_missing=False, **{'pan_tilt.noise': sim.config.link.noise},
+        **aligner))
     assert isinstance(node.session, PanTiltStream)
     # the reference: the ROS-free loop, same link, same seed, the node's own session config
     ref = pan_tilt_closed_loop(sim.config.pan_tilt, PanTiltSession(node.config.session.session),
@@ -97,14 +105,17 @@ def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_k
     client.create_subscription(Float64MultiArray, COMMAND_TOPIC, commands.append, deep)
     client.create_subscription(Float64MultiArray, OUTPUT_TOPICS['corrected'], corrected.append,
                                deep)
+    states = []
+    client.create_subscription(String, PAT_STATE_TOPIC, states.append, pat_state_qos())
+    estimated = sum(1 for o in ref.outcomes if o is not None and o.estimate is not None)
     executor = make_executor(executor_kind, context=ros_context)
     for n in (sim, node, client):
         executor.add_node(n)
     try:
         wait_for(executor, lambda: len(truth) == steps and len(commands) == delivered
-                 and len(corrected) == delivered,
-                 lambda: f'the loop ({len(truth)} truth, {len(commands)} commands, '
-                 f'{len(corrected)} estimates of {delivered})', TIMEOUT)
+                 and len(corrected) == estimated,
+                 lambda: f'the loop ({len(truth)} truth, {len(commands)} commands of '
+                 f'{delivered}, {len(corrected)} estimates of {estimated})', TIMEOUT)
     finally:
         executor.shutdown()
         for n in (sim, node, client):
@@ -122,7 +133,7 @@ def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_k
     got = np.array([conversions.msg_to_base_command(m) for m in commands])
     np.testing.assert_allclose(got, [o.command for o in outcomes], rtol=0, atol=1e-9)
     assert all(list(m.layout.dim[0].label.split(',')) == ['pan', 'tilt'] for m in commands)
-    for msg, o in zip(corrected, outcomes):
+    for msg, o in zip(corrected, [o for o in outcomes if o.estimate is not None]):
         e = msg_to_pan_tilt_state(msg)
         assert e.kind == 'corrected' and e.stamp_ns == o.stamp_ns
         assert e.names == tuple(STATE_LABELS[s] for s in o.estimate.states)
@@ -131,8 +142,17 @@ def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_k
     assert sim.timeouts == 0 and sim.bad_commands == 0
     stats = node.session.stats
     assert stats.received == stats.used == stats.commands == delivered
-    assert theta[CONVERGED:].max() < TRACKING
-    if link['blockage'] != 'none':
+    assert theta[converged:].max() < TRACKING
+    if aligner.get('pat.enabled'):
+        # searching (no estimate) until the light is found, then tracking, on pat_state
+        # (latched, depth 1: a subscriber matched after the hand-over gets only 'tracking')
+        got = [m.data for m in states]
+        assert got in (['acquiring', 'tracking'], ['tracking']), got
+        assert 0 < delivered - estimated < converged
+        assert node.session.pointing.acquisitions == 1
+    else:
+        assert estimated == delivered and [m.data for m in states] in ([], ['disabled'])
+    if link.get('blockage', 'bernoulli') != 'none':
         assert delivered < steps and stats.gaps > 0
 
 
@@ -170,6 +190,7 @@ def test_an_empty_joint_name_is_refused_in_one_line(ros_context, node, joints):
      "'ekf', got 'hill_climbing'"),
     ({'pan_tilt.initial': [0.0, 85.0]}, 'tilt_limits must be within +-80 deg and hold '
      'joints0'),
+    ({'controller': 'lqg', 'pat.enabled': True}, 'pat.enabled needs controller p'),
 ])
 def test_a_two_axis_alignment_config_that_cannot_run_is_refused(ros_context, extra, why):
     with pytest.raises(ValueError) as info:

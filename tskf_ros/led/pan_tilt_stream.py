@@ -144,9 +144,31 @@ class PanTiltStream:
             self.pointing.started(int(stamp_ns))
         if out.command is not None:
             st.commands += 1
-        state = self.session.state
-        self.pointing.enter(state, ENTERED.get(state, 'start'), st.last_stamp_ns or None)
+        self._note_state(st.last_stamp_ns or None)
         return PanTiltStep(out, mu)
+
+    def _note_state(self, stamp_ns: Optional[int]) -> None:
+        """Record the supervisor's state change at this sample, counted as in one axis."""
+        p, state = self.pointing, self.session.state
+        if state == p.state:
+            return
+        sup = self.session.aligner
+        if state == 'tracking':
+            if p.state == 'lost':
+                p.reacquisitions += 1
+            else:
+                p.acquisitions += 1
+            resumed = getattr(sup, 'resumed', None)
+            reason = ('light back after a hold' if resumed is not None and bool(resumed[0])
+                      else ENTERED[state])
+        elif state == 'lost':
+            p.losses += 1
+            p.last_loss_ns = stamp_ns
+            held = getattr(sup, 'held', None)
+            reason = ENTERED[state] + (', held' if held is not None and held[0] > 0 else '')
+        else:
+            reason = ENTERED.get(state, 'start')
+        p.enter(state, reason, stamp_ns)
 
     def skip(self, stamp_ns: int, now_ns: Optional[int] = None) -> None:
         """Count a sample received while the loop is paused: not used, but an input."""
@@ -205,7 +227,9 @@ class PanTiltStream:
             stat.add('Covariance trace', float(np.trace(estimate.P)))
         out += [stat, time_scale(st, self.config)]
         if self.pointing.state != 'disabled':
-            out.append(pointing_status(self.pointing, None, self.paused, st.last_stamp_ns))
+            out.append(pointing_status(self.pointing, getattr(self.session.aligner, 'verdict',
+                                                              None),
+                                       self.paused, st.last_stamp_ns))
         if consume:
             st.gaps_over_bound = 0
             st.bad_since = 0

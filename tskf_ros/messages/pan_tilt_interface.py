@@ -53,6 +53,10 @@ def method(values: dict) -> str:
                                  f"got {values['algorithm']!r} (the two-axis baselines are "
                                  'in the Monte Carlo experiment, not in the node)')
     if values['controller'] == 'lqg':
+        if values['pat.enabled']:
+            raise led.AlignmentError('pat.enabled needs controller p: the two-axis supervisor '
+                                     'steers the P law; with controller lqg set pat.enabled '
+                                     'false')
         return 'conical_lqg'
     return 'conical_ekf_pat' if values['pat.enabled'] else 'conical_ekf'
 

@@ -48,8 +48,8 @@ STATE_LABELS = {
     'x1': 'x1_intensity_V',
     'd_c': 'd_cross_elevation_rad',
     'd_e': 'd_elevation_rad',
-    'v_c': 'v_cross_elevation_rad_per_step',
-    'v_e': 'v_elevation_rad_per_step',
+    'b_c': 'b_cross_elevation_rad_per_step',
+    'b_e': 'b_elevation_rad_per_step',
 }
 
 
