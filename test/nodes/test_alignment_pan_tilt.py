@@ -283,3 +283,15 @@ def test_the_offline_replay_refuses_a_two_axis_parameter_file_in_one_line(tmp_pa
     assert lines == [f'replay_offline: error: {LOOP_FILE}: axes 2: the offline tools replay '
                      'one axis; the two-axis loop runs live (pan_tilt_loop.launch.py)']
     assert not out.exists()
+
+
+def test_acquire_forces_a_search_with_the_two_axis_supervisor_only(ros_context):
+    for enabled, want in ((True, True), (False, False)):
+        node = Alignment(context=ros_context, parameter_overrides=loop_parameters(
+            'alignment', **{'pat.enabled': enabled, 'pat.start': 'tracking'}))
+        try:
+            assert node.session.pat_state == ('tracking' if enabled else 'disabled')
+            assert node.session.acquire() is want
+            assert node.session.pat_state == ('acquiring' if enabled else 'disabled')
+        finally:
+            node.destroy_node()
