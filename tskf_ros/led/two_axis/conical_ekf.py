@@ -44,7 +44,7 @@ The receiver is sent u_k + s_{k+1} - s_k.  Predict and update are tskf_ros.core.
 batched over independent runs.
 
 The scan's own loss: with the mean pointing on the source the boresight is r off it, so
-the scan costs 1 - g_r(r)/g_r(0) of the received intensity (`scan_loss`; 11 % at the
+the scan costs 1 - g_r(r)/g_r(0) of the received intensity (`scan_loss`; 15 % at the
 default r = 4 deg); with a mean error |d| the boresight is at most |d| + r off, so it
 stays in the 15 deg tracking cone while |d| <= 15 - r.
 """
@@ -77,8 +77,10 @@ class ConicalEKFConfig:
     x0: tuple[float, ...] = (2.0, 0.0, 0.0, 0.0, 0.0)
     # P0: x1 as ekf_pat's clipped prior (2 V), d 5 deg, drift 0.1 deg per step
     P0: tuple[float, ...] = (4.0, 25.0, 25.0, 0.01, 0.01)
-    # Q per nominal step: Table I's Q_sys for x1 and each pointing axis, a slow drift walk
-    Q: tuple[float, ...] = (0.0025, 0.01, 0.01, 1e-6, 1e-6)
+    # Q per nominal step: Table I's Q_sys for x1; twice its 0.01 per pointing axis (the
+    # mount's scan circle does not close on the sphere, and h is small-angle); a slow walk
+    # of the drift (its cross-elevation part changes with the source's elevation)
+    Q: tuple[float, ...] = (0.0025, 0.02, 0.02, 1e-5, 1e-5)
     noise: float = 0.2                # sigma of v (V)
     # V: what the model misses (the small-angle h, the walk of x1 within a step), added to
     # the noise in R = noise^2 + model_noise^2; without it a noiseless link makes the

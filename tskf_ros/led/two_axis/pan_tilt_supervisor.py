@@ -22,7 +22,9 @@ the CUSUM of spot_detector sees light; hand-over, the EKF starts from the least-
 fit of what the spiral saw (x1 and d from it, the variances from its Fisher bound,
 inflated and clipped), the boresight turned onto the fitted source plus the next scan
 offset; tracking, the EKF steers, watched by lock_detector (the windowed NIS of the
-EKF's own innovations and M of N low intensities, reused unchanged); lost, the EKF holds
+EKF's own innovations and M of N intensities below lock.level, reused unchanged; not
+the one-axis supervisor's level that follows the light in lock, which a hand-over onto
+the wrong side of the light teaches to take the dark for the light); lost, the EKF holds
 a declared loss for hold_samples (it keeps steering on its drift model; tracking again
 after a full window with few low samples), then the spiral again, centred on the last
 mean pointing seen in good lock.  The supervisor follows the mount's joints [pan, tilt]
@@ -61,30 +63,32 @@ class PanTiltSupervisorConfig:
     noise: float = 1.0            # V: sigma of v the fit assumes
     max_step: float = 45.0        # deg a command turns each axis at most; 0: no limit
     start: str = 'acquiring'      # or 'tracking': from the EKF's own x0, P0
-    level_fraction: float = 0.3   # the low level is at most this times the light in lock
-    bright_samples: int = 20      # samples the light-in-lock average runs over
     inflate: float = 4.0          # the hand-over variances are this times the Fisher bound,
     x1_var: tuple[float, float] = (0.01, 4.0)      # V^2: clipped to this range
     angle_var: tuple[float, float] = (2.0, 25.0)   # deg^2: and this one, per axis
-    fade: float = 1.0             # x noise: a mean in lock below this has faded (0: never)
     hold_samples: int = 100       # samples the EKF holds a declared loss before the search
     # samples the spiral goes on after the CUSUM sees light, so that the fit sees the
     # light's crossing on both sides of its peak
     settle: int = 4
     min_samples: int = 10         # samples of a search before the CUSUM may see light
+    # V: lost, too, when the EKF's peak x1hat g_r(0) falls below this (0: off).  At 1 V
+    # of noise a pointing 15-20 deg off is explained as well by a dim light, but the link's
+    # x1 walk dims 5 % of the lights below 1 V within 20 s, and the EKF that keeps steering
+    # on its drift through the dim spell does better than a search; so off by default
+    min_peak: float = 0.0
 
     def __post_init__(self) -> None:
         """Check the supervisor's settings; raise AlignmentError with the reason."""
         if self.start not in STARTS:
             raise AlignmentError(f'start must be one of {STARTS}, got {self.start!r}')
-        for name in ('noise', 'max_step', 'inflate', 'level_fraction', 'fade'):
+        for name in ('noise', 'max_step', 'inflate', 'min_peak'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise AlignmentError(f'{name} must be >= 0, got {value}')
         if not self.noise > 0 or not self.inflate > 0:
             raise AlignmentError('noise and inflate must be > 0')
-        if self.hold_samples < 0 or self.bright_samples < 1:
-            raise AlignmentError('hold_samples must be >= 0 and bright_samples >= 1')
+        if self.hold_samples < 0:
+            raise AlignmentError(f'hold_samples must be >= 0, got {self.hold_samples}')
         if self.settle < 0 or self.min_samples < 0:
             raise AlignmentError('settle and min_samples must be >= 0')
         for name in ('x1_var', 'angle_var'):
@@ -127,8 +131,6 @@ class PanTiltSupervisor:
         self.declared: Mask = np.zeros(n, dtype=bool)
         self.resumed: Mask = np.zeros(n, dtype=bool)
         self.verdict: Optional[LockVerdict] = None
-        self.bright = np.full(n, np.nan)
-        self.bright_count = np.zeros(n, dtype=int)
         self.tracked = np.zeros(n, dtype=int)
         self.held = np.zeros(n, dtype=int)
         self.losses = np.zeros(n, dtype=int)
@@ -185,25 +187,14 @@ class PanTiltSupervisor:
         s_now = self.tracker.scan_offset
         inner = self.tracker.step(stamp, np.where(steering, z, np.nan))
         nis = np.where(steering, self.tracker.nis, np.nan)
-        known = self.bright_count >= cfg.bright_samples
-        level = np.where(known, np.fmin(cfg.lock.level, cfg.level_fraction * self.bright),
-                         cfg.lock.level)
-        level = np.where(known & (self.bright < cfg.fade * cfg.noise), -np.inf, level)
-        self.verdict = verdict = self.lock.update(z, nis, steering, level)
+        self.verdict = verdict = self.lock.update(z, nis, steering)
         self.tracked = np.where(steering, self.tracked + 1, 0)
         steady = (self.tracked >= cfg.lock.window) & (verdict.low < max(cfg.lock.corroborate, 1))
         good = tracking & steady
         mean = self.joints - joint_turn(s_now, self.joints[:, 1])
         self.last_good = np.where(good[:, None], mean, self.last_good)
-        seen = good & np.isfinite(z)
-        self.bright_count[seen] = np.minimum(self.bright_count[seen] + 1, cfg.bright_samples)
-        self.bright[seen] = np.where(np.isfinite(self.bright[seen]), self.bright[seen], 0.0) + (
-            z[seen] - np.nan_to_num(self.bright[seen])) / self.bright_count[seen]
         searching = ~steering
-        scale = np.where(old == LOST, np.fmin(1.0, 0.5 * self.bright
-                                              / cfg.detector.reference), 1.0)
-        seen_light = self.finder.update(z, self.joints, searching,
-                                        np.nan_to_num(scale, nan=1.0))
+        seen_light = self.finder.update(z, self.joints, searching)
         self.searched = np.where(searching, self.searched + 1, 0)
         seen_light &= self.searched >= cfg.min_samples
         self.pending = np.where(searching & ((self.pending > 0) | seen_light),
@@ -221,7 +212,8 @@ class PanTiltSupervisor:
             timeout = holding & ~steady & (self.held > cfg.hold_samples)
             self._search(timeout, turn)
             steered &= ~timeout
-        lost = verdict.lost & tracking
+        dim = self.tracker.x[:, 0] * self.response.peak < cfg.min_peak
+        lost = (verdict.lost | dim) & tracking
         self.declared = lost
         if np.any(lost):
             self.losses[lost] += 1
@@ -276,8 +268,6 @@ class PanTiltSupervisor:
         P[:, 3, 3], P[:, 4, 4] = P0[3], P0[4]
         self.tracker.restart_runs(found, x, P)
         self.state[found] = TRACKING
-        self.bright[found] = np.nan
-        self.bright_count[found] = 0
         self.handovers[found] += 1
         self.pending[found] = 0
         self.lock.reset(found)

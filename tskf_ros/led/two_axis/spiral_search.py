@@ -96,7 +96,7 @@ class SpiralSearch:
         return displaced(self.center[:, 0], self.center[:, 1], p)
 
     def turn(self, joints: FloatArray, mask: Mask) -> FloatArray:
-        """Advance the runs in mask; return the turn (runs, 2) from joints to their next point."""
+        """Advance the runs in mask; return their turns (runs, 2) to their next points."""
         c = self.config
         a = c.pitch / (2.0 * math.pi)
         # d phi = speed / |dp/dphi|, |dp/dphi| = a sqrt(1 + phi^2)

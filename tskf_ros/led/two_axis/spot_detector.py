@@ -46,16 +46,21 @@ class SpotConfig:
     """CUSUM reference and threshold (V), samples kept for the fit, the fit's grids."""
 
     reference: float = 1.0       # V: k_ref, about half the intensity in the beam
-    threshold: float = 4.0       # V: h (light_detector's: one false alarm in ~1.5e4 at 1 V)
+    # V: h; below light_detector's 4 V: a spiral crosses the light in a few samples (the
+    # dark's false alarms cost a hand-over and a loss, a missed crossing a whole spiral)
+    threshold: float = 3.0
     window: int = 40             # samples (position, intensity) the hand-over fits
     coarse: float = 1.5          # deg between the source positions of the coarse grid
     fine: float = 0.25           # deg: the fine grid around the coarse grid's best
     margin: float = 8.0          # deg: the coarse grid reaches this far beyond the samples
     span: float = 40.0           # deg: and at most this far around the newest sample
+    # V: the fit's x1 g_r(0) is at most this (1.5 times the 3 V peak of Section V): a
+    # crossing seen from one side cannot tell a bright light far off from a dim one near
+    max_peak: float = 4.5
 
     def __post_init__(self) -> None:
         """Check the detector; raise AlignmentError with the reason."""
-        for name in ('reference', 'threshold', 'coarse', 'fine', 'margin', 'span'):
+        for name in ('reference', 'threshold', 'coarse', 'fine', 'margin', 'span', 'max_peak'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise AlignmentError(f'detector {name} must be positive, got {value}')
@@ -116,9 +121,10 @@ class SpotDetector:
         gv = np.where(ok[:, None, :], self.response.g(np.hypot(e[..., 0], e[..., 1])), 0.0)
         zg = np.einsum('mgw,mw->mg', gv, np.where(ok, z, 0.0))
         gg = np.einsum('mgw,mgw->mg', gv, gv)
-        with np.errstate(divide='ignore', invalid='ignore'):
-            score = np.where((zg > 0) & (gg > 0), zg * zg / gg, -np.inf)
-            x1 = np.where(gg > 0, zg / np.maximum(gg, 1e-300), 0.0)
+        # x1 = sum z g / sum g^2 within [0, max_peak / g_r(0)]; the squared residual drops
+        # by 2 x1 sum z g - x1^2 sum g^2 ((sum z g)^2 / sum g^2 where x1 is not clipped)
+        x1 = np.clip(zg / np.maximum(gg, 1e-300), 0.0, self.config.max_peak / self.response.peak)
+        score = np.where((zg > 0) & (gg > 0), 2.0 * x1 * zg - x1 * x1 * gg, -np.inf)
         return score, x1
 
     def sighting(self, mask: Mask, noise: float) -> SpotSighting:
