@@ -20,6 +20,7 @@ import pytest
 
 from tskf_ros.core.units import NS
 from tskf_ros.led.pan_tilt_stream import PanTiltStream, PanTiltStreamConfig
+from tskf_ros.led.two_axis.conical_ekf import transition
 from tskf_ros.led.two_axis.pan_tilt_session import PanTiltSession, PanTiltSessionConfig
 
 DT_NS = 50_000_000
@@ -69,3 +70,22 @@ def test_gaps_rejections_and_a_backward_jump_are_counted():
     assert names == ['input frequency', 'timestamp delay', 'aligner', 'time scale']
     level = {d.name: d.level for d in s.diagnostics()}
     assert level['time scale'] == 0     # the long gap was reported once, by the first call
+
+
+def test_the_prior_is_the_prediction_from_the_last_posterior():
+    # P^f_k = F(mu) P_{k-1} F(mu)^T + mu Q; x1 and the drifts b carry over (F leaves them)
+    s = stream()
+    Q = np.diag(s.session.tracker.config.Q)
+    prev = None
+    for k in (0, 1, 2, 5, 6):                  # a gap of mu = 3 after sample 2
+        step = s.add(NS + k * DT_NS, 2.5)
+        assert step.prior is not None
+        x_prior, P_prior = step.prior
+        if prev is not None:
+            mu = step.mu / 0.05
+            F = transition(mu)
+            np.testing.assert_allclose(P_prior, F @ prev.P @ F.T + mu * Q, rtol=1e-12,
+                                       atol=1e-12)
+            np.testing.assert_allclose(x_prior[[0, 3, 4]], prev.x[[0, 3, 4]], rtol=0,
+                                       atol=1e-12)
+        prev = step.outcome.estimate

@@ -105,15 +105,19 @@ def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_k
     client.create_subscription(Float64MultiArray, COMMAND_TOPIC, commands.append, deep)
     client.create_subscription(Float64MultiArray, OUTPUT_TOPICS['corrected'], corrected.append,
                                deep)
-    states = []
+    states, predicted = [], []
     client.create_subscription(String, PAT_STATE_TOPIC, states.append, pat_state_qos())
+    client.create_subscription(Float64MultiArray, OUTPUT_TOPICS['predicted'], predicted.append,
+                               deep)
     estimated = sum(1 for o in ref.outcomes if o is not None and o.estimate is not None)
+    # a prediction into every estimated sample but the hand-over's (the supervisor's fit)
+    predictions = estimated - (1 if aligner.get('pat.enabled') else 0)
     executor = make_executor(executor_kind, context=ros_context)
     for n in (sim, node, client):
         executor.add_node(n)
     try:
         wait_for(executor, lambda: len(truth) == steps and len(commands) == delivered
-                 and len(corrected) == estimated,
+                 and len(corrected) == estimated and len(predicted) == predictions,
                  lambda: f'the loop ({len(truth)} truth, {len(commands)} commands of '
                  f'{delivered}, {len(corrected)} estimates of {estimated})', TIMEOUT)
     finally:
@@ -133,6 +137,12 @@ def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_k
     got = np.array([conversions.msg_to_base_command(m) for m in commands])
     np.testing.assert_allclose(got, [o.command for o in outcomes], rtol=0, atol=1e-9)
     assert all(list(m.layout.dim[0].label.split(',')) == ['pan', 'tilt'] for m in commands)
+    # the prediction into each sample the filter steered at before (not the hand-over's)
+    before = [msg_to_pan_tilt_state(m) for m in predicted]
+    after = {e.stamp_ns: e for e in map(msg_to_pan_tilt_state, corrected)}
+    for e in before:
+        assert e.kind == 'predicted' and e.mu == after[e.stamp_ns].mu
+        assert np.trace(e.P) >= np.trace(after[e.stamp_ns].P)
     for msg, o in zip(corrected, [o for o in outcomes if o.estimate is not None]):
         e = msg_to_pan_tilt_state(msg)
         assert e.kind == 'corrected' and e.stamp_ns == o.stamp_ns

@@ -38,6 +38,7 @@ from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_diagnostics import aligner_status, pointing_status, time_scale
 from tskf_ros.led.alignment_session import (AlignStats, GAP_FACTOR, MISSING_REASONS,
                                             REJECT_REASONS, RESET_REASONS)
+from tskf_ros.led.intensity_model import FloatArray
 from tskf_ros.led.pointing_stats import PointingStats, Transition
 from tskf_ros.led.two_axis.pan_tilt_session import (PanTiltOutcome, PanTiltSession,
                                                     PanTiltSessionConfig)
@@ -70,6 +71,9 @@ class PanTiltStep:
 
     outcome: PanTiltOutcome
     mu: float = 0.0
+    # the filter's prediction into this sample (x, P), where it steered at the last sample
+    # too (not at a hand-over, where the supervisor restarts it from its fit)
+    prior: Optional[tuple[FloatArray, FloatArray]] = None
 
 
 class PanTiltStream:
@@ -119,6 +123,7 @@ class PanTiltStream:
             reason = 'out_of_range'
             message = f'intensity {z:g} V outside intensity_range {list(cfg.intensity_range)}'
         last = self.session.last_ns
+        steered = self.session.steering
         out = self.session.add(stamp_ns, None if reason else z)
         if reason and out.status in ('used', 'missing'):
             out = replace(out, status='missing', reason=reason, message=message)
@@ -145,7 +150,12 @@ class PanTiltStream:
         if out.command is not None:
             st.commands += 1
         self._note_state(st.last_stamp_ns or None)
-        return PanTiltStep(out, mu)
+        prior = None
+        if out.estimate is not None and (steered or last is None):
+            tracker = self.session.tracker
+            x, P = getattr(tracker, 'x_prior')[0], getattr(tracker, 'P_prior')[0]
+            prior = (np.array(x, dtype=float), (P + P.T) / 2)
+        return PanTiltStep(out, mu, prior)
 
     def _note_state(self, stamp_ns: Optional[int]) -> None:
         """Record the supervisor's state change at this sample, counted as in one axis."""

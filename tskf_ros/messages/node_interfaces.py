@@ -149,10 +149,10 @@ ALIGNMENT = NodeInterface(
            ('corrected', 'as `estimate/predicted`, after the update (18)-(20), kind '
                          '`corrected`, published with the command; the same mu (the '
                          'update does not depend on the step out of t_k). With `axes` 2 '
-                         "the conical-scan EKF's posterior (the only estimate of two "
-                         'axes): states `x1_intensity_V,d_cross_elevation_rad,'
-                         'd_elevation_rad` (and the drifts, if the filter has them), P '
-                         'to match'))),
+                         "both are the conical-scan EKF's, states `x1_intensity_V,"
+                         'd_cross_elevation_rad,d_elevation_rad,'
+                         'b_cross_elevation_rad_per_step,b_elevation_rad_per_step`, P to '
+                         "match (no prediction at the supervisor's hand-over)"))),
      Topic(align.COMMAND_TOPIC, align.COMMAND_TYPE, OUT, RELIABLE_QOS,
            '`[base angle]` (rad), as forward_command_controller expects; with `axes` 2 '
            '`[pan, tilt]` (rad) in the order of `pan_tilt.joints`, which label '

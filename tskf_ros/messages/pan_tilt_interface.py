@@ -85,6 +85,10 @@ def pan_tilt_outcome_messages(step: PanTiltStep, joints: tuple[str, str]) -> lis
     msgs: list[Any] = []
     if out.estimate is not None:
         e = out.estimate
+        if step.prior is not None:
+            x, P = step.prior
+            msgs.append(('predicted', pan_tilt_state_to_msg('predicted', out.stamp_ns,
+                                                            step.mu, x, P, e.states)))
         msgs.append(('corrected', pan_tilt_state_to_msg('corrected', out.stamp_ns, step.mu,
                                                         e.x, e.P, e.states)))
     msgs.append(('command', pan_tilt_command_to_msg(out.command, joints)))
