@@ -27,8 +27,9 @@ Simon, Optimal State Estimation, Wiley 2006, eqs. 5.17-5.19):
 d is an offset of the predicted measurement: Cai et al.'s output offset D for a linear
 model, h(x) - H x for an extended filter linearised at x (so H x + d = h(x)).
 The time-scale filter, the switching and lifted filters and the scanning EKF all call
-these; the update is written once over a leading axis of independent runs (`update_runs`:
-one filter is a stack of one, a batch allocates each intermediate once for all its runs),
+these; both are written once over a leading axis of independent runs (`predict_runs`,
+`update_runs`: one filter is a stack of one, a batch allocates each intermediate once for
+all its runs),
 `update_batch` and `predict_batch` run a batch, `update_predict_run` a sequence of steps
 of one filter.  The innovation test (a gate,
 as robot_localization's rejection threshold) is d^2 = y^T S^-1 y (`mahalanobis2`).
@@ -96,12 +97,6 @@ def _inv(S: Matrix) -> Matrix:
         return np.full((p, p), np.nan)
 
 
-@_jit
-def _symmetric(P: Matrix) -> Matrix:
-    """Return (P + P^T) / 2, as halves so that entries near 1e308 do not overflow."""
-    return P / 2 + P.T / 2
-
-
 # Over runs: a stack of independent filters on a leading axis (a leading axis of 1 is
 # shared by every run).  `update` is written once over runs: one filter is a stack of one,
 # and a batch allocates each intermediate once for all its runs, not once per run.
@@ -118,11 +113,12 @@ def _mm_runs(A: Stack, B: Stack) -> Stack:
     """Return A[r] B[r] for each run r: loops for small matrices, BLAS for large ones."""
     runs = max(A.shape[0], B.shape[0])
     n, m, p = A.shape[1], A.shape[2], B.shape[2]
-    out = np.zeros((runs, n, p))
+    blas = n * m * p > _LOOP_FLOPS
+    out = np.empty((runs, n, p)) if blas else np.zeros((runs, n, p))
     for r in range(runs):
         ra = r if A.shape[0] > 1 else 0
         rb = r if B.shape[0] > 1 else 0
-        if n * m * p > _LOOP_FLOPS:
+        if blas:
             out[r] = np.ascontiguousarray(A[ra]) @ np.ascontiguousarray(B[rb])
             continue
         for i in range(n):
@@ -167,18 +163,25 @@ def _t(A: Stack) -> Stack:
 
 @_jit
 def _symmetric_runs(P: Stack) -> Stack:
-    """Return (P[r] + P[r]^T) / 2 for each run r, as halves (`_symmetric`)."""
+    """Return (P[r] + P[r]^T) / 2 for each run r, as halves (entries near 1e308 stay finite)."""
     return P / 2 + _t(P) / 2
 
 
 @_jit
-def predict(x: Vector, P: Matrix, F: Matrix, Q: Matrix, Bu: Vector) -> tuple[Vector, Matrix]:
-    """Time update; Bu is B u (zeros without an input)."""
+def predict_runs(x: Stack, P: Stack, F: Stack, Q: Stack, Bu: Stack) -> tuple[Stack, Stack]:
+    """Time update of each run; Bu is B u (zeros without an input)."""
     # x = F x + B u
-    x = _mv(F, x) + Bu
+    x = _mv_runs(F, x) + Bu
     # P = F P F^T + Q
-    P = _mm(_mm(F, P), F.T) + Q
-    return x, _symmetric(P)
+    P = _mm_runs(_mm_runs(F, P), _t(F)) + Q
+    return x, _symmetric_runs(P)
+
+
+@_jit
+def predict(x: Vector, P: Matrix, F: Matrix, Q: Matrix, Bu: Vector) -> tuple[Vector, Matrix]:
+    """Time update of one run (a stack of one for predict_runs); Bu is B u."""
+    x_, P_ = predict_runs(x[None], P[None], F[None], Q[None], Bu[None])
+    return x_[0], P_[0]
 
 
 @_jit
@@ -329,10 +332,7 @@ def update_batch(x: NDArray[np.float64], P: NDArray[np.float64], z: NDArray[np.f
 def predict_batch(x: NDArray[np.float64], P: NDArray[np.float64], F: Matrix, Q: Matrix,
                   Bu: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Run `predict` for every run i on (x[i], P[i], Bu[i]), F and Q shared; returns (x, P)."""
-    x_out, P_out = np.empty_like(x), np.empty_like(P)
-    for i in range(x.shape[0]):
-        x_out[i], P_out[i] = predict(x[i], P[i], F, Q, Bu[i])
-    return x_out, P_out
+    return predict_runs(x, P, F[None], Q[None], Bu)
 
 
 def warm_up() -> None:
