@@ -13,7 +13,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""A package's names imported on first use: core's and led's __getattr__ and __dir__."""
+"""A package's names imported on first use: core's, led's and testing's __getattr__."""
 
 import subprocess
 import sys
@@ -39,7 +39,7 @@ def test_an_unknown_name_is_an_attribute_error():
         getattr_('nope')
 
 
-@pytest.mark.parametrize('package', ['tskf_ros.core', 'tskf_ros.led'])
+@pytest.mark.parametrize('package', ['tskf_ros.core', 'tskf_ros.led', 'tskf_ros.testing'])
 def test_every_name_of_all_is_listed_and_resolves(package):
     module = sys.modules.get(package) or __import__(package, fromlist=['__all__'])
     assert set(module.__all__) <= set(dir(module))
@@ -50,7 +50,8 @@ def test_every_name_of_all_is_listed_and_resolves(package):
 
 
 @pytest.mark.parametrize('package, module', [('tskf_ros.core', 'tskf_ros.core.lqr'),
-                                             ('tskf_ros.led', 'tskf_ros.led.scanning_ekf')])
+                                             ('tskf_ros.led', 'tskf_ros.led.scanning_ekf'),
+                                             ('tskf_ros.testing', 'tskf_ros.testing.nodes')])
 def test_importing_the_package_imports_no_module_of_it(package, module):
     code = (f'import sys, {package}; print({module!r} in sys.modules); '
             f'{package}.__dir__(); print({module!r} in sys.modules)')
