@@ -46,6 +46,9 @@ from tskf_ros.tools import console
 REPO = Path(__file__).resolve().parent.parent.parent
 INTERRUPTED = 130
 POLL = 0.002                    # s between two looks at a condition (not a synchronisation)
+# s: a bound on a process that may compile the kernels first (numba without a cache of
+# them: about 20 s idle, more than TIMEOUT on a loaded 2-core machine under colcon test)
+COMPILE_TIMEOUT = 600.0
 
 
 def start(tool: str, args: list, tmp_path: Path) -> tuple[subprocess.Popen, Path]:
@@ -58,9 +61,9 @@ def start(tool: str, args: list, tmp_path: Path) -> tuple[subprocess.Popen, Path
     return proc, err
 
 
-def wait_for(condition, proc: subprocess.Popen) -> bool:
-    """Poll condition until it holds (True) or proc ends (False); fail after TIMEOUT."""
-    deadline = time.monotonic() + TIMEOUT
+def wait_for(condition, proc: subprocess.Popen, timeout: float = TIMEOUT) -> bool:
+    """Poll condition until it holds (True) or proc ends (False); fail after timeout s."""
+    deadline = time.monotonic() + timeout
     while not condition():
         if proc.poll() is not None:
             return False
@@ -317,7 +320,7 @@ def test_ctrl_c_while_the_compiled_kernels_run_under_the_tools_own_handler(tmp_p
     with open(err, 'w') as f:
         proc = subprocess.Popen([sys.executable, '-c', code, str(ready), str(tmp_path)],
                                 cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=f)
-    assert wait_for(ready.exists, proc), err.read_text()
+    assert wait_for(ready.exists, proc, COMPILE_TIMEOUT), err.read_text()
     code, text = interrupt(proc, err)
     assert code == INTERRUPTED and text == '', (code, text)
 
