@@ -475,8 +475,11 @@ def test_a_held_start_takes_a_ctrl_c_before_the_runner_imports_as_an_interrupt(t
 def test_without_a_held_start_the_same_ctrl_c_is_pythons(tmp_path):
     # the control of the test above: the signal really lands before the runner
     code = SIGINT_FIRST + 'from tskf_ros.tools.console import reproduce; reproduce()'
+    # (SIGINT at its default in the child: a shell's background job inherits it ignored,
+    # and Python then keeps it ignored)
     done = subprocess.run([sys.executable, '-c', code, '--help'], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=TIMEOUT)
+                          capture_output=True, text=True, timeout=TIMEOUT,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert done.returncode == -signal.SIGINT and 'KeyboardInterrupt' in done.stderr
 
 
