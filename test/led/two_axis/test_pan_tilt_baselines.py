@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from tskf_ros.led.intensity_model import AlignmentError
-from tskf_ros.led.two_axis.baselines import FourPointAveraging, TwoAxisHillClimbing
+from tskf_ros.led.two_axis.pan_tilt_baselines import FourPointAveraging, TwoAxisHillClimbing
 from tskf_ros.led.two_axis.pan_tilt_simulation import PanTiltLinkConfig, simulate_pan_tilt
 
 
