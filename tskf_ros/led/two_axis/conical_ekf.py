@@ -106,6 +106,8 @@ class ConicalScanEKF:
     (NaN/None: missing), and returns the tangent-plane turn (runs, 2) to send.
     """
 
+    states = STATES
+
     def __init__(self, config: ConicalEKFConfig = ConicalEKFConfig(),
                  response: Optional[RadialResponse] = None, *, runs: int = 1) -> None:
         self.config = config
@@ -133,7 +135,7 @@ class ConicalScanEKF:
         return self.scan[self.index]
 
     def predict(self, mu: float) -> None:
-        """x <- F x + B u_{k-1}, P <- F P F^T + mu Q over mu nominal steps."""
+        """Predict over mu nominal steps: x <- F x + B u_{k-1}, P <- F P F^T + mu Q."""
         Bu = np.zeros((self.runs, 5))
         Bu[:, 1:3] = self.u
         self.x, self.P = kalman.predict_batch(self.x, np.ascontiguousarray(self.P),
@@ -142,7 +144,7 @@ class ConicalScanEKF:
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
 
     def h(self, x: FloatArray, offset: FloatArray) -> FloatArray:
-        """The predicted sample x1 g_r(|d + s|), one per run."""
+        """Return the predicted sample x1 g_r(|d + s|), one per run."""
         e = x[:, 1:3] + offset
         return x[:, 0] * self.response.g(np.hypot(e[:, 0], e[:, 1]))
 
@@ -155,7 +157,7 @@ class ConicalScanEKF:
         return H
 
     def update(self, z: FloatArray) -> None:
-        """The EKF update for the runs whose z is finite, linearised at the prior."""
+        """Run the EKF update for the runs whose z is finite, linearised at the prior."""
         have = np.isfinite(z)
         offset = self.scan_offset
         H = self.jacobian(self.x, offset)
@@ -191,6 +193,10 @@ class ConicalScanEKF:
         s_now = self.scan_offset
         self.index = (self.index + 1) % len(self.scan)
         return u + self.scan_offset - s_now
+
+    def correct_last_turn(self, delta: FloatArray) -> None:
+        """Account for a mount that turned delta (runs, 2) more than commanded (clamped)."""
+        self.u = self.u + np.asarray(delta, dtype=float)
 
     def restart_runs(self, mask: NDArray[np.bool_], x: FloatArray, P: FloatArray) -> None:
         """Start the runs in mask afresh from x (m, 5) and P (m, 5, 5); their next turn is 0."""

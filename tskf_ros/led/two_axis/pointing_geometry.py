@@ -94,8 +94,39 @@ def conical_scan(radius: float, points: int) -> FloatArray:
 
 
 def uniform_in_cone(half_angle: float, runs: int, rng: np.random.Generator) -> FloatArray:
-    """Return tangent-plane offsets (runs, 2) uniform in area within a cone (degrees)."""
-    # area-uniform in a disc: radius half_angle sqrt(U), direction uniform
-    radius = half_angle * np.sqrt(rng.random(runs))
+    """
+    Return offsets d (runs, 2), degrees, whose directions are uniform in solid angle in a cone.
+
+    The solid angle within theta of an axis is 2 pi (1 - cos theta), so cos theta is
+    uniform on [cos half_angle, 1]; the direction around the axis is uniform.  |d| is the
+    exact angle theta (the offsets are meant for `displaced`).
+    """
+    cos_max = math.cos(math.radians(half_angle))
+    theta = np.degrees(np.arccos(1.0 - rng.random(runs) * (1.0 - cos_max)))
     phase = rng.uniform(0.0, 2.0 * np.pi, runs)
-    return radius[:, None] * np.stack([np.cos(phase), np.sin(phase)], axis=-1)
+    return theta[:, None] * np.stack([np.cos(phase), np.sin(phase)], axis=-1)
+
+
+def displaced(azimuth: Angles, elevation: Angles, offset: FloatArray) -> FloatArray:
+    """
+    Return the joints [a, e] (..., 2) of the direction at the exact angle |d| from b(a, e).
+
+    The great circle from b(a, e) toward the tangent direction d = [d_c, d_e] (the
+    exponential map of the sphere): p = cos|d| b + sin|d| (d_c t_c + d_e t_e) / |d| with
+    t_c = [-sin a, cos a, 0] and t_e = [-sin e cos a, -sin e sin a, cos e];
+    off_axis_angle(b, p) = |d| exactly (|d| < 180).
+    """
+    a = np.radians(np.asarray(azimuth, dtype=float))
+    e = np.radians(np.asarray(elevation, dtype=float))
+    d = np.asarray(offset, dtype=float)
+    r = np.radians(np.hypot(d[..., 0], d[..., 1]))
+    safe = np.where(r > 0.0, r, 1.0)
+    u_c, u_e = np.radians(d[..., 0]) / safe, np.radians(d[..., 1]) / safe
+    b = boresight(np.degrees(a), np.degrees(e))
+    t_c = np.stack([-np.sin(a), np.cos(a), np.zeros_like(a)], axis=-1)
+    t_e = np.stack([-np.sin(e) * np.cos(a), -np.sin(e) * np.sin(a), np.cos(e)], axis=-1)
+    p = (np.cos(r)[..., None] * b
+         + np.sin(r)[..., None] * (u_c[..., None] * t_c + u_e[..., None] * t_e))
+    az = np.degrees(np.arctan2(p[..., 1], p[..., 0]))
+    el = np.degrees(np.arcsin(np.clip(p[..., 2], -1.0, 1.0)))
+    return np.stack([az, el], axis=-1)

@@ -87,7 +87,7 @@ class RadialResponse:
                                 + kappa * kappa * _sinhc(kappa * th)), axis=-1)
 
     def gradient(self, error: FloatArray) -> FloatArray:
-        """d g_r(|e|) / d e for tangent-plane errors e (..., 2): g_r'(theta)/theta e."""
+        """Return d g_r(|e|) / d e for tangent-plane errors e (..., 2): g_r'(theta)/theta e."""
         error = np.asarray(error, dtype=float)
         theta = np.hypot(error[..., 0], error[..., 1])
         return self.slope_over_theta(theta)[..., None] * error
