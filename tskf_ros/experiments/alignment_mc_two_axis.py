@@ -42,20 +42,25 @@ from tskf_ros.bag.progress import bar
 from tskf_ros.experiments import alignment_pat, arguments, output
 from tskf_ros.experiments.alignment_ablation_report import bootstrap_ci, wilson
 from tskf_ros.experiments.alignment_mc_two_axis_figure import plot_two_axis
-from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig, ConicalScanEKF
+from tskf_ros.led.two_axis.aligners import make_two_axis_aligner
 from tskf_ros.led.two_axis.pan_tilt_baselines import FourPointAveraging, TwoAxisHillClimbing
-from tskf_ros.led.two_axis.pan_tilt_simulation import (PanTiltLinkConfig, PanTiltTrajectory,
-                                                       simulate_pan_tilt, TwoAxisAligner)
+from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
+from tskf_ros.led.two_axis.pan_tilt_simulation import (PanTiltTrajectory, simulate_pan_tilt,
+                                                       TwoAxisAligner)
 from tskf_ros.led.two_axis.radial_response import RadialResponse
 
 DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
 # name -> what it is, for --help and the JSON
 METHODS = {
-    'ekf': 'conical-scan EKF, P controller per axis',
+    'conical_ekf_pat': 'conical-scan EKF, P controller per axis, with the supervisor',
+    'conical_lqg': 'conical-scan EKF with drift states, LQG per axis',
+    'conical_ekf': 'conical-scan EKF, P controller per axis (no supervisor)',
     'hill_climbing': 'hill climbing, axes alternating (gamma = 2 deg)',
     'four_point': 'four-point averaging, eq. (26) per axis (gamma = 2 deg)',
 }
-DEFAULT_METHODS = ('ekf', 'hill_climbing', 'four_point')
+CONICAL = ('conical_ekf', 'conical_ekf_pat', 'conical_lqg')
+# the comparison: the EKF with the supervisor, the LQG, the two baselines
+DEFAULT_METHODS = ('conical_ekf_pat', 'conical_lqg', 'hill_climbing', 'four_point')
 AXES = ('azimuth', 'elevation')
 RESAMPLES = 2000              # bootstrap resamples of the runs
 Progress = Callable[[str], None]
@@ -64,15 +69,33 @@ Progress = Callable[[str], None]
 def build(name: str, runs: int, link: PanTiltLinkConfig, response: RadialResponse, *,
           clip: bool) -> TwoAxisAligner:
     """Build the method `name` (one of METHODS) for `runs` runs of `link`."""
-    if name == 'ekf':
-        # R from the link's noise, as ekf_pat's in one axis (at least MIN_NOISE: R > 0)
-        config = ConicalEKFConfig(noise=max(link.noise, alignment_pat.MIN_NOISE), dt=link.dt)
-        return ConicalScanEKF(config, response, runs=runs)
+    if name in CONICAL:
+        # R from the link's noise, as ekf_pat's in one axis (at least MIN_NOISE: R > 0); a
+        # cold start searches first (the supervised EKF)
+        start = 'acquiring' if link.cone > 0.0 and name == 'conical_ekf_pat' else 'tracking'
+        return make_two_axis_aligner(name, runs=runs, dt=link.dt, response=response,
+                                     noise=max(link.noise, alignment_pat.MIN_NOISE),
+                                     start=start)
     if name == 'hill_climbing':
         return TwoAxisHillClimbing(runs=runs, dt=link.dt)
     if name == 'four_point':
         return FourPointAveraging(runs=runs, dt=link.dt, clip=clip)
     raise led.AlignmentError(f'unknown method {name!r}; expected one of {list(METHODS)}')
+
+
+def default_methods() -> list[str]:
+    """Return the DEFAULT_METHODS that can be built (conical_ekf if the supervised cannot)."""
+    names = [name for name in DEFAULT_METHODS if available(name)]
+    return names if 'conical_ekf_pat' in names else ['conical_ekf'] + names
+
+
+def available(name: str) -> bool:
+    """Tell whether the method `name` can be built here."""
+    try:
+        build(name, 1, PanTiltLinkConfig(), RadialResponse(), clip=False)
+    except led.AlignmentError:
+        return False
+    return True
 
 
 class Recording:
@@ -252,8 +275,9 @@ def parser() -> argparse.ArgumentParser:
                                        '(0: off)')
     p.add_argument('--methods', '--algorithms', dest='methods',
                    type=lambda t: [a for a in t.split(',') if a],
-                   default=list(DEFAULT_METHODS),
-                   help='comma list of the methods compared, of: ' + ', '.join(
+                   default=None,
+                   help='comma list of the methods compared (default: '
+                        + ','.join(DEFAULT_METHODS) + '), of: ' + ', '.join(
                        f'{k} ({v})' for k, v in METHODS.items()))
     p.add_argument('--clip-four-point', action='store_true',
                    help='clip gamma_p of eq. (26) to [-gamma, gamma] (as --clip-three-point)')
@@ -283,9 +307,14 @@ def config_record(args: argparse.Namespace) -> dict[str, Any]:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the two-axis comparison; return the exit status."""
     args = parser().parse_args(argv)
+    if args.methods is None:
+        args.methods = default_methods()
     unknown = [name for name in args.methods if name not in METHODS]
     if unknown or not args.methods:
         parser().error(f'--methods: unknown {unknown} (known: {", ".join(METHODS)})')
+    missing = [name for name in args.methods if not available(name)]
+    if missing:
+        parser().error(f'--methods: {", ".join(missing)} cannot be built in this version')
 
     def progress(line: str) -> None:
         print(f'[alignment_mc] {line}', file=sys.stderr, flush=True)

@@ -23,10 +23,11 @@ import numpy as np
 from tskf_ros import led
 from tskf_ros.led.two_axis.pan_tilt_simulation import PanTiltTrajectory
 
-LABELS = {'ekf': 'conical-scan EKF (P)', 'ekf_pat': 'conical-scan EKF + supervisor',
-          'ekf_lqg': 'conical-scan EKF, LQG', 'hill_climbing': 'hill climbing',
+LABELS = {'conical_ekf': 'conical-scan EKF (P)',
+          'conical_ekf_pat': 'conical-scan EKF + supervisor',
+          'conical_lqg': 'conical-scan EKF, LQG', 'hill_climbing': 'hill climbing',
           'four_point': 'four-point'}
-COLORS = {'ekf': 'tab:blue', 'ekf_pat': 'navy', 'ekf_lqg': 'tab:purple',
+COLORS = {'conical_ekf': 'tab:blue', 'conical_ekf_pat': 'navy', 'conical_lqg': 'tab:purple',
           'hill_climbing': 'tab:orange', 'four_point': 'tab:green'}
 
 

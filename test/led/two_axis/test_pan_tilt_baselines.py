@@ -22,7 +22,8 @@ import pytest
 
 from tskf_ros.led.intensity_model import AlignmentError
 from tskf_ros.led.two_axis.pan_tilt_baselines import FourPointAveraging, TwoAxisHillClimbing
-from tskf_ros.led.two_axis.pan_tilt_simulation import PanTiltLinkConfig, simulate_pan_tilt
+from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
+from tskf_ros.led.two_axis.pan_tilt_simulation import simulate_pan_tilt
 
 
 def hill_by_hand(zs, gamma):
@@ -129,14 +130,22 @@ def test_four_point_clip_bounds_a_turn_the_printed_form_lets_blow_up():
 @pytest.mark.parametrize('offset0', [5.0, 14.0])
 def test_on_a_still_noiseless_source_each_baseline_converges(offset0):
     # beta 0, no random walk, no noise: hill climbing ends in a limit cycle of steps of
-    # gamma = 2 deg per axis within 5 deg of the source; four-point settles within 0.5 deg
+    # gamma = 2 deg per axis within 5 deg of the source; four-point settles within 1.5 deg.
+    # Not at 0: the mount turns by joint angles at the receiver's elevation, so the cross's
+    # azimuth legs (at e and at e +- gamma) do not close and the cross creeps in azimuth by
+    # about 2 gamma (1/cos(e - gamma) - 1/cos e) per cycle, which (26) holds off at an
+    # offset (0.5-0.6 deg at 20 deg elevation); the elevation error goes to 0 (< 0.5 deg)
     link = PanTiltLinkConfig(noise=0.0, beta=0.0, q_sys=(0.0, 0.0), steps=400,
                              offset0=offset0)
     for aligner, within in ((TwoAxisHillClimbing(runs=50), 5.0),
-                            (FourPointAveraging(runs=50), 0.5)):
+                            (FourPointAveraging(runs=50), 1.5)):
         traj = simulate_pan_tilt(aligner, link, np.random.default_rng(1))
         d = np.hypot(traj.error[..., 0], traj.error[..., 1])
-        assert d[0] == pytest.approx(np.full(50, offset0), rel=1e-9)
+        # the source starts offset0 off the boresight (hill climbing has no scan offset)
+        if isinstance(aligner, TwoAxisHillClimbing):
+            assert traj.theta[0] == pytest.approx(np.full(50, offset0), rel=1e-9)
+        else:
+            assert np.max(np.abs(traj.error[-100:, :, 1])) < 0.5
         assert np.max(d[-100:]) < within, type(aligner).__name__
 
 
