@@ -55,6 +55,11 @@ class DetectorConfig:
                                  f'got {self.window}')
 
 
+def page_cusum(S: FloatArray, z: FloatArray, reference: FloatArray, have: Mask) -> FloatArray:
+    """Return Page's CUSUM S_k = max(0, S_{k-1} + z_k - k_ref) where `have`, else S_{k-1}."""
+    return np.where(have, np.maximum(0.0, S + np.where(have, z, 0.0) - reference), S)
+
+
 class Sighting(NamedTuple):
     """What the scan saw, per found run: peak factor x1 (V), bearing c (deg), cov of [x1, c]."""
 
@@ -92,9 +97,7 @@ class LightDetector:
         c = self.config
         have = mask & np.isfinite(z)
         scale = np.ones(self.runs) if scale is None else np.clip(scale, 1e-3, 1.0)
-        # Page's CUSUM: S_k = max(0, S_{k-1} + z_k - k_ref)
-        self.cusum = np.where(have, np.maximum(0.0, self.cusum + np.where(have, z, 0.0)
-                                               - c.reference * scale), self.cusum)
+        self.cusum = page_cusum(self.cusum, z, c.reference * scale, have)
         self.base[:, self.head] = np.where(have, base, np.nan)
         self.z[:, self.head] = np.where(have, z, np.nan)
         self.head = (self.head + 1) % c.window

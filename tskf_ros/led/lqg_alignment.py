@@ -66,6 +66,17 @@ def triangle_scan(amplitude: float, step: float = 2.0) -> tuple[float, ...]:
     return tuple([-a for a in half] + half)
 
 
+def lqr_turn(L: float, mu: float, error: Array, drift: Array) -> Array:
+    """
+    Return the turn over a step of graininess mu: mu (v - bhat), v = -L xhat.
+
+    u = -L xhat is Remark 4.2's certainty-equivalent control of the error xhat, and the
+    estimated drift bhat of the error per nominal step (x^sigma = x + mu b + turn) is
+    cancelled over the step; error and drift broadcast (one axis or two).
+    """
+    return mu * (-L * error - drift)
+
+
 @dataclass(frozen=True)
 class LQGConfig:
     """
@@ -225,8 +236,7 @@ class LQGAligner:
         mu = self.mu
         L = float(self.regulator.stationary(mu).L[0, 0])
         x = self.x
-        # u = -L x2hat (Remark 4.2), less the drift over the step: turn = mu (u - bhat)
-        return mu * (-L * x[:, 1] - x[:, 2])
+        return lqr_turn(L, mu, x[:, 1], x[:, 2])
 
     def correct_last_turn(self, delta: Array) -> None:
         """Account for a base that turned delta more than commanded (clamped)."""

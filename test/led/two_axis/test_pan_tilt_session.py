@@ -115,3 +115,17 @@ def test_the_link_and_the_session_agree_on_the_start():
     with pytest.raises(AlignmentError, match='starts at'):
         pan_tilt_closed_loop(PanTiltLinkConfig(), session, 3)
     assert PanTiltLink().joints.tolist() == [[0.0, 20.0]]
+
+
+def test_with_the_supervisor_the_state_is_reported():
+    """The conical_ekf_pat method from a cold start: 'acquiring' and no estimate until a hand-over."""
+    session = PanTiltSession(PanTiltSessionConfig(method='conical_ekf_pat', start='acquiring',
+                                                  noise=1.0))
+    out = session.add(NS, 0.1)
+    assert out.state == 'acquiring' and out.estimate is None and out.command is not None
+    loop = pan_tilt_closed_loop(PanTiltLinkConfig(noise=1.0, offset0=10.0),
+                                PanTiltSession(PanTiltSessionConfig(
+                                    method='conical_ekf_pat', start='acquiring', noise=1.0)),
+                                200, seed=3)
+    states = [o.state for o in loop.outcomes if o is not None]
+    assert states[-1] == 'tracking' and loop.theta()[-1] <= 15.0

@@ -17,27 +17,36 @@
 A conical-scan EKF: the intensity and the two pointing errors of a pan-tilt receiver.
 
 The two-axis form of the scanning EKF of Solanki, Al-Rubaia & Tan (IEEE/ASME T-Mech 2018,
-Section IV, eq. (7)-(21)); the geometry is in `pointing_geometry`, the response in
-`radial_response`.  State, in the tangent plane at the source (degrees, volts):
+Section IV, eq. (7)-(21)) with the drift states of lqg_alignment; the geometry is in
+`pointing_geometry`, the response in `radial_response`.  State, in the tangent plane at
+the source (degrees, volts):
 
-    x = [x1, d_c, d_e, v_c, v_e]
+    x = [x1, d_c, d_e, b_c, b_e]
 
-x1 the intensity factor of eq. (5)/(6), d the error of the mean pointing, v the source's
-drift per nominal step dt.  The receiver scans a circle of radius r around its mean
-pointing, s_k = r [cos phi_k, sin phi_k] (`conical_scan`), and each sample is
+x1 the intensity factor of eq. (5)/(6), d the error of the mean pointing (the boresight
+less the scan offset), b the drift of d per nominal step dt.  The receiver scans a circle
+of radius r around its mean pointing, s_k = r [cos phi_k, sin phi_k] (`conical_scan`),
+and each sample is
 
-    z_k = x1 g_r(|d_k + s_k|) + v_k,                          R = sigma^2
+    z_k = x1 g_r(|d_k + s_k|) + v_k,          R = sigma^2 + model_noise^2
 
 (one scalar per sample, not the paper's pair (12): the scan's rotation makes d observable
 over a turn, and the pair's reuse of z_{k-1} would correlate successive noises).  Over
 mu = elapsed / dt nominal steps (mu from the stamps, as the time-scale filter):
 
-    x1 <- x1,   d <- d + u_{k-1} - mu v,   v <- v,   P <- F P F^T + mu Q
+    x1 <- x1,   d <- d + mu b + u_{k-1},   b <- b,   P <- F P F^T + mu Q
 
-with u the turn of the mean pointing commanded at the previous sample.  The control is the
-paper's P law (21) on each axis, u_k = -G dhat_k, plus (optional, not in the paper) the
-estimated drift of one step, + vhat_k.  The receiver is sent u_k + s_{k+1} - s_k.
-Predict and update are tskf_ros.core.kalman's, batched over independent runs.
+with u the turn of the mean pointing commanded at the previous sample.  The control,
+per axis: 'p', the paper's P law (21) u_k = -G dhat_k, plus (not in the paper) the
+estimated drift of one step, - bhat_k; or 'lqr', lqg_alignment's time-scale LQR
+(Bohner & Wintz 2013, eq. (8)) u_k = mu (-L(mu) dhat_k - bhat_k) (lqg_alignment.lqr_turn).
+The receiver is sent u_k + s_{k+1} - s_k.  Predict and update are tskf_ros.core.kalman's,
+batched over independent runs.
+
+The scan's own loss: with the mean pointing on the source the boresight is r off it, so
+the scan costs 1 - g_r(r)/g_r(0) of the received intensity (`scan_loss`; 15 % at the
+default r = 4 deg); with a mean error |d| the boresight is at most |d| + r off, so it
+stays in the 15 deg tracking cone while |d| <= 15 - r.
 """
 
 from dataclasses import dataclass
@@ -48,28 +57,40 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tskf_ros.core import kalman
-from tskf_ros.led.intensity_model import AlignmentError, FloatArray, IncidenceResponse
+from tskf_ros.core.lqr import TimeScaleLQR
+from tskf_ros.led.intensity_model import AlignmentError, FloatArray
+from tskf_ros.led.lqg_alignment import lqr_turn
 from tskf_ros.led.scanning_ekf import as_measurement, Measurement, PAPER_DT, StampClock
 from tskf_ros.led.two_axis.pointing_geometry import conical_scan
 from tskf_ros.led.two_axis.radial_response import RadialResponse
 
-STATES = ('x1', 'd_c', 'd_e', 'v_c', 'v_e')
+CONTROLLERS = ('p', 'lqr')
+STATES = ('x1', 'd_c', 'd_e', 'b_c', 'b_e')
 
 
 @dataclass(frozen=True)
 class ConicalEKFConfig:
     """The conical-scan EKF's parameters; angles in degrees, intensities in volts."""
 
-    radius: float = 2.0               # r of the scan circle
+    radius: float = 4.0               # r of the scan circle (deg)
     points: int = 20                  # samples per scan turn (1 s at 50 ms, as Psi)
     x0: tuple[float, ...] = (2.0, 0.0, 0.0, 0.0, 0.0)
     # P0: x1 as ekf_pat's clipped prior (2 V), d 5 deg, drift 0.1 deg per step
     P0: tuple[float, ...] = (4.0, 25.0, 25.0, 0.01, 0.01)
-    # Q per nominal step: Table I's Q_sys for x1 and each pointing axis, a slow drift walk
-    Q: tuple[float, ...] = (0.0025, 0.01, 0.01, 1e-6, 1e-6)
-    noise: float = 0.2                # sigma of v (V): R = sigma^2
+    # Q per nominal step: Table I's Q_sys for x1; twice its 0.01 per pointing axis (the
+    # mount's scan circle does not close on the sphere, and h is small-angle); a slow walk
+    # of the drift (its cross-elevation part changes with the source's elevation)
+    Q: tuple[float, ...] = (0.0025, 0.02, 0.02, 1e-5, 1e-5)
+    noise: float = 0.2                # sigma of v (V)
+    # V: what the model misses (the small-angle h, the walk of x1 within a step), added to
+    # the noise in R = noise^2 + model_noise^2; without it a noiseless link makes the
+    # filter overconfident
+    model_noise: float = 0.2
     gain: float = 0.5                 # G of the P law (21), per axis
-    feedforward: bool = True          # add vhat to u (not in the paper)
+    feedforward: bool = True          # subtract bhat from u (not in the paper)
+    controller: str = 'p'             # 'p' (21), or 'lqr' (lqg_alignment's regulator)
+    state_weight: float = 0.25        # the LQR's weights of d and of the turn rate
+    input_weight: float = 2.0
     dt: float = PAPER_DT
     x1_floor: float = 0.05            # x1hat is kept >= this (Section IV assumes x1 > 0)
 
@@ -83,18 +104,32 @@ class ConicalEKFConfig:
             raise AlignmentError('every conical-scan EKF parameter must be finite')
         if min(self.P0) < 0.0 or min(self.Q) < 0.0:
             raise AlignmentError('P0 and Q must be >= 0')
-        if not self.noise > 0.0:
-            raise AlignmentError(f'noise must be > 0 V, got {self.noise}')
+        if self.noise < 0.0 or self.model_noise < 0.0 or not self.noise + self.model_noise > 0:
+            raise AlignmentError(f'noise and model_noise must be >= 0 V, one > 0, got '
+                                 f'{self.noise}, {self.model_noise}')
         if not 0.0 < self.gain < 2.0:
             raise AlignmentError(f'gain G must be in (0, 2) (u = -G dhat), got {self.gain}')
         if not self.dt > 0.0:
             raise AlignmentError(f'dt must be > 0 s, got {self.dt}')
+        if self.controller not in CONTROLLERS:
+            raise AlignmentError(f'controller must be one of {CONTROLLERS}, '
+                                 f'got {self.controller!r}')
+        if not (self.state_weight > 0.0 and self.input_weight > 0.0):
+            raise AlignmentError('the LQR weights must be > 0')
+        if self.points < 3:
+            raise AlignmentError(f'the scan needs at least 3 points, got {self.points}')
+
+
+def scan_loss(radius: float, response: Optional[RadialResponse] = None) -> float:
+    """Return 1 - g_r(r)/g_r(0): the intensity the scan alone costs, on the source."""
+    response = response if response is not None else RadialResponse()
+    return 1.0 - float(response.g(np.array([radius]))[0]) / response.peak
 
 
 def transition(mu: float) -> FloatArray:
-    """F over mu nominal steps: d <- d - mu v, x1 and v constant."""
+    """Return F over mu nominal steps: d <- d + mu b, x1 and b constant."""
     F = np.eye(5)
-    F[1, 3] = F[2, 4] = -mu
+    F[1, 3] = F[2, 4] = mu
     return F
 
 
@@ -111,19 +146,21 @@ class ConicalScanEKF:
     def __init__(self, config: ConicalEKFConfig = ConicalEKFConfig(),
                  response: Optional[RadialResponse] = None, *, runs: int = 1) -> None:
         self.config = config
-        self.response = response if response is not None else RadialResponse(IncidenceResponse())
+        self.response = response if response is not None else RadialResponse()
         self.runs = int(runs)
         if self.runs < 1:
             raise AlignmentError(f'runs must be at least 1, got {runs}')
         self.scan = conical_scan(config.radius, config.points)
         self.Q = np.diag(np.asarray(config.Q, dtype=float))
-        self.R = np.full((self.runs, 1, 1), config.noise ** 2)
+        self.R = np.full((self.runs, 1, 1), config.noise ** 2 + config.model_noise ** 2)
         n = self.runs
         self.x = np.tile(np.asarray(config.x0, dtype=float), (n, 1))
         self.P = np.tile(np.diag(np.asarray(config.P0, dtype=float)), (n, 1, 1))
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
         self.index = 0                               # s_k = scan[index]
         self.clock = StampClock(config.dt)
+        self.mu = 1.0                                # the last graininess seen
+        self.regulator = TimeScaleLQR(0.0, 1.0, config.state_weight, config.input_weight)
         self.u = np.zeros((n, 2))                    # u_{k-1}, not yet predicted over
         self.y = np.zeros(n)                         # innovation of the last update
         self.S = np.full(n, np.nan)                  # its variance
@@ -175,11 +212,14 @@ class ConicalScanEKF:
         self.updated = have
 
     def control(self) -> FloatArray:
-        """u_k = -G dhat_k (+ vhat_k with feedforward), per axis."""
-        u = -self.config.gain * self.x[:, 1:3]
-        if self.config.feedforward:
-            u = u + self.x[:, 3:5]
-        return u
+        """Return the turn of the mean pointing per axis, (runs, 2), by the configured law."""
+        c = self.config
+        d, b = self.x[:, 1:3], self.x[:, 3:5]
+        if c.controller == 'lqr':
+            L = float(self.regulator.stationary(self.mu).L[0, 0])
+            return lqr_turn(L, self.mu, d, b)
+        # (21) per axis, u_k = -G dhat_k, less the drift of a step (not in the paper)
+        return -c.gain * d - (b if c.feedforward else 0.0)
 
     def step(self, stamp: float, z: Measurement) -> FloatArray:
         """One sample at `stamp`: predict, update, control; return the turn (runs, 2)."""
@@ -187,12 +227,18 @@ class ConicalScanEKF:
         mu = self.clock.tick(stamp)
         if mu is not None:
             self.predict(mu)
+            self.mu = mu
         self.update(z)
         u = self.control()
         self.u = u
         s_now = self.scan_offset
         self.index = (self.index + 1) % len(self.scan)
         return u + self.scan_offset - s_now
+
+    @property
+    def nis(self) -> FloatArray:
+        """Return the NIS y^2 / S of the last update per run (NaN where z was missing)."""
+        return np.where(self.updated, self.y * self.y / self.S, np.nan)
 
     def correct_last_turn(self, delta: FloatArray) -> None:
         """Account for a mount that turned delta (runs, 2) more than commanded (clamped)."""

@@ -74,10 +74,11 @@ class PanTiltSessionConfig:
             raise AlignmentError(f'tilt_limits must be within +-{MAX_ELEVATION:g} deg and '
                                  f'hold joints0, got {list(self.tilt_limits)}')
 
-    def make_aligner(self) -> object:
-        """Build the configured aligner for one run."""
+    def make_aligner(self, joints: Optional[tuple[float, float]] = None) -> object:
+        """Build the configured aligner for one run, its mount at joints (None: joints0)."""
         return make_two_axis_aligner(self.method, runs=1, noise=self.noise, dt=self.dt,
-                                     start=self.start)
+                                     start=self.start,
+                                     joints0=self.joints0 if joints is None else joints)
 
 
 @dataclass(frozen=True)
@@ -116,7 +117,8 @@ class PanTiltSession:
         self._restart()
 
     def _restart(self) -> None:
-        self.aligner = self.config.make_aligner()
+        self.aligner = self.config.make_aligner((float(self.joints[0]),
+                                                 float(self.joints[1])))
         self.origin_ns: Optional[int] = None
         self.last_ns: Optional[int] = None
 

@@ -74,7 +74,7 @@ def joint_turn(turn: FloatArray, elevation: Angles) -> FloatArray:
     """Return the joint turns [da, de] (degrees) for tangent-plane turns [du_c, du_e]."""
     turn = np.asarray(turn, dtype=float)
     cos_e = np.cos(np.radians(np.asarray(elevation, dtype=float)))
-    return np.stack([turn[..., 0] / cos_e, turn[..., 1]], axis=-1)
+    return np.stack(np.broadcast_arrays(turn[..., 0] / cos_e, turn[..., 1]), axis=-1)
 
 
 def conical_scan(radius: float, points: int) -> FloatArray:
@@ -130,3 +130,37 @@ def displaced(azimuth: Angles, elevation: Angles, offset: FloatArray) -> FloatAr
     az = np.degrees(np.arctan2(p[..., 1], p[..., 0]))
     el = np.degrees(np.arcsin(np.clip(p[..., 2], -1.0, 1.0)))
     return np.stack([az, el], axis=-1)
+
+
+def log_offset(azimuth: Angles, elevation: Angles, to_azimuth: Angles,
+               to_elevation: Angles) -> FloatArray:
+    """
+    Return d (..., 2) with displaced(a, e, d) = (to_a, to_e): the inverse of `displaced`.
+
+    |d| is the exact angle between the two directions and its direction the great
+    circle's at b(a, e) in the [t_c, t_e] frame (the logarithm map of the sphere).
+    """
+    a = np.radians(np.asarray(azimuth, dtype=float))
+    e = np.radians(np.asarray(elevation, dtype=float))
+    p = boresight(to_azimuth, to_elevation)
+    t_c = np.stack([-np.sin(a), np.cos(a), np.zeros_like(a)], axis=-1)
+    t_e = np.stack([-np.sin(e) * np.cos(a), -np.sin(e) * np.sin(a), np.cos(e)], axis=-1)
+    u = np.stack([np.sum(p * t_c, axis=-1), np.sum(p * t_e, axis=-1)], axis=-1)
+    norm = np.hypot(u[..., 0], u[..., 1])
+    theta = off_axis_angle(azimuth, elevation, to_azimuth, to_elevation)
+    return np.where(norm[..., None] > 0.0, u / np.maximum(norm, 1e-300)[..., None], 0.0) \
+        * theta[..., None]
+
+
+def turn_between(joints: FloatArray, target: FloatArray) -> FloatArray:
+    """
+    Return the tangent-plane turn (..., 2) that `joint_turn` at joints' tilt makes target.
+
+    [wrap(a' - a) cos e, e' - e]: the inverse of joint_turn, so a mount at `joints` that
+    executes it reaches `target` exactly.
+    """
+    joints = np.asarray(joints, dtype=float)
+    target = np.asarray(target, dtype=float)
+    cos_e = np.cos(np.radians(joints[..., 1]))
+    return np.stack([wrap_degrees(target[..., 0] - joints[..., 0]) * cos_e,
+                     target[..., 1] - joints[..., 1]], axis=-1)

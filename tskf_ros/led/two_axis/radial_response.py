@@ -28,9 +28,10 @@ two sides,
       kappa_i = 2 s b_i / c_i^2,   s = fit units per degree,
 
 which is even and smooth in theta (so smooth in the two pointing errors at theta = 0), has
-its maximum at theta = 0, and keeps the tracking zone of the one-axis model exactly: the
-unit s is chosen so that the mean of g(+-15 deg) is 20 % of the peak, which is
-g_r(15 deg) = 0.2 g_r(0) (`intensity_model.zone_units_per_degree`).
+its maximum at theta = 0, and keeps the tracking zone of the one-axis model: the unit s
+is chosen so that the mean of g(+-15 deg) is 20 % of g's peak
+(`intensity_model.zone_units_per_degree`), which is g_r(15 deg) = 0.2002 g_r(0) (g's
+peak is a little off 0).
 """
 
 from dataclasses import dataclass, field
@@ -93,5 +94,5 @@ class RadialResponse:
         return self.slope_over_theta(theta)[..., None] * error
 
     def zone_level(self, angle: float = TRACKING_ANGLE) -> float:
-        """Return g_r(angle) / g_r(0): 0.2 at 15 degrees in the tracking-zone unit."""
+        """Return g_r(angle) / g_r(0): 0.2002 at 15 degrees in the tracking-zone unit."""
         return float(self.g(np.array([angle]))[0]) / self.peak

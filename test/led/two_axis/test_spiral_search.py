@@ -1,0 +1,81 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The spiral search: exact on the sphere, its coverage and its length."""
+
+import numpy as np
+import pytest
+
+from tskf_ros.led.intensity_model import AlignmentError
+from tskf_ros.led.two_axis.pointing_geometry import joint_turn, log_offset
+from tskf_ros.led.two_axis.spiral_search import SpiralConfig, SpiralSearch
+
+
+def _run(config, center, samples):
+    search = SpiralSearch(config, 1)
+    joints = np.array([center], dtype=float)
+    search.start(np.ones(1, bool), joints)
+    path = [joints[0].copy()]
+    for _ in range(samples):
+        joints = joints + joint_turn(search.turn(joints, np.ones(1, bool)), joints[:, 1])
+        path.append(joints[0].copy())
+    return search, np.array(path)
+
+
+def test_the_path_covers_the_disc_within_half_a_pitch():
+    """Every direction within 28 deg of the centre is within pitch/2 + speed of the path."""
+    c = SpiralConfig()
+    n = c.samples_to_cover(c.reach)
+    _, path = _run(c, (10.0, 30.0), n)
+    offsets = log_offset(10.0, 30.0, path[:, 0], path[:, 1])
+    rng = np.random.default_rng(0)
+    r = 28.0 * np.sqrt(rng.random(400))
+    phase = rng.uniform(0, 2 * np.pi, 400)
+    probe = r[:, None] * np.stack([np.cos(phase), np.sin(phase)], -1)
+    gap = np.min(np.hypot(*(probe[:, None, :] - offsets[None]).transpose(2, 0, 1)), axis=1)
+    assert gap.max() <= c.pitch / 2 + c.speed
+
+
+def test_the_boresight_moves_speed_per_sample_and_reaches_the_reach():
+    """Steps of about `speed` deg, 1.5 speed at most (the way back), out to `reach`."""
+    c = SpiralConfig()
+    n = c.samples_to_cover(c.reach)
+    _, path = _run(c, (0.0, 20.0), n - 1)
+    step = np.hypot(*np.diff(log_offset(0.0, 20.0, path[:, 0], path[:, 1]), axis=0).T)
+    assert np.all(step <= c.speed * 1.5 * 1.01)      # a tangent step, measured on the sphere
+    assert np.median(step) == pytest.approx(c.speed, rel=0.02)
+    assert np.max(np.hypot(*log_offset(0.0, 20.0, path[:, 0], path[:, 1]).T)) == \
+        pytest.approx(c.reach, abs=c.speed)
+
+
+def test_samples_to_cover_is_the_spiral_length_over_speed():
+    """The length is about pi R^2 / (pitch speed) for R >> pitch: within 5 % at R = 34."""
+    c = SpiralConfig()
+    assert c.samples_to_cover(34.0) == pytest.approx(np.pi * 34**2 / (c.pitch * c.speed),
+                                                     rel=0.05)
+
+
+def test_starts_again_beyond_the_reach():
+    """After a whole spiral it starts another one around the same centre."""
+    c = SpiralConfig()
+    search, _ = _run(c, (0.0, 0.0), c.samples_to_cover(c.reach) + 20)
+    assert search.spirals[0] == 1
+
+
+@pytest.mark.parametrize('bad', [{'speed': 0.0}, {'pitch': -1.0}, {'reach': 5.0}])
+def test_bad_spirals_say_why(bad):
+    """Each bad setting is one AlignmentError."""
+    with pytest.raises(AlignmentError):
+        SpiralConfig(**bad)

@@ -1,0 +1,274 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Pointing, acquisition and tracking in two axes: the supervisor around the conical-scan EKF.
+
+The two-axis form of led.supervisor (not in Solanki et al. 2018, who track from a known
+prior), with its states and tests: acquiring, the spiral search of spiral_search until
+the CUSUM of spot_detector sees light; hand-over, the EKF starts from the least-squares
+fit of what the spiral saw (x1 and d from it, the variances from its Fisher bound,
+inflated and clipped), the boresight turned onto the fitted source plus the next scan
+offset; tracking, the EKF steers, watched by lock_detector (the windowed NIS of the
+EKF's own innovations and M of N intensities below lock.level, reused unchanged; not
+the one-axis supervisor's level that follows the light in lock, which a hand-over onto
+the wrong side of the light teaches to take the dark for the light); lost, the EKF holds
+a declared loss for hold_samples (it keeps steering on its drift model; tracking again
+after a full window with few low samples), then the spiral again, centred on the last
+mean pointing seen in good lock.  The supervisor follows the mount's joints [pan, tilt]
+from `joints0` as the mount does (joint_turn of each turn at the tilt it is made at): a
+search is a pattern of directions on the sphere, and tangent-plane turns do not add up to
+one (over a 30 deg spiral they would miss its centre by tens of degrees).  Vectorised
+over runs.
+"""
+
+from dataclasses import dataclass, field
+import math
+from typing import Optional
+
+import numpy as np
+
+from tskf_ros.led.acquisition_scan import Mask
+from tskf_ros.led.intensity_model import AlignmentError, FloatArray
+from tskf_ros.led.lock_detector import LockConfig, LockDetector, LockVerdict
+from tskf_ros.led.scanning_ekf import as_measurement, Measurement
+from tskf_ros.led.supervisor import ACQUIRING, LOST, STARTS, STATES, TRACKING
+from tskf_ros.led.two_axis.conical_ekf import ConicalScanEKF
+from tskf_ros.led.two_axis.pointing_geometry import (joint_turn, tangent_error,
+                                                     turn_between)
+from tskf_ros.led.two_axis.radial_response import RadialResponse
+from tskf_ros.led.two_axis.spiral_search import SpiralConfig, SpiralSearch
+from tskf_ros.led.two_axis.spot_detector import SpotConfig, SpotDetector
+
+
+@dataclass(frozen=True)
+class PanTiltSupervisorConfig:
+    """The supervisor's search, detection and lock tests, and its actuation budget."""
+
+    spiral: SpiralConfig = field(default_factory=SpiralConfig)
+    detector: SpotConfig = field(default_factory=SpotConfig)
+    lock: LockConfig = field(default_factory=LockConfig)
+    noise: float = 1.0            # V: sigma of v the fit assumes
+    max_step: float = 45.0        # deg a command turns each axis at most; 0: no limit
+    start: str = 'acquiring'      # or 'tracking': from the EKF's own x0, P0
+    inflate: float = 4.0          # the hand-over variances are this times the Fisher bound,
+    x1_var: tuple[float, float] = (0.01, 4.0)      # V^2: clipped to this range
+    angle_var: tuple[float, float] = (2.0, 25.0)   # deg^2: and this one, per axis
+    hold_samples: int = 100       # samples the EKF holds a declared loss before the search
+    # samples the spiral goes on after the CUSUM sees light, so that the fit sees the
+    # light's crossing on both sides of its peak
+    settle: int = 4
+    min_samples: int = 10         # samples of a search before the CUSUM may see light
+    # V: lost, too, when the EKF's peak x1hat g_r(0) falls below this (0: off).  At 1 V
+    # of noise a pointing 15-20 deg off is explained as well by a dim light, but the link's
+    # x1 walk dims 5 % of the lights below 1 V within 20 s, and the EKF that keeps steering
+    # on its drift through the dim spell does better than a search; so off by default
+    min_peak: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Check the supervisor's settings; raise AlignmentError with the reason."""
+        if self.start not in STARTS:
+            raise AlignmentError(f'start must be one of {STARTS}, got {self.start!r}')
+        for name in ('noise', 'max_step', 'inflate', 'min_peak'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise AlignmentError(f'{name} must be >= 0, got {value}')
+        if not self.noise > 0 or not self.inflate > 0:
+            raise AlignmentError('noise and inflate must be > 0')
+        if self.hold_samples < 0:
+            raise AlignmentError(f'hold_samples must be >= 0, got {self.hold_samples}')
+        if self.settle < 0 or self.min_samples < 0:
+            raise AlignmentError('settle and min_samples must be >= 0')
+        for name in ('x1_var', 'angle_var'):
+            lo, hi = getattr(self, name)
+            if not (math.isfinite(hi) and 0.0 < lo <= hi):
+                raise AlignmentError(f'{name} must be [lo, hi] with 0 < lo <= hi')
+        if self.max_step > 0 and self.spiral.speed * 1.5 > self.max_step:
+            raise AlignmentError('the spiral moves faster than max_step allows')
+
+
+class PanTiltSupervisor:
+    """
+    The acquiring / tracking / lost machine around a ConicalScanEKF, for every run.
+
+    `step(stamp, z)` returns the tangent-plane turn (runs, 2); after it `state` holds each
+    run's state (STATES), `declared` the runs whose loss was declared at this step.
+    """
+
+    STATES = STATES
+
+    def __init__(self, tracker: ConicalScanEKF,
+                 config: PanTiltSupervisorConfig = PanTiltSupervisorConfig(),
+                 response: Optional[RadialResponse] = None, *,
+                 joints0: tuple[float, float] = (0.0, 20.0)) -> None:
+        self.tracker = tracker
+        self.config = config
+        self.response = response if response is not None else tracker.response
+        self.runs = n = tracker.runs
+        first = TRACKING if config.start == 'tracking' else ACQUIRING
+        self.state = np.full(n, first, dtype=int)
+        # the mount's joints [pan, tilt] (deg), and those of the tilt of the last turn
+        self.joints = np.tile(np.asarray(joints0, dtype=float), (n, 1))
+        self.tilt_of_turn = self.joints[:, 1].copy()
+        self.last_good = self.joints.copy()      # mean pointing last seen in good lock
+        self.spiral = SpiralSearch(config.spiral, n)
+        self.spiral.start(np.ones(n, dtype=bool), self.joints)
+        self.finder = SpotDetector(config.detector, self.response, n)
+        self.lock = LockDetector(config.lock, n)
+        self.changed: Mask = np.zeros(n, dtype=bool)
+        self.declared: Mask = np.zeros(n, dtype=bool)
+        self.resumed: Mask = np.zeros(n, dtype=bool)
+        self.verdict: Optional[LockVerdict] = None
+        self.tracked = np.zeros(n, dtype=int)
+        self.held = np.zeros(n, dtype=int)
+        self.losses = np.zeros(n, dtype=int)
+        self.handovers = np.zeros(n, dtype=int)
+        self.searched = np.zeros(n, dtype=int)      # samples since the search began
+        self.pending = np.zeros(n, dtype=int)       # samples since the CUSUM saw light
+
+    @property
+    def scan_offset(self) -> FloatArray:
+        """Return the EKF's scan offset of the next sample (2,)."""
+        return self.tracker.scan_offset
+
+    @property
+    def steering(self) -> Mask:
+        """Tell per run whether the EKF steers: tracking, or holding a declared loss."""
+        return (self.state == TRACKING) | (self.held > 0)
+
+    @property
+    def x(self) -> FloatArray:
+        """Return the EKF's posterior (runs, 5)."""
+        return self.tracker.x
+
+    @property
+    def P(self) -> FloatArray:
+        """Return the EKF's posterior covariance (runs, 5, 5)."""
+        return self.tracker.P
+
+    def acquire(self, mask: Optional[Mask] = None) -> None:
+        """Force a new cold search around the current boresight (all runs, or mask)."""
+        mask = np.ones(self.runs, dtype=bool) if mask is None else np.asarray(mask, bool)
+        old = self.state.copy()
+        center = np.where(self.steering[:, None], self.joints, self.spiral.center)
+        self.state[mask] = ACQUIRING
+        self.held[mask] = 0
+        self.spiral.start(mask, center)
+        self.finder.reset(mask)
+        self.searched[mask] = self.pending[mask] = 0
+        self.changed = old != self.state
+
+    def correct_last_turn(self, delta: FloatArray) -> None:
+        """Account for a mount that turned delta (runs, 2) more than the last command."""
+        delta = np.asarray(delta, dtype=float)
+        self.joints = self.joints + joint_turn(delta, self.tilt_of_turn)
+        self.tracker.correct_last_turn(np.where(self.steering[:, None], delta, 0.0))
+
+    def step(self, stamp: float, z: Measurement) -> FloatArray:
+        """Take the sample at `stamp` (NaN/None: missing); return the turn (runs, 2)."""
+        cfg = self.config
+        z = as_measurement(z, self.runs)
+        old = self.state.copy()
+        tracking = old == TRACKING
+        holding = self.held > 0
+        steering = self.steering
+        s_now = self.tracker.scan_offset
+        inner = self.tracker.step(stamp, np.where(steering, z, np.nan))
+        nis = np.where(steering, self.tracker.nis, np.nan)
+        self.verdict = verdict = self.lock.update(z, nis, steering)
+        self.tracked = np.where(steering, self.tracked + 1, 0)
+        steady = (self.tracked >= cfg.lock.window) & (verdict.low < max(cfg.lock.corroborate, 1))
+        good = tracking & steady
+        mean = self.joints - joint_turn(s_now, self.joints[:, 1])
+        self.last_good = np.where(good[:, None], mean, self.last_good)
+        searching = ~steering
+        seen_light = self.finder.update(z, self.joints, searching)
+        self.searched = np.where(searching, self.searched + 1, 0)
+        seen_light &= self.searched >= cfg.min_samples
+        self.pending = np.where(searching & ((self.pending > 0) | seen_light),
+                                self.pending + 1, 0)
+        found = self.pending > cfg.settle
+        turn = np.where(steering[:, None], inner, self.spiral.turn(self.joints, searching))
+        if np.any(found):
+            turn[found] = self._hand_over(found)
+        steered = steering.copy()
+        self.resumed = holding & steady
+        if np.any(holding):
+            self.held[holding] += 1
+            self.state[self.resumed] = TRACKING
+            self.held[self.resumed] = 0
+            timeout = holding & ~steady & (self.held > cfg.hold_samples)
+            self._search(timeout, turn)
+            steered &= ~timeout
+        dim = self.tracker.x[:, 0] * self.response.peak < cfg.min_peak
+        lost = (verdict.lost | dim) & tracking
+        self.declared = lost
+        if np.any(lost):
+            self.losses[lost] += 1
+            self.tracked[lost] = 0
+            self.state[lost] = LOST
+            hold = lost & (cfg.hold_samples > 0)
+            self.held[hold] = 1
+            self.lock.reset(hold)
+            self._search(lost & ~hold, turn)
+            steered &= ~(lost & ~hold)
+        if cfg.max_step > 0:
+            clamped = np.clip(turn, -cfg.max_step, cfg.max_step)
+            if np.any(clamped != turn):
+                self.tracker.correct_last_turn(np.where(steered[:, None], clamped - turn, 0.0))
+            turn = clamped
+        self.tilt_of_turn = self.joints[:, 1].copy()
+        self.joints = self.joints + joint_turn(turn, self.joints[:, 1])
+        self.changed = old != self.state
+        return turn
+
+    def _search(self, mask: Mask, turn: FloatArray) -> None:
+        """Start the spiral around the last good pointing for the runs in mask; set turn."""
+        if np.any(mask):
+            self.held[mask] = 0
+            self.spiral.start(mask, self.last_good)
+            self.finder.reset(mask)
+            self.searched[mask] = self.pending[mask] = 0
+            turn[mask] = self.spiral.turn(self.joints, mask)[mask]
+
+    def _hand_over(self, found: Mask) -> FloatArray:
+        """Start tracking the runs in `found` from the spiral's fit; return their turns."""
+        cfg = self.config
+        seen = self.finder.sighting(found, cfg.noise)
+        s_next = self.tracker.scan_offset
+        joints = self.joints[found]
+        source = seen.center
+        limit = cfg.max_step if cfg.max_step > 0 else np.inf
+        # turn so that the next sample is taken with the mean pointing on the fit: d = 0
+        target = source + joint_turn(s_next, source[:, 1])
+        turn = np.clip(turn_between(joints, target), -limit, limit)
+        after = joints + joint_turn(turn, joints[:, 1])
+        mean = after - joint_turn(s_next, after[:, 1])
+        m = int(np.count_nonzero(found))
+        x = np.zeros((m, 5))
+        x[:, 0] = seen.x1
+        x[:, 1:3] = tangent_error(mean[:, 0], mean[:, 1], source[:, 0], source[:, 1])
+        P = np.zeros((m, 5, 5))
+        P[:, 0, 0] = np.clip(cfg.inflate * seen.P[:, 0, 0], *cfg.x1_var)
+        for i in (1, 2):
+            P[:, i, i] = np.clip(cfg.inflate * seen.P[:, i, i], *cfg.angle_var)
+        P0 = self.tracker.config.P0
+        P[:, 3, 3], P[:, 4, 4] = P0[3], P0[4]
+        self.tracker.restart_runs(found, x, P)
+        self.state[found] = TRACKING
+        self.handovers[found] += 1
+        self.pending[found] = 0
+        self.lock.reset(found)
+        return turn
