@@ -75,7 +75,7 @@ def build(name: str, runs: int, link: PanTiltLinkConfig, response: RadialRespons
         start = 'acquiring' if link.cone > 0.0 and name == 'conical_ekf_pat' else 'tracking'
         return make_two_axis_aligner(name, runs=runs, dt=link.dt, response=response,
                                      noise=max(link.noise, alignment_pat.MIN_NOISE),
-                                     start=start)
+                                     start=start, joints0=(0.0, link.elevation0))
     if name == 'hill_climbing':
         return TwoAxisHillClimbing(runs=runs, dt=link.dt)
     if name == 'four_point':
