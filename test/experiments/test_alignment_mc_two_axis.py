@@ -47,6 +47,10 @@ def test_two_axes_write_the_one_axis_keys_and_per_axis_errors(tmp_path, capsys):
             for i, mean in enumerate(got[key]['mean']):
                 lo, hi = got[key]['ci95'][i]
                 assert lo <= mean + 1e-9 and mean <= hi + 1e-9
+    # a supervised method records its declared losses (a false-alarm rate), a plain one not
+    if 'conical_ekf_pat' in data['results']:
+        assert data['results']['conical_ekf_pat']['false_alarms_per_1000s'][0] is not None
+    assert data['results']['hill_climbing']['false_alarms_per_1000s'] == [None, None]
     # the baselines' numbers, from the closed loop written out here: seed 0 at each level
     for i, noise in enumerate((0.5, 1.5)):
         link = PanTiltLinkConfig(beta=1.2, steps=40, noise=noise, offset0=5.0)
