@@ -118,7 +118,7 @@ def test_the_link_and_the_session_agree_on_the_start():
 
 
 def test_with_the_supervisor_the_state_is_reported():
-    """The conical_ekf_pat method from a cold start: 'acquiring' and no estimate until a hand-over."""
+    """Method conical_ekf_pat, cold start: 'acquiring', no estimate before a hand-over."""
     session = PanTiltSession(PanTiltSessionConfig(method='conical_ekf_pat', start='acquiring',
                                                   noise=1.0))
     out = session.add(NS, 0.1)

@@ -54,7 +54,8 @@ def test_the_boresight_moves_speed_per_sample_and_reaches_the_reach():
     n = c.samples_to_cover(c.reach)
     _, path = _run(c, (0.0, 20.0), n - 1)
     step = np.hypot(*np.diff(log_offset(0.0, 20.0, path[:, 0], path[:, 1]), axis=0).T)
-    assert np.all(step <= c.speed * 1.5 * 1.01)      # a tangent step, measured on the sphere
+    # the limit is on the tangent turn; on the sphere the step is up to 2 % longer
+    assert np.all(step <= c.speed * 1.5 * 1.03)
     assert np.median(step) == pytest.approx(c.speed, rel=0.02)
     assert np.max(np.hypot(*log_offset(0.0, 20.0, path[:, 0], path[:, 1]).T)) == \
         pytest.approx(c.reach, abs=c.speed)

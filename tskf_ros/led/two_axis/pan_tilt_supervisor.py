@@ -70,6 +70,10 @@ class PanTiltSupervisorConfig:
     # samples the spiral goes on after the CUSUM sees light, so that the fit sees the
     # light's crossing on both sides of its peak
     settle: int = 4
+    # then a small spiral around the first fit (None: none), and the fit again from the
+    # samples of both: one crossing of the light leaves c uncertain across the arm
+    refine: Optional[SpiralConfig] = field(
+        default_factory=lambda: SpiralConfig(speed=3.0, pitch=5.0, reach=9.0))
     min_samples: int = 10         # samples of a search before the CUSUM may see light
     # V: lost, too, when the EKF's peak x1hat g_r(0) falls below this (0: off).  At 1 V
     # of noise a pointing 15-20 deg off is explained as well by a dim light, but the link's
@@ -125,6 +129,9 @@ class PanTiltSupervisor:
         self.last_good = self.joints.copy()      # mean pointing last seen in good lock
         self.spiral = SpiralSearch(config.spiral, n)
         self.spiral.start(np.ones(n, dtype=bool), self.joints)
+        self.refine = SpiralSearch(config.refine or config.spiral, n)
+        self.refine_samples = (config.refine.samples_to_cover(config.refine.reach)
+                               if config.refine is not None else 0)
         self.finder = SpotDetector(config.detector, self.response, n)
         self.lock = LockDetector(config.lock, n)
         self.changed: Mask = np.zeros(n, dtype=bool)
@@ -137,6 +144,7 @@ class PanTiltSupervisor:
         self.handovers = np.zeros(n, dtype=int)
         self.searched = np.zeros(n, dtype=int)      # samples since the search began
         self.pending = np.zeros(n, dtype=int)       # samples since the CUSUM saw light
+        self.locked = np.zeros(n, dtype=bool)       # in good lock since the hand-over
 
     @property
     def scan_offset(self) -> FloatArray:
@@ -193,14 +201,24 @@ class PanTiltSupervisor:
         good = tracking & steady
         mean = self.joints - joint_turn(s_now, self.joints[:, 1])
         self.last_good = np.where(good[:, None], mean, self.last_good)
+        self.locked |= good
         searching = ~steering
         seen_light = self.finder.update(z, self.joints, searching)
         self.searched = np.where(searching, self.searched + 1, 0)
         seen_light &= self.searched >= cfg.min_samples
         self.pending = np.where(searching & ((self.pending > 0) | seen_light),
                                 self.pending + 1, 0)
-        found = self.pending > cfg.settle
-        turn = np.where(steering[:, None], inner, self.spiral.turn(self.joints, searching))
+        if cfg.refine is not None:
+            settled = self.pending == cfg.settle + 1
+            if np.any(settled):
+                self.refine.start(settled, self._scatter(settled,
+                                                         self.finder.sighting(settled,
+                                                                              cfg.noise).center))
+        found = self.pending > cfg.settle + self.refine_samples
+        fine = searching & (self.pending > cfg.settle) & (cfg.refine is not None)
+        search = (self.spiral.turn(self.joints, searching & ~fine)
+                  + self.refine.turn(self.joints, fine))
+        turn = np.where(steering[:, None], inner, search)
         if np.any(found):
             turn[found] = self._hand_over(found)
         steered = steering.copy()
@@ -219,7 +237,8 @@ class PanTiltSupervisor:
             self.losses[lost] += 1
             self.tracked[lost] = 0
             self.state[lost] = LOST
-            hold = lost & (cfg.hold_samples > 0)
+            # a hand-over that never came into good lock was onto no light: search again
+            hold = lost & self.locked & (cfg.hold_samples > 0)
             self.held[hold] = 1
             self.lock.reset(hold)
             self._search(lost & ~hold, turn)
@@ -238,10 +257,19 @@ class PanTiltSupervisor:
         """Start the spiral around the last good pointing for the runs in mask; set turn."""
         if np.any(mask):
             self.held[mask] = 0
-            self.spiral.start(mask, self.last_good)
+            # around the last good pointing; after a hand-over onto no light, around the
+            # search's own centre again
+            self.spiral.start(mask, np.where(self.locked[:, None], self.last_good,
+                                             self.spiral.center))
             self.finder.reset(mask)
             self.searched[mask] = self.pending[mask] = 0
             turn[mask] = self.spiral.turn(self.joints, mask)[mask]
+
+    def _scatter(self, mask: Mask, rows: FloatArray) -> FloatArray:
+        """Return a (runs, 2) array with `rows` at the runs in mask, the joints elsewhere."""
+        out = self.joints.copy()
+        out[mask] = rows
+        return out
 
     def _hand_over(self, found: Mask) -> FloatArray:
         """Start tracking the runs in `found` from the spiral's fit; return their turns."""
@@ -270,5 +298,6 @@ class PanTiltSupervisor:
         self.state[found] = TRACKING
         self.handovers[found] += 1
         self.pending[found] = 0
+        self.locked[found] = False
         self.lock.reset(found)
         return turn

@@ -25,11 +25,11 @@ sphere; tangent-plane turns do not add up to positions on a sphere)
 
 out to the radius `reach`, and starts again at c (a new spiral, turned by half a turn,
 so that its arms fall between the last ones).  It advances `speed` degrees of path per
-sample: d phi = speed / sqrt((a phi)^2 + a^2), the arc length element of the spiral.  A
+sample: d phi = speed / (a sqrt(1 + phi^2)), the arc length element of the spiral.  A
 pitch below the width over which the light is seen leaves no gap: with the default 12
 deg pitch every direction within `reach` is at most 6 deg from an arm, where the radial
-response is above 80 % of its peak.  The time to cover a disc of radius R is about
-pi R^2 / (pitch speed) samples (the spiral's length).
+response is 70 % of its peak.  The time to cover a disc of radius R is about
+pi R^2 / (pitch speed) samples (the spiral's length): 96 samples (4.8 s) to 38 deg.
 """
 
 from dataclasses import dataclass
@@ -46,9 +46,10 @@ from tskf_ros.led.two_axis.pointing_geometry import displaced, turn_between
 class SpiralConfig:
     """The spiral: degrees of path per sample, degrees between arms, the widest radius."""
 
-    speed: float = 3.0            # deg the boresight moves per sample while searching
+    speed: float = 4.0            # deg the boresight moves per sample while searching
     pitch: float = 12.0           # deg between successive arms
-    reach: float = 34.0           # deg: the spiral starts again beyond this radius
+    reach: float = 38.0           # deg: the spiral starts again beyond this radius (a 30
+    # deg cone, the light seen some 8 deg off an arm, and the drift while searching)
 
     def __post_init__(self) -> None:
         """Check the spiral; raise AlignmentError with the reason."""
