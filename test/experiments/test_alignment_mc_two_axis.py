@@ -110,3 +110,16 @@ def test_a_bad_argument_is_one_line_and_exit_2(argv, message, capsys):
     assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert message in err[-1] and 'Traceback' not in '\n'.join(err), err
+
+
+def test_the_numbers_do_not_depend_on_the_workers(tmp_path, capsys):
+    # each point starts its own generator from the seed: 1 and 2 processes agree
+    data = []
+    for workers in ('1', '2'):
+        out = tmp_path / f'w{workers}.json'
+        assert alignment_mc.main(['--axes', '2', '--runs', '3', '--steps', '30',
+                                  '--noise-levels', '0.5,1', '--methods',
+                                  'hill_climbing,four_point', '--workers', workers,
+                                  '--json', str(out)]) == 0
+        data.append(json.loads(out.read_text())['results'])
+    assert data[0] == data[1]
