@@ -29,6 +29,7 @@ LABELS = {'conical_ekf': 'conical-scan EKF (P)',
           'four_point': 'four-point'}
 COLORS = {'conical_ekf': 'tab:blue', 'conical_ekf_pat': 'navy', 'conical_lqg': 'tab:purple',
           'hill_climbing': 'tab:orange', 'four_point': 'tab:green'}
+ZOOM = 5.0          # deg: the half-width of the inset around the LED
 
 
 def plot_two_axis(noise_levels: Sequence[float], results: dict,
@@ -68,6 +69,17 @@ def plot_two_axis(noise_levels: Sequence[float], results: dict,
     right.plot(cone * np.cos(phase), cone * np.sin(phase), color='tab:red', ls=':', lw=1.0,
                label=f'{cone:g} deg tracking cone')
     right.plot(0.0, 0.0, 'r+', ms=10)
+    # a zoom on the LED: the EKFs' paths are within a few degrees of it
+    zoom = right.inset_axes((0.04, 0.04, 0.3, 0.3))
+    for name, traj in runs.items():
+        d = traj.error[:, 0, :]
+        zoom.plot(d[:, 0], d[:, 1], lw=0.7, color=COLORS.get(name))
+    zoom.plot(0.0, 0.0, 'r+', ms=8)
+    zoom.set_xlim(-ZOOM, ZOOM)
+    zoom.set_ylim(-ZOOM, ZOOM)
+    zoom.set_aspect('equal')
+    zoom.tick_params(labelsize=7)
+    zoom.set_title(f'zoom on the LED, +-{ZOOM:g} deg', fontsize=7)
     right.set_aspect('equal', adjustable='datalim')
     right.set_xlabel('azimuth error on the sky, (a - a_s) cos e_s (deg)')
     right.set_ylabel('elevation error, e - e_s (deg)')
