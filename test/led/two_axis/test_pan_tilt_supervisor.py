@@ -68,10 +68,22 @@ def test_a_block_of_the_light_is_held_and_tracking_resumes():
 def test_a_loss_held_longer_than_hold_samples_becomes_a_search():
     """Light blocked for 10 s: after hold_samples the runs search (lost, not steering)."""
     sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
-                            PanTiltSupervisorConfig(start='tracking', hold_samples=40))
+                            PanTiltSupervisorConfig(start='tracking', hold_samples=40,
+                                                    fade_peak=0.0))
     link = PanTiltLinkConfig(noise=0.5, steps=200, blocked=(2.0, 12.0))
     simulate_pan_tilt(sup, link, 7)
     assert np.all(sup.state == LOST) and not np.any(sup.steering)
+
+
+def test_a_loss_of_a_dim_light_is_held_for_fade_hold():
+    """A light dimmer in lock than fade_peak: its loss is held fade_hold samples, steering."""
+    sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
+                            PanTiltSupervisorConfig(start='tracking', hold_samples=40,
+                                                    fade_peak=10.0, fade_hold=300))
+    link = PanTiltLinkConfig(noise=0.5, steps=200, blocked=(2.0, 12.0))
+    simulate_pan_tilt(sup, link, 7)
+    assert np.all(sup.state == LOST) and np.all(sup.steering)
+    assert np.all(sup.hold_limit == 300)
 
 
 def test_builds_every_method_by_name():

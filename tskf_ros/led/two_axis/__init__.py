@@ -14,9 +14,12 @@
 # limitations under the License.
 
 """
-LED alignment in two axes: a pan-tilt receiver, a conical-scan EKF, and its closed loop.
+LED alignment in two axes: a pan-tilt receiver, a conical-scan EKF, its supervisor and loop.
 
 pointing_geometry (the mount, the sphere and the tangent plane), radial_response (the
 one-axis response of Solanki et al. as a function of the off-axis angle), conical_ekf
-(the EKF and its per-axis P law) and pan_tilt_simulation (the closed loop on the sphere).
+(the EKF, its per-axis P law and LQR), pan_tilt_link (the link as a seeded plant),
+pan_tilt_simulation (the closed loop, vectorised over runs), spiral_search, spot_detector
+and pan_tilt_supervisor (acquiring, tracking, lost), aligners (each aligner by name) and
+pan_tilt_session (one sample at a time, for the node).  Design: doc/design/two_axis.md.
 """

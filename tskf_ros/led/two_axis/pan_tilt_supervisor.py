@@ -67,6 +67,14 @@ class PanTiltSupervisorConfig:
     x1_var: tuple[float, float] = (0.01, 4.0)      # V^2: clipped to this range
     angle_var: tuple[float, float] = (2.0, 25.0)   # deg^2: and this one, per axis
     hold_samples: int = 100       # samples the EKF holds a declared loss before the search
+    # V and samples: a loss of a light whose peak in good lock (x1hat g_r(0), averaged over
+    # about a second, so that a sudden block leaves it high) was below fade_peak is held
+    # for fade_hold samples instead: the two-axis form of the one-axis fade test.  The
+    # link's x1 walk dims some lights under the noise (5 % below 1 V within 20 s), where
+    # no intensity test tells a faded light from a pointing loss, and steering on the
+    # drift model keeps the pointing where a search in the dark would carry it away
+    fade_peak: float = 2.0
+    fade_hold: int = 400
     # samples the spiral goes on after the CUSUM sees light, so that the fit sees the
     # light's crossing on both sides of its peak
     settle: int = 4
@@ -85,14 +93,14 @@ class PanTiltSupervisorConfig:
         """Check the supervisor's settings; raise AlignmentError with the reason."""
         if self.start not in STARTS:
             raise AlignmentError(f'start must be one of {STARTS}, got {self.start!r}')
-        for name in ('noise', 'max_step', 'inflate', 'min_peak'):
+        for name in ('noise', 'max_step', 'inflate', 'min_peak', 'fade_peak'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise AlignmentError(f'{name} must be >= 0, got {value}')
         if not self.noise > 0 or not self.inflate > 0:
             raise AlignmentError('noise and inflate must be > 0')
-        if self.hold_samples < 0:
-            raise AlignmentError(f'hold_samples must be >= 0, got {self.hold_samples}')
+        if self.hold_samples < 0 or self.fade_hold < 0:
+            raise AlignmentError('hold_samples and fade_hold must be >= 0')
         if self.settle < 0 or self.min_samples < 0:
             raise AlignmentError('settle and min_samples must be >= 0')
         for name in ('x1_var', 'angle_var'):
@@ -145,6 +153,8 @@ class PanTiltSupervisor:
         self.searched = np.zeros(n, dtype=int)      # samples since the search began
         self.pending = np.zeros(n, dtype=int)       # samples since the CUSUM saw light
         self.locked = np.zeros(n, dtype=bool)       # in good lock since the hand-over
+        self.hold_limit = np.full(n, config.hold_samples)   # samples the current hold lasts
+        self.x1_lock = np.full(n, np.nan)           # x1hat in good lock, averaged
 
     @property
     def scan_offset(self) -> FloatArray:
@@ -202,6 +212,11 @@ class PanTiltSupervisor:
         mean = self.joints - joint_turn(s_now, self.joints[:, 1])
         self.last_good = np.where(good[:, None], mean, self.last_good)
         self.locked |= good
+        x1 = self.tracker.x[:, 0]
+        # an exponential average over about a second (alpha = 1/20), only in good lock
+        self.x1_lock = np.where(good, np.where(np.isfinite(self.x1_lock),
+                                               self.x1_lock + (x1 - self.x1_lock) / 20.0, x1),
+                                self.x1_lock)
         searching = ~steering
         seen_light = self.finder.update(z, self.joints, searching)
         self.searched = np.where(searching, self.searched + 1, 0)
@@ -227,7 +242,7 @@ class PanTiltSupervisor:
             self.held[holding] += 1
             self.state[self.resumed] = TRACKING
             self.held[self.resumed] = 0
-            timeout = holding & ~steady & (self.held > cfg.hold_samples)
+            timeout = holding & ~steady & (self.held > self.hold_limit)
             self._search(timeout, turn)
             steered &= ~timeout
         dim = self.tracker.x[:, 0] * self.response.peak < cfg.min_peak
@@ -239,6 +254,9 @@ class PanTiltSupervisor:
             self.state[lost] = LOST
             # a hand-over that never came into good lock was onto no light: search again
             hold = lost & self.locked & (cfg.hold_samples > 0)
+            faded = self.x1_lock * self.response.peak < cfg.fade_peak
+            self.hold_limit = np.where(hold & faded, max(cfg.fade_hold, cfg.hold_samples),
+                                       np.where(hold, cfg.hold_samples, self.hold_limit))
             self.held[hold] = 1
             self.lock.reset(hold)
             self._search(lost & ~hold, turn)
@@ -299,5 +317,6 @@ class PanTiltSupervisor:
         self.handovers[found] += 1
         self.pending[found] = 0
         self.locked[found] = False
+        self.x1_lock[found] = np.nan
         self.lock.reset(found)
         return turn
