@@ -103,8 +103,13 @@ def test_one_axis_is_the_default(tmp_path, capsys):
     (['--axes', '2', '--cold-start', '-1'],
      'argument --cold-start: must be a finite number in [0, 60]'),
     (['--axes', '2', '--runs', '0'], 'argument --runs: must be in'),
+    (['--axes', '2', '--json', '/'], '--json /: / is a folder'),
+    (['--axes', '2', '--png', 'FILE/a.png'], 'is not a folder'),
 ])
-def test_a_bad_argument_is_one_line_and_exit_2(argv, message, capsys):
+def test_a_bad_argument_is_one_line_and_exit_2(argv, message, capsys, tmp_path):
+    # FILE: a file where a folder should be
+    (tmp_path / 'file').write_text('')
+    argv = [a.replace('FILE', str(tmp_path / 'file')) for a in argv]
     with pytest.raises(SystemExit) as info:
         alignment_mc.main(argv)
     assert info.value.code == 2

@@ -304,6 +304,20 @@ def config_record(args: argparse.Namespace) -> dict[str, Any]:
                              'cross-elevation angle wrap(a - a_s) cos e_s, elevation e - e_s'}
 
 
+def unwritable(path: Path) -> Optional[str]:
+    """Return why `path` cannot be written (before the long run), or None."""
+    if path.is_dir():
+        return f'{path} is a folder'
+    parent = path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        return f'{parent} is not a folder'
+    if not os.access(parent, os.W_OK):
+        return f'cannot write in {parent}'
+    return None
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the two-axis comparison; return the exit status."""
     args = parser().parse_args(argv)
@@ -315,6 +329,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     missing = [name for name in args.methods if not available(name)]
     if missing:
         parser().error(f'--methods: {", ".join(missing)} cannot be built in this version')
+    for option, path in (('--json', args.json), ('--png', args.png)):
+        why = unwritable(path) if path is not None else None
+        if why:
+            parser().error(f'{option} {path}: {why}')
 
     def progress(line: str) -> None:
         print(f'[alignment_mc] {line}', file=sys.stderr, flush=True)
