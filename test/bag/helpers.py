@@ -33,7 +33,7 @@ T0 = 1_700_000_000 * NS
 REPO = Path(__file__).resolve().parent.parent.parent
 BAGS = REPO / 'bags'
 CONFIG = REPO / 'config'
-SAMPLES = ('owc_cai_td_1hz', 'owc_ge_1khz', 'led_alignment', 'drogue')
+SAMPLES = ('owc_cai_td_1hz', 'owc_ge_1khz', 'led_alignment', 'led_pan_tilt', 'drogue')
 # s: a bound on waiting for a subprocess or DDS, never an assertion about timing
 TIMEOUT = 60.0
 

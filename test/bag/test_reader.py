@@ -231,7 +231,8 @@ def test_a_byte_flipped_in_a_sample_bag_is_damage_and_the_chunks_before_are_read
 
 # -- what a bag is: its metadata against its messages, confined storage files -------------
 
-@pytest.mark.parametrize('name', ['owc_cai_td_1hz', 'owc_ge_1khz', 'led_alignment', 'drogue'])
+@pytest.mark.parametrize('name', ['owc_cai_td_1hz', 'owc_ge_1khz', 'led_alignment',
+                                  'led_pan_tilt', 'drogue'])
 def test_the_messages_are_what_rosbags_and_mcap_read_and_the_metadata_counts(name):
     reader = BagReader(BAGS / name)
     ours = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]

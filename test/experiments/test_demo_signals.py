@@ -77,10 +77,6 @@ def wait(condition, what, timeout=TIMEOUT):
 @pytest.mark.parametrize('phase', sorted(PHASES))
 @pytest.mark.parametrize('target', ['group', 'demo'])
 def test_ctrl_c_in_any_phase_ends_every_child_with_130(phase, target, tmp_path):
-    if phase == 'live':
-        pytest.xfail('known failure since the lazy-import start-up: a node process signalled '
-                     'while it imports tskf_ros.tools.console prints a KeyboardInterrupt '
-                     'traceback')
     log = tempfile.TemporaryFile('w+', dir=tmp_path)
     args = ['--duration', '20', '--led-duration', '10', '--out', str(tmp_path / 'out'),
             '--reproduce', '--iterations', '20', '--long-iterations', '40']

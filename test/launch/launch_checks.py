@@ -14,7 +14,7 @@
 # limitations under the License.
 
 """
-What the launch_testing tests of launch/ share: the skip where they cannot run, a listener.
+What the launch_testing tests of launch/ share: the skip, the launch, a listener, exit codes.
 
 A launch file is started where launch_ros and launch_testing import and tskf_ros is in the
 ament index (a sourced workspace: colcon test); elsewhere (the venv of ./run, where launch
@@ -96,3 +96,44 @@ def receive(topics: Dict[str, Any], count: int = 3,
         node.destroy_node()
         context.try_shutdown()
     return got
+
+
+def assert_each_receives(case: Any, topics: Dict[str, Any], count: int = 3) -> None:
+    """Assert (in a unittest case) that each of topics carries count messages (see receive)."""
+    got = receive(topics, count)
+    for topic, messages in got.items():
+        case.assertGreaterEqual(len(messages), count, topic)
+
+
+def launch_description(name: str) -> Any:
+    """
+    Return a launch test's description: launch/<name> in NAMESPACE, as `ros2 launch` would.
+
+    Its generate_test_description returns this (launch_testing calls it there).
+    """
+    import launch
+    from launch.actions import IncludeLaunchDescription
+    from launch.launch_description_sources import PythonLaunchDescriptionSource
+    import launch_testing.actions
+
+    return launch.LaunchDescription([
+        IncludeLaunchDescription(
+            PythonLaunchDescriptionSource(launch_file(name)),
+            launch_arguments={'namespace': NAMESPACE, 'log_level': 'warn'}.items()),
+        launch_testing.actions.ReadyToTest(),
+    ])
+
+
+class ExitCodes:
+    """
+    The post-shutdown check that every launched process exited with status 0.
+
+    A mixin, no test case of its own: a test module's TestShutdown(ExitCodes, TestCase),
+    marked with launch_testing.post_shutdown_test(), runs it once the launch has ended.
+    """
+
+    def test_every_node_exits_with_status_0(self, proc_info: Any) -> None:
+        """Assert every process's exit code is 0 (launch_testing passes proc_info)."""
+        import launch_testing.asserts
+
+        launch_testing.asserts.assertExitCodes(proc_info)

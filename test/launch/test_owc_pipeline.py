@@ -17,17 +17,13 @@
 
 import unittest
 
-from launch_checks import launch_file, NAMESPACE, receive, skip_unless_runnable
+from launch_checks import (assert_each_receives, ExitCodes, launch_description, NAMESPACE,
+                           skip_unless_runnable)
 import pytest
 
 skip_unless_runnable()
 
-import launch  # noqa: E402, I100 - imported only where skip_unless_runnable lets the module run
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
-import launch_testing  # noqa: E402
-import launch_testing.actions  # noqa: E402
-import launch_testing.asserts  # noqa: E402
+import launch_testing  # noqa: E402, I100 - imported only where skip_unless_runnable lets it run
 from sensor_msgs.msg import Illuminance  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
@@ -37,12 +33,7 @@ from tskf_ros.messages import estimator_interface as estimator  # noqa: E402
 @pytest.mark.launch_test
 def generate_test_description():
     """Start the launch file in a namespace of its own, as `ros2 launch` would."""
-    return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(launch_file('owc_pipeline.launch.py')),
-            launch_arguments={'namespace': NAMESPACE, 'log_level': 'warn'}.items()),
-        launch_testing.actions.ReadyToTest(),
-    ])
+    return launch_description('owc_pipeline.launch.py')
 
 
 class TestThePipelineRuns(unittest.TestCase):
@@ -51,14 +42,9 @@ class TestThePipelineRuns(unittest.TestCase):
     def test_the_estimator_publishes_estimates_of_the_simulated_power(self):
         topics = {f'/{NAMESPACE}/{estimator.POWER_TOPIC}': Illuminance,
                   f'/{NAMESPACE}/{estimator.OUTPUT_TOPICS["corrected"]}': Float64MultiArray}
-        got = receive(topics)
-        for topic, messages in got.items():
-            self.assertGreaterEqual(len(messages), 3, topic)
+        assert_each_receives(self, topics)
 
 
 @launch_testing.post_shutdown_test()
-class TestShutdown(unittest.TestCase):
+class TestShutdown(ExitCodes, unittest.TestCase):
     """After the launch is shut down (SIGINT), both nodes exited cleanly."""
-
-    def test_every_node_exits_with_status_0(self, proc_info):
-        launch_testing.asserts.assertExitCodes(proc_info)

@@ -17,17 +17,13 @@
 
 import unittest
 
-from launch_checks import launch_file, NAMESPACE, receive, skip_unless_runnable
+from launch_checks import (assert_each_receives, ExitCodes, launch_description, NAMESPACE,
+                           skip_unless_runnable)
 import pytest
 
 skip_unless_runnable()
 
-import launch  # noqa: E402, I100 - imported only where skip_unless_runnable lets the module run
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
-import launch_testing  # noqa: E402
-import launch_testing.actions  # noqa: E402
-import launch_testing.asserts  # noqa: E402
+import launch_testing  # noqa: E402, I100 - imported only where skip_unless_runnable lets it run
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import Illuminance  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -38,12 +34,7 @@ from tskf_ros.messages import estimator_interface as estimator  # noqa: E402
 @pytest.mark.launch_test
 def generate_test_description():
     """Start the launch file in a namespace of its own, as `ros2 launch` would."""
-    return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(launch_file('replay_estimator.launch.py')),
-            launch_arguments={'namespace': NAMESPACE, 'log_level': 'warn'}.items()),
-        launch_testing.actions.ReadyToTest(),
-    ])
+    return launch_description('replay_estimator.launch.py')
 
 
 class TestTheReplayRuns(unittest.TestCase):
@@ -54,14 +45,9 @@ class TestTheReplayRuns(unittest.TestCase):
         topics = {estimator.BAG_POWER_TOPIC: Illuminance,
                   '/clock': Clock,
                   f'/{NAMESPACE}/{estimator.OUTPUT_TOPICS["corrected"]}': Float64MultiArray}
-        got = receive(topics)
-        for topic, messages in got.items():
-            self.assertGreaterEqual(len(messages), 3, topic)
+        assert_each_receives(self, topics)
 
 
 @launch_testing.post_shutdown_test()
-class TestShutdown(unittest.TestCase):
+class TestShutdown(ExitCodes, unittest.TestCase):
     """The player (at the bag's end, or shut down) and the estimator exited cleanly."""
-
-    def test_every_node_exits_with_status_0(self, proc_info):
-        launch_testing.asserts.assertExitCodes(proc_info)

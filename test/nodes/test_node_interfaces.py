@@ -221,3 +221,19 @@ def test_an_unconfigured_driver_publishes_a_declared_task_with_declared_keys(loo
     assert [s.name for s in msg.status] == [f'{node.get_name()}: power meter']
     assert [kv.key for kv in msg.status[0].values] == ['Lifecycle state']
     assert_keys_declared(declared, msg)
+
+
+@pytest.mark.parametrize('name', ['alignment', 'led_link_simulator'])
+def test_two_axes_have_the_declared_topics_services_and_diagnostic_keys(loop, tmp_path, name):
+    # axes 2 (a pan-tilt mount) changes the messages' lengths, not the graph
+    executor = loop[0]
+    node, parameters = start(loop, tmp_path, name, every_topic=False, axes=2)
+    want = expected(node, INTERFACES[name], parameters)
+    spin_until(executor, lambda: discovered(node),
+               what=lambda: f'the graph to show what {name} holds: has {graph(node)}')
+    found = without_standard(graph(node), node)
+    for kind in want:
+        assert found[kind] == want[kind], f'{name} {kind}'
+    msg = first_diagnostics(loop, node)
+    assert [s.name for s in msg.status] == INTERFACES[name].status_names(node.get_name())
+    assert_keys_declared(INTERFACES[name], msg)

@@ -24,9 +24,18 @@ still in the interpreter's teardown 5 s after the signal on a loaded machine, an
 in 30 ended with a traceback (an rcl call of a callback after SIGTERM shut the context).
 """
 
+import os
+from pathlib import Path
+import random
+import signal
+import subprocess
+import tempfile
+import threading
+import time
+
 import pytest
 
-from shutdown_storm import BOUND, NODES, storm
+from shutdown_storm import BOUND, command, NODES, publish_input, START_TIMEOUT, storm
 
 SIGNALS = 50        # per node (the bound must hold for each, not on average)
 # how a node may end: its clean end (0), the console's quiet interrupt (130), or the
@@ -57,3 +66,51 @@ def test_every_signal_ends_the_node_within_the_bound(node):
     ended = sorted(r.seconds for r in s.runs)
     print(f'{node}: {len(ended)} signals, end after the signal: median '
           f'{ended[len(ended) // 2]:.2f} s, max {ended[-1]:.2f} s')
+
+
+COMPILE_SIGNALS = 5     # per node: a SIGINT each while numba compiles its kernels
+
+
+def llvm_loaded(pid):
+    """Tell whether the process has mapped LLVM (numba imported: its kernels compile)."""
+    try:
+        return 'libllvmlite' in Path(f'/proc/{pid}/maps').read_text()
+    except OSError:
+        return False
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('node', ['alignment', 'timescale_estimator'])
+def test_a_sigint_while_numba_compiles_the_kernels_is_quiet(node, tmp_path):
+    # an empty numba cache: the node's background thread compiles for seconds, and the
+    # signal comes once LLVM is loaded, the input flowing (a SIGINT there once printed
+    # llvmlite's "Exception ignored on calling ctypes callback" traceback)
+    stop = threading.Event()
+    feeder = threading.Thread(target=publish_input, args=(stop,), daemon=True)
+    feeder.start()
+    try:
+        for k in range(COMPILE_SIGNALS):
+            cache = tmp_path / f'numba{k}'
+            log = tempfile.TemporaryFile('w+', dir=tmp_path)
+            proc = subprocess.Popen(command(node, random.Random(k)), stdout=log,
+                                    stderr=subprocess.STDOUT, text=True,
+                                    env={**os.environ, 'NUMBA_CACHE_DIR': str(cache)})
+            deadline = time.monotonic() + START_TIMEOUT
+            while not llvm_loaded(proc.pid) and proc.poll() is None:
+                assert time.monotonic() < deadline, 'numba never loaded'
+                time.sleep(0.005)
+            # at 0, 0.3, ... 1.2 s into the compilation (the moment chosen, not awaited)
+            time.sleep(0.3 * k)
+            proc.send_signal(signal.SIGINT)
+            try:
+                status = proc.wait(timeout=BOUND)
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+            log.seek(0)
+            out = log.read()
+            assert status in (0, 130), (status, out[-3000:])
+            assert 'Traceback' not in out and 'Exception ignored' not in out, out[-3000:]
+    finally:
+        stop.set()
+        feeder.join(timeout=10)

@@ -54,8 +54,9 @@ def keyword(call, name):
     return None
 
 
-def test_there_are_three_launch_files():
+def test_there_are_four_launch_files():
     assert [p.name for p in LAUNCH] == ['led_loop.launch.py', 'owc_pipeline.launch.py',
+                                        'pan_tilt_loop.launch.py',
                                         'replay_estimator.launch.py']
 
 
@@ -104,6 +105,9 @@ LIVE_LAYOUTS = {
         'received_power', 'true_angle', *estimator.OUTPUT_TOPICS.values()}),
     'foxglove_led_live.json': ('/led/', {
         'intensity', 'true_angle', aligner.PAT_STATE_TOPIC, *aligner.OUTPUT_TOPICS.values()}),
+    'foxglove_pan_tilt_live.json': ('/pan_tilt/', {
+        'intensity', 'true_angle', aligner.PAT_STATE_TOPIC, aligner.OUTPUT_TOPICS['corrected'],
+        aligner.COMMAND_TOPIC}),
 }
 
 

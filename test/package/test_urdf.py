@@ -51,3 +51,40 @@ def test_the_base_joint_limits_are_the_aligners_default_limits():
     limit = joints()['base'].find('limit')
     assert float(limit.get('lower')) == pytest.approx(math.radians(lo), abs=1e-4)
     assert float(limit.get('upper')) == pytest.approx(math.radians(hi), abs=1e-4)
+
+
+# -- the pan-tilt mount (the simulator and the alignment node with axes 2) -----------------
+
+PAN_TILT = URDF.parent / 'pan_tilt_mount.urdf'
+
+
+def pan_tilt_joints():
+    root = ET.parse(PAN_TILT).getroot()
+    return {j.get('name'): j for j in root.iter('joint')}
+
+
+def test_the_pan_tilt_joints_are_the_two_axis_truths_joints():
+    from tskf_ros.messages.pan_tilt_messages import OFF_AXIS, truth_joints
+    movable = {name for name, j in pan_tilt_joints().items() if j.get('type') != 'fixed'}
+    joints = default_parameters()['pan_tilt.joints']
+    # every joint of true_angle but off_axis, an angle between two directions, not a joint
+    assert movable == set(truth_joints(joints)) - {OFF_AXIS}
+    assert [pan_tilt_joints()[j].get('type') for j in joints] == ['revolute', 'revolute']
+
+
+def test_the_pan_tilt_tree_is_connected_and_rooted_at_world():
+    root = ET.parse(PAN_TILT).getroot()
+    links = {link.get('name') for link in root.iter('link')}
+    children = {j.find('child').get('link') for j in pan_tilt_joints().values()}
+    parents = {j.find('parent').get('link') for j in pan_tilt_joints().values()}
+    assert links == children | {'world'}
+    assert parents <= links and 'world' not in children
+
+
+def test_the_tilt_joint_limits_are_the_aligners_default_tilt_limits():
+    lo, hi = default_parameters()['pan_tilt.tilt_limits']          # degrees
+    limit = pan_tilt_joints()['tilt'].find('limit')
+    assert float(limit.get('lower')) == pytest.approx(math.radians(lo), abs=1e-4)
+    assert float(limit.get('upper')) == pytest.approx(math.radians(hi), abs=1e-4)
+    # elevation positive up: a turn about -y lifts the boresight (x) toward +z
+    assert pan_tilt_joints()['tilt'].find('axis').get('xyz') == '0 -1 0'

@@ -450,3 +450,42 @@ def test_the_sigint_flag_runs_first_before_the_interrupt(sigint_restored):
     finally:
         flag.restore()
     assert order == ['first', 'interrupt'] and flag.is_set()
+
+
+# a SIGINT to the child itself before anything of tskf_ros runs: the interpreter and site
+# have started, the console runner is not yet imported
+SIGINT_FIRST = 'import os, signal; os.kill(os.getpid(), signal.SIGINT); '
+
+
+@pytest.mark.parametrize('tool', ['alignment', 'timescale_estimator', 'reproduce'])
+def test_a_held_start_takes_a_ctrl_c_before_the_runner_imports_as_an_interrupt(tool, tmp_path):
+    # started by start_held (as the demo starts its children), the SIGINT waits for the
+    # runner's handler: without it, Python's KeyboardInterrupt traceback and exit -2
+    err = tmp_path / f'{tool}.err'
+    code = SIGINT_FIRST + f'from tskf_ros.tools.console import {tool}; {tool}()'
+    with open(err, 'w') as f:
+        proc = console.start_held([sys.executable, '-c', code, '--help'], cwd=tmp_path,
+                                  stdout=subprocess.DEVNULL, stderr=f)
+    assert proc.wait(timeout=TIMEOUT) == INTERRUPTED and err.read_text() == ''
+
+
+def test_without_a_held_start_the_same_ctrl_c_is_pythons(tmp_path):
+    # the control of the test above: the signal really lands before the runner
+    code = SIGINT_FIRST + 'from tskf_ros.tools.console import reproduce; reproduce()'
+    done = subprocess.run([sys.executable, '-c', code, '--help'], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=TIMEOUT)
+    assert done.returncode == -signal.SIGINT and 'KeyboardInterrupt' in done.stderr
+
+
+def test_a_held_start_leaves_the_parents_mask_and_the_childs_sigint_works(tmp_path):
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    err = tmp_path / 'play.err'
+    with open(err, 'w') as f:
+        proc = console.start_held([sys.executable, '-c', 'from tskf_ros.tools.console import '
+                                   'play; play()', '--help'], cwd=tmp_path,
+                                  stdout=subprocess.DEVNULL, stderr=f)
+    assert signal.pthread_sigmask(signal.SIG_BLOCK, []) == before
+    # once it loads its modules, its runner has taken SIGINT back: the signal ends it
+    wait_for(lambda: loading_site_packages(proc.pid), proc)
+    code, text = interrupt(proc, err)
+    assert code in (INTERRUPTED, 0) and 'Traceback' not in text, (code, text)

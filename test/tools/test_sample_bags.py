@@ -76,7 +76,7 @@ def assert_same_messages(got, want, rtol=1e-9):
                 assert a == b, f'message {k} {key}: {a!r} != {b!r}'
 
 
-@pytest.mark.parametrize('name', ['owc_cai_td_1hz', 'led_alignment', 'drogue'])
+@pytest.mark.parametrize('name', ['owc_cai_td_1hz', 'led_alignment', 'led_pan_tilt', 'drogue'])
 def test_regenerating_a_sample_bag_gives_the_same_messages(tmp_path, name):
     path = sample_bags.make(name, tmp_path, readme_seed(name))
     assert_same_messages(messages(path), messages(BAGS / name))
@@ -133,7 +133,7 @@ def test_plot_bag_on_an_offline_alignment_replay(tmp_path, capsys):
 def test_foxglove_layout_refers_to_topics_the_bags_have():
     layout = json.loads((REPO / 'config' / 'foxglove_layout.json').read_text())
     topics = set()
-    for name in ('owc_cai_td_1hz', 'led_alignment'):
+    for name in ('owc_cai_td_1hz', 'led_alignment', 'led_pan_tilt'):
         topics |= set(BagReader(BAGS / name).topics)
     topics |= {'/estimate/predicted', '/estimate/corrected', '/diagnostics'}
     for panel in layout['configById'].values():

@@ -26,6 +26,7 @@ from tqdm import tqdm
 __all__ = ['bar', 'DeferredInterrupt', 'Interrupts', 'wrap']
 
 T = TypeVar('T')
+S = TypeVar('S', bound='_SigintContext')
 
 
 def bar(total: Optional[int], desc: str, unit: str, enabled: bool = True) -> tqdm:
@@ -46,14 +47,12 @@ def wrap(items: Iterable[T], total: Optional[int], desc: str, unit: str,
         b.close()
 
 
-class Interrupts:
+class _SigintContext:
     """
-    Notice a SIGINT even when a library turns its KeyboardInterrupt into another error.
+    A SIGINT handler of its own while active (in the main thread); `check` after a SIGINT.
 
-    While active (in the main thread), SIGINT sets `seen` and raises KeyboardInterrupt as
-    Python's default handler does.  A C extension that calls back into Python (rclpy's
-    deserialize_message) may swallow that KeyboardInterrupt and raise its own error
-    (RuntimeError: "does not deserialize"); `seen` still says that the cause was Ctrl-C.
+    Subclasses define `_handler`.  In another thread nothing is installed and `check`
+    never raises.  The previous handler is restored on the way out.
     """
 
     def __init__(self) -> None:
@@ -61,50 +60,10 @@ class Interrupts:
         self._previous: object = None
 
     def _handler(self, signum: int, frame: Optional[FrameType]) -> None:
-        self.seen = True
-        raise KeyboardInterrupt
+        raise NotImplementedError
 
-    def __enter__(self) -> 'Interrupts':
-        """Install the handler (the main thread only; elsewhere only `check` is a no-op)."""
-        if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._handler)
-        return self
-
-    def __exit__(self, kind: Optional[type], exc: Optional[BaseException],
-                 tb: Optional[TracebackType]) -> None:
-        """Restore the previous handler."""
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
-
-    def check(self) -> None:
-        """Raise KeyboardInterrupt if a SIGINT came (whatever became of its exception)."""
-        if self.seen:
-            raise KeyboardInterrupt
-
-
-class DeferredInterrupt:
-    """
-    Ctrl-C taken at a safe point: SIGINT sets `seen`, and `check()` raises KeyboardInterrupt.
-
-    While active (in the main thread), the first SIGINT raises nothing where it lands: a
-    KeyboardInterrupt raised inside a lock's acquire or release, an import, or a compiled
-    kernel's dispatch can leave a lock held (the next acquire then waits forever) or turn
-    into another error.  The work calls `check()` between its steps (each few thousand
-    messages), where nothing is held.  A second SIGINT raises at once (a step that does not
-    end).  The previous handler is restored on the way out.
-    """
-
-    def __init__(self) -> None:
-        self.seen = False
-        self._previous: object = None
-
-    def _handler(self, signum: int, frame: Optional[FrameType]) -> None:
-        if self.seen:
-            raise KeyboardInterrupt
-        self.seen = True
-
-    def __enter__(self) -> 'DeferredInterrupt':
-        """Install the handler (the main thread only; elsewhere `check` never raises)."""
+    def __enter__(self: S) -> S:
+        """Install the handler (the main thread only)."""
         if threading.current_thread() is threading.main_thread():
             self._previous = signal.signal(signal.SIGINT, self._handler)
         return self
@@ -117,6 +76,39 @@ class DeferredInterrupt:
             self._previous = None
 
     def check(self) -> None:
-        """Raise KeyboardInterrupt if a SIGINT came."""
+        """Raise KeyboardInterrupt if a SIGINT came (whatever became of its exception)."""
         if self.seen:
             raise KeyboardInterrupt
+
+
+class Interrupts(_SigintContext):
+    """
+    Notice a SIGINT even when a library turns its KeyboardInterrupt into another error.
+
+    While active (in the main thread), SIGINT sets `seen` and raises KeyboardInterrupt as
+    Python's default handler does.  A C extension that calls back into Python (rclpy's
+    deserialize_message) may swallow that KeyboardInterrupt and raise its own error
+    (RuntimeError: "does not deserialize"); `seen` still says that the cause was Ctrl-C.
+    """
+
+    def _handler(self, signum: int, frame: Optional[FrameType]) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+
+class DeferredInterrupt(_SigintContext):
+    """
+    Ctrl-C taken at a safe point: SIGINT sets `seen`, and `check()` raises KeyboardInterrupt.
+
+    While active (in the main thread), the first SIGINT raises nothing where it lands: a
+    KeyboardInterrupt raised inside a lock's acquire or release, an import, or a compiled
+    kernel's dispatch can leave a lock held (the next acquire then waits forever) or turn
+    into another error.  The work calls `check()` between its steps (each few thousand
+    messages), where nothing is held.  A second SIGINT raises at once (a step that does not
+    end).  The previous handler is restored on the way out.
+    """
+
+    def _handler(self, signum: int, frame: Optional[FrameType]) -> None:
+        if self.seen:
+            raise KeyboardInterrupt
+        self.seen = True

@@ -20,8 +20,9 @@ No I/O and no ROS: every module here imports only numpy, scipy and this folder. 
 below are imported from their modules when first used (a node imports only what it runs).
 """
 
-import importlib
-from typing import Any, TYPE_CHECKING
+from typing import TYPE_CHECKING
+
+from tskf_ros.core.lazy_names import lazy_names
 
 if TYPE_CHECKING:
     from tskf_ros.core.fixed_lag import FixedLagSmoother
@@ -42,16 +43,4 @@ __all__ = ['FilterError', 'FixedLagSmoother', 'LQRError', 'LQRGains', 'NotInvert
            'rts_smooth', 'smooth_at', 'Smoothed', 'TimeScaleKalmanFilter', 'TimeScaleLQG',
            'TimeScaleLQR']
 
-
-def __getattr__(name: str) -> Any:
-    """Import a name of __all__ from its module on first use."""
-    if name not in _SOURCES:
-        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
-    value = getattr(importlib.import_module(f'{__name__}.{_SOURCES[name]}'), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    """List the module's names, those not imported yet included."""
-    return sorted(set(globals()) | set(_SOURCES))
+__getattr__, __dir__ = lazy_names(__name__, _SOURCES, globals())

@@ -28,7 +28,6 @@ import argparse
 from concurrent.futures import ProcessPoolExecutor
 import dataclasses
 from dataclasses import dataclass
-import os
 from pathlib import Path
 import sys
 import time
@@ -141,21 +140,14 @@ def parser() -> argparse.ArgumentParser:
     """Build the command-line interface."""
     p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.alignment_ablation',
                                 description=__doc__.split('\n\n')[0])
-    p.add_argument('--runs', type=arguments.count(1, arguments.MAX_RUNS), default=2000,
-                   help='runs per row and noise level (2000)')
-    p.add_argument('--noise-levels', type=arguments.noise_list,
-                   default=list(DEFAULT_NOISE_LEVELS),
-                   help='comma list of noise standard deviations in volts (0,0.25,...,2.5)')
+    arguments.add_runs(p, 2000, 'row and noise level')
+    arguments.add_noise_levels(p, DEFAULT_NOISE_LEVELS)
     p.add_argument('--rows', type=lambda t: [a for a in t.split(',') if a],
                    default=[row.name for row in ROWS],
                    help='comma list of the rows (default: all: ' + ','.join(ROW) + ')')
     p.add_argument('--beta', type=arguments.rate_deg_s, default=1.2,
                    help='disturbance rate, deg/s (1.2)')
-    p.add_argument('--steps', type=arguments.count(1, arguments.MAX_STEPS), default=400,
-                   help='steps per run (400 = 20 s)')
-    p.add_argument('--seed', type=arguments.seed, default=0)
-    p.add_argument('--workers', type=arguments.count(1, 1024), default=os.cpu_count() or 1,
-                   help='processes (default: every core); the results do not depend on it')
+    arguments.add_run_options(p)
     p.add_argument('--json', type=Path, help='write the results as JSON')
     p.add_argument('--markdown', type=Path, help='write the tables as a markdown page')
     p.add_argument('--png', type=Path, help='write tracking %% against noise, with intervals')

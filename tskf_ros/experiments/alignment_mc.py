@@ -19,7 +19,6 @@ import argparse
 from concurrent.futures import ProcessPoolExecutor
 import dataclasses
 import math
-import os
 from pathlib import Path
 import sys
 import time
@@ -216,21 +215,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--axes', type=int, choices=(1, 2), default=1,
                    help='1: a receiver turned about one axis (this page of options); 2: a '
                         'pan-tilt receiver (see --axes 2 --help)')
-    p.add_argument('--runs', type=arguments.count(1, arguments.MAX_RUNS), default=1000,
-                   help='runs per noise level (1000)')
-    p.add_argument('--noise-levels', type=arguments.noise_list,
-                   default=list(DEFAULT_NOISE_LEVELS),
-                   help='comma list of noise standard deviations in volts (0,0.25,...,2.5)')
+    arguments.add_runs(p, 1000, 'noise level')
+    arguments.add_noise_levels(p, DEFAULT_NOISE_LEVELS)
     p.add_argument('--beta', type=arguments.rate_deg_s,
                    default=1.2, help='disturbance rate, deg/s (1.2)')
-    p.add_argument('--steps', type=arguments.count(1, arguments.MAX_STEPS), default=400,
-                   help='steps per run (400 = 20 s)')
-    p.add_argument('--dt', type=arguments.number(0.0, arguments.MAX_DT, open_low=True),
-                   default=led.PAPER_DT, help='time step, s (0.05)')
-    p.add_argument('--seed', type=arguments.seed, default=0)
-    p.add_argument('--workers', type=arguments.count(1, 1024), default=os.cpu_count() or 1,
-                   help='processes the points run on (default: every core); the results do '
-                        'not depend on it')
+    arguments.add_run_options(p, dt=led.PAPER_DT)
     p.add_argument('--dropout', type=float, default=0.0,
                    help='probability that a measurement is missing (0)')
     p.add_argument('--x2-0', type=arguments.angle_deg,

@@ -250,21 +250,11 @@ def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.alignment_mc --axes 2',
                                 description=__doc__.split('\n\n')[0])
     p.add_argument('--axes', type=int, choices=(2,), default=2, help='2: this experiment')
-    p.add_argument('--runs', type=arguments.count(1, arguments.MAX_RUNS), default=1000,
-                   help='runs per noise level and method (1000)')
-    p.add_argument('--noise-levels', type=arguments.noise_list,
-                   default=list(DEFAULT_NOISE_LEVELS),
-                   help='comma list of noise standard deviations in volts (0,0.25,...,2.5)')
+    arguments.add_runs(p, 1000, 'noise level and method')
+    arguments.add_noise_levels(p, DEFAULT_NOISE_LEVELS)
     p.add_argument('--beta', type=arguments.rate_deg_s, default=1.2,
                    help='drift rate per joint axis, deg/s (1.2)')
-    p.add_argument('--steps', type=arguments.count(1, arguments.MAX_STEPS), default=400,
-                   help='samples per run (400 = 20 s)')
-    p.add_argument('--dt', type=arguments.number(0.0, arguments.MAX_DT, open_low=True),
-                   default=led.PAPER_DT, help='time step, s (0.05)')
-    p.add_argument('--seed', type=arguments.seed, default=0)
-    p.add_argument('--workers', type=arguments.count(1, 1024), default=os.cpu_count() or 1,
-                   help='processes the points run on (default: every core); the results do '
-                        'not depend on it')
+    arguments.add_run_options(p, dt=led.PAPER_DT)
     p.add_argument('--dropout', type=arguments.number(0.0, 0.99), default=0.0,
                    help='probability that a sample is missing (0)')
     p.add_argument('--offset0', type=arguments.number(0.0, 90.0), default=5.0, metavar='DEG',

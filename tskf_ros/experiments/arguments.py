@@ -13,11 +13,16 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""argparse types of the experiments' numeric options: any value out of range is one usage line."""
+"""
+The experiments' numeric option types and the options the Monte Carlo experiments share.
+
+Any value out of range is one usage line.
+"""
 
 import argparse
 import math
-from typing import Callable
+import os
+from typing import Callable, Optional, Sequence
 
 # seeds: what numpy's default_rng takes as one 32-bit word (every documented seed fits)
 SEED_LIMIT = 2 ** 32
@@ -93,3 +98,30 @@ noise_volts = number(0.0, MAX_NOISE)
 noise_list = numbers(0.0, MAX_NOISE)
 rate_deg_s = number(0.0, MAX_RATE)
 angle_deg = number(-180.0, 180.0)
+
+
+def add_runs(p: argparse.ArgumentParser, default: int, per: str) -> None:
+    """Add --runs, the Monte Carlo runs per `per` (a point, a noise level, ...)."""
+    p.add_argument('--runs', type=count(1, MAX_RUNS), default=default,
+                   help=f'runs per {per} ({default})')
+
+
+def add_noise_levels(p: argparse.ArgumentParser, default: Sequence[float]) -> None:
+    """Add --noise-levels, the LED experiments' comma list of noise levels in volts."""
+    shown = ','.join(f'{v:g}' for v in default) if len(default) <= 3 else \
+        f'{default[0]:g},{default[1]:g},...,{default[-1]:g}'
+    p.add_argument('--noise-levels', type=noise_list, default=list(default),
+                   help=f'comma list of noise standard deviations in volts ({shown})')
+
+
+def add_run_options(p: argparse.ArgumentParser, dt: Optional[float] = None) -> None:
+    """Add the Monte Carlo options --steps, --dt (if dt: its default, s), --seed, --workers."""
+    p.add_argument('--steps', type=count(1, MAX_STEPS), default=400,
+                   help='steps per run (400 = 20 s)')
+    if dt is not None:
+        p.add_argument('--dt', type=number(0.0, MAX_DT, open_low=True), default=dt,
+                       help=f'time step, s ({dt:g})')
+    p.add_argument('--seed', type=seed, default=0)
+    p.add_argument('--workers', type=count(1, 1024), default=os.cpu_count() or 1,
+                   help='processes the points run on (default: every core); the results do '
+                        'not depend on it')

@@ -35,6 +35,7 @@ from tskf_ros.core.time_scales import jumps
 from tskf_ros.core.units import NS
 from tskf_ros.experiments import arguments
 from tskf_ros.led import PAPER_DT, TRACKING_ANGLE
+from tskf_ros.tools.console import start_held
 
 LED_NAMESPACE = '/led'
 # the largest ROS_DOMAIN_ID of ROS 2 on Linux (its ports must stay below 65536)
@@ -156,6 +157,8 @@ class Children:
     longer holds the children), and `stop` passes one SIGINT on to each child's group, as
     a Ctrl-C to that child alone would be: the same end whether the signal went to the
     demo's group or to the demo process only, and no child signalled twice mid-shutdown.
+    Each child starts with SIGINT held until its console runner takes it (start_held): a
+    stop while a child still starts (the interpreter, its imports) ends it quietly too.
     """
 
     def __init__(self) -> None:
@@ -169,7 +172,7 @@ class Children:
         with self.lock:
             if self.stopping:
                 return None
-            proc = subprocess.Popen(cmd, env=dict(os.environ), process_group=0)
+            proc = start_held(cmd, env=dict(os.environ), process_group=0)
             self.procs.append(proc)
             return proc
 

@@ -19,7 +19,6 @@ import argparse
 from concurrent.futures import ProcessPoolExecutor
 import dataclasses
 import math
-import os
 from pathlib import Path
 import sys
 import time
@@ -157,8 +156,7 @@ def parser() -> argparse.ArgumentParser:
     """Build the command-line interface."""
     p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.lqg_comparison',
                                 description=__doc__.split('\n\n')[0])
-    p.add_argument('--runs', type=arguments.count(1, arguments.MAX_RUNS), default=1000,
-                   help='runs per point (1000)')
+    arguments.add_runs(p, 1000, 'point')
     p.add_argument('--betas',
                    type=arguments.numbers(0.0, arguments.MAX_RATE), default=list(DEFAULT_BETAS),
                    help='comma list of drift rates, deg/s (0,2,...,16)')
@@ -168,14 +166,7 @@ def parser() -> argparse.ArgumentParser:
                    default=1.0, help='effort point noise, V (1)')
     p.add_argument('--effort-beta', type=arguments.rate_deg_s, default=2.8,
                    help='effort point drift rate, deg/s (2.8, Fig. 14)')
-    p.add_argument('--steps', type=arguments.count(1, arguments.MAX_STEPS), default=400,
-                   help='steps per run (400 = 20 s)')
-    p.add_argument('--dt', type=arguments.number(0.0, arguments.MAX_DT, open_low=True),
-                   default=led.PAPER_DT, help='time step, s (0.05)')
-    p.add_argument('--seed', type=arguments.seed, default=0)
-    p.add_argument('--workers', type=arguments.count(1, 1024), default=os.cpu_count() or 1,
-                   help='processes the points run on (default: every core); the results do '
-                        'not depend on it')
+    arguments.add_run_options(p, dt=led.PAPER_DT)
     p.add_argument('--ablation', action='store_true',
                    help='also run the LQG variants of ABLATIONS at --ablation-beta (noise '
                         '--noise) and at the effort point')

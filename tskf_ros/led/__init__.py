@@ -23,8 +23,9 @@ alignment_config and alignment_session (behind the alignment node) are imported 
 their modules.  The names are imported from their modules when first used.
 """
 
-import importlib
-from typing import Any, TYPE_CHECKING
+from typing import TYPE_CHECKING
+
+from tskf_ros.core.lazy_names import lazy_names
 
 if TYPE_CHECKING:
     from tskf_ros.led.baselines import (ALGORITHMS, AnyAligner, CONTROLLERS, HILL_STEP,
@@ -80,16 +81,4 @@ __all__ = [
     'TrackingLinkConfig', 'Trajectory', 'triangle_scan', 'wrap_degrees', 'zone_units_per_degree',
 ]
 
-
-def __getattr__(name: str) -> Any:
-    """Import a name of __all__ from its module on first use."""
-    if name not in _SOURCES:
-        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
-    value = getattr(importlib.import_module(f'{__name__}.{_SOURCES[name]}'), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    """List the module's names, those not imported yet included."""
-    return sorted(set(globals()) | set(_SOURCES))
+__getattr__, __dir__ = lazy_names(__name__, _SOURCES, globals())

@@ -25,13 +25,12 @@ state, its time, the transitions, losses and re-acquisitions, and the lock tests
 """
 
 import math
-from typing import Optional, TYPE_CHECKING
+from typing import Optional, Protocol, TYPE_CHECKING
 
 import numpy as np
 
 from tskf_ros.core.diagnostic_status import ERROR, OK, Status, TIME_SCALE, WARN
 from tskf_ros.core.units import NS
-from tskf_ros.led.alignment_config import AlignmentConfig
 from tskf_ros.led.intensity_model import FloatArray
 
 from tskf_ros.led.lock_detector import LockVerdict
@@ -47,7 +46,19 @@ POINTING = 'pointing'
 POINTING_LEVELS = {'tracking': OK, 'acquiring': WARN, 'lost': ERROR}
 
 
-def aligner_status(st: 'AlignStats', cfg: AlignmentConfig, base: float, health_error: str,
+class DiagnosedConfig(Protocol):
+    """What the tasks read of a session's config (AlignmentConfig, the two-axis one)."""
+
+    @property
+    def algorithm(self) -> str:
+        """Return the aligner's name."""
+
+    @property
+    def max_gap(self) -> float:
+        """Return the s beyond which a gap warns."""
+
+
+def aligner_status(st: 'AlignStats', cfg: DiagnosedConfig, base: float, health_error: str,
                    ekf_state: Optional[tuple[FloatArray, FloatArray]], paused: bool,
                    reasons: tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]
                    ) -> Status:
@@ -88,7 +99,7 @@ def aligner_status(st: 'AlignStats', cfg: AlignmentConfig, base: float, health_e
     return stat
 
 
-def time_scale(st: 'AlignStats', cfg: AlignmentConfig) -> Status:
+def time_scale(st: 'AlignStats', cfg: DiagnosedConfig) -> Status:
     """Return the 'time scale' status: gaps and mu of the intensity stream."""
     stat = Status(TIME_SCALE)
     stat.summary(OK, 'ok')
@@ -126,11 +137,15 @@ def pointing_status(p: PointingStats, verdict: Optional[LockVerdict], paused: bo
 
 
 def status_line(st: 'AlignStats', rate: float, base: float, paused: bool,
-                x: Optional[FloatArray], pat_state: str = 'disabled') -> str:
+                x: Optional[FloatArray], pat_state: str = 'disabled',
+                tilt: Optional[float] = None) -> str:
     """Return the one-line status the node logs: rate, gaps, command, estimate, state."""
     estimate = '' if x is None else ', estimate [' + ' '.join(
         f'{v:.4g}' for v in x.tolist()) + ']'
     state = '' if pat_state == 'disabled' else f'; {pat_state}'
+    # two axes: base is the pan joint's command
+    command = (f'base {base:.4g} deg' if tilt is None else
+               f'pan {base:.4g} deg, tilt {tilt:.4g} deg')
     return (f'{rate:.3g} Hz in{" (paused)" if paused else ""}, {st.received} received, '
-            f'{st.used} used; {st.gaps} gap(s) (longest {st.gap_max:g} s); base '
-            f'{base:.4g} deg{estimate}; {sum(st.resets.values())} restart(s){state}')
+            f'{st.used} used; {st.gaps} gap(s) (longest {st.gap_max:g} s); '
+            f'{command}{estimate}; {sum(st.resets.values())} restart(s){state}')

@@ -26,10 +26,12 @@ from std_msgs.msg import String
 from tskf_ros import led
 from tskf_ros.led.alignment_config import AlignmentConfig
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
+from tskf_ros.led.pan_tilt_stream import PanTiltStream
 from tskf_ros.led.pat_config import PatConfig
 from tskf_ros.led.pointing_stats import Transition
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATE_ESTIMATE_TYPE
+from tskf_ros.messages.pan_tilt_interface import check_joints, pan_tilt_config
 from tskf_ros.messages.parameter_schema import load_schema, ParameterError
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
 from tskf_ros.messages.qos import DEFAULT_DEPTH, reliable_qos
@@ -75,8 +77,11 @@ def parameters_to_config(values: dict) -> NodeConfig:
     """Build the config from parameter values; raise AlignmentError with the reason if bad."""
     try:
         values = load_schema(NODE_NAME).check(values)
+        check_joints(values)
     except ParameterError as exc:
         raise led.AlignmentError(str(exc)) from None
+    if values['axes'] == 2:
+        return pan_tilt_config(values)
     session = {f.name: values[f.name] for f in fields(AlignmentConfig) if f.name != 'pat'}
     arrays = {k: tuple(v) for k, v in session.items() if isinstance(v, list)}
     pat = PatConfig(**{f.name: values[PAT_PREFIX + f.name] for f in fields(PatConfig)})
@@ -97,13 +102,18 @@ def load_config(params_file: Optional[Union[str, Path]] = None,
 
     The file's `alignment`, `/alignment`, `/**/alignment` or `/**` ros__parameters override
     the defaults, each checked against the node's schema.  Raises ParamsError naming the
-    file and the problem.
+    file and the problem.  The offline tools that read it replay one axis: a file with
+    `axes: 2` is refused.
     """
     values = parameter_values(params_file, load_schema(NODE_NAME), overrides)
     try:
-        return parameters_to_config(values)
+        config = parameters_to_config(values)
     except (led.AlignmentError, ValueError, TypeError, KeyError) as exc:
         raise ParamsError(f'{params_file or "defaults"}: {exc}') from None
+    if not isinstance(config.session, AlignmentConfig):
+        raise ParamsError(f'{params_file or "defaults"}: axes 2: the offline tools replay one '
+                          'axis; the two-axis loop runs live (pan_tilt_loop.launch.py)')
+    return config
 
 
 def output_qos(config: NodeConfig, output: str) -> QoSProfile:
@@ -152,7 +162,8 @@ def bag_outcome_messages(out: AlignOutcome, config: NodeConfig) -> list[tuple[st
     return [(BAG_OUTPUT_TOPICS[key], msg) for key, msg in outcome_messages(out, config)]
 
 
-def diagnostics_message(session: AlignmentSession, config: NodeConfig, stamp_ns: int, *,
+def diagnostics_message(session: Union[AlignmentSession, PanTiltStream], config: NodeConfig,
+                        stamp_ns: int, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""
     # like the estimator's, with its receiver frame as the hardware id

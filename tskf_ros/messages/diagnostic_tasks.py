@@ -143,7 +143,11 @@ ALIGNER_TASK = DiagnosticTask(
             + _reasons(ALIGN_REJECT_REASONS)),
      KeyRow(('Resets (<reason>)',), 'restarts, by reason: ' + _reasons(ALIGN_RESET_REASONS)),
      KeyRow(('x1 estimate (V)', 'x2 estimate (deg)', 'Covariance trace', 'Singular updates'),
-            "the scanning EKF's estimate (the EKF only)")))
+            "the scanning EKF's estimate (the EKF only)"),
+     KeyRow(('Tilt command (deg)', 'd_c estimate (deg)', 'd_e estimate (deg)'),
+            "`axes` 2: the tilt joint's last command (`Base command (deg)` is the pan "
+            "joint's), the conical-scan EKF's cross-elevation and elevation errors (with "
+            '`x1 estimate (V)` and `Covariance trace`, while it steers)')))
 
 ALIGNMENT_TIME_SCALE_TASK = DiagnosticTask(
     TIME_SCALE, 'the time scale of the intensity stream: gaps and graininess',

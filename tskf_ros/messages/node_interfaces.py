@@ -102,13 +102,18 @@ LED_LINK_SIMULATOR = NodeInterface(
            '`illuminance` = photodiode voltage V_d (V), `variance` = `noise`^2 (V^2), '
            'header.stamp = the sample time, frame `frame_id`'),
      Topic(TRUTH_TOPIC, TRUTH_TYPE, OUT, qos_summary(TRUTH_QOS),
-           'joints `incidence` (phi), `base`, `transmitter`: angles at `position` (rad)'),
+           'joints `incidence` (phi), `base`, `transmitter`: angles at `position` (rad); '
+           'with `axes` 2 the two `pan_tilt.joints` (the receiver, scan included), '
+           '`source_azimuth`, `source_elevation` and `off_axis`, the angle between the '
+           "receiver's boresight and the source (rad)"),
      Topic(align.COMMAND_TOPIC, align.COMMAND_TYPE, IN, RELIABLE_QOS,
-           '`[base angle]` (rad), as a ros2_control forward_command_controller takes it'),
+           '`[base angle]` (rad), as a ros2_control forward_command_controller takes it; '
+           'with `axes` 2 `[pan, tilt]` (rad) in the order of `pan_tilt.joints`'),
      DIAGNOSTICS),
     (),
     (samples_frequency_task('`time_factor` / `dt` (none in lockstep)'),),
-    purpose="Solanki et al.'s LED link with a commanded rotating receiver base")
+    purpose="Solanki et al.'s LED link with a commanded rotating receiver base (axes 2: "
+    'a pan-tilt mount')
 
 POWER_METER_DRIVER = NodeInterface(
     'power_meter_driver',
@@ -143,9 +148,15 @@ ALIGNMENT = NodeInterface(
                          'first sample of a run)'),
            ('corrected', 'as `estimate/predicted`, after the update (18)-(20), kind '
                          '`corrected`, published with the command; the same mu (the '
-                         'update does not depend on the step out of t_k)'))),
+                         'update does not depend on the step out of t_k). With `axes` 2 '
+                         "both are the conical-scan EKF's, states `x1_intensity_V,"
+                         'd_cross_elevation_rad,d_elevation_rad,'
+                         'b_cross_elevation_rad_per_step,b_elevation_rad_per_step`, P to '
+                         "match (no prediction at the supervisor's hand-over)"))),
      Topic(align.COMMAND_TOPIC, align.COMMAND_TYPE, OUT, RELIABLE_QOS,
-           '`[base angle]` (rad), as forward_command_controller expects'),
+           '`[base angle]` (rad), as forward_command_controller expects; with `axes` 2 '
+           '`[pan, tilt]` (rad) in the order of `pan_tilt.joints`, which label '
+           '`layout.dim[0]`'),
      Topic(align.PAT_STATE_TOPIC, align.PAT_STATE_TYPE, OUT,
            qos_summary(align.pat_state_qos()) + ' (latched)',
            '`data` = `acquiring`, `tracking` or `lost` (`disabled` with `pat.enabled` '
@@ -163,7 +174,8 @@ ALIGNMENT = NodeInterface(
              'false')),
     (INPUT_FREQUENCY_TASK, TIMESTAMP_DELAY_TASK, ALIGNER_TASK, ALIGNMENT_TIME_SCALE_TASK,
      POINTING_TASK),
-    purpose='LED active alignment: the scanning EKF or a baseline, commanding the base')
+    purpose='LED active alignment: the scanning EKF or a baseline, commanding the base; '
+    'with axes 2 the conical-scan EKF commanding a pan-tilt mount')
 
 # node (executable) name -> its interface
 INTERFACES = {i.node: i for i in (TIMESCALE_ESTIMATOR, POWER_METER_SIMULATOR,

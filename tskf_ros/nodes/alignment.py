@@ -15,7 +15,7 @@
 
 """The alignment node: LED active alignment (Solanki et al. 2018) on stamped intensities."""
 
-from typing import Optional
+from typing import Any, Optional, Union
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
@@ -26,22 +26,37 @@ from std_srvs.srv import SetBool, Trigger
 from tskf_ros import led
 from tskf_ros.led.alignment_diagnostics import status_line
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
+from tskf_ros.led.pan_tilt_stream import PanTiltStep, PanTiltStream, PanTiltStreamConfig
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import (diagnostics_message, INPUT_TOPIC,
                                                    NODE_NAME, NodeConfig, outcome_messages,
                                                    output_qos, OUTPUT_TOPICS,
                                                    parameters_to_config, pat_state_message,
                                                    pat_state_qos, PAT_STATE_TOPIC)
+from tskf_ros.messages.pan_tilt_interface import check_joints, pan_tilt_outcome_messages
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import diagnostic_name, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
 
 
+def new_session(config: Any) -> Union[AlignmentSession, PanTiltStream]:
+    """Return the session of a config: the two-axis stream (axes 2) or the one-axis session."""
+    if isinstance(config, PanTiltStreamConfig):
+        return PanTiltStream(config)
+    return AlignmentSession(config)
+
+
 class Alignment(ReconfigurableNode):
-    """Node wrapping AlignmentSession: intensity in, base commands, estimates, diagnostics out."""
+    """
+    Node wrapping the alignment session: intensity in, commands, estimates, diagnostics out.
+
+    One node for one and two axes (`axes`): the two share the input, the topics, the
+    services, the supervisor's parameters and the diagnostics, so a second node would
+    repeat all of it; only the session and the messages' lengths differ.
+    """
 
     SCHEMA = NODE_NAME
-    SESSION = AlignmentSession
+    SESSION = staticmethod(new_session)
     CONFIG_ERRORS = (led.AlignmentError, KeyError, TypeError, ValueError)
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
@@ -67,7 +82,17 @@ class Alignment(ReconfigurableNode):
         self.enable_service = self.create_service(SetBool, '~/enable', self._on_enable)
         # ~/acquire (std_srvs/srv/Trigger): force a new cold search (pat.enabled)
         self.acquire_service = self.create_service(Trigger, '~/acquire', self._on_acquire)
+        self.two_axes = isinstance(self.session, PanTiltStream)
+        self.joints = check_joints(self.parameter_values())
         cfg = self.config.session
+        if isinstance(cfg, PanTiltStreamConfig):
+            s = cfg.session
+            self.get_logger().info(
+                f'aligning a pan-tilt mount ({self.joints[0]}, {self.joints[1]}) with '
+                f'{s.method}, starting at [{s.joints0[0]:g}, {s.joints0[1]:g}] deg'
+                + ('' if s.method == 'conical_ekf' else f', starting {s.start}'))
+            self._report_transitions()
+            return
         self.get_logger().info(
             f'aligning with {cfg.algorithm}'
             + (' and the time-scale LQG controller' if cfg.algorithm == 'ekf'
@@ -101,7 +126,7 @@ class Alignment(ReconfigurableNode):
             self.session.skip(stamp_ns, now_ns)      # counted in diagnostics, not used
             return
         out = self.session.add(stamp_ns, volts, now_ns=now_ns)
-        self._report(out)
+        self._report(out.outcome if isinstance(out, PanTiltStep) else out)
         self._publish(out)
         if self.session.pointing.pending:
             self._report_transitions()
@@ -122,20 +147,22 @@ class Alignment(ReconfigurableNode):
                 self.get_logger().info(text)
             self.pat_pub.publish(pat_state_message(t))
 
-    def _report(self, out: AlignOutcome) -> None:
+    def _report(self, out: Any) -> None:
         log = self.get_logger()
+        supervised = self.session.pat_state != 'disabled'
         if out.status == 'rejected':
             log.warning(f'sample dropped ({out.reason}): {out.message}')
-        elif out.status == 'missing' and not (out.reason == 'negative'
-                                              and self.session.supervisor is not None):
+        elif out.status == 'missing' and not (out.reason == 'negative' and supervised):
             # (the supervisor takes a negative reading as the dark it is: no warning)
             log.warning(f'sample at {out.stamp_ns / 1e9:.3f} s treated as missing '
                         f'({out.reason}): {out.message}', throttle_duration_sec=1.0)
         elif out.status == 'reset':
             log.warning(f'aligner restarted ({out.reason}): {out.message}')
 
-    def _publish(self, out: AlignOutcome) -> None:
-        for key, msg in outcome_messages(out, self.config):
+    def _publish(self, out: Union[AlignOutcome, PanTiltStep]) -> None:
+        msgs = (pan_tilt_outcome_messages(out, self.joints) if isinstance(out, PanTiltStep)
+                else outcome_messages(out, self.config))
+        for key, msg in msgs:
             self.pubs[key].publish(msg)
 
     def restart(self, why: str, reason: str = 'clock_jump') -> None:
@@ -174,6 +201,11 @@ class Alignment(ReconfigurableNode):
     def status_line(self, rate: float) -> str:
         """Return the INFO status line: rate, gaps, last command and estimate, restarts."""
         s = self.session
+        if isinstance(s, PanTiltStream):
+            e = s.session.estimate()
+            pan, tilt = s.joints
+            return status_line(s.stats, rate, pan, s.paused, None if e is None else e.x[:3],
+                               s.pat_state, tilt)
         return status_line(s.stats, rate, s.base, s.paused,
                            None if s.ekf is None else s.ekf.x[0], s.pat_state)
 

@@ -16,16 +16,23 @@
 """The led_link_simulator node: the LED link of Solanki et al. 2018 Section V, base commanded."""
 
 from dataclasses import dataclass, replace
-from typing import Optional
+import math
+from typing import Optional, Union
 
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64MultiArray
 
+from tskf_ros import led
 from tskf_ros.core.units import NS
 from tskf_ros.led.led_link import LedLink, LedLinkConfig, LedLinkError, LedSample, sample_offset_ns
+from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLink, PanTiltLinkConfig, PanTiltSample
+from tskf_ros.led.two_axis.radial_response import RadialResponse
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import COMMAND_TOPIC, INPUT_TOPIC
+from tskf_ros.messages.pan_tilt_interface import check_joints
+from tskf_ros.messages.pan_tilt_messages import pan_tilt_truth_to_msg
+from tskf_ros.messages.parameter_schema import ParameterError
 from tskf_ros.messages.qos import DEFAULT_DEPTH
 from tskf_ros.nodes.node_base import link_config, LinkSimulatorNode, MAX_BATCH
 from tskf_ros.nodes.node_runner import run_node
@@ -46,6 +53,30 @@ class LedSimulatorConfig:
     wait_for_subscribers: int
     frame_id: str
     beam_blocked: bool = False
+    pan_tilt: Optional[PanTiltLinkConfig] = None     # axes 2: the two-axis link
+    joints: tuple[str, str] = ('pan', 'tilt')
+
+
+def pan_tilt_link_config(link: LedLinkConfig, values: dict) -> PanTiltLinkConfig:
+    """Return the two-axis link of the shared parameters; LedLinkError (one line) if none."""
+    if link.blockage == 'gilbert_elliott':
+        raise LedLinkError('axes 2 takes blockage none or bernoulli (the two-axis link drops '
+                           'samples independently), got gilbert_elliott')
+    if not abs(link.phi0) < 90.0:
+        raise LedLinkError(f"axes 2: phi0, the source's angle off the boresight at sample 0, "
+                           f'must be within +-90 deg, got {link.phi0:g}')
+    if link.max_speed > 0:
+        raise LedLinkError('axes 2: the mount reaches each command within a sample; '
+                           f'max_speed must be 0, got {link.max_speed:g}')
+    try:
+        return PanTiltLinkConfig(
+            beta=link.beta, dt=link.dt, noise=link.noise,
+            q_sys=(link.intensity_walk ** 2, link.angle_noise ** 2),
+            max_intensity=link.max_intensity, offset0=abs(link.phi0),
+            elevation0=values['pan_tilt.elevation0'],
+            dropout=link.drop_probability if link.blockage == 'bernoulli' else 0.0)
+    except led.AlignmentError as exc:
+        raise LedLinkError(f'bad simulator parameters: {exc}') from None
 
 
 class LedLinkSimulator(LinkSimulatorNode):
@@ -58,7 +89,11 @@ class LedLinkSimulator(LinkSimulatorNode):
                  node_name: str = NODE_NAME, namespace: Optional[str] = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
-        self.link = LedLink(self.config.link)
+        cfg = self.config
+        self.link: Union[LedLink, PanTiltLink] = (
+            LedLink(cfg.link) if cfg.pan_tilt is None else PanTiltLink(
+                cfg.pan_tilt, runs=1, seed=cfg.link.seed,
+                response=RadialResponse(cfg.link.response())))
         self.link.obstructed = self.config.beam_blocked
         self.add_on_set_parameters_callback(self._validate)
         link = self.config.link
@@ -81,6 +116,9 @@ class LedLinkSimulator(LinkSimulatorNode):
             f'simulating the LED link: beta {link.beta:g} deg/s, noise {link.noise:g} V, '
             f'dt {link.dt:g} s x {factor:g}{" (lockstep)" if self.config.lockstep else ""}, '
             f'seed {link.seed}, blockage {link.blockage}'
+            + ('' if cfg.pan_tilt is None else
+               f'; a pan-tilt mount ({cfg.joints[0]}, {cfg.joints[1]}), tilt '
+               f'{cfg.pan_tilt.elevation0:g} deg at the start')
             + (f', {self.total} samples' if self.total else ''))
 
     @property
@@ -90,10 +128,16 @@ class LedLinkSimulator(LinkSimulatorNode):
 
     def _read(self, values: dict) -> LedSimulatorConfig:
         link = link_config(LedLinkConfig, values, LedLinkError)
+        try:
+            joints = check_joints(values)
+        except ParameterError as exc:
+            raise LedLinkError(str(exc)) from None
+        pan_tilt = pan_tilt_link_config(link, values) if values['axes'] == 2 else None
         return LedSimulatorConfig(link, values['time_factor'], values['lockstep'],
                                   values['command_timeout'], values['duration'],
                                   values['start_time'], values['wait_for_subscribers'],
-                                  values['frame_id'], values['beam_blocked'])
+                                  values['frame_id'], values['beam_blocked'], pan_tilt,
+                                  joints)
 
     def _validate(self, changes: list) -> SetParametersResult:
         """Only beam_blocked changes at run time; the seeded stream is fixed at start."""
@@ -113,13 +157,18 @@ class LedLinkSimulator(LinkSimulatorNode):
 
     def _on_command(self, msg: Float64MultiArray) -> None:
         angles = conversions.msg_to_base_command(msg)
-        if angles.size != 1 or not np.isfinite(angles[0]):
+        n = 1 if self.config.pan_tilt is None else 2
+        if angles.size != n or not np.all(np.isfinite(angles)):
             self.bad_commands += 1
             self.get_logger().warning(
-                f'base command ignored: expected one finite joint position (rad), got '
-                f'{list(msg.data)}', throttle_duration_sec=1.0)
+                f'base command ignored: expected {("one", "two")[n - 1]} finite joint '
+                f'position{"s" if n > 1 else ""} (rad), got {list(msg.data)}',
+                throttle_duration_sec=1.0)
             return
-        self.link.command(float(angles[0]))
+        if isinstance(self.link, PanTiltLink):
+            self.link.command(angles)
+        else:
+            self.link.command(float(angles[0]))
         self.commands += 1
         self._answered = True
         if self.start_ns is not None:
@@ -163,18 +212,25 @@ class LedLinkSimulator(LinkSimulatorNode):
                     return
             self._publish(self.link.sample(), now)
 
-    def _publish(self, s: LedSample, now: int) -> None:
+    def _publish(self, s: Union[LedSample, PanTiltSample], now: int) -> None:
         """Publish one sample: the truth always, the intensity unless it was dropped."""
         cfg = self.config
         stamp = self.stamp0_ns + sample_offset_ns(s.index, cfg.link.dt)
-        self.truth_pub.publish(conversions.led_truth_to_msg(stamp, s.phi, s.base, s.bearing))
-        if s.blocked:
+        if isinstance(s, PanTiltSample):
+            self.truth_pub.publish(pan_tilt_truth_to_msg(stamp, s.joints[0], s.source[0],
+                                                         float(s.theta[0]), cfg.joints))
+            dropped, reading = bool(s.missing[0]), float(s.reading[0])
+        else:
+            self.truth_pub.publish(conversions.led_truth_to_msg(stamp, s.phi, s.base,
+                                                                s.bearing))
+            dropped, reading = s.blocked, s.reading
+        if dropped or not math.isfinite(reading):
             return
         if cfg.lockstep:
             self._answered = False
             self._waiting_since = now
         self.sensor_pub.publish(conversions.intensity_to_msg(
-            stamp, s.reading, cfg.link.noise ** 2, frame_id=cfg.frame_id))
+            stamp, reading, cfg.link.noise ** 2, frame_id=cfg.frame_id))
 
 
 DESCRIPTION = ('Simulated LED link with a commanded rotating receiver '

@@ -29,8 +29,7 @@ The helpers are imported on first use (they import rclpy), so that pytest loadin
 plugin (this package's ``plugin`` module) imports no rclpy.
 """
 
-import importlib
-from typing import Any
+from tskf_ros.core.lazy_names import lazy_names
 
 __all__ = ['NODES', 'node_class', 'spin_until', 'start_in_process']
 
@@ -38,9 +37,4 @@ __all__ = ['NODES', 'node_class', 'spin_until', 'start_in_process']
 _HOMES = {'NODES': 'nodes', 'node_class': 'nodes', 'start_in_process': 'nodes',
           'spin_until': 'spin'}
 
-
-def __getattr__(name: str) -> Any:
-    """Import a helper's module on first access (PEP 562)."""
-    if name not in _HOMES:
-        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
-    return getattr(importlib.import_module(f'{__name__}.{_HOMES[name]}'), name)
+__getattr__, __dir__ = lazy_names(__name__, _HOMES, globals())

@@ -22,9 +22,12 @@ import signal
 import sys
 import threading
 from types import FrameType
-from typing import Any, Callable, NoReturn, Optional
+from typing import Any, Callable, NoReturn, Optional, Sequence, TYPE_CHECKING
 
 from tskf_ros.bag.bag_errors import EXIT_INTERRUPTED
+
+if TYPE_CHECKING:
+    import subprocess
 
 # each console script (setup.py's console_scripts) and the function it runs;
 # test/tools/test_console.py checks this table against setup.py
@@ -56,7 +59,9 @@ def run(tool: str) -> NoReturn:
     and nothing on stderr; once the tool has ended, Ctrl-C is ignored.  An interrupt that
     lands inside a C extension's import comes out as another error (numpy: an ImportError
     "PyCapsule_Import could not import module"): after a Ctrl-C, any error is the
-    interrupt.
+    interrupt.  A SIGINT before this runs (the interpreter's start, site's imports, the
+    import of this module: tens of milliseconds) is Python's own, a traceback, unless the
+    process was started by start_held.
     """
     def entry() -> object:
         module, _, name = TOOLS[tool].partition(':')
@@ -72,7 +77,8 @@ def run_as_main(main: Callable[[], object]) -> NoReturn:
     no traceback (a tool may print its own one line), and Ctrl-C is ignored once main has
     ended.  Not covered: a Ctrl-C while `python -m` imports the module (its numpy, scipy,
     rclpy), which happens before this is called: Python prints its KeyboardInterrupt
-    traceback and dies of SIGINT.  The console scripts (run) cover that phase too.
+    traceback and dies of SIGINT.  The console scripts (run) cover that phase too, and a
+    process started by start_held every phase.
     """
     _quietly(main, main.__module__.rpartition('.')[2])
 
@@ -161,10 +167,32 @@ class _SigintSeen:
         os.close(self.write_fd)
 
 
+def start_held(cmd: Sequence[str], **popen: Any) -> 'subprocess.Popen[Any]':
+    """
+    Start cmd, a tool run through run() or run_as_main, with SIGINT held until it can take it.
+
+    A SIGINT before the child's runner has its handler (while the interpreter starts,
+    site's .pth files import, this module imports) would end it with Python's
+    KeyboardInterrupt traceback or "Fatal Python error: init_import_site".  The child
+    starts with SIGINT blocked (a signal mask survives fork and exec, and Popen passes the
+    calling thread's on); the runner unblocks it once its handler is in place, and a SIGINT
+    that came meanwhile, kept pending by the kernel, is taken then: exit EXIT_INTERRUPTED,
+    nothing on stderr.  popen: subprocess.Popen's keyword arguments.
+    """
+    import subprocess
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        return subprocess.Popen(cmd, **popen)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def _quietly(entry: Callable[[], object], tool: str) -> NoReturn:
     interrupted = SigintFlag()
     seen = _SigintSeen() if interrupted.main else None
     try:
+        if interrupted.main:    # a SIGINT held since the start (start_held) is taken here
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         status = entry()
     except KeyboardInterrupt:
         status = EXIT_INTERRUPTED

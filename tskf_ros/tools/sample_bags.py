@@ -31,8 +31,13 @@ from tskf_ros.bag.writer import BagError, BagWriter
 from tskf_ros.core.time_scales import cai_td
 from tskf_ros.core.units import NS
 from tskf_ros.experiments import drogue as drogue_sim
+from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
+from tskf_ros.led.two_axis.pan_tilt_session import (pan_tilt_closed_loop, PanTiltSession,
+                                                    PanTiltSessionConfig)
 from tskf_ros.messages import alignment_interface as aligner_interface
 from tskf_ros.messages import conversions
+from tskf_ros.messages.pan_tilt_messages import (pan_tilt_command_to_msg, pan_tilt_state_to_msg,
+                                                 pan_tilt_truth_to_msg)
 from tskf_ros.owc.vibrating_link import OwcLink, OwcLinkConfig
 
 PROG = 'make_sample_bags'
@@ -50,6 +55,9 @@ RELIABLE_QOS = [qos_from_rclpy(QoSProfile(depth=100, reliability=ReliabilityPoli
 # Gilbert-Elliott parameters of owc_ge_1khz
 GE = {'ge_p_gb': 0.002, 'ge_p_bg': 0.05, 'ge_loss_good': 0.0, 'ge_loss_bad': 1.0}
 LED_DROPOUT = 0.05
+# led_pan_tilt: 20 s at 50 ms, the default joint names
+PAN_TILT_STEPS = 400
+PAN_TILT_JOINTS = ('pan', 'tilt')
 
 
 def td_seconds() -> np.ndarray:
@@ -129,6 +137,37 @@ def led_alignment(writer: BagWriter, seed: int) -> None:
             conversions.base_command_to_msg(base[k])))
 
 
+def led_pan_tilt(writer: BagWriter, seed: int) -> None:
+    """Simulate one two-axis run: the conical-scan EKF on a pan-tilt mount, as the nodes run it."""
+    link = PanTiltLinkConfig(dropout=LED_DROPOUT)
+    session = PanTiltSession(PanTiltSessionConfig(noise=link.noise))
+    run = pan_tilt_closed_loop(link, session, PAN_TILT_STEPS, seed=seed,
+                               start_ns=START_S * NS)
+    writer.add_topic('/photodiode', ILLUMINANCE, qos=SENSOR_QOS)
+    writer.add_topic('/pan_tilt/truth', JOINT_STATE, qos=RELIABLE_QOS)
+    writer.add_topic('/pan_tilt/estimate', ESTIMATE, qos=RELIABLE_QOS)
+    writer.add_topic('/pan_tilt/command', aligner_interface.COMMAND_TYPE, qos=RELIABLE_QOS)
+    last = None
+    for s, out in zip(run.samples, run.outcomes):
+        stamp = START_S * NS + int(round(s.t * NS))
+        writer.write('/pan_tilt/truth', stamp, serialize(pan_tilt_truth_to_msg(
+            stamp, s.joints[0], s.source[0], float(s.theta[0]), PAN_TILT_JOINTS)))
+        if out is None:         # dropped: never reached the receiver
+            continue
+        writer.write('/photodiode', stamp, serialize(
+            conversions.power_to_msg(stamp, float(s.reading[0]), link.noise ** 2,
+                                     frame_id='photodiode')))
+        if out.estimate is not None:
+            mu = 0.0 if last is None else (stamp - last) / NS
+            e = out.estimate
+            writer.write('/pan_tilt/estimate', stamp, serialize(pan_tilt_state_to_msg(
+                'corrected', stamp, mu, e.x, e.P, e.states)))
+        if out.command is not None:
+            writer.write('/pan_tilt/command', stamp, serialize(
+                pan_tilt_command_to_msg(out.command, PAN_TILT_JOINTS)))
+        last = stamp
+
+
 def drogue(writer: BagWriter, seed: int) -> None:
     """Simulate one drogue of Fang & de Callafon Section IV (tskf_ros.experiments.drogue)."""
     run = drogue_sim.run(drogue_sim.DrogueConfig(seed=seed))
@@ -149,7 +188,7 @@ def drogue(writer: BagWriter, seed: int) -> None:
 
 
 SAMPLES = {'owc_cai_td_1hz': owc_cai_td_1hz, 'owc_ge_1khz': owc_ge_1khz,
-           'led_alignment': led_alignment, 'drogue': drogue}
+           'led_alignment': led_alignment, 'led_pan_tilt': led_pan_tilt, 'drogue': drogue}
 
 
 def make(name: str, out: Path, seed: int = DEFAULT_SEED, *, overwrite: bool = False) -> Path:

@@ -1,0 +1,71 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The alignment node's two-axis parameters: which core aligner the shared choices name."""
+
+import pytest
+
+from tskf_ros import led
+from tskf_ros.core.units import NS
+from tskf_ros.led.pan_tilt_stream import PanTiltStream, PanTiltStreamConfig
+from tskf_ros.messages.alignment_interface import default_parameters, parameters_to_config
+from tskf_ros.messages.pan_tilt_interface import pan_tilt_outcome_messages
+
+
+def two_axis(**extra):
+    """Return the node config of the defaults with axes 2 and extra."""
+    return parameters_to_config({**default_parameters(), 'axes': 2, **extra})
+
+
+@pytest.mark.parametrize('extra, method, start', [
+    ({'pat.enabled': False}, 'conical_ekf', 'tracking'),
+    ({'pat.enabled': True}, 'conical_ekf_pat', 'acquiring'),
+    ({'pat.enabled': True, 'pat.start': 'tracking'}, 'conical_ekf_pat', 'tracking'),
+    ({'pat.enabled': False, 'controller': 'lqg'}, 'conical_lqg', 'tracking'),
+])
+def test_the_shared_choices_name_the_two_axis_aligner(extra, method, start):
+    config = two_axis(**extra)
+    assert isinstance(config.session, PanTiltStreamConfig)
+    assert (config.session.session.method, config.session.session.start) == (method, start)
+
+
+def test_the_shared_limits_reach_the_session():
+    s = two_axis(**{'max_step': 10.0, 'max_backward': 2.0, 'state_limit': 50.0, 'dt': 0.1,
+                    'pan_tilt.initial': [15.0, -30.0], 'pan_tilt.tilt_limits': [-40.0, 40.0],
+                    'pan_tilt.noise': 0.7}).session.session
+    assert (s.max_step, s.max_backward, s.state_limit, s.dt, s.noise) == (10.0, 2.0, 50.0,
+                                                                          0.1, 0.7)
+    assert s.joints0 == (15.0, -30.0) and s.tilt_limits == (-40.0, 40.0)
+
+
+@pytest.mark.parametrize('extra, why', [
+    ({'algorithm': 'three_point'}, "algorithm must be 'ekf'"),
+    ({'controller': 'lqg', 'pat.enabled': True}, 'pat.enabled needs controller p'),
+    ({'pan_tilt.joints': ['pan', '']}, 'pan_tilt.joints must be two non-empty joint names'),
+    ({'axes': 3}, 'axes must be one of 1, 2, got 3'),
+])
+def test_a_config_that_cannot_run_is_one_line(extra, why):
+    with pytest.raises(led.AlignmentError) as info:
+        two_axis(**extra)
+    assert why in str(info.value) and '\n' not in str(info.value)
+
+
+def test_the_outcome_messages_are_predicted_corrected_command_in_order():
+    stream = PanTiltStream(two_axis(**{'pat.enabled': False}).session)
+    first = pan_tilt_outcome_messages(stream.add(NS, 2.5), ('pan', 'tilt'))
+    assert [key for key, _ in first] == ['predicted', 'corrected', 'command']
+    rejected = stream.add(NS, 2.5)                    # the same stamp: dropped
+    assert rejected.outcome.status == 'rejected'
+    assert pan_tilt_outcome_messages(rejected, ('pan', 'tilt')) == []
