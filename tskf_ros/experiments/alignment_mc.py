@@ -29,7 +29,7 @@ import numpy as np
 
 from tskf_ros import led
 from tskf_ros.bag.progress import bar
-from tskf_ros.experiments import alignment_pat, arguments, output
+from tskf_ros.experiments import alignment_mc_two_axis, alignment_pat, arguments, output
 from tskf_ros.experiments.alignment_figures import plot_run, plot_tracking
 
 DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
@@ -242,6 +242,9 @@ def parser() -> argparse.ArgumentParser:
     """Build the command-line interface."""
     p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.alignment_mc',
                                 description=__doc__.split('\n\n')[0])
+    p.add_argument('--axes', type=int, choices=(1, 2), default=1,
+                   help='1: a receiver turned about one axis (this page of options); 2: a '
+                        'pan-tilt receiver (see --axes 2 --help)')
     arguments.add_runs(p, 1000, 'noise level')
     arguments.add_noise_levels(p, DEFAULT_NOISE_LEVELS)
     p.add_argument('--beta', type=arguments.rate_deg_s,
@@ -302,6 +305,10 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the requested experiments; return the exit status."""
+    axes = argparse.ArgumentParser(prog=parser().prog, add_help=False)
+    axes.add_argument('--axes', type=int, choices=(1, 2), default=1)
+    if axes.parse_known_args(argv)[0].axes == 2:
+        return alignment_mc_two_axis.main(argv)
     args = parser().parse_args(argv)
     if not 0.0 <= args.dropout < 1.0 or any(not 0.0 <= d < 1.0 for d in args.dropout_levels):
         parser().error('dropout probabilities must be in [0, 1)')

@@ -100,12 +100,23 @@ def metrics(traj: led.Trajectory, states: Optional[np.ndarray],
     supervisor's, from each declared loss to its next step tracking in the cone (None for
     a plain algorithm); false alarms: the declared losses of runs never out of the cone.
     """
-    dt = float(traj.t[1] - traj.t[0]) if traj.t.size > 1 else 1.0
-    steps, runs = traj.phi.shape
-    phi = led.wrap_degrees(traj.phi)
+    return angle_metrics(traj.t, led.wrap_degrees(traj.phi), states, declared, angle=angle,
+                         blocked=blocked)
+
+
+def angle_metrics(t: np.ndarray, phi: np.ndarray, states: Optional[np.ndarray],
+                  declared: Optional[np.ndarray], *, angle: float = led.TRACKING_ANGLE,
+                  blocked: Sequence[float] = ()) -> dict:
+    """
+    Return metrics() from the stamps t (steps,) and the pointing angles phi (steps, runs).
+
+    phi is a wrapped angle of incidence (one axis) or an off-axis angle >= 0 (two axes).
+    """
+    dt = float(t[1] - t[0]) if t.size > 1 else 1.0
+    steps, runs = phi.shape
     inside = np.abs(phi) <= angle
     acquisition, reacquisition = pointing_metrics.pointing_events(
-        phi, dt, angle=angle, dark=dark_steps(traj.t, blocked))
+        phi, dt, angle=angle, dark=dark_steps(t, blocked))
     lost = int(np.count_nonzero(~inside[-1]))
     out = {'lost_at_end': lost / runs, 'lost_runs': lost, 'acquisition': acquisition,
            'reacquisition': reacquisition, 'duration_s': steps * dt, 'runs': runs, 'dt': dt,
@@ -272,7 +283,8 @@ def plot_acquisition(results: dict, *, level: int = 0, title: str) -> Figure:
     return fig
 
 
-__all__ = ['plot_acquisition', 'plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'dark_steps',
+__all__ = ['plot_acquisition', 'plot_pat_run', 'ACQUIRED_WITHIN', 'angle_metrics', 'build_pat',
+           'dark_steps',
            'empty_record',
            'evaluate', 'join_metrics', 'metrics',
            'MIN_NOISE', 'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']

@@ -1,0 +1,130 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""alignment_mc --axes 2 (tskf_ros.experiments.alignment_mc_two_axis): its JSON and its CLI."""
+
+import json
+
+import numpy as np
+import pytest
+
+from tskf_ros.experiments import alignment_mc, alignment_mc_two_axis, alignment_pat
+from tskf_ros.experiments.alignment_ablation_report import wilson
+from tskf_ros.led.two_axis.pan_tilt_baselines import FourPointAveraging, TwoAxisHillClimbing
+from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
+from tskf_ros.led.two_axis.pan_tilt_simulation import simulate_pan_tilt
+
+ONE_AXIS_KEYS = {'angular', 'measure'} | set(alignment_pat.empty_record())
+
+
+def test_two_axes_write_the_one_axis_keys_and_per_axis_errors(tmp_path, capsys):
+    out, png = tmp_path / 'a.json', tmp_path / 'a.png'
+    assert alignment_mc.main(['--axes', '2', '--runs', '6', '--steps', '40', '--workers', '1',
+                              '--noise-levels', '0.5,1.5', '--json', str(out),
+                              '--png', str(png)]) == 0
+    data = json.loads(out.read_text())
+    assert {'noise_levels', 'results', 'config', 'elapsed_s'} <= set(data)
+    assert data['noise_levels'] == [0.5, 1.5] and data['config']['axes'] == 2
+    assert list(data['results']) == alignment_mc_two_axis.default_methods()
+    assert {'hill_climbing', 'four_point'} < set(data['results'])
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    for name, got in data['results'].items():
+        assert ONE_AXIS_KEYS <= set(got), name
+        assert set(got['rms_error_deg']) == {'azimuth', 'elevation'}
+        for key in ('angular', 'measure'):
+            for i, mean in enumerate(got[key]['mean']):
+                lo, hi = got[key]['ci95'][i]
+                assert lo <= mean + 1e-9 and mean <= hi + 1e-9
+    # a supervised method records its declared losses (a false-alarm rate), a plain one not
+    if 'conical_ekf_pat' in data['results']:
+        assert data['results']['conical_ekf_pat']['false_alarms_per_1000s'][0] is not None
+    assert data['results']['hill_climbing']['false_alarms_per_1000s'] == [None, None]
+    # the baselines' numbers, from the closed loop written out here: seed 0 at each level
+    for i, noise in enumerate((0.5, 1.5)):
+        link = PanTiltLinkConfig(beta=1.2, steps=40, noise=noise, offset0=5.0)
+        for name, aligner in (('hill_climbing', TwoAxisHillClimbing(runs=6)),
+                              ('four_point', FourPointAveraging(runs=6))):
+            traj = simulate_pan_tilt(aligner, link, np.random.default_rng(0))
+            got = data['results'][name]
+            inside = traj.theta <= 15.0
+            tracked = 100.0 * inside.mean(axis=0)
+            assert got['angular']['mean'][i] == pytest.approx(tracked.mean(), abs=1e-9)
+            assert got['angular']['std'][i] == pytest.approx(tracked.std(), abs=1e-9)
+            measure = 100.0 * (traj.clean >= 0.6).mean(axis=0)
+            assert got['measure']['mean'][i] == pytest.approx(measure.mean(), abs=1e-9)
+            lost = int(np.count_nonzero(~inside[-1]))
+            assert got['lost_at_end'][i] == pytest.approx(lost / 6, abs=1e-12)
+            assert got['lost_at_end_ci95'][i] == pytest.approx(list(wilson(lost, 6)), abs=1e-12)
+            for axis, name_of_axis in enumerate(('azimuth', 'elevation')):
+                rms = np.sqrt(np.mean(traj.error[:, :, axis] ** 2, axis=0))
+                assert got['rms_error_deg'][name_of_axis]['mean'][i] == \
+                    pytest.approx(rms.mean(), rel=1e-12)
+    err = capsys.readouterr().err
+    assert 'noise 1.50 (2/2)' in err and f'wrote {out}' in err
+
+
+def test_a_cold_start_is_recorded_and_the_acquisition_counted(tmp_path, capsys):
+    out = tmp_path / 'a.json'
+    assert alignment_mc.main(['--axes', '2', '--runs', '5', '--steps', '60', '--workers', '1',
+                              '--noise-levels', '0', '--cold-start', '30',
+                              '--methods', 'four_point', '--json', str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data['config']['cold_start_deg'] == 30.0
+    got = data['results']['four_point']
+    within = got['acquired_within_10s'][0]
+    assert within is not None and 0.0 <= within <= 1.0
+    assert got['acquired_within_10s_ci95'][0] == pytest.approx(
+        list(wilson(round(within * 5), 5)), abs=1e-12)
+
+
+def test_one_axis_is_the_default(tmp_path, capsys):
+    out = tmp_path / 'a.json'
+    assert alignment_mc.main(['--runs', '2', '--steps', '20', '--noise-levels', '0.5',
+                              '--algorithms', 'ekf', '--json', str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert 'axes' not in data['config'] and set(data['results']) == {'ekf'}
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--axes', '3'], 'argument --axes: invalid choice: 3 (choose from 1, 2)'),
+    (['--axes', '2', '--methods', 'nope'], "--methods: unknown ['nope']"),
+    (['--axes', '2', '--cold-start', '-1'],
+     'argument --cold-start: must be a finite number in [0, 60]'),
+    (['--axes', '2', '--runs', '0'], 'argument --runs: must be in'),
+    (['--axes', '2', '--json', '/'], '--json /: / is a folder'),
+    (['--axes', '2', '--png', 'FILE/a.png'], 'is not a folder'),
+])
+def test_a_bad_argument_is_one_line_and_exit_2(argv, message, capsys, tmp_path):
+    # FILE: a file where a folder should be
+    (tmp_path / 'file').write_text('')
+    argv = [a.replace('FILE', str(tmp_path / 'file')) for a in argv]
+    with pytest.raises(SystemExit) as info:
+        alignment_mc.main(argv)
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1] and 'Traceback' not in '\n'.join(err), err
+
+
+def test_the_numbers_do_not_depend_on_the_workers(tmp_path, capsys):
+    # each point starts its own generator from the seed: 1 and 2 processes agree
+    data = []
+    for workers in ('1', '2'):
+        out = tmp_path / f'w{workers}.json'
+        assert alignment_mc.main(['--axes', '2', '--runs', '3', '--steps', '30',
+                                  '--noise-levels', '0.5,1', '--methods',
+                                  'hill_climbing,four_point', '--workers', workers,
+                                  '--json', str(out)]) == 0
+        data.append(json.loads(out.read_text())['results'])
+    assert data[0] == data[1]

@@ -1,0 +1,367 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Monte Carlo comparison of two-axis (pan-tilt) LED alignment: `alignment_mc --axes 2`.
+
+Every method runs the closed loop of tskf_ros.led.two_axis.pan_tilt_simulation at each
+noise level from one seed (common random numbers: the methods see the same links).  Per
+method and level, with the JSON keys of one axis: the tracking % by angle (the receiver's
+off-axis angle within 15 deg) and by measure (clean intensity >= 0.6 V), and the pointing
+metrics of alignment_pat (loss at the end, acquisition, re-acquisition); in addition 95 %
+intervals (a percentile bootstrap over runs for means, Wilson's for proportions) and the
+RMS error of the mean pointing per axis: azimuth (the cross-elevation angle on the sky,
+wrap(a - a_s) cos e_s) and elevation (e - e_s), in degrees.
+"""
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+import dataclasses
+import os
+from pathlib import Path
+import sys
+import time
+from typing import Any, Callable, Iterator, Optional, Sequence
+
+import numpy as np
+
+from tskf_ros import led
+from tskf_ros.bag.progress import bar
+from tskf_ros.experiments import alignment_pat, arguments, output
+from tskf_ros.experiments.alignment_ablation_report import bootstrap_ci, wilson
+from tskf_ros.experiments.alignment_mc_two_axis_figure import plot_two_axis
+from tskf_ros.led.two_axis.aligners import make_two_axis_aligner
+from tskf_ros.led.two_axis.pan_tilt_baselines import FourPointAveraging, TwoAxisHillClimbing
+from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
+from tskf_ros.led.two_axis.pan_tilt_simulation import (PanTiltTrajectory, simulate_pan_tilt,
+                                                       TwoAxisAligner)
+from tskf_ros.led.two_axis.radial_response import RadialResponse
+
+DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
+# name -> what it is, for --help and the JSON
+METHODS = {
+    'conical_ekf_pat': 'conical-scan EKF, P controller per axis, with the supervisor',
+    'conical_lqg': 'conical-scan EKF with drift states, LQG per axis',
+    'conical_ekf': 'conical-scan EKF, P controller per axis (no supervisor)',
+    'hill_climbing': 'hill climbing, axes alternating (gamma = 2 deg)',
+    'four_point': 'four-point averaging, eq. (26) per axis (gamma = 2 deg)',
+}
+CONICAL = ('conical_ekf', 'conical_ekf_pat', 'conical_lqg')
+# the comparison: the EKF with the supervisor, the LQG, the two baselines
+DEFAULT_METHODS = ('conical_ekf_pat', 'conical_lqg', 'hill_climbing', 'four_point')
+AXES = ('azimuth', 'elevation')
+RESAMPLES = 2000              # bootstrap resamples of the runs
+Progress = Callable[[str], None]
+
+
+def build(name: str, runs: int, link: PanTiltLinkConfig, response: RadialResponse, *,
+          clip: bool) -> TwoAxisAligner:
+    """Build the method `name` (one of METHODS) for `runs` runs of `link`."""
+    if name in CONICAL:
+        # R from the link's noise, as ekf_pat's in one axis (at least MIN_NOISE: R > 0); a
+        # cold start searches first (the supervised EKF)
+        start = 'acquiring' if link.cone > 0.0 and name == 'conical_ekf_pat' else 'tracking'
+        return make_two_axis_aligner(name, runs=runs, dt=link.dt, response=response,
+                                     noise=max(link.noise, alignment_pat.MIN_NOISE),
+                                     start=start, joints0=(0.0, link.elevation0))
+    if name == 'hill_climbing':
+        return TwoAxisHillClimbing(runs=runs, dt=link.dt)
+    if name == 'four_point':
+        return FourPointAveraging(runs=runs, dt=link.dt, clip=clip)
+    raise led.AlignmentError(f'unknown method {name!r}; expected one of {list(METHODS)}')
+
+
+def default_methods() -> list[str]:
+    """Return the DEFAULT_METHODS that can be built (conical_ekf if the supervised cannot)."""
+    names = [name for name in DEFAULT_METHODS if available(name)]
+    return names if 'conical_ekf_pat' in names else ['conical_ekf'] + names
+
+
+def available(name: str) -> bool:
+    """Tell whether the method `name` can be built here."""
+    try:
+        build(name, 1, PanTiltLinkConfig(), RadialResponse(), clip=False)
+    except led.AlignmentError:
+        return False
+    return True
+
+
+class Recording:
+    """An aligner whose supervisor's states and declared losses (if it has them) are kept."""
+
+    def __init__(self, aligner: TwoAxisAligner) -> None:
+        self.aligner = aligner
+        self.runs = aligner.runs
+        self.states: list[np.ndarray] = []
+        self.declared: list[np.ndarray] = []
+
+    @property
+    def scan_offset(self) -> np.ndarray:
+        """Return the aligner's scan offset."""
+        return self.aligner.scan_offset
+
+    def step(self, stamp: float, z: led.Measurement) -> np.ndarray:
+        """Step the aligner; keep its state and declared losses when it is supervised."""
+        turn = self.aligner.step(stamp, z)
+        if hasattr(self.aligner, 'state') and hasattr(self.aligner, 'declared'):
+            self.states.append(np.array(getattr(self.aligner, 'state')))
+            self.declared.append(np.array(getattr(self.aligner, 'declared')))
+        return turn
+
+
+@dataclasses.dataclass(frozen=True)
+class Point:
+    """One method on one link: the task of one worker process."""
+
+    name: str
+    runs: int
+    link: PanTiltLinkConfig
+    seed: int
+    response: RadialResponse
+    clip: bool
+
+
+@dataclasses.dataclass
+class PointResult:
+    """Per run: tracking % (angle, measure), RMS error per axis (runs, 2); the metrics."""
+
+    angular: np.ndarray
+    measure: np.ndarray
+    rms: np.ndarray
+    metrics: dict
+
+
+def simulate(p: Point) -> tuple[PanTiltTrajectory, Recording]:
+    """Run one point's closed loop from its seed; return the trajectory and the record."""
+    aligner = Recording(build(p.name, p.runs, p.link, p.response, clip=p.clip))
+    traj = simulate_pan_tilt(aligner, p.link, np.random.default_rng(p.seed), p.response)
+    return traj, aligner
+
+
+def run_point(p: Point) -> PointResult:
+    """Simulate one point and reduce it to per-run numbers."""
+    traj, rec = simulate(p)
+    angular = 100.0 * np.mean(traj.theta <= led.TRACKING_ANGLE, axis=0)
+    measure = 100.0 * np.mean(traj.clean >= led.TRACKING_LEVEL * p.link.max_intensity, axis=0)
+    rms = np.sqrt(np.mean(traj.error ** 2, axis=0))
+    supervised = bool(rec.states)
+    m = alignment_pat.angle_metrics(traj.t, traj.theta,
+                                    np.array(rec.states) if supervised else None,
+                                    np.array(rec.declared) if supervised else None,
+                                    blocked=p.link.blocked)
+    return PointResult(angular, measure, rms, m)
+
+
+def run_points(points: Sequence[Point], workers: int) -> Iterator[PointResult]:
+    """Yield run_point of each point, in order, computed on `workers` processes."""
+    if workers <= 1 or len(points) <= 1:
+        yield from map(run_point, points)
+        return
+    with ProcessPoolExecutor(max_workers=min(workers, len(points))) as pool:
+        yield from pool.map(run_point, points)
+
+
+def empty_entry() -> dict:
+    """Return one method's lists, filled one noise level at a time by record()."""
+    mean_ci: Callable[[], dict] = lambda: {'mean': [], 'ci95': []}    # noqa: E731
+    return {'angular': {'mean': [], 'std': [], 'ci95': []},
+            'measure': {'mean': [], 'std': [], 'ci95': []},
+            **alignment_pat.empty_record(),
+            'lost_at_end_ci95': [], 'acquired_within_10s_ci95': [],
+            'rms_error_deg': {axis: mean_ci() for axis in AXES}}
+
+
+def record(entry: dict, r: PointResult, index: np.ndarray) -> None:
+    """Append one noise level's numbers; index (resamples, runs) draws the bootstrap."""
+    for key, values in (('angular', r.angular), ('measure', r.measure)):
+        entry[key]['mean'].append(float(np.mean(values)))
+        entry[key]['std'].append(float(np.std(values)))
+        entry[key]['ci95'].append(bootstrap_ci(values, index))
+    alignment_pat.record(entry, r.metrics)
+    runs = r.angular.size
+    lost = int(round(r.metrics['lost_at_end'] * runs))
+    entry['lost_at_end_ci95'].append(wilson(lost, runs))
+    acq = r.metrics['acquisition']
+    within = int(np.count_nonzero(acq.observed & (acq.times <= alignment_pat.ACQUIRED_WITHIN)))
+    entry['acquired_within_10s_ci95'].append(wilson(within, acq.times.size)
+                                             if acq.times.size else None)
+    for i, axis in enumerate(AXES):
+        entry['rms_error_deg'][axis]['mean'].append(float(np.mean(r.rms[:, i])))
+        entry['rms_error_deg'][axis]['ci95'].append(bootstrap_ci(r.rms[:, i], index))
+
+
+def sweep(noise_levels: Sequence[float], methods: Sequence[str], *, runs: int,
+          link: PanTiltLinkConfig, seed: int, response: RadialResponse, clip: bool,
+          progress: Optional[Progress] = None, workers: int = 1) -> dict:
+    """Run every method at every noise level; return {'results', 'elapsed_s'}."""
+    results = {name: empty_entry() for name in methods}
+    index = np.random.default_rng([seed, 1]).integers(0, runs, size=(RESAMPLES, runs))
+    start = time.perf_counter()
+    tick = bar(len(noise_levels) * len(methods), 'alignment_mc two axes', 'point',
+               progress is not None)
+    points = [Point(name, runs, dataclasses.replace(link, noise=float(noise)), seed, response,
+                    clip) for noise in noise_levels for name in methods]
+    done = run_points(points, workers)
+    for i, noise in enumerate(noise_levels):
+        tic = time.perf_counter()
+        parts = []
+        for name in methods:
+            r = next(done)
+            record(results[name], r, index)
+            parts.append(f'{name} {np.mean(r.angular):5.1f}%')
+            tick.update(1)
+        if progress is not None:
+            progress(f'noise {noise:.2f} ({i + 1}/{len(noise_levels)}): ' + '  '.join(parts)
+                     + f'  [{runs} runs, {time.perf_counter() - tic:.1f} s]')
+    tick.close()
+    return {'results': results, 'elapsed_s': time.perf_counter() - start}
+
+
+def table(noise_levels: Sequence[float], results: dict) -> str:
+    """Format tracking % by angle, mean [95 % interval], and the share lost at the end."""
+    names = list(results)
+    head = f'{"noise":>6} | ' + ' | '.join(f'{n + " % [95%] lost":>30}' for n in names)
+    lines = [head, '-' * len(head)]
+    for i, noise in enumerate(noise_levels):
+        cells = []
+        for n in names:
+            a = results[n]['angular']
+            lo, hi = a['ci95'][i]
+            cells.append(f'{a["mean"][i]:5.1f} [{lo:5.1f}, {hi:5.1f}] '
+                         f'{results[n]["lost_at_end"][i]:6.3f}'.rjust(30))
+        lines.append(f'{noise:6.2f} | ' + ' | '.join(cells))
+    return '\n'.join(lines)
+
+
+def parser() -> argparse.ArgumentParser:
+    """Build the two-axis command line."""
+    p = argparse.ArgumentParser(prog='python -m tskf_ros.experiments.alignment_mc --axes 2',
+                                description=__doc__.split('\n\n')[0])
+    p.add_argument('--axes', type=int, choices=(2,), default=2, help='2: this experiment')
+    arguments.add_runs(p, 1000, 'noise level and method')
+    arguments.add_noise_levels(p, DEFAULT_NOISE_LEVELS)
+    p.add_argument('--beta', type=arguments.rate_deg_s, default=1.2,
+                   help='drift rate per joint axis, deg/s (1.2)')
+    arguments.add_run_options(p, dt=led.PAPER_DT)
+    p.add_argument('--dropout', type=arguments.number(0.0, 0.99), default=0.0,
+                   help='probability that a sample is missing (0)')
+    p.add_argument('--offset0', type=arguments.number(0.0, 90.0), default=5.0, metavar='DEG',
+                   help='off-axis angle of the mean pointing at the start, random direction '
+                        '(5)')
+    p.add_argument('--cold-start', type=arguments.number(0.0, 60.0), default=0.0,
+                   metavar='DEG', help='start uniform in a cone of DEG instead of --offset0 '
+                                       '(0: off)')
+    p.add_argument('--methods', '--algorithms', dest='methods',
+                   type=lambda t: [a for a in t.split(',') if a],
+                   default=None,
+                   help='comma list of the methods compared (default: '
+                        + ','.join(DEFAULT_METHODS) + '), of: ' + ', '.join(
+                       f'{k} ({v})' for k, v in METHODS.items()))
+    p.add_argument('--clip-four-point', action='store_true',
+                   help='clip gamma_p of eq. (26) to [-gamma, gamma] (as --clip-three-point)')
+    p.add_argument('--run-noise', type=arguments.noise_volts, default=1.0,
+                   help="noise of the figure's single run, V (1.0)")
+    p.add_argument('--json', type=Path, help='write the comparison as JSON')
+    p.add_argument('--png', type=Path, help='write the figure: tracking against noise, and '
+                   "one run's pointing error in the azimuth-elevation plane")
+    return p
+
+
+def config_record(args: argparse.Namespace) -> dict[str, Any]:
+    """Return the JSON's config: the settings and the definitions of the numbers."""
+    return {'axes': 2, 'runs': args.runs, 'beta_deg_per_s': args.beta, 'steps': args.steps,
+            'dt_s': args.dt, 'seed': args.seed, 'dropout': args.dropout,
+            'offset0_deg': args.offset0, 'cold_start_deg': args.cold_start,
+            'clip_four_point': args.clip_four_point, 'max_intensity_v': led.MAX_INTENSITY,
+            'methods': {name: METHODS[name] for name in args.methods},
+            'tracking': {'angle_deg': led.TRACKING_ANGLE,
+                         'level_v': led.TRACKING_LEVEL * led.MAX_INTENSITY},
+            'intervals': f'95 %: percentile bootstrap over runs ({RESAMPLES} resamples) for '
+                         'means, Wilson for proportions',
+            'rms_error_deg': 'RMS over a run of the mean pointing error: azimuth as the '
+                             'cross-elevation angle wrap(a - a_s) cos e_s, elevation e - e_s'}
+
+
+def unwritable(path: Path) -> Optional[str]:
+    """Return why `path` cannot be written (before the long run), or None."""
+    if path.is_dir():
+        return f'{path} is a folder'
+    parent = path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        return f'{parent} is not a folder'
+    if not os.access(parent, os.W_OK):
+        return f'cannot write in {parent}'
+    return None
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the two-axis comparison; return the exit status."""
+    args = parser().parse_args(argv)
+    if args.methods is None:
+        args.methods = default_methods()
+    unknown = [name for name in args.methods if name not in METHODS]
+    if unknown or not args.methods:
+        parser().error(f'--methods: unknown {unknown} (known: {", ".join(METHODS)})')
+    missing = [name for name in args.methods if not available(name)]
+    if missing:
+        parser().error(f'--methods: {", ".join(missing)} cannot be built in this version')
+    for option, path in (('--json', args.json), ('--png', args.png)):
+        why = unwritable(path) if path is not None else None
+        if why:
+            parser().error(f'{option} {path}: {why}')
+
+    def progress(line: str) -> None:
+        print(f'[alignment_mc] {line}', file=sys.stderr, flush=True)
+
+    try:
+        response = RadialResponse()
+        link = PanTiltLinkConfig(beta=args.beta, dt=args.dt, steps=args.steps,
+                                 dropout=args.dropout, offset0=args.offset0,
+                                 cone=args.cold_start)
+    except led.AlignmentError as exc:
+        print(f'alignment_mc: {exc}', file=sys.stderr)
+        return 2
+    progress(f'two axes: beta {args.beta:g} deg/s per axis; {args.steps} steps of {args.dt:g} '
+             f's; {args.runs} runs per point; methods {", ".join(args.methods)}')
+    out = sweep(args.noise_levels, args.methods, runs=args.runs, link=link, seed=args.seed,
+                response=response, clip=args.clip_four_point, progress=progress,
+                workers=args.workers)
+    progress(f'comparison done in {out["elapsed_s"]:.1f} s')
+    print(table(args.noise_levels, out['results']))
+    data = {'noise_levels': list(args.noise_levels), 'results': out['results'],
+            'config': config_record(args), 'elapsed_s': out['elapsed_s']}
+    if args.json:
+        output.write_json(args.json, data)
+        progress(f'wrote {args.json}')
+    if args.png:
+        run_link = dataclasses.replace(link, noise=args.run_noise)
+        runs = {name: simulate(Point(name, 1, run_link, args.seed, response,
+                                     args.clip_four_point))[0] for name in args.methods}
+        start = (f'cold start in a {args.cold_start:g} deg cone' if args.cold_start
+                 else f'start {args.offset0:g} deg off')
+        fig = plot_two_axis(args.noise_levels, out['results'], runs, title=(
+            f'Two axes: beta = {args.beta:g} deg/s per axis, {start}, {args.runs} runs, '
+            f'seed {args.seed}'), run_title=f'one run (seed {args.seed}), noise '
+                                            f'{args.run_noise:g} V')
+        output.save_figure(fig, args.png, dpi=120)
+        progress(f'wrote {args.png}')
+    return 0
+
+
+if __name__ == '__main__':
+    from tskf_ros.tools.console import run_as_main
+    run_as_main(main)
