@@ -97,6 +97,13 @@ def test_update_batch_is_update_run_by_run(n, p):
         x_i, P_i, _, _, _ = kalman.update(m['x'], m['P'], m['z'], m['H'], m['R'], m['d'])
         np.testing.assert_array_equal(x[i], x_i)
         np.testing.assert_array_equal(P[i], P_i)
+    # a leading axis of 1 is shared by every run: H, R and d of run 0 for all
+    shared = kalman.update_runs(stack['x'], stack['P'], stack['z'], stack['H'][:1],
+                                stack['R'][:1], stack['d'][:1])
+    for i, m in enumerate(runs):
+        want = kalman.update(m['x'], m['P'], m['z'], runs[0]['H'], runs[0]['R'], runs[0]['d'])
+        for got, expected in zip(shared, want):
+            np.testing.assert_array_equal(got[i], expected)
 
 
 # The covariance update under ill-conditioning.  P has eigenvalues spread log-uniformly

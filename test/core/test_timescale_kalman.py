@@ -546,3 +546,30 @@ def test_a_run_on_jittered_mu_is_the_step_loop_bit_for_bit(transition):
         np.testing.assert_array_equal(res.P_corrected[k], step.P_corrected)
         np.testing.assert_array_equal(res.x_predicted[k], step.x_predicted)
         np.testing.assert_array_equal(res.P_predicted[k], step.P_predicted)
+
+
+@pytest.mark.parametrize('transition', ['euler', 'exact'])
+def test_a_new_mu_built_with_its_step_is_the_cached_jump_bit_for_bit(transition):
+    # without an input, a step over a mu met for the first time builds the jump in the
+    # same compiled call as the update and prediction; a twin whose cache already holds
+    # every jump (the separate path), and the run, give the same bits
+    rng = np.random.default_rng(30)
+    m = random_model(rng, 3, 2, 0)
+    mus = 0.01 * (1 + rng.uniform(-0.01, 0.01, 40))
+    ys = rng.normal(size=(80, 2))
+    kf = TimeScaleKalmanFilter(**m, transition=transition)
+    twin = TimeScaleKalmanFilter(**m, transition=transition)
+    for mu in mus:
+        twin.transition_matrices(float(mu))          # fills the twin's cache
+    # each mu twice: the second time kf caches its jump and steps with it
+    twice = np.concatenate([mus, mus])
+    res = TimeScaleKalmanFilter(**m, transition=transition).run(twice, ys)
+    for k in range(80):
+        new, cached = kf.step(float(twice[k]), ys[k]), twin.step(float(twice[k]), ys[k])
+        for a, b, c in ((new.x_corrected, cached.x_corrected, res.x_corrected[k]),
+                        (new.P_corrected, cached.P_corrected, res.P_corrected[k]),
+                        (new.x_predicted, cached.x_predicted, res.x_predicted[k]),
+                        (new.P_predicted, cached.P_predicted, res.P_predicted[k])):
+            np.testing.assert_array_equal(a, b)
+            np.testing.assert_array_equal(a, c)
+    assert set(kf._jumps) == set(mus.tolist())

@@ -82,3 +82,20 @@ def test_the_stack_of_jittered_mu_is_scipys_expm_and_van_loans_block_exponential
     assert eu.regressive.all()
     # I + mu A singular at mu = 1 for A = -I: not regressive (Definition 2.12)
     assert not transitions('euler', -np.eye(2), GQGt, B, np.array([1.0, 0.5])).regressive[0]
+
+
+def test_the_taylor_series_stops_where_the_first_term_left_out_is_below_the_rounding():
+    # N terms, the fewest with norm^N / (N + 1)! <= 2^-54: 14 at ||X|| = 1/2 (the most),
+    # fewer for the small jumps of jittered stamps; at A = 0 the series still keeps X
+    from math import factorial
+    from tskf_ros.core.transitions import _taylor_terms
+    for norm in (0.5, 0.1, 0.02, 1e-3, 1e-8, 0.0):
+        N = _taylor_terms(norm)
+        assert norm ** N / factorial(N + 1) <= 2.0 ** -54
+        assert N == 1 or norm ** (N - 1) / factorial(N) > 2.0 ** -54
+    assert _taylor_terms(0.5) == 14 and _taylor_terms(0.02) == 7 and _taylor_terms(0.0) == 1
+    # A = 0: F = I and Q_d = mu GQG^T exactly
+    GQGt = np.array([[0.3, 0.1], [0.1, 2.0]])
+    F, Qd = van_loan(np.zeros((2, 2)), GQGt, 0.01)
+    np.testing.assert_array_equal(F, np.eye(2))
+    np.testing.assert_allclose(Qd, 0.01 * GQGt, rtol=1e-15)

@@ -187,3 +187,47 @@ def test_workers_give_the_sequential_results_run_for_run():
                                         alignment_mc.run_points(points, 2)):
         np.testing.assert_array_equal(a1, a2)
         np.testing.assert_array_equal(m1, m2)
+
+
+def test_a_point_in_parts_is_the_same_on_any_workers_and_its_first_part_is_the_seeds():
+    # 7 runs in parts of 3 (3, 3, 1): the parts are the tasks; joined in order they give
+    # the same numbers on one process or two, and the first part draws what an
+    # undivided point of 3 runs draws from the seed
+    link = led.TrackingLinkConfig(beta=1.2, steps=60, noise=1.5)
+    point = alignment_mc.Point('ekf_pat', 7, link, 4, led.IncidenceResponse(), led.EKFConfig(),
+                               False, 'p')
+    one = list(alignment_mc.run_points([point], 1, part_runs=3))[0]
+    two = list(alignment_mc.run_points([point], 2, part_runs=3))[0]
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])
+    assert repr(one[2]) == repr(two[2])
+    assert one[0].shape == (7,) and one[2]['runs'] == 7
+    first = alignment_mc.run_point(dataclasses.replace(point, runs=3))
+    np.testing.assert_array_equal(one[0][:3], first[0])
+    np.testing.assert_array_equal(one[1][:3], first[1])
+
+
+def test_the_metrics_of_parts_joined_are_the_metrics_of_all_runs():
+    # one simulation of 6 runs cut into runs 0-3 and 4-5: metrics of each, joined, equal
+    # the metrics of the whole (the same events, counts over all runs)
+    link = led.TrackingLinkConfig(beta=1.2, steps=200, noise=2.5, blocked=(4.0, 5.0))
+    *_, traj, rec = alignment_pat.evaluate('ekf_pat', 6, link, np.random.default_rng(2),
+                                           led.IncidenceResponse(), led.EKFConfig(), False)
+    states, declared = np.array(rec.states), np.array(rec.declared)
+
+    def cut(runs):
+        part = led.Trajectory(t=traj.t, **{f: getattr(traj, f)[:, runs] for f in
+                                           ('phi', 'x2', 'x1', 'clean', 'z', 'command')})
+        return alignment_pat.metrics(part, states[:, runs], declared[:, runs],
+                                     blocked=link.blocked)
+
+    whole = alignment_pat.metrics(traj, states, declared, blocked=link.blocked)
+    joined = alignment_pat.join_metrics([cut(slice(0, 4)), cut(slice(4, 6))])
+    assert whole.keys() == joined.keys()
+    for key, value in whole.items():
+        if isinstance(value, alignment_pat.pointing_metrics.Durations):
+            # the same events (the latency's are listed by step, not by run: sorted)
+            assert sorted(zip(value.times, value.observed)) == sorted(
+                zip(joined[key].times, joined[key].observed)), key
+        else:
+            assert value == joined[key], key

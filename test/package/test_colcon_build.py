@@ -28,8 +28,13 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = 'tskf_ros'
 NOT_COPIED = shutil.ignore_patterns(
-    '.git', '.venv', '.pytest_cache', 'results', 'build', 'install', 'log', '__pycache__',
-    '*.egg-info')
+    '.git', '.venv', '.venv-floor', '.pytest_cache', '.mypy_cache', 'results', 'build',
+    'install', 'log', '__pycache__', '*.egg-info', '_build')
+# `colcon test`'s bound: about 10 min on an idle 2-core machine, 21 min at load 5
+COLCON_TEST_TIMEOUT = 2700.0
+# a test that runs longer than this under colcon dumps every thread's stack into the log
+# (pytest's faulthandler_timeout), so that a hang shows where it is
+HANG_DUMP_AFTER = 600
 # What `ros2 run PACKAGE EXE` does: look EXE up in <package prefix>/lib/PACKAGE.
 LIB_DIR = (
     'import os, sys; '
@@ -67,6 +72,40 @@ def in_sourced_workspace(install, *command, timeout=120):
     return subprocess.run(
         ['bash', '-c', 'source "$0/setup.bash" && exec "$@"', str(install), *command],
         env=build_env(install.parent), capture_output=True, text=True, timeout=timeout)
+
+
+def run_in_own_session(command, cwd, env, log, timeout):
+    """
+    Run command with its output into log; past timeout s end it and everything it started.
+
+    colcon's pytest and the node processes of the tests are grandchildren: a session of
+    their own lets one signal to the process group end them all (and subprocess.run's
+    timeout would end colcon alone).  Return the exit status (-9 after the timeout).
+    """
+    import signal
+
+    with open(log, 'w') as out:
+        proc = subprocess.Popen(command, cwd=cwd, env=env, stdout=out,
+                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                start_new_session=True)
+        try:
+            return proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            # first SIGABRT to the group: Python's faulthandler (PYTHONFAULTHANDLER) prints
+            # the stacks of each process that hangs, then SIGKILL
+            os.killpg(proc.pid, signal.SIGABRT)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                pass
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+            out.write(f'\n[test] colcon test ran past {timeout:.0f} s: ended\n')
+            return -9
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
 
 
 def build_env(workspace):
@@ -207,38 +246,43 @@ def test_installed_driver_publishes_from_the_installed_simulated_meter(install):
     assert all(abs(m.illuminance - 248.04) < 1e-9 for m in got), out
 
 
-@pytest.mark.skipif(os.environ.get('TSKF_COLCON_TEST') != '1',
-                    reason='colcon test of the whole workspace takes most of an hour on 2 '
-                           'cores: run it with TSKF_COLCON_TEST=1')
 def test_colcon_test_passes_in_the_workspace(install):
     """
     `colcon test` of the built workspace passes, as a ROS user runs it (no ./run, no .venv).
 
     Its fast part (-m "not slow", so that this test does not run itself again); the README's
     `./run test` runs everything.  The tests that need the ./run environment skip there,
-    saying why, and the launch files are started where launch_ros is installed.
+    saying why, and the launch files are started where launch_ros is installed.  Its output
+    goes to <workspace>/colcon_test.log as it comes (unbuffered), and a test that runs
+    longer than HANG_DUMP_AFTER s there dumps its threads' stacks into it.
     """
     import xml.etree.ElementTree as ET
 
     workspace = install.parent
     env = {k: v for k, v in build_env(workspace).items()
            if not k.startswith('PYTEST') and k != 'VIRTUAL_ENV'}
-    result = subprocess.run(
-        [sys.executable, '-m', 'colcon', '--log-base', str(workspace / 'log'), 'test',
-         '--base-paths', str(workspace / 'src'),
-         '--build-base', str(workspace / 'build'),
-         '--install-base', str(workspace / 'install'),
-         '--event-handlers', 'console_cohesion+',
-         # (colcon takes an argument that starts with a space as pytest's, not its own)
-         '--pytest-args', ' -m', 'not slow', ' -p', 'no:cacheprovider', ' -rs'],
-        cwd=workspace, env=env, capture_output=True, text=True, timeout=3600)
-    output = result.stdout[-20000:] + result.stderr[-5000:]
-    assert result.returncode == 0, output
+    env.update(PYTHONUNBUFFERED='1', PYTHONFAULTHANDLER='1')
+    command = [
+        sys.executable, '-m', 'colcon', '--log-base', str(workspace / 'log'), 'test',
+        '--base-paths', str(workspace / 'src'),
+        '--build-base', str(workspace / 'build'),
+        '--install-base', str(workspace / 'install'),
+        '--event-handlers', 'console_direct+', '--return-code-on-test-failure',
+        # (colcon takes an argument that starts with a space as pytest's, not its own)
+        '--pytest-args', ' -m', 'not slow', ' -p', 'no:cacheprovider', ' -rs',
+        ' -o', f'faulthandler_timeout={HANG_DUMP_AFTER}']
+    log = workspace / 'colcon_test.log'
+    returncode = run_in_own_session(command, workspace, env, log, COLCON_TEST_TIMEOUT)
+    output = log.read_text(errors='replace')[-20000:]
+    # (colcon writes a stand-in report with one error when pytest writes none)
     report = ET.parse(workspace / 'build' / PACKAGE / 'pytest.xml').getroot()
     suite = report if report.tag == 'testsuite' else report.find('testsuite')
     counts = {key: int(suite.get(key, 0)) for key in ('tests', 'failures', 'errors', 'skipped')}
+    failed = [case.get('name') for case in suite.iter('testcase')
+              if case.find('failure') is not None or case.find('error') is not None]
+    assert returncode == 0, f'colcon test exited {returncode}, {counts}, {failed}:\n{output}'
     assert counts['tests'] > 1000, (counts, output)
-    assert counts['failures'] == counts['errors'] == 0, (counts, output)
+    assert counts['failures'] == counts['errors'] == 0, (counts, failed, output)
     # every skip says why
     for case in suite.iter('testcase'):
         for skipped in case.iter('skipped'):

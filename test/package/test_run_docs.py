@@ -29,6 +29,10 @@ POLL = 0.05         # s between two looks at a condition (not a synchronisation)
 
 
 @pytest.mark.skipif(shutil.which('flock') is None, reason='no flock (util-linux)')
+@pytest.mark.skipif(not (REPO / '.venv' / '.requirements.sha256').is_file(),
+                    reason='needs the venv that ./run makes in this tree (a ROS workspace '
+                           'has none, and ./run docs would install one: minutes of pip, '
+                           'about 1 GB); run it with ./run test')
 def test_a_second_docs_build_waits_for_the_first(tmp_path):
     lock = REPO / 'doc' / '_build' / '.lock'
     lock.parent.mkdir(parents=True, exist_ok=True)

@@ -27,8 +27,11 @@ Simon, Optimal State Estimation, Wiley 2006, eqs. 5.17-5.19):
 d is an offset of the predicted measurement: Cai et al.'s output offset D for a linear
 model, h(x) - H x for an extended filter linearised at x (so H x + d = h(x)).
 The time-scale filter, the switching and lifted filters and the scanning EKF all call
-these; `update_batch` and `predict_batch` run them over a leading axis of independent runs,
-`update_predict_run` over a sequence of steps of one filter.  The innovation test (a gate,
+these; both are written once over a leading axis of independent runs (`predict_runs`,
+`update_runs`: one filter is a stack of one, a batch allocates each intermediate once for
+all its runs),
+`update_batch` and `predict_batch` run a batch, `update_predict_run` a sequence of steps
+of one filter.  The innovation test (a gate,
 as robot_localization's rejection threshold) is d^2 = y^T S^-1 y (`mahalanobis2`).
 """
 
@@ -94,32 +97,111 @@ def _inv(S: Matrix) -> Matrix:
         return np.full((p, p), np.nan)
 
 
+# Over runs: a stack of independent filters on a leading axis (a leading axis of 1 is
+# shared by every run).  `update` is written once over runs: one filter is a stack of one,
+# and a batch allocates each intermediate once for all its runs, not once per run.
+Stack = NDArray[np.float64]
+
+
+def _matmul_vector(A: Stack, x: Stack) -> Stack:
+    """Return A[r] x[r] for each run r, by numpy (the interpreted `_mv_runs`)."""
+    return np.matmul(A, x[..., None])[..., 0]
+
+
+@kernel(interpreted=np.matmul)
+def _mm_runs(A: Stack, B: Stack) -> Stack:
+    """Return A[r] B[r] for each run r: loops for small matrices, BLAS for large ones."""
+    runs = max(A.shape[0], B.shape[0])
+    n, m, p = A.shape[1], A.shape[2], B.shape[2]
+    blas = n * m * p > _LOOP_FLOPS
+    out = np.empty((runs, n, p)) if blas else np.zeros((runs, n, p))
+    for r in range(runs):
+        ra = r if A.shape[0] > 1 else 0
+        rb = r if B.shape[0] > 1 else 0
+        if blas:
+            out[r] = np.ascontiguousarray(A[ra]) @ np.ascontiguousarray(B[rb])
+            continue
+        for i in range(n):
+            for k in range(m):
+                a = A[ra, i, k]
+                for j in range(p):
+                    out[r, i, j] += a * B[rb, k, j]
+    return out
+
+
+@kernel(interpreted=_matmul_vector)
+def _mv_runs(A: Stack, x: Stack) -> Stack:
+    """Return A[r] x[r] for each run r."""
+    runs = max(A.shape[0], x.shape[0])
+    n, m = A.shape[1], A.shape[2]
+    out = np.zeros((runs, n))
+    for r in range(runs):
+        ra = r if A.shape[0] > 1 else 0
+        rx = r if x.shape[0] > 1 else 0
+        for i in range(n):
+            s = 0.0
+            for k in range(m):
+                s += A[ra, i, k] * x[rx, k]
+            out[r, i] = s
+    return out
+
+
 @_jit
-def _symmetric(P: Matrix) -> Matrix:
-    """Return (P + P^T) / 2, as halves so that entries near 1e308 do not overflow."""
-    return P / 2 + P.T / 2
+def _inv_runs(S: Stack) -> Stack:
+    """Return S[r]^-1 for each run r (`_inv`)."""
+    out = np.empty(S.shape)
+    for r in range(S.shape[0]):
+        out[r] = _inv(S[r])
+    return out
+
+
+@_jit
+def _t(A: Stack) -> Stack:
+    """Return A[r]^T for each run r."""
+    return A.transpose((0, 2, 1))
+
+
+@_jit
+def _symmetric_runs(P: Stack) -> Stack:
+    """Return (P[r] + P[r]^T) / 2 for each run r, as halves (entries near 1e308 stay finite)."""
+    return P / 2 + _t(P) / 2
+
+
+@_jit
+def predict_runs(x: Stack, P: Stack, F: Stack, Q: Stack, Bu: Stack) -> tuple[Stack, Stack]:
+    """Time update of each run; Bu is B u (zeros without an input)."""
+    # x = F x + B u
+    x = _mv_runs(F, x) + Bu
+    # P = F P F^T + Q
+    P = _mm_runs(_mm_runs(F, P), _t(F)) + Q
+    return x, _symmetric_runs(P)
 
 
 @_jit
 def predict(x: Vector, P: Matrix, F: Matrix, Q: Matrix, Bu: Vector) -> tuple[Vector, Matrix]:
-    """Time update; Bu is B u (zeros without an input)."""
-    # x = F x + B u
-    x = _mv(F, x) + Bu
-    # P = F P F^T + Q
-    P = _mm(_mm(F, P), F.T) + Q
-    return x, _symmetric(P)
+    """Time update of one run (a stack of one for predict_runs); Bu is B u."""
+    x_, P_ = predict_runs(x[None], P[None], F[None], Q[None], Bu[None])
+    return x_[0], P_[0]
+
+
+@_jit
+def innovation_runs(x: Stack, P: Stack, z: Stack, H: Stack, R: Stack, d: Stack
+                    ) -> tuple[Stack, Stack, Stack]:
+    """Return the innovation y, its covariance S and P H^T of each run."""
+    # y = z - (H x + d)
+    y = z - (_mv_runs(H, x) + d)
+    # S = H P H^T + R
+    PHt = _mm_runs(P, _t(H))
+    S = _mm_runs(H, PHt) + R
+    return y, S, PHt
 
 
 @_jit
 def innovation(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
                ) -> tuple[Vector, Matrix, Matrix]:
-    """Return the innovation y, its covariance S and P H^T."""
-    # y = z - (H x + d)
-    y = z - (_mv(H, x) + d)
-    # S = H P H^T + R
-    PHt = _mm(P, H.T)
-    S = _mm(H, PHt) + R
-    return y, S, PHt
+    """Return the innovation y, its covariance S and P H^T (`innovation_runs`, one run)."""
+    y, S, PHt = innovation_runs(x[None], P[None], z[None], H[None], R[None], d[None])
+    return y[0], S[0], PHt[0]
 
 
 @_jit
@@ -143,23 +225,31 @@ def mahalanobis2(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vecto
 
 
 @_jit
-def update(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
-           ) -> tuple[Vector, Matrix, Vector, Matrix, Matrix]:
-    """Measurement update; returns (x, P, y, S, K)."""
-    y, S, PHt = innovation(x, P, z, H, R, d)
+def update_runs(x: Stack, P: Stack, z: Stack, H: Stack, R: Stack, d: Stack
+                ) -> tuple[Stack, Stack, Stack, Stack, Stack]:
+    """Measurement update of each run; returns (x, P, y, S, K)."""
+    y, S, PHt = innovation_runs(x, P, z, H, R, d)
     # K = P H^T S^-1
-    K = _mm(PHt, _inv(S))
+    K = _mm_runs(PHt, _inv_runs(S))
     # x = x + K y
-    x = x + _mv(K, y)
+    x = x + _mv_runs(K, y)
     # P = (I - K H) P (I - K H)^T + K R K^T: the Joseph form (Bucy & Joseph 1968; Simon
     # eq. 5.19), right for any K, so that an error in K changes P only to second order.  It
     # is evaluated as written, as congruences of P and R, which keeps P positive
     # semi-definite when P is ill-conditioned; expanding it with S = H P H^T + R into
     # P - K (H P) - (P H^T) K^T + K S K^T keeps the algebra but not that property
     # (test/core/test_kalman.py measures both)
-    I_KH = np.eye(P.shape[0]) - _mm(K, H)
-    P = _mm(_mm(I_KH, P), I_KH.T) + _mm(_mm(K, R), K.T)
-    return x, _symmetric(P), y, S, K
+    I_KH = np.eye(P.shape[1]) - _mm_runs(K, H)
+    P = _mm_runs(_mm_runs(I_KH, P), _t(I_KH)) + _mm_runs(_mm_runs(K, R), _t(K))
+    return x, _symmetric_runs(P), y, S, K
+
+
+@_jit
+def update(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
+           ) -> tuple[Vector, Matrix, Vector, Matrix, Matrix]:
+    """Measurement update of one run (a stack of one for update_runs): (x, P, y, S, K)."""
+    x_, P_, y, S, K = update_runs(x[None], P[None], z[None], H[None], R[None], d[None])
+    return x_[0], P_[0], y[0], S[0], K[0]
 
 
 @_jit
@@ -234,9 +324,7 @@ def update_batch(x: NDArray[np.float64], P: NDArray[np.float64], z: NDArray[np.f
                  H: NDArray[np.float64], R: NDArray[np.float64], d: NDArray[np.float64]
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Run `update` for every run i on (x[i], P[i], z[i], H[i], R[i], d[i]); returns (x, P)."""
-    x_out, P_out = np.empty_like(x), np.empty_like(P)
-    for i in range(x.shape[0]):
-        x_out[i], P_out[i], _, _, _ = update(x[i], P[i], z[i], H[i], R[i], d[i])
+    x_out, P_out, _, _, _ = update_runs(x, P, z, H, R, d)
     return x_out, P_out
 
 
@@ -244,10 +332,7 @@ def update_batch(x: NDArray[np.float64], P: NDArray[np.float64], z: NDArray[np.f
 def predict_batch(x: NDArray[np.float64], P: NDArray[np.float64], F: Matrix, Q: Matrix,
                   Bu: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Run `predict` for every run i on (x[i], P[i], Bu[i]), F and Q shared; returns (x, P)."""
-    x_out, P_out = np.empty_like(x), np.empty_like(P)
-    for i in range(x.shape[0]):
-        x_out[i], P_out[i] = predict(x[i], P[i], F, Q, Bu[i])
-    return x_out, P_out
+    return predict_runs(x, P, F[None], Q[None], Bu)
 
 
 def warm_up() -> None:

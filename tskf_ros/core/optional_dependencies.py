@@ -16,8 +16,8 @@
 The optional libraries of tskf_ros: which feature needs which, and how to install them.
 
 The estimator, the simulators, the alignment node, the launch files, bag record/play and
-the offline replay need only the system packages rosdep installs (numpy, scipy, numba,
-PyYAML, matplotlib, tqdm) and the bag libraries (mcap, rosbags).  The features below need
+the offline replay need only the system packages rosdep installs (numpy, scipy, PyYAML,
+matplotlib, tqdm), numba and the bag libraries (mcap, rosbags).  The features below need
 more; their libraries are imported only when the feature is used, and a missing one ends
 the tool with one line naming what to install (MissingDependency, which the console entry
 prints).  setup.py's extras_require and package.xml's comments follow this table

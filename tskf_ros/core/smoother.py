@@ -196,8 +196,6 @@ def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], 
     kf = TimeScaleKalmanFilter(A, C, Q=Q, R=R, G=G, B=B, D=D, x0=x0, P0=P0,
                                transition=transition)
     n = kf.n
-    values, jump = np.unique(m, return_inverse=True)
-    F = kf.transition_stack(values).F
     z = _measured(y, K, kf.p) if u is None else None
     if z is not None:
         # every point measured, no input: one compiled run, no per-point rows
@@ -205,8 +203,12 @@ def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], 
         res = kf.run(m, z)
         if res.steps < K:
             _refused(kf, float(m[res.steps]), z[res.steps], res.steps)
+        # the backward pass's F, made once the run's own transitions are freed (with
+        # jittered stamps nearly every mu is distinct: a stack as long as the data)
+        F, jump = _transitions_of(kf, m)
         return Forward(res.x_corrected, res.P_corrected, res.x_predicted, res.P_predicted,
-                       F, jump.astype(np.intp), us, kf)
+                       F, jump, us, kf)
+    F, jump = _transitions_of(kf, m)
     ys = _rows(y, K, kf.p, 'y')
     us = _rows(u, K, kf.B.shape[1], 'u', missing=False)
     x_f, x_p = np.empty((K, n)), np.empty((K, n))
@@ -219,7 +221,14 @@ def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], 
             raise type(exc)(f'point {k} (mu = {mu_k}): {exc}') from None
         x_f[k], P_f[k] = res1.x_corrected, res1.P_corrected
         x_p[k], P_p[k] = res1.x_predicted, res1.P_predicted
-    return Forward(x_f, P_f, x_p, P_p, F, jump.astype(np.intp), us, kf)
+    return Forward(x_f, P_f, x_p, P_p, F, jump, us, kf)
+
+
+def _transitions_of(kf: TimeScaleKalmanFilter, m: NDArray[np.float64]
+                    ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """Return F of each distinct mu of m and the index of each point's in it."""
+    values, jump = np.unique(m, return_inverse=True)
+    return kf.transition_stack(values).F, jump.astype(np.intp)
 
 
 def _measured(y: Optional[ArrayLike], K: int, p: int) -> Optional[NDArray[np.float64]]:

@@ -62,8 +62,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from tskf_ros.core import kalman
 from tskf_ros.core.matrices import as_matrix, as_vector, check_covariance, FilterError
-from tskf_ros.core.transitions import (Transition, TransitionCache, TRANSITIONS,
-                                       Transitions)
+from tskf_ros.core.transitions import (noise_over, Transition, TransitionCache,
+                                       TRANSITIONS, Transitions)
 
 Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
@@ -265,11 +265,15 @@ class TimeScaleKalmanFilter:
     def _jump(self, mu: float) -> Transition:
         """Return the transition over mu; raise NonRegressiveError where Definition 2.12 fails."""
         jump = self._jumps[mu]
-        if not jump.regressive and not self.allow_nonregressive:
+        self._check_regressive(jump.regressive, mu)
+        return jump
+
+    def _check_regressive(self, regressive: bool, mu: float) -> None:
+        """Raise NonRegressiveError if I + mu A is singular and that is not allowed."""
+        if not regressive and not self.allow_nonregressive:
             raise NonRegressiveError(
                 f'I + mu A is singular at mu = {mu}: A is not regressive on this time '
                 'scale (Bohner & Wintz Definition 2.12); the step is refused')
-        return jump
 
     def check_mu(self, mu: float) -> float:
         """Return mu as float, or raise if it is not a finite positive graininess."""
@@ -300,8 +304,8 @@ class TimeScaleKalmanFilter:
 
     @staticmethod
     def _noise_over(mu: Union[float, NDArray[np.float64]], R: Matrix) -> NDArray[np.float64]:
-        """R_d = R / mu: white noise of intensity R seen through a point of measure mu."""
-        return R / mu
+        """R_d = R / mu (transitions.noise_over's source, numpy broadcasting a stack of mu)."""
+        return noise_over.py_func(R, mu)
 
     def step(self, mu: float, y: Optional[ArrayLike], u: Optional[ArrayLike] = None, *,
              R: Optional[ArrayLike] = None) -> StepResult:
@@ -320,6 +324,15 @@ class TimeScaleKalmanFilter:
         xhat + mu xhat^Delta = F (xhat + mu W^T e) + mu B u.
         """
         mu = self.check_mu(mu)
+        uses_u = u is not None and self._uses_B
+        if y is not None and not uses_u and self._jumps.once(mu):
+            # a mu met for the first time (jittered stamps): its jump and the step in one
+            # compiled call, the jump not kept
+            step, regressive = self._jumps.step_once(
+                self.x, self.P, as_vector(y, self.p, 'y'), self._C,
+                self._R if R is None else self._measurement_noise(R), self._D, mu)
+            self._check_regressive(regressive, mu)
+            return self._keep(mu, step)
         jump = self._jump(mu)
         Bu = self._zero
         if u is not None and self._uses_B:
@@ -334,18 +347,24 @@ class TimeScaleKalmanFilter:
         else:
             z = as_vector(y, self.p, 'y')
             Rd = self._noise_over(mu, self._R if R is None else self._measurement_noise(R))
-            x_c, P_c, x_p, P_p, e, S, status = kalman.update_predict(
-                self.x, self.P, z, self._C, Rd, self._D, jump.F, jump.Qd, Bu)
-            if status == kalman.NOT_POSITIVE:
-                raise FilterError(f'R + mu C P C^T is not positive at mu = {mu}: '
-                                  'P has lost semi-definiteness')
-            if status == kalman.NOT_FINITE:
-                raise FilterError(f'step with mu = {mu} overflowed; '
-                                  'the filter state is unchanged')
-            res = StepResult(mu, x_c, P_c, x_p, P_p, e, S)
+            return self._keep(mu, kalman.update_predict(self.x, self.P, z, self._C, Rd,
+                                                        self._D, jump.F, jump.Qd, Bu))
         self.x, self.P = res.x_predicted, res.P_predicted
         self.x_corrected, self.P_corrected = res.x_corrected, res.P_corrected
         return res
+
+    def _keep(self, mu: float, step: tuple) -> StepResult:
+        """Keep kalman.update_predict's step as the filter's state, or raise why not."""
+        x_c, P_c, x_p, P_p, e, S, status = step
+        if status == kalman.NOT_POSITIVE:
+            raise FilterError(f'R + mu C P C^T is not positive at mu = {mu}: '
+                              'P has lost semi-definiteness')
+        if status == kalman.NOT_FINITE:
+            raise FilterError(f'step with mu = {mu} overflowed; '
+                              'the filter state is unchanged')
+        self.x, self.P = x_p, P_p
+        self.x_corrected, self.P_corrected = x_c, P_c
+        return StepResult(mu, x_c, P_c, x_p, P_p, e, S)
 
     def run(self, mu: ArrayLike, y: ArrayLike, u: Optional[ArrayLike] = None, *,
             test: Optional[InnovationTest] = None) -> RunResult:

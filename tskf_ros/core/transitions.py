@@ -31,16 +31,18 @@ from numpy.typing import NDArray
 
 # the filter's matrix product: loops for small matrices, BLAS for large ones
 from tskf_ros.core.jit import kernel
-from tskf_ros.core.kalman import _mm
+from tskf_ros.core.kalman import _mm, update_predict
 
 Matrix = NDArray[np.float64]
 Stack = NDArray[np.float64]
 TRANSITIONS = ('euler', 'exact')
 # transitions kept per filter, keyed by mu (a stream at a fixed rate reuses a few)
 CACHE_SIZE = 64
-# terms of the Taylor series of e^X for ||X|| <= 1/2: the first term left out is below
-# 2^-15 / 15! = 2.3e-17, under a rounding of the leading I
+# the Taylor series of e^X for ||X|| <= 1/2 (the A block's norm): N terms, the fewest with
+# ||X||^N / (N + 1)! <= 2^-54, a bound on the first term left out relative to the leading
+# I (or, in the off-diagonal block, to GQG^T mu); at ||X|| = 1/2 that is 14 terms
 _TAYLOR_TERMS = 14
+_TAYLOR_TOLERANCE = 2.0 ** -54
 # Hadamard's test of I + mu A (Definition 2.12): |det F| > _RTOL prod_i |row_i of F|
 _RTOL = 1e-12
 
@@ -48,25 +50,41 @@ _jit = kernel
 
 
 @_jit
-def _expm_taylor(X: Matrix) -> Matrix:
+def _taylor_terms(norm: float) -> int:
+    """Return the fewest terms N with norm^N / (N + 1)! <= _TAYLOR_TOLERANCE (norm <= 1/2)."""
+    bound = 1.0                         # norm^N / (N + 1)! at N = 0
+    for N in range(1, _TAYLOR_TERMS):
+        bound *= norm / (N + 1)
+        if bound <= _TAYLOR_TOLERANCE:
+            return N
+    return _TAYLOR_TERMS
+
+
+@_jit
+def _expm_taylor(X: Matrix, norm: float) -> Matrix:
     """
-    Return e^X for ||X|| <= 1/2 by its Taylor series, in Horner's form.
+    Return e^X for ||X|| <= norm <= 1/2 by its Taylor series, in Horner's form.
 
     e^X = I + X (I + X/2 (I + X/3 (... (I + X/N)))) (Moler & Van Loan, "Nineteen dubious
     ways to compute the exponential of a matrix", SIAM Review 2003, method 3; the scaling
-    and squaring around it is the caller's).
+    and squaring around it is the caller's), with N = _taylor_terms(norm).
     """
     eye = np.eye(X.shape[0])
     E = eye.copy()
-    for k in range(_TAYLOR_TERMS, 0, -1):
+    for k in range(_taylor_terms(norm), 0, -1):
         E = eye + _mm(X, E) / k
     return E
 
 
 @_jit
-def _halvings(A: Matrix, mu: float) -> int:
-    """Return k with max(||A||_1, ||A||_inf) mu / 2^k <= 1/2: the halvings of mu."""
-    norm = max(np.abs(A).sum(axis=0).max(), np.abs(A).sum(axis=1).max())
+def _norm(A: Matrix) -> float:
+    """Return max(||A||_1, ||A||_inf)."""
+    return max(np.abs(A).sum(axis=0).max(), np.abs(A).sum(axis=1).max())
+
+
+@_jit
+def _halvings(norm: float, mu: float) -> int:
+    """Return k with norm mu / 2^k <= 1/2 (norm = _norm(A)): the halvings of mu."""
     if not 2.0 * norm * mu > 1.0:
         return 0
     # in logarithms: norm * mu may overflow where mu / 2^k does not
@@ -90,8 +108,10 @@ def van_loan(A: Matrix, GQGt: Matrix, mu: float) -> tuple[Matrix, Matrix]:
     M[:n, :n] = -A
     M[:n, n:] = GQGt
     M[n:, n:] = A.T
-    k = _halvings(A, mu)
-    E = _expm_taylor(M * math.ldexp(mu, -k))
+    norm = _norm(A)
+    k = _halvings(norm, mu)
+    h = math.ldexp(mu, -k)
+    E = _expm_taylor(M * h, min(norm * h, 0.5))
     F = np.ascontiguousarray(E[n:, n:].T)
     Qd = _mm(F, np.ascontiguousarray(E[:n, n:]))
     for _ in range(k):
@@ -114,8 +134,10 @@ def exact_input_matrix(A: Matrix, B: Matrix, mu: float) -> Matrix:
     M = np.zeros((n + m, n + m))
     M[:n, :n] = A
     M[:n, n:] = B
-    k = _halvings(A, mu)
-    E = _expm_taylor(M * math.ldexp(mu, -k))
+    norm = _norm(A)
+    k = _halvings(norm, mu)
+    h = math.ldexp(mu, -k)
+    E = _expm_taylor(M * h, min(norm * h, 0.5))
     F = np.ascontiguousarray(E[:n, :n])
     Bd = np.ascontiguousarray(E[:n, n:])
     for _ in range(k):
@@ -190,6 +212,34 @@ def euler_stack(A: Matrix, GQGt: Matrix, B: Matrix, mus: NDArray[np.float64]
     return F, Qd, Bd, regressive
 
 
+@_jit
+def noise_over(R: Matrix, mu: float) -> Matrix:
+    """R_d = R / mu: white noise of intensity R seen through a point of measure mu."""
+    return R / mu
+
+
+@_jit
+def jump_update_predict(x: NDArray[np.float64], P: Matrix, z: NDArray[np.float64], H: Matrix,
+                        R: Matrix, d: NDArray[np.float64], A: Matrix, GQGt: Matrix,
+                        B: Matrix, mu: float, exact: bool
+                        ) -> tuple[tuple[NDArray[np.float64], Matrix, NDArray[np.float64],
+                                         Matrix, NDArray[np.float64], Matrix, int], bool]:
+    """
+    Return the step over mu in one compiled call, without an input (B u = 0).
+
+    kalman.update_predict with R_d = R / mu and the jump's F, Q_d (Euler, or exact:
+    `euler` / `van_loan` above), and whether I + mu A is invertible: on jittered stamps
+    every mu is new, and building its jump apart costs a call and a cache entry more.
+    """
+    if exact:
+        F, Qd = van_loan(A, GQGt, mu)
+        regressive = True
+    else:
+        F, Qd, _, regressive = euler(A, GQGt, B, mu)
+    step = update_predict(x, P, z, H, noise_over(R, mu), d, F, Qd, np.zeros(x.shape[0]))
+    return step, regressive
+
+
 class Transition(NamedTuple):
     """The jump over one graininess mu, and whether I + mu A is invertible (Definition 2.12)."""
 
@@ -243,6 +293,7 @@ class TransitionCache(dict[float, Transition]):
                  input_matrix: bool = True) -> None:
         super().__init__()
         self.kind, self.input_matrix = kind, input_matrix
+        self.seen: set[float] = set()       # mu met once, not cached (see `once`)
         self.A, self.GQGt, self.B = (np.ascontiguousarray(M, dtype=float) for M in (A, GQGt, B))
 
     def __missing__(self, mu: float) -> Transition:
@@ -252,6 +303,29 @@ class TransitionCache(dict[float, Transition]):
             del self[next(iter(self))]
         self[mu] = jump
         return jump
+
+    def once(self, mu: float) -> bool:
+        """
+        Tell whether mu is met for the first time (not cached, not met once before).
+
+        A jump is cached from the second time its mu is met: the mu of jittered stamps
+        never come back, and building their jumps inside the step (`jump_update_predict`)
+        saves a call and a cache entry each.
+        """
+        if mu in self or mu in self.seen:
+            return False
+        if len(self.seen) >= CACHE_SIZE:
+            self.seen.clear()
+        self.seen.add(mu)
+        return True
+
+    def step_once(self, x: NDArray[np.float64], P: Matrix, z: NDArray[np.float64], H: Matrix,
+                  R: Matrix, d: NDArray[np.float64], mu: float
+                  ) -> tuple[tuple[NDArray[np.float64], Matrix, NDArray[np.float64], Matrix,
+                                   NDArray[np.float64], Matrix, int], bool]:
+        """Return jump_update_predict over mu (no input) and whether I + mu A is invertible."""
+        return jump_update_predict(x, P, z, H, R, d, self.A, self.GQGt, self.B, mu,
+                                   self.kind == 'exact')
 
     def stack(self, mus: NDArray[np.float64]) -> Transitions:
         """Return the transitions of every mu of mus (a run's distinct values) in one call."""

@@ -96,9 +96,14 @@ def _record(results: dict, name: str, angular: np.ndarray, measure: np.ndarray) 
         results[name][metric]['std'].append(float(np.std(values)))
 
 
+# runs simulated at once: memory is bounded by this, not by the runs of a point; a point
+# of more runs is split into parts, the tasks of the worker processes
+PART_RUNS = 1000
+
+
 @dataclasses.dataclass(frozen=True)
 class Point:
-    """One algorithm on one link: the task of one worker process."""
+    """One algorithm on one link (or part of its runs: `part`): the task of one worker."""
 
     name: str
     runs: int
@@ -108,11 +113,19 @@ class Point:
     ekf: led.EKFConfig
     clip: bool
     controller: str
+    part: int = 0       # part k > 0 of a point's runs draws from the generator [seed, k]
+
+
+def parts(p: Point, size: int) -> list[Point]:
+    """Split a point's runs into parts of at most `size` runs (the first draws the seed's)."""
+    return [dataclasses.replace(p, runs=min(size, p.runs - start), part=k)
+            for k, start in enumerate(range(0, p.runs, size))]
 
 
 def run_point(p: Point) -> tuple[np.ndarray, np.ndarray, dict]:
     """Simulate one point; return the tracking % per run (angular, measure) and the metrics."""
-    rng = np.random.default_rng(p.seed)     # common random numbers: the same draws
+    # common random numbers: the same draws for every algorithm and level
+    rng = np.random.default_rng(p.seed if p.part == 0 else [p.seed, p.part])
     if p.name in PAT_ALGORITHMS:
         angular, measure, m, _, _ = alignment_pat.evaluate(p.name, p.runs, p.link, rng,
                                                            p.response, p.ekf, p.clip)
@@ -123,13 +136,30 @@ def run_point(p: Point) -> tuple[np.ndarray, np.ndarray, dict]:
     return angular, measure, alignment_pat.metrics(traj, None, None, blocked=p.link.blocked)
 
 
-def run_points(points: Sequence[Point], workers: int) -> Iterator[tuple]:
-    """Yield run_point of each point, in order, computed on `workers` processes."""
-    if workers <= 1 or len(points) <= 1:
-        yield from map(run_point, points)
+def run_points(points: Sequence[Point], workers: int,
+               part_runs: Optional[int] = None) -> Iterator[tuple]:
+    """
+    Yield run_point of each point, in order, computed on `workers` processes.
+
+    Each point runs in parts of at most part_runs runs (PART_RUNS), joined in order: the
+    results depend on neither the workers nor the order the parts end in.
+    """
+    tasks = [parts(p, part_runs or PART_RUNS) for p in points]
+    flat = [q for point in tasks for q in point]
+    if workers <= 1 or len(flat) <= 1:
+        done = map(run_point, flat)
+        yield from _joined(tasks, done)
         return
-    with ProcessPoolExecutor(max_workers=min(workers, len(points))) as pool:
-        yield from pool.map(run_point, points)
+    with ProcessPoolExecutor(max_workers=min(workers, len(flat))) as pool:
+        yield from _joined(tasks, pool.map(run_point, flat))
+
+
+def _joined(tasks: list[list[Point]], done: Iterator[tuple]) -> Iterator[tuple]:
+    """Join the parts of each point (the results in the order of tasks, flattened)."""
+    for point in tasks:
+        got = [next(done) for _ in point]
+        yield (np.concatenate([g[0] for g in got]), np.concatenate([g[1] for g in got]),
+               alignment_pat.join_metrics([g[2] for g in got]))
 
 
 def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.TrackingLinkConfig,

@@ -106,10 +106,13 @@ def metrics(traj: led.Trajectory, states: Optional[np.ndarray],
     inside = np.abs(phi) <= angle
     acquisition, reacquisition = pointing_metrics.pointing_events(
         phi, dt, angle=angle, dark=dark_steps(traj.t, blocked))
-    out = {'lost_at_end': float(np.mean(~inside[-1])), 'acquisition': acquisition,
-           'reacquisition': reacquisition, 'duration_s': steps * dt}
+    lost = int(np.count_nonzero(~inside[-1]))
+    out = {'lost_at_end': lost / runs, 'lost_runs': lost, 'acquisition': acquisition,
+           'reacquisition': reacquisition, 'duration_s': steps * dt, 'runs': runs, 'dt': dt,
+           'steps': steps}
     if declared is None or states is None:
-        out.update({'latency': None, 'false_alarms_per_1000s': None})
+        out.update({'latency': None, 'false_alarms_per_1000s': None, 'alarms': None,
+                    'clean_runs': None})
         return out
     locked = inside & (states == TRACKING)
     clean = inside.all(axis=0)
@@ -117,7 +120,41 @@ def metrics(traj: led.Trajectory, states: Optional[np.ndarray],
     alarms = declared[:, clean].sum()
     out.update({'latency': pointing_metrics.step_latency(phi, dt, locked, declared,
                                                          angle=angle),
-                'false_alarms_per_1000s': float(1000.0 * alarms / seconds) if seconds else None})
+                'false_alarms_per_1000s': _per_1000s(alarms, seconds),
+                'alarms': int(alarms), 'clean_runs': int(clean.sum())})
+    return out
+
+
+def _per_1000s(alarms: float, seconds: float) -> Optional[float]:
+    return float(1000.0 * alarms / seconds) if seconds else None
+
+
+def join_metrics(parts: Sequence[dict]) -> dict:
+    """
+    Return the metrics of the runs of several simulations together (metrics() of each).
+
+    The events are joined, the runs lost at the end and the false alarms are counted over
+    all the runs: the metrics of one simulation of all of them.
+    """
+    if len(parts) == 1:
+        return parts[0]
+    runs = sum(p['runs'] for p in parts)
+    lost = sum(p['lost_runs'] for p in parts)
+    out = {'lost_at_end': lost / runs, 'lost_runs': lost, 'duration_s': parts[0]['duration_s'],
+           'runs': runs, 'dt': parts[0]['dt'], 'steps': parts[0]['steps']}
+    for key in ('acquisition', 'reacquisition'):
+        out[key] = pointing_metrics.Durations.join([p[key] for p in parts])
+    if parts[0]['latency'] is None:
+        out.update({'latency': None, 'false_alarms_per_1000s': None, 'alarms': None,
+                    'clean_runs': None})
+        return out
+    alarms = sum(p['alarms'] for p in parts)
+    clean = sum(p['clean_runs'] for p in parts)
+    # the clean seconds as metrics() counts them: clean runs x steps x dt
+    steps = parts[0]['steps']
+    out.update({'latency': pointing_metrics.Durations.join([p['latency'] for p in parts]),
+                'false_alarms_per_1000s': _per_1000s(alarms, clean * steps * parts[0]['dt']),
+                'alarms': alarms, 'clean_runs': clean})
     return out
 
 
@@ -237,5 +274,5 @@ def plot_acquisition(results: dict, *, level: int = 0, title: str) -> Figure:
 
 __all__ = ['plot_acquisition', 'plot_pat_run', 'ACQUIRED_WITHIN', 'build_pat', 'dark_steps',
            'empty_record',
-           'evaluate', 'metrics',
+           'evaluate', 'join_metrics', 'metrics',
            'MIN_NOISE', 'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']

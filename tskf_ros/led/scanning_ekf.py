@@ -363,7 +363,8 @@ class ScanningEKF:
         y[~have] = 0.0
         self.C = C
         self.y = y
-        self.det = np.where(pair, np.linalg.det(C), np.nan)
+        # |C_k| of each run's 2 x 2 C_k, written out (numpy's det of a stack factorises each)
+        self.det = np.where(pair, C[:, 0, 0] * C[:, 1, 1] - C[:, 0, 1] * C[:, 1, 0], np.nan)
         scale = np.maximum(np.abs(x[:, 0]), 1e-12)
         self.singular = pair & (np.abs(self.det) <= self.det_tolerance * scale)
         # R as in Table I; z_prev was already used at the previous update, so the v's of

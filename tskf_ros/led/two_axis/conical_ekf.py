@@ -75,8 +75,10 @@ class ConicalEKFConfig:
     radius: float = 4.0               # r of the scan circle (deg)
     points: int = 20                  # samples per scan turn (1 s at 50 ms, as Psi)
     x0: tuple[float, ...] = (2.0, 0.0, 0.0, 0.0, 0.0)
-    # P0: x1 as ekf_pat's clipped prior (2 V), d 5 deg, drift 0.1 deg per step
-    P0: tuple[float, ...] = (4.0, 25.0, 25.0, 0.01, 0.01)
+    # P0: x1 as ekf_pat's clipped prior (2 V), d 5 deg, drift 0.063 deg per step (1.26
+    # deg/s: the link's 1.2 deg/s per joint axis; a wider prior let the first seconds'
+    # pull on d leak into a drift of the wrong sign, which the feedforward then steered)
+    P0: tuple[float, ...] = (4.0, 25.0, 25.0, 0.004, 0.004)
     # Q per nominal step: Table I's Q_sys for x1; twice its 0.01 per pointing axis (the
     # mount's scan circle does not close on the sphere, and h is small-angle); a slow walk
     # of the drift (its cross-elevation part changes with the source's elevation)

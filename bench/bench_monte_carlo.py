@@ -1,0 +1,162 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Time and memory of the alignment Monte Carlo against its goals, in one run.
+
+    python bench/bench_monte_carlo.py [--repeats 3] [--quick]
+
+1. The default comparison (`python -m tskf_ros.experiments.alignment_mc --runs 1000`:
+   7 algorithms x 11 noise levels) on every core and on one (--workers 1), alternated,
+   wall time median over the repeats.  Goal: <= 5 s on every core.
+2. One algorithm (ekf_pat) at one level (1 V) for 1e3, 1e4 and 1e5 runs on every core:
+   wall time and peak RSS.  Goals: 1e5 runs in <= 60 s; RSS flat in the number of runs.
+
+Each command runs in a fresh process; RSS is sampled every 0.1 s over the process and its
+workers: the peak of their sum, and of the largest.  The load average is printed beside
+each figure: the machine may be shared, so the CPU time of the process and its workers is
+printed too (on idle cores the wall time is about CPU / workers, plus the start-up).
+Figures only; nothing is asserted.
+"""
+
+import argparse
+from dataclasses import dataclass
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+MODULE = 'tskf_ros.experiments.alignment_mc'
+GOAL_DEFAULT_S = 5.0
+GOAL_1E5_S = 60.0
+
+
+PAGE = os.sysconf('SC_PAGE_SIZE')
+
+
+def tree_rss(root: int) -> list[int]:
+    """Return the RSS (bytes) of process root and of its descendants, from /proc (Linux)."""
+    parent: dict[int, int] = {}
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            try:
+                with open(f'/proc/{entry}/stat') as f:
+                    # pid (comm) state ppid ...: comm may hold spaces, so split after ')'
+                    parent[int(entry)] = int(f.read().rsplit(')', 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue            # the process ended meanwhile
+    tree, grew = {root}, True
+    while grew:
+        more = {pid for pid, ppid in parent.items() if ppid in tree} - tree
+        tree |= more
+        grew = bool(more)
+    rss = []
+    for pid in tree:
+        try:
+            with open(f'/proc/{pid}/statm') as f:
+                rss.append(int(f.read().split()[1]) * PAGE)
+        except (OSError, ValueError, IndexError):
+            continue
+    return rss
+
+
+@dataclass
+class Measured:
+    """One command: wall and CPU time (s), peak RSS of the process tree's sum and largest."""
+
+    wall_s: float
+    cpu_s: float
+    peak_sum_mb: float
+    peak_one_mb: float
+    load: float
+
+
+def measure(args: list[str]) -> Measured:
+    """Run `python -m alignment_mc args` in a fresh process; sample its tree's RSS."""
+    load = os.getloadavg()[0]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        proc = subprocess.Popen([sys.executable, '-m', MODULE, *args], cwd=tmp,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        peak_sum = peak_one = 0
+        while proc.poll() is None:
+            rss = tree_rss(proc.pid)
+            if rss:
+                peak_sum, peak_one = max(peak_sum, sum(rss)), max(peak_one, max(rss))
+            time.sleep(0.1)
+        wall = time.perf_counter() - start
+        err = proc.stderr.read().decode() if proc.stderr else ''
+        if proc.returncode:
+            raise SystemExit(f'{MODULE} {" ".join(args)} failed:\n{err}')
+    # the CPU time of the process and of the workers it waited for
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return Measured(wall, cpu, peak_sum / 2**20, peak_one / 2**20, load)
+
+
+def verdict(ok: bool) -> str:
+    """Return MET or NOT MET."""
+    return 'MET' if ok else 'NOT MET'
+
+
+def main() -> None:
+    """Measure and print the figures."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--repeats', type=int, default=3, help='repeats of part 1 (3)')
+    parser.add_argument('--quick', action='store_true',
+                        help='part 1 once, part 2 up to 1e4 runs')
+    args = parser.parse_args()
+    cores = os.cpu_count() or 1
+    print(f'{platform.machine()}, {cores} CPUs, Python {platform.python_version()}; '
+          'load average (1 min) beside each figure')
+
+    print(f'\n1. the default comparison, --runs 1000 (7 algorithms x 11 levels): '
+          f'--workers {cores} vs --workers 1, alternated')
+    got: dict[int, list[Measured]] = {cores: [], 1: []}
+    for _ in range(1 if args.quick else args.repeats):
+        for workers in got:
+            got[workers].append(measure(['--runs', '1000', '--workers', str(workers)]))
+    for workers, runs in got.items():
+        wall = statistics.median(m.wall_s for m in runs)
+        print(f'   --workers {workers}: {wall:6.1f} s median of '
+              f'{", ".join(f"{m.wall_s:.1f}" for m in runs)} s (load '
+              f'{", ".join(f"{m.load:.1f}" for m in runs)}), CPU '
+              f'{statistics.median(m.cpu_s for m in runs):.1f} s; peak RSS '
+              f'{max(m.peak_sum_mb for m in runs):.0f} MB in all, '
+              f'{max(m.peak_one_mb for m in runs):.0f} MB the largest process'
+              + (f'   <= {GOAL_DEFAULT_S:g} s {verdict(wall <= GOAL_DEFAULT_S)}'
+                 if workers == cores else ''))
+    one, many = (statistics.median(m.wall_s for m in got[w]) for w in (1, cores))
+    print(f'   speed-up on {cores} workers: {one / many:.2f}x')
+
+    print(f'\n2. ekf_pat at 1 V, --workers {cores}: time and peak RSS against the runs')
+    print('      runs    wall (s)   CPU (s)   RSS all (MB)   RSS largest (MB)   load   goal')
+    for runs in (1000, 10000) if args.quick else (1000, 10000, 100000):
+        m = measure(['--runs', str(runs), '--noise-levels', '1', '--algorithms', 'ekf_pat',
+                     '--workers', str(cores)])
+        goal = (f'<= {GOAL_1E5_S:g} s {verdict(m.wall_s <= GOAL_1E5_S)}' if runs == 100000
+                else '')
+        print(f'   {runs:7d}   {m.wall_s:8.1f}   {m.cpu_s:7.1f}   {m.peak_sum_mb:12.0f}   '
+              f'{m.peak_one_mb:16.0f}'
+              f'   {m.load:4.1f}   {goal}')
+
+
+if __name__ == '__main__':
+    main()
