@@ -17,17 +17,12 @@
 
 import unittest
 
-from launch_checks import launch_file, NAMESPACE, receive, skip_unless_runnable
+from launch_checks import ExitCodes, launch_description, NAMESPACE, receive, skip_unless_runnable
 import pytest
 
 skip_unless_runnable()
 
-import launch  # noqa: E402, I100 - imported only where skip_unless_runnable lets the module run
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
-import launch_testing  # noqa: E402
-import launch_testing.actions  # noqa: E402
-import launch_testing.asserts  # noqa: E402
+import launch_testing  # noqa: E402, I100 - imported only where skip_unless_runnable lets it run
 from sensor_msgs.msg import Illuminance  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
@@ -37,12 +32,7 @@ from tskf_ros.messages import alignment_interface as aligner  # noqa: E402
 @pytest.mark.launch_test
 def generate_test_description():
     """Start the launch file in a namespace of its own, as `ros2 launch` would."""
-    return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(launch_file('pan_tilt_loop.launch.py')),
-            launch_arguments={'namespace': NAMESPACE, 'log_level': 'warn'}.items()),
-        launch_testing.actions.ReadyToTest(),
-    ])
+    return launch_description('pan_tilt_loop.launch.py')
 
 
 class TestTheLoopRuns(unittest.TestCase):
@@ -61,8 +51,5 @@ class TestTheLoopRuns(unittest.TestCase):
 
 
 @launch_testing.post_shutdown_test()
-class TestShutdown(unittest.TestCase):
+class TestShutdown(ExitCodes, unittest.TestCase):
     """After the launch is shut down (SIGINT), both nodes exited cleanly."""
-
-    def test_every_node_exits_with_status_0(self, proc_info):
-        launch_testing.asserts.assertExitCodes(proc_info)
