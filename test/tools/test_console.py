@@ -320,8 +320,13 @@ def test_ctrl_c_while_the_compiled_kernels_run_under_the_tools_own_handler(tmp_p
     with open(err, 'w') as f:
         proc = subprocess.Popen([sys.executable, '-c', code, str(ready), str(tmp_path)],
                                 cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=f)
-    assert wait_for(ready.exists, proc, COMPILE_TIMEOUT), err.read_text()
-    code, text = interrupt(proc, err)
+    try:
+        assert wait_for(ready.exists, proc, COMPILE_TIMEOUT), err.read_text()
+        code, text = interrupt(proc, err)
+    finally:                                        # its loop never ends by itself
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
     assert code == INTERRUPTED and text == '', (code, text)
 
 
