@@ -342,3 +342,6 @@ def warm_up() -> None:
     euler_stack(A, A, A[:, :1], mus)
     van_loan_stack(A, A, mus)
     exact_input_stack(A, A[:, :1], mus)
+    x, z, H = np.zeros(2), np.zeros(1), np.ones((1, 2))
+    for exact in (False, True):
+        jump_update_predict(x, A, z, H, np.eye(1), z, A, A, A[:, :1], 1.0, exact)
