@@ -68,6 +68,7 @@ def test_estimator_in_another_process(ros_context, executor_kind, tmp_path):
     stamps = np.array([1.0, 2.0, 3.0, 6.0, 7.0, 8.0, 8.5, 9.0, 13.0, 14.0])
     y = np.random.default_rng(4).normal(180.0, 10.0, stamps.size)
     predicted = collector.record.predicted
+    failure = None
     try:
         spin_until(executor, lambda: pub.get_subscription_count() >= 2
                    and collector.peers_ready() and any(
@@ -92,12 +93,16 @@ def test_estimator_in_another_process(ros_context, executor_kind, tmp_path):
         spin_until(executor, lambda: len(collector.record.corrected) == stamps.size - 1,
                    lambda: f'{stamps.size - 1} corrected estimates (got '
                    f'{len(collector.record.corrected)})')
+    except (AssertionError, TimeoutError) as error:
+        failure = error
     finally:
         executor.shutdown()
         client.destroy_node()
         collector.destroy_node()
         out = stop(proc, log)
         log.close()
+    # the node's own output says where it was (a wait that failed here says only what we saw)
+    assert failure is None, f'{failure}\nthe estimator process printed:\n{out}'
     assert proc.returncode == 0, out
     assert 'rejected (duplicate)' in out or 'WARN' not in out
     ref = run_filter(owc(), discrete(stamps), y[:, None])

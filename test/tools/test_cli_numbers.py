@@ -112,7 +112,7 @@ TOOLS = {
         ('--runs', '--noise-levels', '--beta', '--steps', '--dt', '--seed', '--dropout',
          '--x2-0', '--cold-start', '--units-per-degree', '--x1-floor', '--fig9-beta',
          '--run-noise', '--dropout-levels', '--dropout-noise', '--dropout-beta', '--blocked',
-         '--workers'),
+         '--workers', '--axes'),
         ('--algorithms', '--controller', '--json', '--png', '--acquisition-png', '--fig8',
          '--fig9', '--pat-run', '--dropout-png', '--dropout-json')),
     'alignment_ablation': Tool(alignment_ablation.main, lambda d: [
