@@ -96,14 +96,17 @@ def _record(results: dict, name: str, angular: np.ndarray, measure: np.ndarray) 
         results[name][metric]['std'].append(float(np.std(values)))
 
 
-# runs simulated at once: memory is bounded by this, not by the runs of a point; a point
-# of more runs is split into parts, the tasks of the worker processes
+# runs drawn from one generator: a point of more runs is split into parts, part k > 0
+# drawing from the generator [seed, k] (the numbers of a seed do not depend on anything else)
 PART_RUNS = 1000
+# runs simulated side by side by one task (the parts, and the levels of a sweep, of one
+# algorithm): memory is bounded by this, not by the runs of a point
+BATCH_RUNS = 4000
 
 
 @dataclasses.dataclass(frozen=True)
 class Point:
-    """One algorithm on one link (or part of its runs: `part`): the task of one worker."""
+    """One algorithm on one link (or part of its runs: `part`)."""
 
     name: str
     runs: int
@@ -115,6 +118,11 @@ class Point:
     controller: str
     part: int = 0       # part k > 0 of a point's runs draws from the generator [seed, k]
 
+    def kind(self) -> 'Point':
+        """What points simulated side by side share: all but runs, part, noise and dropout."""
+        return dataclasses.replace(self, runs=0, part=0, link=dataclasses.replace(
+            self.link, noise=0.0, dropout=0.0))
+
 
 def parts(p: Point, size: int) -> list[Point]:
     """Split a point's runs into parts of at most `size` runs (the first draws the seed's)."""
@@ -122,44 +130,119 @@ def parts(p: Point, size: int) -> list[Point]:
             for k, start in enumerate(range(0, p.runs, size))]
 
 
+def batches(points: Sequence[Point], size: int = BATCH_RUNS) -> list[list[int]]:
+    """
+    Group points (parts) into the tasks of run_batch: indices, at most `size` runs each.
+
+    A task holds points of one kind (Point.kind), in order; at least one point.
+    """
+    kinds: dict[Point, list[int]] = {}
+    for i, p in enumerate(points):
+        kinds.setdefault(p.kind(), []).append(i)
+    out: list[list[int]] = []
+    for members in kinds.values():
+        task: list[int] = []
+        for i in members:
+            if task and sum(points[j].runs for j in task) + points[i].runs > size:
+                out.append(task)
+                task = []
+            task.append(i)
+        out.append(task)
+    return out
+
+
 def run_point(p: Point) -> tuple[np.ndarray, np.ndarray, dict]:
     """Simulate one point; return the tracking % per run (angular, measure) and the metrics."""
-    # common random numbers: the same draws for every algorithm and level
-    rng = np.random.default_rng(p.seed if p.part == 0 else [p.seed, p.part])
-    if p.name in PAT_ALGORITHMS:
-        angular, measure, m, _, _ = alignment_pat.evaluate(p.name, p.runs, p.link, rng,
-                                                           p.response, p.ekf, p.clip)
-        return angular, measure, m
-    aligner = build(p.name, p.runs, p.link, p.response, p.ekf, p.clip, p.controller)
-    traj = led.simulate_tracking(aligner, p.link, rng, p.response)
-    angular, measure = led.tracking(traj, threshold=led.TRACKING_LEVEL * p.link.max_intensity)
-    return angular, measure, alignment_pat.metrics(traj, None, None, blocked=p.link.blocked)
+    return run_batch([p])[0]
+
+
+def run_batch(points: Sequence[Point]) -> list[tuple[np.ndarray, np.ndarray, dict]]:
+    """
+    Simulate points of one kind side by side (one aligner); return run_point of each.
+
+    Each point draws its numbers as it would alone: common random numbers, the same draws
+    for every algorithm and level of a part.  Each run is, number for number, what the
+    point gives alone (led.simulate_blocks).
+    """
+    first = points[0]
+    if any(p.kind() != first.kind() for p in points):
+        raise ValueError('run_batch simulates points of one kind (Point.kind) side by side')
+    draws: dict[tuple[int, int], led.Disturbances] = {}
+    blocks = []
+    for p in points:
+        key = (p.part, p.runs)
+        if key not in draws:
+            rng = np.random.default_rng(p.seed if p.part == 0 else [p.seed, p.part])
+            draws[key] = led.draw_disturbances(p.link, rng, p.runs)
+        blocks.append(led.Block(p.link, draws[key]))
+    runs = sum(p.runs for p in points)
+    record: Optional[alignment_pat.Recorded] = None
+    if first.name in PAT_ALGORITHMS:
+        R = np.repeat([alignment_pat.ekf_settings(first.name, p.link, first.ekf).R
+                       for p in points], [p.runs for p in points], axis=0)
+        record = alignment_pat.build_pat(first.name, runs, first.link, first.response,
+                                         first.ekf, first.clip, R=R)
+        aligner: led.Aligner = record
+    else:
+        aligner = build(first.name, runs, first.link, first.response, first.ekf, first.clip,
+                        first.controller)
+    traj = led.simulate_blocks(aligner, blocks, first.response)
+    states = declared = None
+    if record is not None:
+        states, declared = np.array(record.states), np.array(record.declared)
+    out = []
+    start = 0
+    for p in points:
+        cols = slice(start, start + p.runs)
+        start += p.runs
+        part = led.Trajectory(t=traj.t, phi=traj.phi[:, cols], x2=traj.x2[:, cols],
+                              x1=traj.x1[:, cols], clean=traj.clean[:, cols], z=traj.z[:, cols],
+                              command=traj.command[:, cols])
+        angular, measure = led.tracking(part,
+                                        threshold=led.TRACKING_LEVEL * p.link.max_intensity)
+        m = alignment_pat.metrics(part, None if states is None else states[:, cols],
+                                  None if declared is None else declared[:, cols],
+                                  blocked=p.link.blocked)
+        out.append((angular, measure, m))
+    return out
 
 
 def run_points(points: Sequence[Point], workers: int,
-               part_runs: Optional[int] = None) -> Iterator[tuple]:
+               part_runs: Optional[int] = None,
+               batch_runs: Optional[int] = None) -> Iterator[tuple]:
     """
     Yield run_point of each point, in order, computed on `workers` processes.
 
-    Each point runs in parts of at most part_runs runs (PART_RUNS), joined in order: the
-    results depend on neither the workers nor the order the parts end in.
+    Each point runs in parts of at most part_runs runs (PART_RUNS), and the parts of points
+    of one kind side by side, at most batch_runs runs (BATCH_RUNS) a task; the parts are
+    joined in order: the results depend on neither the workers, nor the batches, nor the
+    order the tasks end in.
     """
-    tasks = [parts(p, part_runs or PART_RUNS) for p in points]
-    flat = [q for point in tasks for q in point]
-    if workers <= 1 or len(flat) <= 1:
-        done = map(run_point, flat)
-        yield from _joined(tasks, done)
+    split = [parts(p, part_runs or PART_RUNS) for p in points]
+    flat = [q for point in split for q in point]
+    tasks = batches(flat, batch_runs or BATCH_RUNS)
+    work = [[flat[i] for i in task] for task in tasks]
+    if workers <= 1 or len(work) <= 1:
+        yield from _joined(split, tasks, map(run_batch, work))
         return
-    with ProcessPoolExecutor(max_workers=min(workers, len(flat))) as pool:
-        yield from _joined(tasks, pool.map(run_point, flat))
+    with ProcessPoolExecutor(max_workers=min(workers, len(work))) as pool:
+        yield from _joined(split, tasks, pool.map(run_batch, work))
 
 
-def _joined(tasks: list[list[Point]], done: Iterator[tuple]) -> Iterator[tuple]:
-    """Join the parts of each point (the results in the order of tasks, flattened)."""
-    for point in tasks:
-        got = [next(done) for _ in point]
-        yield (np.concatenate([g[0] for g in got]), np.concatenate([g[1] for g in got]),
-               alignment_pat.join_metrics([g[2] for g in got]))
+def _joined(split: list[list[Point]], tasks: list[list[int]],
+            done: Iterator[list[tuple]]) -> Iterator[tuple]:
+    """Join the parts of each point in order, as the tasks (indices into the parts) end."""
+    got: dict[int, tuple] = {}
+    first = 0                       # index of the first part of the next point to yield
+    point = 0
+    for task, results in zip(tasks, done):
+        got.update(zip(task, results))
+        while point < len(split) and all(first + j in got for j in range(len(split[point]))):
+            mine = [got.pop(first + j) for j in range(len(split[point]))]
+            yield (np.concatenate([g[0] for g in mine]), np.concatenate([g[1] for g in mine]),
+                   alignment_pat.join_metrics([g[2] for g in mine]))
+            first += len(split[point])
+            point += 1
 
 
 def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.TrackingLinkConfig,

@@ -59,20 +59,34 @@ class Recorded:
         self.supervisor.correct_last_turn(delta)
 
 
-def build_pat(name: str, runs: int, link: led.TrackingLinkConfig,
-              response: led.IncidenceResponse, ekf: led.EKFConfig, clip: bool,
-              config: Optional[SupervisorConfig] = None) -> Recorded:
+def ekf_settings(name: str, link: led.TrackingLinkConfig, ekf: led.EKFConfig) -> led.EKFConfig:
     """
-    Build the supervised aligner `name` (one of PAT_ALGORITHMS) for `runs` runs.
+    Return the EKF settings of the supervised `name` on `link`.
 
     ekf_pat's EKF is told the link's noise: R = sigma^2 I (Table I's R is 1 V^2 at every
     level of Fig. 10); the plain ekf and ekf_reset keep Table I.
     """
     if name == 'ekf_pat':
         r = max(link.noise, MIN_NOISE) ** 2
-        ekf = dataclasses.replace(ekf, R=((r, 0.0), (0.0, r)))
+        return dataclasses.replace(ekf, R=((r, 0.0), (0.0, r)))
+    return ekf
+
+
+def build_pat(name: str, runs: int, link: led.TrackingLinkConfig,
+              response: led.IncidenceResponse, ekf: led.EKFConfig, clip: bool,
+              config: Optional[SupervisorConfig] = None,
+              R: Optional[np.ndarray] = None) -> Recorded:
+    """
+    Build the supervised aligner `name` (one of PAT_ALGORITHMS) for `runs` runs.
+
+    The EKF's settings are `ekf_settings`; R (runs, 2, 2), if given, replaces its R with
+    one per run (runs of several links side by side).
+    """
+    ekf = ekf_settings(name, link, ekf)
     tracker = led.make_aligner(PAT_ALGORITHMS[name], runs=runs, dt=link.dt, response=response,
                                ekf=ekf, clip=clip)
+    if R is not None and isinstance(tracker, led.ScanningEKF):
+        tracker.R = np.asarray(R, dtype=float).reshape(runs, 2, 2)
     if config is None:
         # a known prior (the paper's x2_0) starts in tracking; a cold start searches
         config = SupervisorConfig(start='acquiring' if link.x2_0_spread > 0 else 'tracking')
@@ -284,7 +298,7 @@ def plot_acquisition(results: dict, *, level: int = 0, title: str) -> Figure:
 
 
 __all__ = ['plot_acquisition', 'plot_pat_run', 'ACQUIRED_WITHIN', 'angle_metrics', 'build_pat',
-           'dark_steps',
+           'dark_steps', 'ekf_settings',
            'empty_record',
            'evaluate', 'join_metrics', 'metrics',
            'MIN_NOISE', 'PAT_ALGORITHMS', 'record', 'Recorded', 'STATES']

@@ -41,8 +41,9 @@ if TYPE_CHECKING:
                                            PAPER_GAIN, PAPER_P0, PAPER_Q, PAPER_Q_SYS, PAPER_R,
                                            PAPER_R_SYS, PAPER_X0, SCAN_ANGLES, ScanningEKF,
                                            StampClock)
-    from tskf_ros.led.tracking_simulation import (simulate_tracking, tracking, TrackingLinkConfig,
-                                                  Trajectory)
+    from tskf_ros.led.tracking_simulation import (Block, Disturbances, draw_disturbances,
+                                                  simulate_blocks, simulate_tracking, tracking,
+                                                  TrackingLinkConfig, Trajectory)
 
 # each name and the module it comes from
 _SOURCES = {
@@ -66,17 +67,21 @@ _SOURCES = {
     'PAPER_X0': 'scanning_ekf', 'SCAN_ANGLES': 'scanning_ekf', 'ScanningEKF': 'scanning_ekf',
     'StampClock': 'scanning_ekf', 'simulate_tracking': 'tracking_simulation',
     'tracking': 'tracking_simulation', 'TrackingLinkConfig': 'tracking_simulation',
-    'Trajectory': 'tracking_simulation',
+    'Trajectory': 'tracking_simulation', 'Block': 'tracking_simulation',
+    'Disturbances': 'tracking_simulation', 'draw_disturbances': 'tracking_simulation',
+    'simulate_blocks': 'tracking_simulation',
 }
 
 __all__ = [
     'ALGORITHMS', 'Aligner', 'AlignmentError', 'AnyAligner', 'as_measurement', 'attenuation',
-    'check_observability', 'CONTROLLERS', 'EKFConfig', 'HILL_STEP', 'HillClimbing',
+    'Block', 'check_observability', 'CONTROLLERS', 'Disturbances', 'draw_disturbances',
+    'EKFConfig', 'HILL_STEP', 'HillClimbing',
     'IncidenceResponse', 'irradiance', 'LITERAL_UNITS_PER_DEGREE', 'LQGAligner', 'LQGConfig',
     'make_aligner', 'MAX_INTENSITY', 'max_gain', 'Measurement', 'Observability',
     'observability', 'ObservabilityError', 'ObservabilityWarning',
     'PAPER_DT', 'PAPER_G_COEFFICIENTS', 'PAPER_GAIN', 'PAPER_P0', 'PAPER_Q', 'PAPER_Q_SYS',
-    'PAPER_R', 'PAPER_R_SYS', 'PAPER_X0', 'SCAN_ANGLES', 'ScanningEKF', 'simulate_tracking',
+    'PAPER_R', 'PAPER_R_SYS', 'PAPER_X0', 'SCAN_ANGLES', 'ScanningEKF', 'simulate_blocks',
+    'simulate_tracking',
     'StampClock', 'ThreePointAveraging', 'tracking', 'TRACKING_ANGLE', 'TRACKING_LEVEL',
     'TrackingLinkConfig', 'Trajectory', 'triangle_scan', 'wrap_degrees', 'zone_units_per_degree',
 ]

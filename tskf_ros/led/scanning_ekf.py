@@ -273,7 +273,8 @@ class ScanningEKF:
     Each `step(stamp, z)` is one iteration k: predict (13)-(14) over the time since the
     previous call, update with the measurement pair (12) if z_k arrived, compute the
     control (21) and return the motor command u_k + psi_{k+1} - psi_k.  Posterior
-    x, P and prior x_prior, P_prior have a leading runs axis.
+    x, P and prior x_prior, P_prior have a leading runs axis.  R is config.R, shared by
+    every run, or a stack (runs, 2, 2) of one R per run (runs at several noise levels).
     """
 
     def __init__(self, config: EKFConfig = EKFConfig(),
@@ -401,7 +402,7 @@ class ScanningEKF:
         a1 = x2 + self.scan_offset
         g, dg = self.response.g(a1), self.response.dg(a1)
         C1 = np.stack([g, self.x[:, 0] * dg], axis=-1)
-        S = np.einsum('ri,rij,rj->r', C1, P, C1) + self.R[0, 0]
+        S = np.einsum('ri,rij,rj->r', C1, P, C1) + self.R[..., 0, 0]
         with np.errstate(all='ignore'):
             return np.abs(z - self.x[:, 0] * g) / np.sqrt(S)
 

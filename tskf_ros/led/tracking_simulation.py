@@ -20,9 +20,10 @@ Eq. (25): x1_k = x1_{k-1} + w1, x2_k = x2_{k-1} + beta + u_{k-1} + w2, with Tabl
 parameters, and the tracking percentages of Section V (Table I, Fig. 8-10).
 """
 
+import dataclasses
 from dataclasses import dataclass
 import math
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -74,6 +75,56 @@ class Trajectory:
     estimate: Optional[FloatArray] = None   # (steps, runs, 2) posterior [x1, x2], EKFs
 
 
+@dataclass(frozen=True)
+class Disturbances:
+    """
+    The random numbers of one simulation (steps, runs), in the order they are drawn.
+
+    v is standard normal: a link's noise scales it at each step, so links that differ in
+    noise (and in dropout: u < dropout is missing) share these numbers.
+    """
+
+    w1: FloatArray         # w1 of eq. (25), N(0, Q_sys,11)
+    w2: FloatArray         # w2 of eq. (25), N(0, Q_sys,22)
+    v: FloatArray          # v of eq. (8) over the link's noise, N(0, 1)
+    u: FloatArray          # uniform on [0, 1): the measurement is missing where u < dropout
+    x2_0: FloatArray       # (runs,): the true x2 at the start (deg)
+
+    @property
+    def runs(self) -> int:
+        """Return the number of runs."""
+        return int(self.w1.shape[1])
+
+
+def draw_disturbances(link: TrackingLinkConfig, rng: np.random.Generator,
+                      runs: int) -> Disturbances:
+    """Draw the noise of `runs` runs of link.steps steps (w1, w2, v, dropouts, then x2_0)."""
+    n, steps = int(runs), int(link.steps)
+    w1 = rng.standard_normal((steps, n)) * math.sqrt(link.q_sys[0])
+    w2 = rng.standard_normal((steps, n)) * math.sqrt(link.q_sys[1])
+    v = rng.standard_normal((steps, n))
+    u = rng.random((steps, n))
+    x2_0 = np.full(n, link.x2_0)
+    if link.x2_0_spread > 0.0:
+        x2_0 = x2_0 + rng.uniform(-link.x2_0_spread, link.x2_0_spread, n)
+    return Disturbances(w1=w1, w2=w2, v=v, u=u, x2_0=x2_0)
+
+
+@dataclass(frozen=True)
+class Block:
+    """Runs side by side in one simulation: their link and their noise."""
+
+    link: TrackingLinkConfig
+    noise: Disturbances
+
+
+def _check(link: TrackingLinkConfig) -> None:
+    if int(link.steps) < 1:
+        raise AlignmentError(f'steps must be at least 1, got {int(link.steps)}')
+    if not 0.0 <= link.dropout < 1.0:
+        raise AlignmentError(f'dropout must be in [0, 1), got {link.dropout}')
+
+
 def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random.Generator,
                       response: Optional[IncidenceResponse] = None) -> Trajectory:
     """
@@ -82,21 +133,47 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
     Step k: the receiver at phi_k measures z_k = x1_k g(phi_k) + v_k (eq. (8)), the aligner
     returns the command c_k, and phi_{k+1} = phi_k + beta dt + c_k + w2, x1_{k+1} =
     |x1_k + w1| (kept positive, as Section IV assumes).  The noise is drawn up front in a
-    fixed order, so aligners run with the same seed see the same w, v and dropouts.
+    fixed order (`draw_disturbances`), so aligners run with the same seed see the same w,
+    v and dropouts.
+    """
+    _check(link)
+    noise = draw_disturbances(link, rng, aligner.runs)
+    return simulate_blocks(aligner, [Block(link, noise)], response)
+
+
+def simulate_blocks(aligner: Aligner, blocks: Sequence[Block],
+                    response: Optional[IncidenceResponse] = None) -> Trajectory:
+    """
+    Run `simulate_tracking` on blocks of runs side by side: the aligner steps all at once.
+
+    Block i's runs are the columns after those of blocks 0 .. i-1; its link gives their
+    measurement noise and dropout, its Disturbances their random numbers (blocks may share
+    them: the same draws at several noise levels).  The links differ in noise and dropout
+    only.  Each run is what simulate_tracking gives it alone, number for number.
     """
     response = response if response is not None else IncidenceResponse()
+    if not blocks:
+        raise AlignmentError('simulate_blocks needs at least one block of runs')
+    link = blocks[0].link
+    for b in blocks:
+        _check(b.link)
+        if dataclasses.replace(b.link, noise=link.noise, dropout=link.dropout) != link:
+            raise AlignmentError('the blocks of one simulation differ in noise and dropout only')
     n, steps = aligner.runs, int(link.steps)
-    if steps < 1:
-        raise AlignmentError(f'steps must be at least 1, got {steps}')
-    if not 0.0 <= link.dropout < 1.0:
-        raise AlignmentError(f'dropout must be in [0, 1), got {link.dropout}')
-    w1 = rng.standard_normal((steps, n)) * math.sqrt(link.q_sys[0])
-    w2 = rng.standard_normal((steps, n)) * math.sqrt(link.q_sys[1])
-    v = rng.standard_normal((steps, n)) * link.noise
-    missing = rng.random((steps, n)) < link.dropout
-    x2_0 = np.full(n, link.x2_0)
-    if link.x2_0_spread > 0.0:
-        x2_0 = x2_0 + rng.uniform(-link.x2_0_spread, link.x2_0_spread, n)
+    sizes = [b.noise.runs for b in blocks]
+    if sum(sizes) != n or any(b.noise.w1.shape[0] != steps for b in blocks):
+        raise AlignmentError(f'the blocks hold {sum(sizes)} runs of '
+                             f'{[b.noise.w1.shape[0] for b in blocks]} steps; the aligner has '
+                             f'{n} runs, the link {steps} steps')
+
+    def joined(name: str, k: int) -> FloatArray:
+        """Row k of a noise array, the blocks side by side."""
+        rows = [getattr(b.noise, name)[k] for b in blocks]
+        return rows[0] if len(rows) == 1 else np.concatenate(rows)
+
+    # each run's noise level and dropout probability
+    noise = np.repeat([b.link.noise for b in blocks], sizes)
+    dropout = np.repeat([b.link.dropout for b in blocks], sizes)
     t = np.arange(steps, dtype=float) * link.dt
     shape = (steps, n)
     ekf = aligner if isinstance(aligner, (ScanningEKF, LQGAligner)) else None
@@ -105,14 +182,14 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
                      clean=np.empty(shape), z=np.empty(shape), command=np.empty(shape),
                      estimate=estimate)
     x1 = np.full(n, link.max_intensity / response.peak)
-    phi = x2_0 + aligner.scan_offset
+    phi = np.concatenate([b.noise.x2_0 for b in blocks]) + aligner.scan_offset
     drift = link.beta * link.dt
     for k in range(steps):
         clean = x1 * response.g(wrap_degrees(phi))
         if link.blocked and link.blocked[0] <= t[k] < link.blocked[1]:
             clean = np.zeros(n)
         # (8): V_d,k = x1 g(phi) + v_k
-        z = np.where(missing[k], np.nan, clean + v[k])
+        z = np.where(joined('u', k) < dropout, np.nan, clean + joined('v', k) * noise)
         out.phi[k], out.x2[k], out.x1[k] = phi, phi - aligner.scan_offset, x1
         out.clean[k], out.z[k] = clean, z
         cmd = aligner.step(t[k], z)
@@ -120,8 +197,8 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
         if ekf is not None and estimate is not None:
             estimate[k] = ekf.x[:, :2]
         # (25): x2_k = x2_{k-1} + beta + u_{k-1} + w2 (here on phi = x2 + psi, with the scan)
-        phi = phi + drift + cmd + w2[k]
-        x1 = np.abs(x1 + w1[k])
+        phi = phi + drift + cmd + joined('w2', k)
+        x1 = np.abs(x1 + joined('w1', k))
     return out
 
 
