@@ -81,16 +81,8 @@ def _mv(A: Matrix, x: Vector) -> Vector:
 
 @_jit
 def _inv(S: Matrix) -> Matrix:
-    """Return S^-1: closed forms for 1 x 1 and 2 x 2 (inf or NaN entries when S is singular)."""
+    """Return S^-1 by LAPACK (NaN entries when S is singular): `_inv_runs` beyond 2 x 2."""
     p = S.shape[0]
-    if p == 1:
-        return np.full((1, 1), 1.0 / S[0, 0])
-    if p == 2:
-        a, b, c, d = S[0, 0], S[0, 1], S[1, 0], S[1, 1]
-        det = a * d - b * c
-        out = np.empty((2, 2))
-        out[0, 0], out[0, 1], out[1, 0], out[1, 1] = d / det, -b / det, -c / det, a / det
-        return out
     try:
         return np.linalg.inv(np.ascontiguousarray(S))
     except Exception:       # singular: numba raises LinAlgError's message as an Exception
@@ -113,19 +105,28 @@ def _mm_runs(A: Stack, B: Stack) -> Stack:
     """Return A[r] B[r] for each run r: loops for small matrices, BLAS for large ones."""
     runs = max(A.shape[0], B.shape[0])
     n, m, p = A.shape[1], A.shape[2], B.shape[2]
-    blas = n * m * p > _LOOP_FLOPS
-    out = np.empty((runs, n, p)) if blas else np.zeros((runs, n, p))
+    out = np.empty((runs, n, p))
     for r in range(runs):
         ra = r if A.shape[0] > 1 else 0
         rb = r if B.shape[0] > 1 else 0
-        if blas:
+        if n * m * p > _LOOP_FLOPS:
             out[r] = np.ascontiguousarray(A[ra]) @ np.ascontiguousarray(B[rb])
-            continue
-        for i in range(n):
-            for k in range(m):
-                a = A[ra, i, k]
+        elif n == 2 and m == 2 and p == 2:
+            # the loops below, written out (3x faster than loops of unknown bounds): each
+            # entry summed from 0 in the order of k, as they do
+            a00, a01, a10, a11 = A[ra, 0, 0], A[ra, 0, 1], A[ra, 1, 0], A[ra, 1, 1]
+            b00, b01, b10, b11 = B[rb, 0, 0], B[rb, 0, 1], B[rb, 1, 0], B[rb, 1, 1]
+            out[r, 0, 0] = (0.0 + a00 * b00) + a01 * b10
+            out[r, 0, 1] = (0.0 + a00 * b01) + a01 * b11
+            out[r, 1, 0] = (0.0 + a10 * b00) + a11 * b10
+            out[r, 1, 1] = (0.0 + a10 * b01) + a11 * b11
+        else:
+            for i in range(n):
                 for j in range(p):
-                    out[r, i, j] += a * B[rb, k, j]
+                    s = 0.0
+                    for k in range(m):
+                        s += A[ra, i, k] * B[rb, k, j]
+                    out[r, i, j] = s
     return out
 
 
@@ -148,10 +149,24 @@ def _mv_runs(A: Stack, x: Stack) -> Stack:
 
 @_jit
 def _inv_runs(S: Stack) -> Stack:
-    """Return S[r]^-1 for each run r (`_inv`)."""
+    """
+    Return S[r]^-1 for each run r.
+
+    Closed forms for 1 x 1 and 2 x 2 (inf or NaN entries when S[r] is singular), LAPACK
+    beyond (`_inv`).
+    """
+    p = S.shape[1]
     out = np.empty(S.shape)
     for r in range(S.shape[0]):
-        out[r] = _inv(S[r])
+        if p == 1:
+            out[r, 0, 0] = 1.0 / S[r, 0, 0]
+        elif p == 2:
+            a, b, c, d = S[r, 0, 0], S[r, 0, 1], S[r, 1, 0], S[r, 1, 1]
+            det = a * d - b * c
+            out[r, 0, 0], out[r, 0, 1] = d / det, -b / det
+            out[r, 1, 0], out[r, 1, 1] = -c / det, a / det
+        else:
+            out[r] = _inv(S[r])
     return out
 
 

@@ -119,7 +119,7 @@ class Point:
     part: int = 0       # part k > 0 of a point's runs draws from the generator [seed, k]
 
     def kind(self) -> 'Point':
-        """What points simulated side by side share: all but runs, part, noise and dropout."""
+        """Return what points simulated side by side share: all but runs, part, noise, dropout."""
         return dataclasses.replace(self, runs=0, part=0, link=dataclasses.replace(
             self.link, noise=0.0, dropout=0.0))
 

@@ -95,13 +95,10 @@ def summary(d: Durations) -> dict:
             'censored': int(np.count_nonzero(~d.observed))}
 
 
-def _back(inside: Bools, hold: int) -> Bools:
-    """Per step k of one run: |phi| within the cone from k through k + hold - 1."""
-    steps = inside.size
-    if steps < hold:
-        return np.zeros(0, dtype=bool)
-    c = np.r_[0, np.cumsum(inside)]
-    return (c[hold:] - c[:-hold]) == hold            # k = 0 .. steps - hold
+def _next(mask: Bools, none: int) -> NDArray[np.int64]:
+    """Per step k and run (columns): the first step >= k where mask is set (none: never)."""
+    index = np.where(mask, np.arange(mask.shape[0])[:, None], none)
+    return np.minimum.accumulate(index[::-1], axis=0)[::-1]
 
 
 def pointing_events(phi: NDArray[np.float64], dt: float, *, angle: float,
@@ -111,7 +108,8 @@ def pointing_events(phi: NDArray[np.float64], dt: float, *, angle: float,
     Return (acquisition, re-acquisition) durations of phi (steps, runs), in seconds.
 
     dark (steps,): the steps without light (a blocked beam); an event that starts in the
-    dark starts when the light is back.
+    dark starts when the light is back.  The events are listed run by run, each run's in
+    time order; all runs take their next event at once.
     """
     steps, runs = phi.shape
     hold = max(int(round(hold_s / dt)), 1)
@@ -121,36 +119,43 @@ def pointing_events(phi: NDArray[np.float64], dt: float, *, angle: float,
     lit = np.where(~dark, np.arange(steps), steps)
     next_lit = np.minimum.accumulate(np.r_[lit, steps][::-1])[::-1]
     last = steps - hold                 # the last step from which a hold can be seen
-    acq_t, acq_o, re_t, re_o = [], [], [], []
-    for r in range(runs):
-        back = np.flatnonzero(_back(inside[:, r], hold))
-        if not back.size:
-            acq_t.append((last + 1) * dt)
-            acq_o.append(False)
-            continue
-        acq_t.append(back[0] * dt)
-        acq_o.append(True)
-        leaves = np.flatnonzero(inside[:-1, r] & ~inside[1:, r]) + 1
-        k = back[0] + hold
-        while True:
-            i = int(np.searchsorted(leaves, k))
-            if i == leaves.size:
-                break
-            start = int(next_lit[leaves[i]])
-            if start > last:            # not watched long enough for a hold: censored at 0
-                re_t.append(0.0)
-                re_o.append(False)
-                break
-            j = int(np.searchsorted(back, start))
-            if j == back.size:
-                re_t.append((last + 1 - start) * dt)
-                re_o.append(False)
-                break
-            re_t.append((back[j] - start) * dt)
-            re_o.append(True)
-            k = back[j] + hold
-    return (Durations(np.array(acq_t, dtype=float), np.array(acq_o, dtype=bool)),
-            Durations(np.array(re_t, dtype=float), np.array(re_o, dtype=bool)))
+    # back in the cone at k: |phi| within it from k through k + hold - 1 (k = 0 .. last)
+    c = np.concatenate([np.zeros((1, runs), dtype=np.int64), np.cumsum(inside, axis=0)])
+    back = (c[hold:] - c[:-hold]) == hold if steps >= hold else np.zeros((0, runs), bool)
+    none = back.shape[0]
+    # the first step back in the cone at or after k (k = 0 .. last), and the first step
+    # at or after k (k = 0 .. steps) where the run leaves the cone (steps: never)
+    next_back = _next(back, none)
+    leaves = np.zeros((steps + 1, runs), dtype=bool)
+    leaves[1:steps] = inside[:-1] & ~inside[1:]
+    next_leave = _next(leaves, steps)
+    first = next_back[0] if none else np.full(runs, none)
+    found = first < none
+    acq_t = np.where(found, first * dt, (last + 1) * dt)
+    # re-acquisitions: each round takes the next event of every run still watched
+    events: list[tuple[NDArray[np.int64], NDArray[np.float64], Bools]] = []
+    r = np.flatnonzero(found)
+    k = first[r] + hold
+    while r.size:
+        leave = next_leave[k, r]
+        r, leave = r[leave < steps], leave[leave < steps]
+        start = next_lit[leave]
+        late = start > last             # not watched long enough for a hold: censored at 0
+        events.append((r[late], np.zeros(np.count_nonzero(late)), np.zeros(late.sum(), bool)))
+        r, start = r[~late], start[~late]
+        j = next_back[start, r]
+        ended = j < none
+        events.append((r[~ended], (last + 1 - start[~ended]) * dt,
+                       np.zeros(np.count_nonzero(~ended), bool)))
+        events.append((r[ended], (j[ended] - start[ended]) * dt,
+                       np.ones(np.count_nonzero(ended), bool)))
+        r, k = r[ended], j[ended] + hold
+    run = np.concatenate([e[0] for e in events]) if events else np.zeros(0, np.int64)
+    order = np.argsort(run, kind='stable')
+    times = np.concatenate([e[1] for e in events])[order] if events else np.zeros(0)
+    observed = np.concatenate([e[2] for e in events])[order] if events else np.zeros(0, bool)
+    return (Durations(np.asarray(acq_t, dtype=float), found),
+            Durations(times.astype(float), observed.astype(bool)))
 
 
 def step_latency(phi: NDArray[np.float64], dt: float, locked: Bools, declared: Bools,

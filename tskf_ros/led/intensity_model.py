@@ -61,8 +61,15 @@ def wrap_degrees(angle: FloatArray) -> FloatArray:
 
 
 def wrap_degrees(angle: Angles) -> Angles:
-    """Wrap angles in degrees to [-180, 180)."""
-    return (np.asarray(angle, dtype=float) + 180.0) % 360.0 - 180.0
+    """Wrap angles in degrees to [-180, 180): (angle + 180) mod 360 - 180."""
+    a = np.asarray(angle, dtype=float) + 180.0
+    if np.ndim(a) == 0:
+        return a % 360.0 - 180.0
+    # the remainder (slow) only where it changes something: a in [0, 360) is its own
+    outside = ~((a >= 0.0) & (a < 360.0))
+    if outside.any():
+        a[outside] %= 360.0
+    return a - 180.0
 
 
 def attenuation(c: float, d: float) -> float:

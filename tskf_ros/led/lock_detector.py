@@ -116,8 +116,9 @@ class LockDetector:
         self.config = config
         self.runs = int(runs)
         n = config.window
-        self.low = np.zeros((self.runs, n), dtype=bool)
-        self.nis = np.full((self.runs, n), np.nan)
+        # the windows, one row per sample (the oldest is overwritten), one column per run
+        self.low = np.zeros((n, self.runs), dtype=bool)
+        self.nis = np.full((n, self.runs), np.nan)
         self.head = 0
         # the band for every count of NIS values in the window
         self.bands = np.array([nis_band(k, config.nis_alpha, config.gate)
@@ -134,8 +135,8 @@ class LockDetector:
 
     def reset(self, mask: Mask) -> None:
         """Empty the windows of the runs in mask (after a hand-over or a reset)."""
-        self.low[mask] = False
-        self.nis[mask] = np.nan
+        self.low[:, mask] = False
+        self.nis[:, mask] = np.nan
 
     def update(self, z: FloatArray, nis: FloatArray, mask: Mask,
                level: Optional[FloatArray] = None) -> LockVerdict:
@@ -150,12 +151,13 @@ class LockDetector:
         gate2 = c.gate * c.gate if c.gate > 0 else math.inf
         kept = have & np.isfinite(nis) & (nis < gate2)
         h = self.head
-        self.low[:, h] = have & (z < level)
-        self.nis[:, h] = np.where(kept, nis, np.nan)
+        self.low[h] = have & (z < level)
+        self.nis[h] = np.where(kept, nis, np.nan)
         self.head = (h + 1) % c.window
-        low = self.low.sum(axis=1)
-        count = np.isfinite(self.nis).sum(axis=1)
-        total = np.nansum(self.nis, axis=1)
+        low = self.low.sum(axis=0)
+        finite = ~np.isnan(self.nis)
+        count = finite.sum(axis=0)
+        total = np.where(finite, self.nis, 0.0).sum(axis=0)
         band = self.bands[count]
         # the NIS is judged once half the window has values
         high = (count >= (c.window + 1) // 2) & (total > band)
