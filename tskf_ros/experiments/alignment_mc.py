@@ -22,15 +22,17 @@ import math
 from pathlib import Path
 import sys
 import time
-from typing import Callable, Iterator, Optional, Sequence
+from typing import Callable, Iterator, Optional, Sequence, TYPE_CHECKING
 
-from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
 from tskf_ros.bag.progress import bar
 from tskf_ros.experiments import alignment_mc_two_axis, alignment_pat, arguments, output
 from tskf_ros.experiments.alignment_figures import plot_run, plot_tracking
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
 DEFAULT_DROPOUTS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
@@ -301,7 +303,7 @@ def write_json(path: Path, data: dict) -> None:
     output.write_json(path, data)
 
 
-def save_figure(fig: Figure, path: Path) -> None:
+def save_figure(fig: 'Figure', path: Path) -> None:
     """Save a matplotlib figure as PNG, atomically."""
     output.save_figure(fig, path, dpi=120)
 

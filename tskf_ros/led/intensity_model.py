@@ -94,8 +94,26 @@ def _fit(u: FloatArray, coefficients: Sequence[float]) -> FloatArray:
 
 def _fit(u: Angles, coefficients: Sequence[float]) -> Angles:
     """Eq. (4) in fit units: a1 e^{-((u - b1)/c1)^2} + a2 e^{-((u - b2)/c2)^2}."""
+    return _weighted(*_gaussians(u, coefficients), coefficients)
+
+
+def _gaussians(u: Angles, coefficients: Sequence[float]) -> tuple[Angles, Angles]:
+    """Return the two Gaussians of eq. (4) at u fit units: e^{-((u - b)/c)^2}."""
+    _, b1, c1, _, b2, c2 = coefficients
+    return np.exp(-((u - b1) / c1) ** 2), np.exp(-((u - b2) / c2) ** 2)
+
+
+def _weighted(e1: Angles, e2: Angles, coefficients: Sequence[float]) -> Angles:
+    """Eq. (4) from its Gaussians: a1 e1 + a2 e2."""
+    return coefficients[0] * e1 + coefficients[3] * e2
+
+
+def _slope(u: Angles, e1: Angles, e2: Angles, coefficients: Sequence[float],
+           scale: float) -> Angles:
+    """Return the derivative of eq. (4) in phi = u / scale, from its Gaussians at u."""
     a1, b1, c1, a2, b2, c2 = coefficients
-    return a1 * np.exp(-((u - b1) / c1) ** 2) + a2 * np.exp(-((u - b2) / c2) ** 2)
+    # d/du a e^{-((u - b)/c)^2} = -2 a (u - b) / c^2 e^{-((u - b)/c)^2}; du/dphi = scale
+    return scale * (-2.0 * a1 * (u - b1) / c1 ** 2 * e1 - 2.0 * a2 * (u - b2) / c2 ** 2 * e2)
 
 
 def _fit_peak(coefficients: Sequence[float]) -> tuple[float, float]:
@@ -177,9 +195,20 @@ class IncidenceResponse:
 
     def dg(self, phi: Angles) -> Angles:
         """g'(phi), the derivative of eq. (4) with respect to phi in degrees."""
-        a1, b1, c1, a2, b2, c2 = self.coefficients
+        return self.g_dg(phi)[1]
+
+    @overload
+    def g_dg(self, phi: float) -> tuple[float, float]:
+        ...
+
+    @overload
+    def g_dg(self, phi: FloatArray) -> tuple[FloatArray, FloatArray]:
+        ...
+
+    def g_dg(self, phi: Angles) -> tuple[Angles, Angles]:
+        """Return g(phi) and g'(phi) (their exponentials evaluated once for both)."""
         s = self.units_per_degree
+        assert s is not None                # set by __post_init__
         u = np.asarray(phi, dtype=float) * s
-        # d/du a e^{-((u - b)/c)^2} = -2 a (u - b) / c^2 e^{-((u - b)/c)^2}; du/dphi = s
-        return s * (-2.0 * a1 * (u - b1) / c1 ** 2 * np.exp(-((u - b1) / c1) ** 2)
-                    - 2.0 * a2 * (u - b2) / c2 ** 2 * np.exp(-((u - b2) / c2) ** 2))
+        e1, e2 = _gaussians(u, self.coefficients)
+        return _weighted(e1, e2, self.coefficients), _slope(u, e1, e2, self.coefficients, s)

@@ -132,8 +132,9 @@ class LightDetector:
         x1 = np.maximum(x1, 0.0)
         phi_best = np.where(ok, b0 - bearing[:, None], 0.0)
         # J rows: d/dx1 = g(b - c), d/dc = -x1 g'(b - c)
-        J = np.stack([np.where(ok, g.g(phi_best), 0.0),
-                      np.where(ok, -x1[:, None] * g.dg(phi_best), 0.0)], axis=-1)
+        g_best, dg_best = g.g_dg(phi_best)
+        J = np.stack([np.where(ok, g_best, 0.0),
+                      np.where(ok, -x1[:, None] * dg_best, 0.0)], axis=-1)
         info = np.einsum('mwi,mwj->mij', J, J) / max(noise, 1e-6) ** 2
         info += np.eye(2) * 1e-9
         P = np.linalg.inv(info)

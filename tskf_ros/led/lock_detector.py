@@ -116,9 +116,11 @@ class LockDetector:
         self.config = config
         self.runs = int(runs)
         n = config.window
-        # the windows, one row per sample (the oldest is overwritten), one column per run
+        # the windows, one row per sample (the oldest is overwritten), one column per run:
+        # low intensity, and the NIS values kept (0 where none)
         self.low = np.zeros((n, self.runs), dtype=bool)
-        self.nis = np.full((n, self.runs), np.nan)
+        self.kept = np.zeros((n, self.runs), dtype=bool)
+        self.nis = np.zeros((n, self.runs))
         self.head = 0
         # the band for every count of NIS values in the window
         self.bands = np.array([nis_band(k, config.nis_alpha, config.gate)
@@ -136,7 +138,8 @@ class LockDetector:
     def reset(self, mask: Mask) -> None:
         """Empty the windows of the runs in mask (after a hand-over or a reset)."""
         self.low[:, mask] = False
-        self.nis[:, mask] = np.nan
+        self.kept[:, mask] = False
+        self.nis[:, mask] = 0.0
 
     def update(self, z: FloatArray, nis: FloatArray, mask: Mask,
                level: Optional[FloatArray] = None) -> LockVerdict:
@@ -152,12 +155,12 @@ class LockDetector:
         kept = have & np.isfinite(nis) & (nis < gate2)
         h = self.head
         self.low[h] = have & (z < level)
-        self.nis[h] = np.where(kept, nis, np.nan)
+        self.kept[h] = kept
+        self.nis[h] = np.where(kept, nis, 0.0)
         self.head = (h + 1) % c.window
         low = self.low.sum(axis=0)
-        finite = ~np.isnan(self.nis)
-        count = finite.sum(axis=0)
-        total = np.where(finite, self.nis, 0.0).sum(axis=0)
+        count = self.kept.sum(axis=0)
+        total = self.nis.sum(axis=0)
         band = self.bands[count]
         # the NIS is judged once half the window has values
         high = (count >= (c.window + 1) // 2) & (total > band)

@@ -325,27 +325,33 @@ class ScanningEKF:
         self.x_prior = self.x.copy()
         self.P_prior = self.P.copy()
 
+    def linearise(self, x: FloatArray, psi: float, shift: FloatArray,
+                  psi_prev: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Return h(x) of eq. (16) and its Jacobian C_k of eq. (17) at x (g evaluated once)."""
+        a1 = x[:, 1] + psi
+        a2 = x[:, 1] - shift + psi_prev
+        g1, dg1 = self.response.g_dg(a1)
+        g2, dg2 = self.response.g_dg(a2)
+        # (16): [x1 g(x2 + psi_k), x1 g(x2 - shift + psi_{k-1})], shift = u since z_prev.
+        # (15) prints x1hat_{k-1}^f in row 2 but (17) differentiates it with respect to
+        # x1hat_k^f; under (7) x1 has no input, so both rows use the current x1.
+        hx = np.stack([x[:, 0] * g1, x[:, 0] * g2], axis=-1)
+        C = np.empty((x.shape[0], 2, 2))
+        C[:, 0, 0] = g1                    # C_k,1,1 = g(x2^f + psi_k)
+        C[:, 0, 1] = x[:, 0] * dg1         # C_k,1,2 = x1^f g'(x2^f + psi_k)
+        C[:, 1, 0] = g2                    # C_k,2,1 = g(x2^f - u_{k-1} + psi_{k-1})
+        C[:, 1, 1] = x[:, 0] * dg2         # C_k,2,2 = x1^f g'(x2^f - u_{k-1} + psi_{k-1})
+        return hx, C
+
     def h(self, x: FloatArray, psi: float, shift: FloatArray,
           psi_prev: FloatArray) -> FloatArray:
         """Eq. (16): [x1 g(x2 + psi_k), x1 g(x2 - shift + psi_{k-1})], shift = u since z_prev."""
-        # (15) prints x1hat_{k-1}^f in row 2 but (17) differentiates it with respect to
-        # x1hat_k^f; under (7) x1 has no input, so both rows use the current x1.
-        g = self.response.g
-        return np.stack([x[:, 0] * g(x[:, 1] + psi),
-                         x[:, 0] * g(x[:, 1] - shift + psi_prev)], axis=-1)
+        return self.linearise(x, psi, shift, psi_prev)[0]
 
     def jacobian(self, x: FloatArray, psi: float, shift: FloatArray,
                  psi_prev: FloatArray) -> FloatArray:
         """Eq. (17): C_k = dh/dx at x, one 2x2 matrix per run."""
-        g, dg = self.response.g, self.response.dg
-        a1 = x[:, 1] + psi
-        a2 = x[:, 1] - shift + psi_prev
-        C = np.empty((x.shape[0], 2, 2))
-        C[:, 0, 0] = g(a1)                 # C_k,1,1 = g(x2^f + psi_k)
-        C[:, 0, 1] = x[:, 0] * dg(a1)      # C_k,1,2 = x1^f g'(x2^f + psi_k)
-        C[:, 1, 0] = g(a2)                 # C_k,2,1 = g(x2^f - u_{k-1} + psi_{k-1})
-        C[:, 1, 1] = x[:, 0] * dg(a2)      # C_k,2,2 = x1^f g'(x2^f - u_{k-1} + psi_{k-1})
-        return C
+        return self.linearise(x, psi, shift, psi_prev)[1]
 
     def update(self, z: FloatArray) -> None:
         """Eq. (18)-(20) for the runs whose z is finite; a run without z_prev uses row 1 only."""
@@ -353,10 +359,10 @@ class ScanningEKF:
         pair = have & np.isfinite(self.z_prev)
         psi = self.scan_offset
         x, P = self.x, self.P
-        C = self.jacobian(x, psi, self.since, self.psi_prev)
-        # y_k = [z_k, z_prev] (12); yhat_k = h(x^f) (15)-(16)
+        # yhat_k = h(x^f) (15)-(16) and C_k (17)
+        hx, C = self.linearise(x, psi, self.since, self.psi_prev)
+        # y_k = [z_k, z_prev] (12)
         y = np.stack([np.where(have, z, 0.0), np.where(pair, self.z_prev, 0.0)], axis=-1)
-        hx = self.h(x, psi, self.since, self.psi_prev)
         y = y - hx
         # the first measurement has no partner: drop row 2 (zero row and residual)
         C[~pair, 1, :] = 0.0
@@ -400,7 +406,7 @@ class ScanningEKF:
         x2 = self.x[:, 1] + (self.u if last is not None else 0.0)
         P = self.P + mu * self.Q
         a1 = x2 + self.scan_offset
-        g, dg = self.response.g(a1), self.response.dg(a1)
+        g, dg = self.response.g_dg(a1)
         C1 = np.stack([g, self.x[:, 0] * dg], axis=-1)
         S = np.einsum('ri,rij,rj->r', C1, P, C1) + self.R[..., 0, 0]
         with np.errstate(all='ignore'):
