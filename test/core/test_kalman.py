@@ -106,6 +106,33 @@ def test_update_batch_is_update_run_by_run(n, p):
             np.testing.assert_array_equal(got[i], expected)
 
 
+def test_small_products_and_inverses_are_their_formulas_in_floats():
+    # the 2 x 2 product written out and the closed-form inverses give what the loops and
+    # the formulas give in plain floats (sums from 0 in the order of k), bit for bit
+    rng = np.random.default_rng(11)
+    A, B = rng.standard_normal((50, 2, 2)), rng.standard_normal((50, 2, 2))
+    A[0] = -0.0
+    got = kalman._mm_runs(A, B)
+    for r in range(50):
+        for i in range(2):
+            for j in range(2):
+                want = 0.0
+                for k in range(2):
+                    want += float(A[r, i, k]) * float(B[r, k, j])
+                assert got[r, i, j] == want and np.signbit(got[r, i, j]) == np.signbit(want)
+    for p in (1, 2, 3):
+        S = rng.standard_normal((20, p, p))
+        S[0] = 0.0                                      # singular: inf or NaN entries
+        inv = kalman._inv_runs(S)
+        for r in range(1, 20):
+            np.testing.assert_allclose(inv[r] @ S[r], np.eye(p), atol=1e-9)
+        assert not np.isfinite(inv[0]).all()
+        if p == 2:
+            a, b, c, d = (float(v) for v in S[1].ravel())
+            det = a * d - b * c
+            assert inv[1].tolist() == [[d / det, -b / det], [-c / det, a / det]]
+
+
 # The covariance update under ill-conditioning.  P has eigenvalues spread log-uniformly
 # over cond(P) (up to 1e12, random orientation); R is a random SPD matrix scaled from
 # 1e-24 ||P|| (a near-perfect measurement: the exact posterior is then singular to

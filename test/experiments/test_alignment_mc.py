@@ -207,6 +207,43 @@ def test_a_point_in_parts_is_the_same_on_any_workers_and_its_first_part_is_the_s
     np.testing.assert_array_equal(one[1][:3], first[1])
 
 
+@pytest.mark.parametrize('parameter, values, names, extra', [
+    ('noise', (0.0, 1.25, 2.5), ('ekf', 'three_point', 'ekf_pat', 'hill_climbing_pat',
+                                 'ekf_reset'), {}),
+    ('dropout', (0.0, 0.3), ('ekf', 'ekf_hold', 'hill_climbing'), {'noise': 1.0}),
+    ('noise', (0.5, 2.0), ('three_point_pat', 'ekf_pat'),
+     {'x2_0': 0.0, 'x2_0_spread': 40.0, 'blocked': (2.0, 3.0)}),
+])
+def test_levels_and_parts_side_by_side_are_each_part_alone_run_for_run(parameter, values,
+                                                                       names, extra):
+    # the sequential path: one part (of at most 3 runs) at a time, each on its own
+    # aligner; batched: every level and part of an algorithm side by side in one task (and
+    # in tasks of 6 runs on two workers); the same numbers, run for run
+    link = led.TrackingLinkConfig(beta=1.2, steps=80, **extra)
+    points = [alignment_mc.Point(name, 7, dataclasses.replace(link, **{parameter: v}), 5,
+                                 led.IncidenceResponse(), led.EKFConfig(), False, 'p')
+              for v in values for name in names]
+    alone = list(alignment_mc.run_points(points, 1, part_runs=3, batch_runs=3))
+    for workers, batch in ((1, 10**6), (2, 6)):
+        together = list(alignment_mc.run_points(points, workers, part_runs=3, batch_runs=batch))
+        assert len(together) == len(points)
+        for (a1, m1, k1), (a2, m2, k2) in zip(alone, together):
+            np.testing.assert_array_equal(a1, a2)
+            np.testing.assert_array_equal(m1, m2)
+            assert repr(k1) == repr(k2)
+
+
+def test_tasks_hold_one_kind_and_take_the_kinds_in_turn():
+    link = led.TrackingLinkConfig()
+    points = [alignment_mc.Point(name, 1000, dataclasses.replace(link, noise=v), 0,
+                                 led.IncidenceResponse(), led.EKFConfig(), False, 'p')
+              for v in (0.0, 0.5, 1.0) for name in ('ekf', 'ekf_pat')]
+    # ekf at 0.0, 0.5 | ekf_pat at 0.0, 0.5 | ekf at 1.0 | ekf_pat at 1.0
+    assert alignment_mc.batches(points, 2000) == [[0, 2], [1, 3], [4], [5]]
+    # a point larger than a task is a task of its own
+    assert alignment_mc.batches(points[:1], 10) == [[0]]
+
+
 def test_the_metrics_of_parts_joined_are_the_metrics_of_all_runs():
     # one simulation of 6 runs cut into runs 0-3 and 4-5: metrics of each, joined, equal
     # the metrics of the whole (the same events, counts over all runs)

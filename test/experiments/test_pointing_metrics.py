@@ -111,3 +111,50 @@ def test_lock_window_latency_is_from_the_declared_loss():
     d = pm.step_latency(np.zeros((5, 2)), 0.5, locked, declared, angle=15.0)
     # never tracking again: censored at the end of the run (4 steps after the loss)
     assert d.observed.tolist() == [False, True] and d.times[0] == pytest.approx(2.0)
+
+
+def reference_events(inside, dt, hold, dark):
+    """Return the events of one run, step by step: the definitions written out again."""
+    steps = inside.size
+    last = steps - hold
+    back = [k for k in range(last + 1) if inside[k:k + hold].all()]
+    if not back:
+        return ((last + 1) * dt, False), []
+    events, k = [], back[0] + hold
+    while True:
+        leave = next((s for s in range(max(k, 1), steps) if inside[s - 1] and not inside[s]),
+                     None)
+        if leave is None:
+            break
+        start = next((s for s in range(leave, steps) if not dark[s]), steps)
+        if start > last:
+            events.append((0.0, False))
+            break
+        again = next((b for b in back if b >= start), None)
+        if again is None:
+            events.append(((last + 1 - start) * dt, False))
+            break
+        events.append(((again - start) * dt, True))
+        k = again + hold
+    return (back[0] * dt, True), events
+
+
+def test_events_of_all_runs_at_once_are_each_runs_own():
+    # random walks in and out of the cone, with and without dark steps: the events, run by
+    # run in time order, are those of the step-by-step definition
+    rng = np.random.default_rng(1)
+    for trial in range(60):
+        steps, runs = int(rng.integers(1, 50)), int(rng.integers(1, 9))
+        phi = (np.cumsum(rng.normal(0.0, rng.uniform(1.0, 12.0), (steps, runs)), axis=0)
+               + rng.uniform(-30.0, 30.0, runs))
+        dark = rng.random(steps) < 0.3 if trial % 2 else np.zeros(steps, dtype=bool)
+        dt, hold_s = float(rng.choice([0.1, 0.5])), float(rng.choice([0.1, 0.3, 1.0]))
+        acq, re = pm.pointing_events(phi, dt, angle=15.0, dark=dark, hold_s=hold_s)
+        hold = max(int(round(hold_s / dt)), 1)
+        want = [reference_events(np.abs(phi[:, r]) <= 15.0, dt, hold, dark)
+                for r in range(runs)]
+        assert acq.times.tolist() == [w[0][0] for w in want]
+        assert acq.observed.tolist() == [w[0][1] for w in want]
+        events = [e for w in want for e in w[1]]
+        assert re.times.tolist() == [e[0] for e in events]
+        assert re.observed.tolist() == [e[1] for e in events]

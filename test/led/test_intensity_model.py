@@ -71,3 +71,13 @@ def test_dg_matches_the_hand_derivative_and_finite_differences():
     h = 1e-5
     numeric = (g_paper(s * (phi + h)) - g_paper(s * (phi - h))) / (2 * h)
     np.testing.assert_allclose(RESPONSE.dg(phi), numeric, rtol=1e-6, atol=1e-9)
+
+
+def test_g_dg_is_g_and_dg():
+    # one pair of exponentials for both: the same numbers as each alone, arrays and floats
+    phi = np.linspace(-200.0, 200.0, 401)
+    g, dg = RESPONSE.g_dg(phi)
+    np.testing.assert_array_equal(g, RESPONSE.g(phi))
+    np.testing.assert_array_equal(dg, RESPONSE.dg(phi))
+    np.testing.assert_allclose(g, g_paper(RESPONSE.units_per_degree * phi), rtol=1e-15)
+    assert RESPONSE.g_dg(3.5) == (RESPONSE.g(3.5), RESPONSE.dg(3.5))

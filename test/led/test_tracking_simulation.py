@@ -15,6 +15,8 @@
 
 """The closed-loop tracking simulation (Solanki et al. 2018, eq. (25), Table I, Section V)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -52,3 +54,37 @@ def test_large_beta_fails():
     # 50 runs at 16 deg/s (seed 0): 11.9% (300 runs: 12.3%; the README's Fig. 9 loses it)
     angular, _ = tracking_mean('ekf', 0.2, runs=50, beta=alignment_mc.FAIL_BETA)
     assert angular == pytest.approx(LARGE_BETA_50_RUNS, abs=0.05)
+
+
+@pytest.mark.parametrize('name', ['ekf', 'three_point'])
+def test_blocks_side_by_side_are_each_run_alone(name):
+    # two noise levels and dropouts sharing one draw, a third block with its own: each
+    # block's runs are, number for number, what simulate_tracking gives them alone
+    base = led.TrackingLinkConfig(beta=1.2, steps=120, x2_0_spread=3.0)
+    links = [dataclasses.replace(base, noise=0.5), dataclasses.replace(base, noise=2.0,
+                                                                       dropout=0.3)]
+    shared = led.draw_disturbances(base, np.random.default_rng(7), 4)
+    other = led.draw_disturbances(base, np.random.default_rng(8), 3)
+    blocks = [led.Block(links[0], shared), led.Block(links[1], shared),
+              led.Block(links[1], other)]
+    together = led.simulate_blocks(led.make_aligner(name, runs=11), blocks)
+    start = 0
+    for link, seed, runs in ((links[0], 7, 4), (links[1], 7, 4), (links[1], 8, 3)):
+        alone = led.simulate_tracking(led.make_aligner(name, runs=runs), link,
+                                      np.random.default_rng(seed))
+        cols = slice(start, start + runs)
+        for field in ('phi', 'x2', 'x1', 'clean', 'z', 'command'):
+            np.testing.assert_array_equal(getattr(together, field)[:, cols],
+                                          getattr(alone, field), err_msg=field)
+        start += runs
+
+
+def test_blocks_must_share_all_but_noise_and_dropout():
+    base = led.TrackingLinkConfig(steps=20)
+    noise = led.draw_disturbances(base, np.random.default_rng(0), 2)
+    with pytest.raises(led.AlignmentError, match='differ in noise and dropout only'):
+        led.simulate_blocks(led.make_aligner('ekf', runs=4),
+                            [led.Block(base, noise),
+                             led.Block(dataclasses.replace(base, beta=2.0), noise)])
+    with pytest.raises(led.AlignmentError, match='the aligner has 3 runs'):
+        led.simulate_blocks(led.make_aligner('ekf', runs=3), [led.Block(base, noise)])

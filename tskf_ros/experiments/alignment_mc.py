@@ -18,6 +18,7 @@
 import argparse
 from concurrent.futures import ProcessPoolExecutor
 import dataclasses
+import functools
 import math
 from pathlib import Path
 import sys
@@ -136,21 +137,33 @@ def batches(points: Sequence[Point], size: int = BATCH_RUNS) -> list[list[int]]:
     """
     Group points (parts) into the tasks of run_batch: indices, at most `size` runs each.
 
-    A task holds points of one kind (Point.kind), in order; at least one point.
+    A task holds points of one kind (Point.kind), in order; at least one point.  The
+    tasks take the kinds in turn (the first task of each, then the second, ...), so that
+    the workers' last tasks are of every kind, not all of the last one.
     """
-    kinds: dict[Point, list[int]] = {}
+    kinds: dict[Point, list[list[int]]] = {}
     for i, p in enumerate(points):
-        kinds.setdefault(p.kind(), []).append(i)
-    out: list[list[int]] = []
-    for members in kinds.values():
-        task: list[int] = []
-        for i in members:
-            if task and sum(points[j].runs for j in task) + points[i].runs > size:
-                out.append(task)
-                task = []
-            task.append(i)
-        out.append(task)
-    return out
+        tasks = kinds.setdefault(p.kind(), [[]])
+        if tasks[-1] and sum(points[j].runs for j in tasks[-1]) + p.runs > size:
+            tasks.append([])
+        tasks[-1].append(i)
+    rounds = max(len(tasks) for tasks in kinds.values())
+    return [tasks[k] for k in range(rounds) for tasks in kinds.values() if k < len(tasks)]
+
+
+@functools.lru_cache(maxsize=4)
+def _draws(seed: int, part: int, runs: int,
+           link: led.TrackingLinkConfig) -> led.Disturbances:
+    """
+    Return the random numbers of a part (kept: every algorithm and level draws the same).
+
+    Read-only: the simulations share them.
+    """
+    rng = np.random.default_rng(seed if part == 0 else [seed, part])
+    noise = led.draw_disturbances(link, rng, runs)
+    for field in dataclasses.fields(noise):
+        getattr(noise, field.name).setflags(write=False)
+    return noise
 
 
 def run_point(p: Point) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -169,14 +182,8 @@ def run_batch(points: Sequence[Point]) -> list[tuple[np.ndarray, np.ndarray, dic
     first = points[0]
     if any(p.kind() != first.kind() for p in points):
         raise ValueError('run_batch simulates points of one kind (Point.kind) side by side')
-    draws: dict[tuple[int, int], led.Disturbances] = {}
-    blocks = []
-    for p in points:
-        key = (p.part, p.runs)
-        if key not in draws:
-            rng = np.random.default_rng(p.seed if p.part == 0 else [p.seed, p.part])
-            draws[key] = led.draw_disturbances(p.link, rng, p.runs)
-        blocks.append(led.Block(p.link, draws[key]))
+    blocks = [led.Block(p.link, _draws(p.seed, p.part, p.runs, first.kind().link))
+              for p in points]
     runs = sum(p.runs for p in points)
     record: Optional[alignment_pat.Recorded] = None
     if first.name in PAT_ALGORITHMS:

@@ -95,10 +95,13 @@ def summary(d: Durations) -> dict:
             'censored': int(np.count_nonzero(~d.observed))}
 
 
-def _next(mask: Bools, none: int) -> NDArray[np.int64]:
+def _next(mask: Bools, none: int) -> NDArray[np.signedinteger]:
     """Per step k and run (columns): the first step >= k where mask is set (none: never)."""
-    index = np.where(mask, np.arange(mask.shape[0])[:, None], none)
-    return np.minimum.accumulate(index[::-1], axis=0)[::-1]
+    steps = np.arange(mask.shape[0], dtype=np.int32 if none < 2**31 else np.int64)
+    index = np.where(mask, steps[:, None], steps.dtype.type(none))
+    backward = index[::-1]
+    np.minimum.accumulate(backward, axis=0, out=backward)
+    return index
 
 
 def pointing_events(phi: NDArray[np.float64], dt: float, *, angle: float,

@@ -118,6 +118,12 @@ def _slope(u: Angles, e1: Angles, e2: Angles, coefficients: Sequence[float],
 
 def _fit_peak(coefficients: Sequence[float]) -> tuple[float, float]:
     """Return (u, g(u)) at the maximum of eq. (4), in fit units."""
+    return _fit_peak_of(tuple(coefficients))
+
+
+@functools.lru_cache(maxsize=16)
+def _fit_peak_of(coefficients: tuple[float, ...]) -> tuple[float, float]:
+    """Return `_fit_peak` (cached: every IncidenceResponse needs it)."""
     b1, b2 = coefficients[1], coefficients[4]
     lo, hi = min(b1, b2), max(b1, b2)
     import scipy.optimize    # noqa: I900 - here: 0.5 s to import, for a cached fit
