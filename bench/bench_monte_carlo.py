@@ -16,13 +16,18 @@
 """
 Time and memory of the alignment Monte Carlo against its goals, in one run.
 
-    python bench/bench_monte_carlo.py [--repeats 3] [--quick]
+    python bench/bench_monte_carlo.py [--repeats 3] [--quick] [--against DIR]
 
 1. The default comparison (`python -m tskf_ros.experiments.alignment_mc --runs 1000`:
    7 algorithms x 11 noise levels) on every core and on one (--workers 1), alternated,
    wall time median over the repeats.  Goal: <= 5 s on every core.
 2. One algorithm (ekf_pat) at one level (1 V) for 1e3, 1e4 and 1e5 runs on every core:
    wall time and peak RSS.  Goals: 1e5 runs in <= 60 s; RSS flat in the number of runs.
+
+--against DIR: a source tree of another commit (`git worktree add DIR COMMIT`, or
+`git archive COMMIT tskf_ros | tar -x -C DIR`), whose tskf_ros is put first on
+PYTHONPATH: its default comparison on every core is alternated with this tree's, and its
+1e3..1e5 runs follow this tree's, for a before / after ratio measured in the same run.
 
 Each command runs in a fresh process; RSS is sampled every 0.1 s over the process and its
 workers: the peak of their sum, and of the largest.  The load average is printed beside
@@ -41,6 +46,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from typing import Optional
 
 MODULE = 'tskf_ros.experiments.alignment_mc'
 GOAL_DEFAULT_S = 5.0
@@ -87,13 +93,16 @@ class Measured:
     load: float
 
 
-def measure(args: list[str]) -> Measured:
-    """Run `python -m alignment_mc args` in a fresh process; sample its tree's RSS."""
+def measure(args: list[str], tree: Optional[str] = None) -> Measured:
+    """Run `python -m alignment_mc args` (tree's, if given) in a fresh process; sample RSS."""
     load = os.getloadavg()[0]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    env = dict(os.environ)
+    if tree is not None:
+        env['PYTHONPATH'] = os.pathsep.join([tree, *filter(None, [env.get('PYTHONPATH')])])
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, '-m', MODULE, *args], cwd=tmp,
+        proc = subprocess.Popen([sys.executable, '-m', MODULE, *args], cwd=tmp, env=env,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         peak_sum = peak_one = 0
         while proc.poll() is None:
@@ -116,46 +125,71 @@ def verdict(ok: bool) -> str:
     return 'MET' if ok else 'NOT MET'
 
 
+def summary(runs: list[Measured]) -> str:
+    """Median wall time, the runs' wall times and loads, CPU and peak RSS of a figure."""
+    wall = statistics.median(m.wall_s for m in runs)
+    return (f'{wall:6.1f} s median of {", ".join(f"{m.wall_s:.1f}" for m in runs)} s (load '
+            f'{", ".join(f"{m.load:.1f}" for m in runs)}), CPU '
+            f'{statistics.median(m.cpu_s for m in runs):.1f} s; peak RSS '
+            f'{max(m.peak_sum_mb for m in runs):.0f} MB in all, '
+            f'{max(m.peak_one_mb for m in runs):.0f} MB the largest process')
+
+
 def main() -> None:
     """Measure and print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--repeats', type=int, default=3, help='repeats of part 1 (3)')
     parser.add_argument('--quick', action='store_true',
                         help='part 1 once, part 2 up to 1e4 runs')
+    parser.add_argument('--against', metavar='DIR',
+                        help="another commit's source tree, measured alongside (before / after)")
     args = parser.parse_args()
+    if args.against and not os.path.isdir(os.path.join(args.against, 'tskf_ros')):
+        raise SystemExit(f'--against {args.against}: no tskf_ros package in it')
     cores = os.cpu_count() or 1
     print(f'{platform.machine()}, {cores} CPUs, Python {platform.python_version()}; '
           'load average (1 min) beside each figure')
 
     print(f'\n1. the default comparison, --runs 1000 (7 algorithms x 11 levels): '
-          f'--workers {cores} vs --workers 1, alternated')
-    got: dict[int, list[Measured]] = {cores: [], 1: []}
+          f'--workers {cores} vs --workers 1, alternated'
+          + (f'; and {args.against} on --workers {cores}' if args.against else ''))
+    cases = [('this tree', cores, None), ('this tree', 1, None)]
+    if args.against:
+        cases.append((args.against, cores, args.against))
+    got: dict[tuple, list[Measured]] = {case: [] for case in cases}
     for _ in range(1 if args.quick else args.repeats):
-        for workers in got:
-            got[workers].append(measure(['--runs', '1000', '--workers', str(workers)]))
-    for workers, runs in got.items():
+        for case in cases:
+            got[case].append(measure(['--runs', '1000', '--workers', str(case[1])], case[2]))
+    for (name, workers, tree), runs in got.items():
         wall = statistics.median(m.wall_s for m in runs)
-        print(f'   --workers {workers}: {wall:6.1f} s median of '
-              f'{", ".join(f"{m.wall_s:.1f}" for m in runs)} s (load '
-              f'{", ".join(f"{m.load:.1f}" for m in runs)}), CPU '
-              f'{statistics.median(m.cpu_s for m in runs):.1f} s; peak RSS '
-              f'{max(m.peak_sum_mb for m in runs):.0f} MB in all, '
-              f'{max(m.peak_one_mb for m in runs):.0f} MB the largest process'
-              + (f'   <= {GOAL_DEFAULT_S:g} s {verdict(wall <= GOAL_DEFAULT_S)}'
-                 if workers == cores else ''))
-    one, many = (statistics.median(m.wall_s for m in got[w]) for w in (1, cores))
+        goal = (f'   <= {GOAL_DEFAULT_S:g} s {verdict(wall <= GOAL_DEFAULT_S)}'
+                if workers == cores and tree is None else '')
+        print(f'   {name}, --workers {workers}: {summary(runs)}{goal}')
+    one, many = (statistics.median(m.wall_s for m in got[('this tree', w, None)])
+                 for w in (1, cores))
     print(f'   speed-up on {cores} workers: {one / many:.2f}x')
+    if args.against:
+        before = got[(args.against, cores, args.against)]
+        now = got[('this tree', cores, None)]
+        wall, cpu = (statistics.median(getattr(m, key) for m in now)
+                     / statistics.median(getattr(m, key) for m in before)
+                     for key in ('wall_s', 'cpu_s'))
+        print(f'   this tree / {args.against}, --workers {cores}: wall {wall:.2f}, '
+              f'CPU {cpu:.2f}')
 
     print(f'\n2. ekf_pat at 1 V, --workers {cores}: time and peak RSS against the runs')
-    print('      runs    wall (s)   CPU (s)   RSS all (MB)   RSS largest (MB)   load   goal')
+    print('   tree         runs    wall (s)   CPU (s)   RSS all (MB)   RSS largest (MB)   load'
+          '   goal')
+    trees = [('this tree', None)] + ([(args.against, args.against)] if args.against else [])
     for runs in (1000, 10000) if args.quick else (1000, 10000, 100000):
-        m = measure(['--runs', str(runs), '--noise-levels', '1', '--algorithms', 'ekf_pat',
-                     '--workers', str(cores)])
-        goal = (f'<= {GOAL_1E5_S:g} s {verdict(m.wall_s <= GOAL_1E5_S)}' if runs == 100000
-                else '')
-        print(f'   {runs:7d}   {m.wall_s:8.1f}   {m.cpu_s:7.1f}   {m.peak_sum_mb:12.0f}   '
-              f'{m.peak_one_mb:16.0f}'
-              f'   {m.load:4.1f}   {goal}')
+        for name, tree in trees:
+            m = measure(['--runs', str(runs), '--noise-levels', '1', '--algorithms', 'ekf_pat',
+                         '--workers', str(cores)], tree)
+            goal = (f'<= {GOAL_1E5_S:g} s {verdict(m.wall_s <= GOAL_1E5_S)}'
+                    if runs == 100000 and tree is None else '')
+            print(f'   {name[-10:]:>10} {runs:7d}   {m.wall_s:8.1f}   {m.cpu_s:7.1f}   '
+                  f'{m.peak_sum_mb:12.0f}   {m.peak_one_mb:16.0f}   {m.load:4.1f}   {goal}',
+                  flush=True)
 
 
 if __name__ == '__main__':
