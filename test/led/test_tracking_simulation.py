@@ -88,3 +88,18 @@ def test_blocks_must_share_all_but_noise_and_dropout():
                              led.Block(dataclasses.replace(base, beta=2.0), noise)])
     with pytest.raises(led.AlignmentError, match='the aligner has 3 runs'):
         led.simulate_blocks(led.make_aligner('ekf', runs=3), [led.Block(base, noise)])
+
+
+def test_fields_not_kept_have_no_steps_and_the_others_are_the_same():
+    link = led.TrackingLinkConfig(steps=50, noise=1.0, dropout=0.2)
+    noise = led.draw_disturbances(link, np.random.default_rng(3), 4)
+    full = led.simulate_blocks(led.make_aligner('ekf', runs=4), [led.Block(link, noise)])
+    some = led.simulate_blocks(led.make_aligner('ekf', runs=4), [led.Block(link, noise)],
+                               keep=('phi', 'clean'))
+    np.testing.assert_array_equal(some.phi, full.phi)
+    np.testing.assert_array_equal(some.clean, full.clean)
+    assert some.z.shape == some.x2.shape == some.command.shape == (0, 4)
+    assert some.estimate is None and full.estimate is not None
+    with pytest.raises(led.AlignmentError, match='unknown fields'):
+        led.simulate_blocks(led.make_aligner('ekf', runs=4), [led.Block(link, noise)],
+                            keep=('phi', 'speed'))

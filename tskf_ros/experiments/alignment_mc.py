@@ -195,7 +195,8 @@ def run_batch(points: Sequence[Point]) -> list[tuple[np.ndarray, np.ndarray, dic
     else:
         aligner = build(first.name, runs, first.link, first.response, first.ekf, first.clip,
                         first.controller)
-    traj = led.simulate_blocks(aligner, blocks, first.response)
+    # what tracking and the metrics read: the angle and the clean intensity
+    traj = led.simulate_blocks(aligner, blocks, first.response, keep=('phi', 'clean'))
     states = declared = None
     if record is not None:
         states, declared = np.array(record.states), np.array(record.declared)

@@ -23,7 +23,7 @@ parameters, and the tracking percentages of Section V (Table I, Fig. 8-10).
 import dataclasses
 from dataclasses import dataclass
 import math
-from typing import Optional, Sequence
+from typing import Collection, Optional, Sequence
 
 import numpy as np
 
@@ -63,7 +63,12 @@ class TrackingLinkConfig:
 
 @dataclass
 class Trajectory:
-    """One simulation: time (steps,) and per-step, per-run arrays (steps, runs)."""
+    """
+    One simulation: time (steps,) and per-step, per-run arrays (steps, runs).
+
+    A field the simulation was asked not to keep (simulate_blocks' `keep`) has no steps:
+    (0, runs), and no estimate (None).
+    """
 
     t: FloatArray
     phi: FloatArray        # true angle of incidence, unwrapped (degrees)
@@ -73,6 +78,10 @@ class Trajectory:
     z: FloatArray          # the measurement given to the aligner, NaN when missing
     command: FloatArray    # motor command returned by the aligner
     estimate: Optional[FloatArray] = None   # (steps, runs, 2) posterior [x1, x2], EKFs
+
+
+# the per-step fields of a Trajectory
+FIELDS = ('phi', 'x2', 'x1', 'clean', 'z', 'command', 'estimate')
 
 
 @dataclass(frozen=True)
@@ -142,14 +151,16 @@ def simulate_tracking(aligner: Aligner, link: TrackingLinkConfig, rng: np.random
 
 
 def simulate_blocks(aligner: Aligner, blocks: Sequence[Block],
-                    response: Optional[IncidenceResponse] = None) -> Trajectory:
+                    response: Optional[IncidenceResponse] = None, *,
+                    keep: Collection[str] = FIELDS) -> Trajectory:
     """
     Run `simulate_tracking` on blocks of runs side by side: the aligner steps all at once.
 
     Block i's runs are the columns after those of blocks 0 .. i-1; its link gives their
     measurement noise and dropout, its Disturbances their random numbers (blocks may share
     them: the same draws at several noise levels).  The links differ in noise and dropout
-    only.  Each run is what simulate_tracking gives it alone, number for number.
+    only.  Each run is what simulate_tracking gives it alone, number for number.  keep:
+    the Trajectory fields recorded (FIELDS; the others have no steps: less memory).
     """
     response = response if response is not None else IncidenceResponse()
     if not blocks:
@@ -176,11 +187,14 @@ def simulate_blocks(aligner: Aligner, blocks: Sequence[Block],
     dropout = np.repeat([b.link.dropout for b in blocks], sizes)
     t = np.arange(steps, dtype=float) * link.dt
     shape = (steps, n)
+    unknown = set(keep) - set(FIELDS)
+    if unknown:
+        raise AlignmentError(f'keep: unknown fields {sorted(unknown)}; expected some of {FIELDS}')
     ekf = aligner if isinstance(aligner, (ScanningEKF, LQGAligner)) else None
-    estimate = None if ekf is None else np.empty((steps, n, 2))
-    out = Trajectory(t=t, phi=np.empty(shape), x2=np.empty(shape), x1=np.empty(shape),
-                     clean=np.empty(shape), z=np.empty(shape), command=np.empty(shape),
-                     estimate=estimate)
+    kept = {f: np.empty(shape if f in keep else (0, n)) for f in FIELDS if f != 'estimate'}
+    estimate = None if ekf is None or 'estimate' not in keep else np.empty((steps, n, 2))
+    out = Trajectory(t=t, **kept, estimate=estimate)
+    rows = [f for f in kept if f in keep]
     x1 = np.full(n, link.max_intensity / response.peak)
     phi = np.concatenate([b.noise.x2_0 for b in blocks]) + aligner.scan_offset
     drift = link.beta * link.dt
@@ -190,10 +204,11 @@ def simulate_blocks(aligner: Aligner, blocks: Sequence[Block],
             clean = np.zeros(n)
         # (8): V_d,k = x1 g(phi) + v_k
         z = np.where(joined('u', k) < dropout, np.nan, clean + joined('v', k) * noise)
-        out.phi[k], out.x2[k], out.x1[k] = phi, phi - aligner.scan_offset, x1
-        out.clean[k], out.z[k] = clean, z
+        offset = aligner.scan_offset
         cmd = aligner.step(t[k], z)
-        out.command[k] = cmd
+        now = {'phi': phi, 'x1': x1, 'clean': clean, 'z': z, 'command': cmd}
+        for f in rows:
+            kept[f][k] = now[f] if f != 'x2' else phi - offset
         if ekf is not None and estimate is not None:
             estimate[k] = ekf.x[:, :2]
         # (25): x2_k = x2_{k-1} + beta + u_{k-1} + w2 (here on phi = x2 + psi, with the scan)
