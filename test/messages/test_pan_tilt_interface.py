@@ -108,10 +108,10 @@ def test_gain_is_the_p_law_of_eq_21_in_two_axes(gain):
 
 @pytest.mark.parametrize('hold, steering', [(0, False), (200, True)])
 def test_pat_hold_samples_holds_a_blocked_light_in_two_axes_as_in_one(hold, steering):
-    """Blocked from 2 s: with pat.hold_samples 0 the supervisor searches, with 200 it holds."""
+    """Blocked from 4 s: with pat.hold_samples 0 the supervisor searches, with 200 it holds."""
     session = PanTiltSession(two_axis(**{'pat.start': 'tracking', 'pat.hold_samples': hold,
                                          'pan_tilt.noise': 0.5}).session.session)
-    link = PanTiltLinkConfig(noise=0.5, blocked=(2.0, 20.0))
-    loop = pan_tilt_closed_loop(link, session, 120, seed=3)
+    link = PanTiltLinkConfig(noise=0.5, blocked=(4.0, 20.0))
+    loop = pan_tilt_closed_loop(link, session, 160, seed=3)
     assert loop.outcomes[-1].state == 'lost'
     assert session.steering is steering

@@ -81,7 +81,7 @@ def test_a_loss_of_a_dim_light_is_held_for_fade_hold():
     sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
                             PanTiltSupervisorConfig(start='tracking', hold_samples=40,
                                                     fade_peak=10.0, fade_hold=300,
-                                                    fade_seen=False))
+                                                    fade_seen=False, hold_after=0))
     link = PanTiltLinkConfig(noise=0.5, steps=200, blocked=(2.0, 12.0))
     simulate_pan_tilt(sup, link, 7)
     assert np.all(sup.state == LOST) and np.all(sup.steering)
@@ -92,11 +92,24 @@ def test_a_light_never_seen_at_fade_peak_in_lock_has_not_faded():
     """fade_seen: x1_lock never reached fade_peak since the start, so hold_samples only."""
     sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
                             PanTiltSupervisorConfig(start='tracking', hold_samples=40,
-                                                    fade_peak=10.0, fade_hold=300))
+                                                    fade_peak=10.0, fade_hold=300,
+                                                    hold_after=0))
     link = PanTiltLinkConfig(noise=0.5, steps=200, blocked=(2.0, 12.0))
     simulate_pan_tilt(sup, link, 7)
     assert np.all(sup.x1_best * sup.response.peak < 10.0)
     assert np.all(sup.hold_limit == 40) and not np.any(sup.steering)
+
+
+@pytest.mark.parametrize('hold_after, held', [(0, True), (40, False)])
+def test_a_lock_younger_than_hold_after_is_not_held(hold_after, held):
+    """Blocked at 2 s, about 20 samples after good lock: held only with hold_after 0."""
+    sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
+                            PanTiltSupervisorConfig(start='tracking', hold_samples=300,
+                                                    hold_after=hold_after))
+    simulate_pan_tilt(sup, PanTiltLinkConfig(noise=0.5, steps=120, blocked=(2.0, 12.0)), 7)
+    assert np.all(sup.state == LOST) and np.all(sup.losses == 1)
+    assert np.all(sup.lock_age < 40)
+    assert np.all(sup.steering == held)
 
 
 class _Watch:
@@ -126,7 +139,8 @@ class _Watch:
 def test_a_fade_hold_looks_around_and_comes_back_to_the_held_pointing():
     """fade_look: one spiral pass (no light: blocked), then the hold at its moving centre."""
     config = PanTiltSupervisorConfig(start='tracking', hold_samples=20, fade_peak=10.0,
-                                     fade_hold=40, fade_seen=False, fade_look=20.0)
+                                     fade_hold=40, fade_seen=False, fade_look=20.0,
+                                     hold_after=0)
     watch = _Watch(PanTiltSupervisor(ConicalScanEKF(runs=10), config))
     simulate_pan_tilt(watch, PanTiltLinkConfig(noise=0.5, steps=300, blocked=(2.0, 15.0)), 7)
     looking, steering = np.array(watch.looking), np.array(watch.steering)

@@ -84,6 +84,10 @@ class PanTiltSupervisorConfig:
     # as the drift model predicts the source; light seen: the hand-over; none: back to the
     # centre and the EKF as it was, and the hold again (fade_hold samples, then a look)
     fade_look: float = 0.0
+    # samples of good lock since the hand-over (or the start) before a loss is held: a
+    # lock lost sooner was on a fit off the light, and the hold would only delay the
+    # search (on a cold start at 1 V, 2 of the 10 s)
+    hold_after: int = 40
     # samples the spiral goes on after the CUSUM sees light, so that the fit sees the
     # light's crossing on both sides of its peak
     settle: int = 4
@@ -108,8 +112,8 @@ class PanTiltSupervisorConfig:
                 raise AlignmentError(f'{name} must be >= 0, got {value}')
         if not self.noise > 0 or not self.inflate > 0:
             raise AlignmentError('noise and inflate must be > 0')
-        if self.hold_samples < 0 or self.fade_hold < 0:
-            raise AlignmentError('hold_samples and fade_hold must be >= 0')
+        if self.hold_samples < 0 or self.fade_hold < 0 or self.hold_after < 0:
+            raise AlignmentError('hold_samples, fade_hold and hold_after must be >= 0')
         if self.settle < 0 or self.min_samples < 0:
             raise AlignmentError('settle and min_samples must be >= 0')
         for name in ('x1_var', 'angle_var'):
@@ -169,6 +173,7 @@ class PanTiltSupervisor:
         self.x1_lock = np.full(n, np.nan)           # x1hat in good lock, averaged
         self.fading = np.zeros(n, dtype=bool)       # the current hold is a fade hold
         self.x1_best = np.full(n, np.nan)           # the highest x1_lock since hand-over
+        self.lock_age = np.zeros(n, dtype=int)      # samples in good lock since hand-over
         self.looking = np.zeros(n, dtype=bool)      # a fade hold's look is under way
         self.look_x = self.tracker.x.copy()         # the EKF when the look began
         self.look_P = self.tracker.P.copy()
@@ -230,6 +235,7 @@ class PanTiltSupervisor:
         mean = self.joints - joint_turn(s_now, self.joints[:, 1])
         self.last_good = np.where(good[:, None], mean, self.last_good)
         self.locked |= good
+        self.lock_age = np.where(good, self.lock_age + 1, self.lock_age)
         x1 = self.tracker.x[:, 0]
         # an exponential average over about a second (alpha = 1/20), only in good lock
         self.x1_lock = np.where(good, np.where(np.isfinite(self.x1_lock),
@@ -277,8 +283,10 @@ class PanTiltSupervisor:
             self.losses[lost] += 1
             self.tracked[lost] = 0
             self.state[lost] = LOST
-            # a hand-over that never came into good lock was onto no light: search again
-            hold = lost & self.locked & (cfg.hold_samples > 0)
+            # a hand-over that never came into good lock, or held it less than hold_after
+            # samples, was onto no light or a fit off it: search again at once
+            hold = (lost & self.locked & (self.lock_age >= cfg.hold_after)
+                    & (cfg.hold_samples > 0))
             # faded: dim now, and seen at fade_peak or brighter in this lock (a lock that
             # never saw the light bright may be an EKF that explains its own error by x1)
             peak = self.response.peak
@@ -382,6 +390,7 @@ class PanTiltSupervisor:
         self.looking[found] = False
         self.locked[found] = False
         self.x1_best[found] = np.nan
+        self.lock_age[found] = 0
         self.x1_lock[found] = np.nan
         self.lock.reset(found)
         return turn
