@@ -29,8 +29,9 @@ a declared loss for hold_samples (it keeps steering on its drift model; tracking
 after a full window with few low samples), then the spiral again, centred on the last
 mean pointing seen in good lock; a lock younger than hold_after is not held, and a light
 that faded in lock (dim now, seen bright since the hand-over) is held fade_hold samples,
-then, with fade_look, looked for by one spiral pass that follows the drift model.  The supervisor follows the mount's joints [pan, tilt]
-from `joints0` as the mount does (joint_turn of each turn at the tilt it is made at): a
+then, with fade_look, looked for by one spiral pass that follows the drift model.  The
+supervisor follows the mount's joints [pan, tilt] from `joints0` as the mount does
+(joint_turn of each turn at the tilt it is made at): a
 search is a pattern of directions on the sphere, and tangent-plane turns do not add up to
 one (over a 30 deg spiral they would miss its centre by tens of degrees).  Vectorised
 over runs.
