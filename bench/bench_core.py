@@ -37,13 +37,16 @@ of a part alternate within each repeat, so a load that comes and goes hits them 
    transition with the same Van Loan kernel), n = 1, 2, 6, 20 (goals <= 0.5x, n = 20
    <= 1.0x; exact within 1.2x of Euler); `kf.run` against FilterPy's `batch_filter` given
    Fs, Qs, Rs, n = 2 (goal <= 0.2x). Results are checked equal; ratios of medians.
-5. `rts_smooth`, K = 1e6, n = 2, +-1 % jitter, in a fresh process: the growth of peak RSS
-   (ru_maxrss) over the call against the size of its output (goal <= 2x).
+5. `rts_smooth`, K = 1e6 (`--rss-points`), n = 2, +-1 % jitter, in a fresh process: the
+   peak RSS of the call (the kernel's high-water mark, reset before it) over the RSS before
+   it, against the size of its output (goal <= 2x); `--rss-baseline DIR` alternates it
+   with the package of another source tree (DIR/tskf_ros, e.g. `git archive` of a commit).
 
 Figures only; nothing is asserted.
 """
 
 import argparse
+import functools
 import os
 import platform
 import statistics
@@ -383,9 +386,20 @@ def goal_jitter(repeats: int, quick: bool) -> None:
 
 
 RSS_SCRIPT = """
-import resource, sys
+import resource, sys, time
+if len(sys.argv) > 2:       # an older source tree of the package, to compare
+    sys.path.insert(0, sys.argv[2])
 import numpy as np
 from tskf_ros.core import rts_smooth
+
+
+def hwm():
+    # the kernel's high-water mark of this process (kB), and its resident set now
+    with open('/proc/self/status') as f:
+        rows = dict(line.split(':', 1) for line in f)
+    return int(rows['VmHWM'].split()[0]), int(rows['VmRSS'].split()[0])
+
+
 K = int(sys.argv[1])
 rng = np.random.default_rng(0)
 mu = 0.01 * (1 + rng.uniform(-0.01, 0.01, K))
@@ -393,32 +407,64 @@ y = rng.normal(size=(K, 1))
 kw = dict(Q=np.eye(2) * 0.1, R=[[0.5]], x0=[0.0, 0.0], P0=np.eye(2))
 A, C = [[0.0, 1.0], [-1.0, -0.3]], [[1.0, 0.0]]
 rts_smooth(A, C, mu[:10], y[:10], **kw)
-before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-out = rts_smooth(A, C, mu, y, **kw)
-after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-print(before, after, out.xs.nbytes + out.Ps.nbytes)
+try:        # start the high-water mark afresh (Linux: clear_refs 5)
+    with open('/proc/self/clear_refs', 'w') as f:
+        f.write('5')
+    before = hwm()[1]
+    t0 = time.thread_time()
+    out = rts_smooth(A, C, mu, y, **kw)
+    cpu = time.thread_time() - t0
+    after = hwm()[0]
+except OSError:
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.thread_time()
+    out = rts_smooth(A, C, mu, y, **kw)
+    cpu = time.thread_time() - t0
+    after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(before, after, out.xs.nbytes + out.Ps.nbytes, cpu)
 """
 
 
-def goal_rss(repeats: int, quick: bool) -> None:
+def goal_rss(repeats: int, quick: bool, points: Optional[int] = None,
+             baseline: Optional[str] = None) -> None:
     """Peak RSS of rts_smooth, K = 1e6, n = 2, +-1 % jitter, in a fresh process."""
     import subprocess
     import sys
-    K = 100_000 if quick else 1_000_000
-    out = subprocess.run([sys.executable, '-c', RSS_SCRIPT, str(K)], check=True,
-                         capture_output=True, text=True).stdout.split()
-    before, after, size = int(out[0]) * 1024, int(out[1]) * 1024, int(out[2])
-    grew = after - before
-    print(f'\n5. rts_smooth, K = {K}, n = 2, +-1 % jitter (a fresh process, ru_maxrss)')
-    print(f'   peak RSS {after / 2**20:.0f} MB, {before / 2**20:.0f} MB before the call: '
-          f'grew {grew / 2**20:.0f} MB for an output of {size / 2**20:.0f} MB: '
-          f'{grew / size:.2f}x   <= 2x {verdict(grew <= 2 * size)}')
+    K = points or (100_000 if quick else 1_000_000)
+    trees: dict[str, list[tuple[float, float]]] = {'this tree': []}
+    if baseline is not None:
+        trees[baseline] = []
+    print(f'\n5. rts_smooth, K = {K}, n = 2, +-1 % jitter (a fresh process each, the peak RSS '
+          'of the call over the RSS before it)')
+    for _ in range(3 if baseline else 1):
+        for tree in trees:
+            extra = [] if tree == 'this tree' else [tree]
+            out = subprocess.run([sys.executable, '-c', RSS_SCRIPT, str(K)] + extra, check=True,
+                                 capture_output=True, text=True).stdout.split()
+            before, after, size = int(out[0]) * 1024, int(out[1]) * 1024, int(out[2])
+            grew, cpu = after - before, float(out[3])
+            print(f'   {tree}: peak RSS {after / 2**20:.0f} MB, {before / 2**20:.0f} MB before '
+                  f'the call: grew {grew / 2**20:.0f} MB for an output of {size / 2**20:.0f} MB: '
+                  f'{grew / size:.2f}x   <= 2x {verdict(grew <= 2 * size)}; the call '
+                  f'{cpu:.2f} s thread CPU')
+            trees[tree].append((grew / size, cpu))
+    if baseline is not None:
+        ours, theirs = trees['this tree'], trees[baseline]
+        cpu_ratio = (statistics.median(c for _, c in ours)
+                     / statistics.median(c for _, c in theirs))
+        print(f'   medians, this tree / {baseline}: RSS growth over output '
+              f'{statistics.median(g for g, _ in ours):.2f}x / '
+              f'{statistics.median(g for g, _ in theirs):.2f}x, CPU of the call '
+              f'{cpu_ratio:.2f}')
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--repeats', type=int, default=7, help='repeats (>= 5)')
     parser.add_argument('--quick', action='store_true', help='a tenth of the calls')
+    parser.add_argument('--rss-points', type=int, help='K of part 5 (default 1e6)')
+    parser.add_argument('--rss-baseline', metavar='DIR',
+                        help='part 5 alternated with the package in DIR (DIR/tskf_ros)')
     parser.add_argument('--only', nargs='+',
                         choices=('step', 'session', 'alignment', 'jitter', 'rss'),
                         help='run only these parts')
@@ -431,7 +477,9 @@ def main() -> None:
     print(f'thread CPU time per call, min / median over {args.repeats} repeats, '
           'cases alternated')
     parts = {'step': goal_step, 'session': goal_session, 'alignment': goal_alignment,
-             'jitter': goal_jitter, 'rss': goal_rss}
+             'jitter': goal_jitter,
+             'rss': functools.partial(goal_rss, points=args.rss_points,
+                                      baseline=args.rss_baseline)}
     for name in args.only or list(parts):
         parts[name](args.repeats, args.quick)
 

@@ -25,6 +25,7 @@ import pytest
 import scipy.linalg
 
 from tskf_ros.core import FilterError, rts_smooth, smooth_at, TimeScaleKalmanFilter
+from tskf_ros.core import smoother
 from tskf_ros.core.timescale_kalman import NonRegressiveError
 
 TOL = 1e-9
@@ -365,3 +366,23 @@ def test_the_compiled_forward_run_gives_the_step_loops_bits(kind):
     loop = rts_smooth(A, [[1.0, 0.0]], mu, y, u=np.zeros((K, 1)), **kw)
     np.testing.assert_array_equal(run.xs, loop.xs)
     np.testing.assert_array_equal(run.Ps, loop.Ps)
+
+
+@pytest.mark.parametrize('kind', ['euler', 'exact'])
+def test_chunked_passes_are_the_textbook_smoother_and_the_whole_runs_bits(kind, monkeypatch):
+    # the least chunk (16 points): the forward runs and the backward chunks split at 16,
+    # 32, 48, with missing measurements across a split and at one
+    m = irregular_model()
+    mu, y, _ = irregular_data(K=60)
+    y[15:18] = np.nan
+    y[32] = np.nan
+    kw = {k: m[k] for k in ('Q', 'R', 'G', 'B', 'D', 'x0', 'P0')}
+    whole = rts_smooth(m['A'], m['C'], mu, y, transition=kind, **kw)
+    monkeypatch.setattr(smoother, '_CHUNK_BYTES', 1)
+    assert smoother._chunk(3) == 16
+    xs, Ps = rts_smooth(m['A'], m['C'], mu, y, transition=kind, **kw)
+    x_ref, P_ref, _ = reference(m, mu, y, np.zeros((60, 1)), kind)
+    close(xs, x_ref)
+    close(Ps, P_ref)
+    np.testing.assert_array_equal(xs, whole.xs)
+    np.testing.assert_array_equal(Ps, whole.Ps)

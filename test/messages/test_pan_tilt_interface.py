@@ -15,11 +15,16 @@
 
 """The alignment node's two-axis parameters: which core aligner the shared choices name."""
 
+import numpy as np
 import pytest
 
 from tskf_ros import led
 from tskf_ros.core.units import NS
 from tskf_ros.led.pan_tilt_stream import PanTiltStream, PanTiltStreamConfig
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
+from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
+from tskf_ros.led.two_axis.pan_tilt_session import pan_tilt_closed_loop, PanTiltSession
+from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisorConfig
 from tskf_ros.messages.alignment_interface import default_parameters, parameters_to_config
 from tskf_ros.messages.pan_tilt_interface import pan_tilt_outcome_messages
 
@@ -69,3 +74,44 @@ def test_the_outcome_messages_are_predicted_corrected_command_in_order():
     rejected = stream.add(NS, 2.5)                    # the same stamp: dropped
     assert rejected.outcome.status == 'rejected'
     assert pan_tilt_outcome_messages(rejected, ('pan', 'tilt')) == []
+
+
+def test_at_the_defaults_the_two_axis_filter_and_supervisor_are_the_core_defaults():
+    s = two_axis().session.session
+    assert s.ekf == ConicalEKFConfig() and s.supervisor == PanTiltSupervisorConfig()
+
+
+def test_gain_and_the_shared_pat_parameters_reach_the_two_axis_configs():
+    s = two_axis(**{'gain': 1.2, 'pat.hold_samples': 7, 'pat.detector_reference': 0.8,
+                    'pat.lock_window': 30, 'pat.lock_low_count': 20, 'pat.lock_level': 0.4,
+                    'pat.lock_nis_alpha': 1e-3, 'pat.lock_corroborate': 5}).session.session
+    assert s.ekf.gain == 1.2 and s.supervisor.hold_samples == 7
+    assert s.supervisor.detector.reference == 0.8
+    lock = s.supervisor.lock
+    assert (lock.window, lock.low_count, lock.level, lock.nis_alpha, lock.corroborate) == (
+        30, 20, 0.4, 1e-3, 5)
+    aligner = PanTiltSession(s).aligner
+    assert aligner.tracker.config.gain == 1.2 and aligner.config.lock == lock
+
+
+@pytest.mark.parametrize('gain', [0.25, 0.5, 1.5])
+def test_gain_is_the_p_law_of_eq_21_in_two_axes(gain):
+    """The first turn less the scan's step is -G dhat (d has no drift yet: b stays 0)."""
+    session = PanTiltSession(two_axis(**{'pat.enabled': False, 'gain': gain}).session.session)
+    s0 = session.tracker.scan_offset.copy()
+    out = session.add(NS, 0.5)
+    s1 = session.tracker.scan_offset
+    d = np.array(out.estimate.error)
+    assert np.all(out.estimate.x[3:5] == 0.0) and np.linalg.norm(d) > 1e-4
+    np.testing.assert_allclose(np.array(out.turn) - (s1 - s0), -gain * d, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize('hold, steering', [(0, False), (200, True)])
+def test_pat_hold_samples_holds_a_blocked_light_in_two_axes_as_in_one(hold, steering):
+    """Blocked from 4 s: with pat.hold_samples 0 the supervisor searches, with 200 it holds."""
+    session = PanTiltSession(two_axis(**{'pat.start': 'tracking', 'pat.hold_samples': hold,
+                                         'pan_tilt.noise': 0.5}).session.session)
+    link = PanTiltLinkConfig(noise=0.5, blocked=(4.0, 20.0))
+    loop = pan_tilt_closed_loop(link, session, 160, seed=3)
+    assert loop.outcomes[-1].state == 'lost'
+    assert session.steering is steering

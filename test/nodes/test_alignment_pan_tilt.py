@@ -231,6 +231,12 @@ def test_axes_is_read_only_and_a_tilt_limit_change_restarts_the_two_axis_aligner
         assert result[0].successful, result[0].reason
         assert node.session.config.session.tilt_limits == (-30.0, 30.0)
         assert node.session.stats.resets['reconfigured'] == 1
+        # the shared filter and supervisor parameters reach the two-axis aligner
+        result = node.set_parameters([Parameter('gain', value=1.1),
+                                      Parameter('pat.hold_samples', value=30)])
+        assert all(r.successful for r in result), [r.reason for r in result]
+        session = node.session.config.session
+        assert session.ekf.gain == 1.1 and session.supervisor.hold_samples == 30
         # refused with the reason, and the node keeps its config
         result = node.set_parameters([Parameter('algorithm', value='three_point')])[0]
         assert not result.successful and "algorithm must be 'ekf'" in result.reason

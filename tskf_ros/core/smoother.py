@@ -17,11 +17,13 @@
 Rauch-Tung-Striebel smoother for the time-scale Kalman filter (Bohner & Wintz 2013, Table 3).
 
 Forward: the filter at the points t_0 < ... < t_{K-1} of the time scale
-(t_{k+1} = t_k + mu_k), in compiled runs (`TimeScaleKalmanFilter.run`, the same bits as its
-`step`); it keeps x(t_k|t_k), P(t_k|t_k), the prediction x(t_{k+1}|t_k), P(t_{k+1}|t_k)
-and, per distinct mu, the jump F (I + mu A, or e^{A mu}) with each point's index into them.
-The backward pass writes x(t_k|T), P(t_k|T) over x(t_k|t_k), P(t_k|t_k) in place: the
-forward arrays are the output, and the pass needs only the predictions besides.
+(t_{k+1} = t_k + mu_k), in compiled runs between missing measurements
+(`TimeScaleKalmanFilter.run`, the same bits as its `step`), chunk by chunk; it keeps only
+x(t_k|t_k), P(t_k|t_k), which become the output: the backward pass writes x(t_k|T),
+P(t_k|T) over them in place, from the last point back, remaking each point's prediction
+x(t_{k+1}|t_k), P(t_{k+1}|t_k) and jump F (I + mu A, or e^{A mu}) from x(t_k|t_k),
+P(t_k|t_k) and mu_k with the filter's own transitions and `kalman.predict`, chunk by
+chunk.  Peak memory is the output and one chunk, whatever K.
 Backward (Rauch, Tung & Striebel, AIAA J. 3, 1965; Sarkka, Bayesian Filtering and
 Smoothing, 2013, Theorem 8.2), from x(t_{K-1}|T) = x(t_{K-1}|t_{K-1}):
 
@@ -44,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tskf_ros.core import kalman
 from tskf_ros.core.jit import kernel
+from tskf_ros.core.kalman import predict
 from tskf_ros.core.matrices import FilterError
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 
@@ -62,16 +65,18 @@ class Smoothed(NamedTuple):
 
 
 class Forward(NamedTuple):
-    """What the backward pass needs of the forward pass, one row per point."""
+    """The forward pass: x(t_k|t_k), P(t_k|t_k) per point and what remakes its jumps."""
 
-    x_f: NDArray[np.float64]        # x(t_k|t_k)
-    P_f: NDArray[np.float64]        # P(t_k|t_k)
-    x_p: NDArray[np.float64]        # x(t_{k+1}|t_k)
-    P_p: NDArray[np.float64]        # P(t_{k+1}|t_k)
-    F: NDArray[np.float64]          # the jumps of the distinct mu
-    jump: NDArray[np.intp]          # point k jumps by F[jump[k]]
-    inputs: list[Optional[Vector]]  # u(t_k), held over the jump
-    kf: TimeScaleKalmanFilter       # the filter that made them (for the partial jumps)
+    x_f: NDArray[np.float64]            # x(t_k|t_k) (K, n)
+    P_f: NDArray[np.float64]            # P(t_k|t_k) (K, n, n)
+    mu: NDArray[np.float64]             # the graininess of each point (K,)
+    inputs: Optional[NDArray[np.float64]]   # u(t_k) (K, m), a row of NaN: none; or None
+    kf: TimeScaleKalmanFilter           # the filter that made them (its transitions)
+
+
+# the points of one compiled run or one backward chunk: about 1 MiB of output rows, so
+# that the run's own arrays (its predictions, the jumps of its distinct mu) stay small
+_CHUNK_BYTES = 1 << 20
 
 
 _jit = kernel
@@ -126,9 +131,9 @@ def backward_pass(x_f: NDArray[np.float64], P_f: NDArray[np.float64],
 
 
 def _graininess(mu: ArrayLike) -> Vector:
-    """Return mu as a 1-D array of finite graininesses > 0, one per point."""
+    """Return mu as a 1-D array of finite graininesses > 0, one per point (not copied)."""
     try:
-        m = np.array(mu, dtype=float)
+        m = np.asarray(mu, dtype=float)
     except (TypeError, ValueError) as exc:
         raise FilterError(f'mu is not numeric: {exc}') from None
     if m.ndim != 1 or m.size == 0:
@@ -140,25 +145,29 @@ def _graininess(mu: ArrayLike) -> Vector:
     return m
 
 
-def _rows(values: Optional[ArrayLike], K: int, size: int, name: str, *,
-          missing: bool = True) -> list[Optional[Vector]]:
+def _table(values: Optional[ArrayLike], K: int, size: int, name: str, *,
+           missing: bool = True) -> Optional[NDArray[np.float64]]:
     """
-    Split y or u into K rows of `size` entries (None: no value at that point).
+    Return y or u as a checked (K, size) array, a row of NaN where a point has no value.
 
-    With missing=True (y), an all-NaN row, or a masked row of a numpy masked array, is
-    a missing measurement too.
+    A row None, or (with missing=True, for y) an all-NaN row or a masked row of a numpy
+    masked array, is no value at that point.  A float array of that shape is not copied.
     """
     if values is None:
-        return [None] * K
+        return None
     if isinstance(values, (list, tuple)):
         if len(values) != K:
             raise FilterError(f'{name} must have {K} rows (one per point), got {len(values)}')
-        return [None if v is None else _row(v, size, name, k, missing)
-                for k, v in enumerate(values)]
+        table = np.full((K, size), np.nan)
+        for k, v in enumerate(values):
+            row = None if v is None else _row(v, size, name, k, missing)
+            if row is not None:
+                table[k] = row
+        return table
     try:
         if isinstance(values, np.ma.MaskedArray):
             values = np.ma.filled(np.ma.asarray(values, dtype=float), np.nan)
-        a = np.array(values, dtype=float)
+        a = np.asarray(values, dtype=float)
     except (TypeError, ValueError) as exc:
         raise FilterError(f'{name} is not numeric: {exc}') from None
     if a.ndim == 1 and size == 1:
@@ -166,7 +175,13 @@ def _rows(values: Optional[ArrayLike], K: int, size: int, name: str, *,
     if a.shape != (K, size):
         raise FilterError(f'{name} must have shape {(K, size)} (one row per point), '
                           f'got {a.shape}')
-    return [_row(a[k], size, name, k, missing) for k in range(K)]
+    ok = np.isfinite(a).all(axis=1)
+    if missing:
+        ok |= np.isnan(a).all(axis=1)
+    bad = np.flatnonzero(~ok)
+    if bad.size:
+        _row(a[bad[0]], size, name, int(bad[0]), missing)     # raises, saying why
+    return a
 
 
 def _row(value: ArrayLike, size: int, name: str, k: int, missing: bool) -> Optional[Vector]:
@@ -186,90 +201,117 @@ def _row(value: ArrayLike, size: int, name: str, k: int, missing: bool) -> Optio
     raise FilterError(f'{name}[{k}] = {v} has non-finite entries')
 
 
+def _at(table: Optional[NDArray[np.float64]], k: int) -> Optional[Vector]:
+    """Return row k of a `_table`, None where the point has no value."""
+    if table is None or np.isnan(table[k, 0]):
+        return None
+    return table[k]
+
+
+def _chunk(n: int) -> int:
+    """Return the points of one chunk for a state of n: _CHUNK_BYTES of x(t|t), P(t|t)."""
+    return max(16, _CHUNK_BYTES // (8 * n * (n + 1)))
+
+
 def _forward(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], *,
              Q: ArrayLike, R: ArrayLike, G: Optional[ArrayLike], B: Optional[ArrayLike],
              u: Optional[ArrayLike], D: Optional[ArrayLike], x0: ArrayLike, P0: ArrayLike,
              transition: str) -> Forward:
-    """Run the filter at every point (in runs between missing measurements); keep its rows."""
+    """Run the filter at every point, keeping only x(t_k|t_k), P(t_k|t_k)."""
     m = _graininess(mu)
     K = m.size
     kf = TimeScaleKalmanFilter(A, C, Q=Q, R=R, G=G, B=B, D=D, x0=x0, P0=P0,
                                transition=transition)
-    n = kf.n
-    z = _measured(y, K, kf.p) if u is None else None
-    if z is not None:
-        # every point measured, no input: one compiled run, no per-point rows
-        us: list[Optional[Vector]] = [None] * K
-        res = kf.run(m, z)
-        if res.steps < K:
-            _refused(kf, float(m[res.steps]), z[res.steps], res.steps)
-        # the backward pass's F, made once the run's own transitions are freed (with
-        # jittered stamps nearly every mu is distinct: a stack as long as the data)
-        F, jump = _transitions_of(kf, m)
-        return Forward(res.x_corrected, res.P_corrected, res.x_predicted, res.P_predicted,
-                       F, jump, us, kf)
-    F, jump = _transitions_of(kf, m)
-    ys = _rows(y, K, kf.p, 'y')
-    us = _rows(u, K, kf.B.shape[1], 'u', missing=False)
-    x_f, x_p = np.empty((K, n)), np.empty((K, n))
-    P_f, P_p = np.empty((K, n, n)), np.empty((K, n, n))
-    for k in range(K):
-        mu_k = float(m[k])
-        try:
-            res1 = kf.step(mu_k, ys[k], us[k])
-        except FilterError as exc:
-            raise type(exc)(f'point {k} (mu = {mu_k}): {exc}') from None
-        x_f[k], P_f[k] = res1.x_corrected, res1.P_corrected
-        x_p[k], P_p[k] = res1.x_predicted, res1.P_predicted
-    return Forward(x_f, P_f, x_p, P_p, F, jump, us, kf)
+    z = _table(y, K, kf.p, 'y')
+    us = _table(u, K, kf.B.shape[1], 'u', missing=False)
+    fw = Forward(np.empty((K, kf.n)), np.empty((K, kf.n, kf.n)), m, us, kf)
+    if us is not None:
+        # an input per point: the filter's step at each (its B_d u is made per step)
+        for k in range(K):
+            _step(fw, k, _at(z, k))
+        return fw
+    # the stretches measured at every point in compiled runs, in chunks (the run keeps
+    # its predictions and the jumps of its distinct mu: with jittered stamps nearly every
+    # mu is distinct, so as long as the run); a missing measurement is one step
+    chunk = _chunk(kf.n)
+    for a in range(0, K, chunk):
+        b = min(a + chunk, K)
+        measured = np.zeros(b - a, dtype=bool) if z is None else ~np.isnan(z[a:b, 0])
+        edges = np.flatnonzero(measured[1:] != measured[:-1]) + 1 + a
+        for s, e in zip(np.concatenate(([a], edges)), np.concatenate((edges, [b]))):
+            if z is not None and measured[s - a]:
+                _run(fw, z, int(s), int(e))
+            else:
+                for k in range(s, e):
+                    _step(fw, k, None)
+    return fw
 
 
-def _transitions_of(kf: TimeScaleKalmanFilter, m: NDArray[np.float64]
-                    ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
-    """Return F of each distinct mu of m and the index of each point's in it."""
-    values, jump = np.unique(m, return_inverse=True)
-    return kf.transition_stack(values).F, jump.astype(np.intp)
+def _run(fw: Forward, z: NDArray[np.float64], a: int, b: int) -> None:
+    """Filter points a to b - 1, all measured, no input, in one compiled run."""
+    res = fw.kf.run(fw.mu[a:b], z[a:b])
+    fw.x_f[a:a + res.steps] = res.x_corrected
+    fw.P_f[a:a + res.steps] = res.P_corrected
+    if res.steps < b - a:
+        # the run stopped before a step that `step` refuses: its error, with the point
+        _step(fw, a + res.steps, z[a + res.steps])
+        raise FilterError(f'point {a + res.steps} (mu = {fw.mu[a + res.steps]}): '
+                          'the step was refused')
 
 
-def _measured(y: Optional[ArrayLike], K: int, p: int) -> Optional[NDArray[np.float64]]:
-    """Return y as a finite (K, p) array, or None where `_rows` must check and split it."""
-    if y is None or isinstance(y, (list, tuple, np.ma.MaskedArray)):
-        return None
+def _step(fw: Forward, k: int, y_k: Optional[Vector]) -> None:
+    """Filter point k with the filter's step; an error names the point."""
+    mu_k = float(fw.mu[k])
     try:
-        z = np.asarray(y, dtype=float)
-    except (TypeError, ValueError):
-        return None
-    if z.ndim == 1 and p == 1:
-        z = z.reshape(-1, 1)
-    if z.shape != (K, p) or not np.isfinite(z).all():
-        return None
-    return z
-
-
-def _refused(kf: TimeScaleKalmanFilter, mu_k: float, y_k: Vector, k: int) -> None:
-    """Raise the error `step` gives for point k, where a run stopped."""
-    try:
-        kf.step(mu_k, y_k)
+        res = fw.kf.step(mu_k, y_k, _at(fw.inputs, k))
     except FilterError as exc:
         raise type(exc)(f'point {k} (mu = {mu_k}): {exc}') from None
-    raise FilterError(f'point {k} (mu = {mu_k}): the step was refused')
+    fw.x_f[k], fw.P_f[k] = res.x_corrected, res.P_corrected
 
 
 @_jit
 def _backward_in_place(x: NDArray[np.float64], P: NDArray[np.float64],
-                       x_p: NDArray[np.float64], P_p: NDArray[np.float64],
-                       F: NDArray[np.float64], jump: NDArray[np.intp]) -> None:
-    """Turn x(t_k|t_k), P(t_k|t_k) into x(t_k|T), P(t_k|T), from the last point back."""
-    for k in range(x.shape[0] - 2, -1, -1):
-        G = smoother_gain(P[k], F[jump[k]], P_p[k])
-        x[k], P[k] = smoothed_step(x[k], P[k], x_p[k], P_p[k], G, x[k + 1], P[k + 1])
+                       F: NDArray[np.float64], Q: NDArray[np.float64],
+                       Bu: NDArray[np.float64], jump: NDArray[np.intp],
+                       start: int, stop: int) -> None:
+    """
+    Turn x(t_k|t_k), P(t_k|t_k) into x(t_k|T), P(t_k|T) for k = stop - 1 down to start.
+
+    x[stop], P[stop] are smoothed already; point k jumps by F[i], Q[i], i = jump[k - start],
+    with the input Bu[k - start].
+    """
+    for k in range(stop - 1, start - 1, -1):
+        i = jump[k - start]
+        # x(t_{k+1}|t_k), P(t_{k+1}|t_k): the filter's own prediction (kalman.predict on
+        # the same x(t_k|t_k), P(t_k|t_k) and jump, the same bits), made again here rather
+        # than kept from the forward pass
+        x_p, P_p = predict(x[k], P[k], F[i], Q[i], Bu[k - start])
+        G = smoother_gain(P[k], F[i], P_p)
+        x[k], P[k] = smoothed_step(x[k], P[k], x_p, P_p, G, x[k + 1], P[k + 1])
 
 
-def _backward(fw: Forward) -> Smoothed:
-    """Run the RTS recursion from the last point's corrected estimate back to t_0."""
-    xs, Ps = fw.x_f.copy(), fw.P_f.copy()
-    _backward_in_place(xs, Ps, fw.x_p, fw.P_p, np.ascontiguousarray(fw.F), fw.jump)
-    return Smoothed(xs, Ps)
+def _backward(fw: Forward, x: NDArray[np.float64], P: NDArray[np.float64]) -> None:
+    """
+    Run the RTS recursion over x = x(t_k|t_k), P = P(t_k|t_k), in place, to t_0.
+
+    In chunks from the last point back, each with the jumps of its distinct mu (made in
+    one call, as the run made them), so that no array is as long as the data but x, P.
+    """
+    kf, m, K = fw.kf, fw.mu, fw.mu.size
+    chunk = _chunk(kf.n)
+    uses_B = fw.inputs is not None and bool(np.any(kf.B))
+    for b in range(K - 1, 0, -chunk):
+        a = max(b - chunk, 0)
+        values, jump = np.unique(m[a:b], return_inverse=True)
+        jumps = kf.transition_stack(values)
+        Bu = np.zeros((b - a, kf.n))
+        if uses_B:
+            for k in range(a, b):
+                u_k = _at(fw.inputs, k)
+                if u_k is not None:     # as `step` makes it: B_d u
+                    Bu[k - a] = jumps.Bd[jump[k - a]] @ u_k
+        _backward_in_place(x, P, np.ascontiguousarray(jumps.F), np.ascontiguousarray(jumps.Qd),
+                           Bu, jump.reshape(-1).astype(np.intp), a, b)
 
 
 def rts_smooth(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike], *,
@@ -288,15 +330,15 @@ def rts_smooth(A: ArrayLike, C: ArrayLike, mu: ArrayLike, y: Optional[ArrayLike]
     """
     fw = _forward(A, C, mu, y, Q=Q, R=R, G=G, B=B, u=u, D=D, x0=x0, P0=P0,
                   transition=transition)
-    # the forward rows become the output: no copy of them
-    _backward_in_place(fw.x_f, fw.P_f, fw.x_p, fw.P_p, np.ascontiguousarray(fw.F), fw.jump)
+    # the forward rows become the output, smoothed in place: no copy of them
+    _backward(fw, fw.x_f, fw.P_f)
     return Smoothed(fw.x_f, fw.P_f)
 
 
 def _interpolate(fw: Forward, smooth: Smoothed, k: int, mu_k: float, mu1: float
                  ) -> tuple[Vector, Matrix]:
     """Smoothed estimate at s = t_k + mu1, 0 < mu1 < mu_k, under the model's partial jumps."""
-    kf, u = fw.kf, fw.inputs[k]
+    kf, u = fw.kf, _at(fw.inputs, k)
     F1, Q1, B1 = kf.transition_matrices(mu1)
     F2, Q2, B2 = kf.transition_matrices(mu_k - mu1)
     # C order, the layout the kernels are compiled for (e^{A mu} may come transposed)
@@ -343,7 +385,8 @@ def smooth_at(times: ArrayLike, A: ArrayLike, C: ArrayLike, mu: ArrayLike,
         raise FilterError(f'time {s} is outside the points [{points[0]}, {points[-1]}]')
     fw = _forward(A, C, m, y, Q=Q, R=R, G=G, B=B, u=u, D=D, x0=x0, P0=P0,
                   transition=transition)
-    smooth = _backward(fw)
+    smooth = Smoothed(fw.x_f.copy(), fw.P_f.copy())
+    _backward(fw, smooth.xs, smooth.Ps)
     n = fw.kf.n
     xs, Ps = np.empty((ts.size, n)), np.empty((ts.size, n, n))
     for i, s in enumerate(ts):
@@ -365,4 +408,5 @@ def warm_up() -> None:
     G = smoother_gain(P, P, P)
     smoothed_step(x, P, x, P, G, x, P)
     backward_pass(x[None], P[None], x[None], P[None], G[None], 0, 1, x[None], P[None])
-    _backward_in_place(x[None], P[None], x[None], P[None], P[None], np.zeros(1, dtype=np.intp))
+    _backward_in_place(x[None], P[None], P[None], P[None], x[None], np.zeros(1, dtype=np.intp),
+                       0, 0)

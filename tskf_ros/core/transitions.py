@@ -61,18 +61,22 @@ def _taylor_terms(norm: float) -> int:
 
 
 @_jit
-def _expm_taylor(X: Matrix, norm: float) -> Matrix:
+def _expm_taylor(X: Matrix, norm: float, V: Matrix) -> Matrix:
     """
-    Return e^X for ||X|| <= norm <= 1/2 by its Taylor series, in Horner's form.
+    Return e^X V for ||X|| <= norm <= 1/2 by the Taylor series of e^X, in Horner's form.
 
     e^X = I + X (I + X/2 (I + X/3 (... (I + X/N)))) (Moler & Van Loan, "Nineteen dubious
     ways to compute the exponential of a matrix", SIAM Review 2003, method 3; the scaling
-    and squaring around it is the caller's), with N = _taylor_terms(norm).
+    and squaring around it is the caller's), with N = _taylor_terms(norm), times V from
+    the innermost term out: S = V + X S / k, so that columns of e^X (V = some columns of
+    I) cost their share of the products only.
     """
-    eye = np.eye(X.shape[0])
-    E = eye.copy()
+    E = V.copy()
     for k in range(_taylor_terms(norm), 0, -1):
-        E = eye + _mm(X, E) / k
+        # E = V + X E / k, in place on the product (one new array a term)
+        E = _mm(X, E)
+        E /= k
+        E += V
     return E
 
 
@@ -101,19 +105,27 @@ def van_loan(A: Matrix, GQGt: Matrix, mu: float) -> tuple[Matrix, Matrix]:
     taken over h = mu / 2^k small enough for the Taylor series and doubled k times,
     F(2h) = F(h)^2, Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T: the one-shot block exponential
     holds e^{-A mu}, which for a stable A and a long mu (60 s of a spring-mass system) is
-    so large that F and Q_d lose every digit (F came out 1e10, Q_d indefinite).
+    so large that F and Q_d lose every digit (F came out 1e10, Q_d indefinite).  Only the
+    right-hand block column of the exponential is used, and only it is summed (half the
+    products of the whole 2n x 2n series, the same sums).
     """
     n = A.shape[0]
-    M = np.zeros((2 * n, 2 * n))
-    M[:n, :n] = -A
-    M[:n, n:] = GQGt
-    M[n:, n:] = A.T
     norm = _norm(A)
     k = _halvings(norm, mu)
     h = math.ldexp(mu, -k)
-    E = _expm_taylor(M * h, min(norm * h, 0.5))
-    F = np.ascontiguousarray(E[n:, n:].T)
-    Qd = _mm(F, np.ascontiguousarray(E[:n, n:]))
+    # M h, M = [[-A, GQG^T], [0, A^T]]
+    Mh = np.zeros((2 * n, 2 * n))
+    for i in range(n):
+        for j in range(n):
+            Mh[i, j] = -A[i, j] * h
+            Mh[i, n + j] = GQGt[i, j] * h
+            Mh[n + i, n + j] = A[j, i] * h
+    right = np.zeros((2 * n, n))     # the right-hand columns of I
+    for i in range(n):
+        right[n + i, i] = 1.0
+    E = _expm_taylor(Mh, min(norm * h, 0.5), right)
+    F = np.ascontiguousarray(E[n:].T)
+    Qd = _mm(F, np.ascontiguousarray(E[:n]))
     for _ in range(k):
         # Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T
         Qd = Qd + _mm(_mm(F, Qd), np.ascontiguousarray(F.T))
@@ -137,7 +149,7 @@ def exact_input_matrix(A: Matrix, B: Matrix, mu: float) -> Matrix:
     norm = _norm(A)
     k = _halvings(norm, mu)
     h = math.ldexp(mu, -k)
-    E = _expm_taylor(M * h, min(norm * h, 0.5))
+    E = _expm_taylor(M * h, min(norm * h, 0.5), np.eye(n + m))
     F = np.ascontiguousarray(E[:n, :n])
     Bd = np.ascontiguousarray(E[:n, n:])
     for _ in range(k):

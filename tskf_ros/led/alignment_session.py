@@ -99,6 +99,18 @@ class AlignStats:
     gaps_over_bound: int = 0
     bad_since: int = 0
 
+    def record_interval(self, interval: float, dt: float, max_gap: float) -> None:
+        """Count an interval between stamps: a gap when it is over GAP_FACTOR dt."""
+        mu = interval / dt
+        self.mu_current = mu
+        self.mu_max = max(self.mu_max, mu)
+        if mu > GAP_FACTOR:
+            self.gaps += 1
+            self.missed += max(int(round(mu)) - 1, 0)
+            self.gap_max = max(self.gap_max, interval)
+            if interval > max_gap:
+                self.gaps_over_bound += 1
+
 
 class AlignmentSession:
     """One aligner fed from a stream of stamped intensity samples; see the module docstring."""
@@ -226,7 +238,7 @@ class AlignmentSession:
         mu = 0.0
         if last is not None:
             mu = (stamp_ns - last) / NS
-            self._record_interval(mu)
+            self.stats.record_interval(mu, self.config.dt, self.config.max_gap)
         if self.origin_ns is None:
             self.origin_ns = stamp_ns
         self.last_ns = stamp_ns
@@ -376,18 +388,6 @@ class AlignmentSession:
         """Restart the aligner after a failed step; nothing is published for this sample."""
         self.reset('filter_error')
         return self._reject('filter_error', stamp_ns, f'{message}; aligner restarted')
-
-    def _record_interval(self, interval: float) -> None:
-        st, cfg = self.stats, self.config
-        mu = interval / cfg.dt
-        st.mu_current = mu
-        st.mu_max = max(st.mu_max, mu)
-        if mu > GAP_FACTOR:
-            st.gaps += 1
-            st.missed += max(int(round(mu)) - 1, 0)
-            st.gap_max = max(st.gap_max, interval)
-            if interval > cfg.max_gap:
-                st.gaps_over_bound += 1
 
 
 def _frequency(config: AlignmentConfig) -> FrequencyParams:

@@ -36,8 +36,8 @@ import numpy as np
 from tskf_ros.core.diagnostic_status import expected_frequency, InputStream, Status
 from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_diagnostics import aligner_status, pointing_status, time_scale
-from tskf_ros.led.alignment_session import (AlignStats, GAP_FACTOR, MISSING_REASONS,
-                                            REJECT_REASONS, RESET_REASONS)
+from tskf_ros.led.alignment_session import (AlignStats, MISSING_REASONS, REJECT_REASONS,
+                                            RESET_REASONS)
 from tskf_ros.led.intensity_model import FloatArray
 from tskf_ros.led.pointing_stats import PointingStats, Transition
 from tskf_ros.led.two_axis.pan_tilt_session import (PanTiltOutcome, PanTiltSession,
@@ -139,7 +139,7 @@ class PanTiltStream:
                 st.resets[out.reason] += 1
             elif last is not None:
                 mu = (int(stamp_ns) - last) / NS
-                self._record_interval(mu)
+                self.stats.record_interval(mu, self.config.dt, self.config.max_gap)
             if out.status == 'missing':
                 st.missing[out.reason] += 1
                 st.bad_since += 1
@@ -245,16 +245,3 @@ class PanTiltStream:
             st.bad_since = 0
             self.health_error = ''
         return out
-
-    def _record_interval(self, interval: float) -> None:
-        """Count a gap (an interval over GAP_FACTOR dt) as the one-axis session does."""
-        st = self.stats
-        mu = interval / self.config.dt
-        st.mu_current = mu
-        st.mu_max = max(st.mu_max, mu)
-        if mu > GAP_FACTOR:
-            st.gaps += 1
-            st.missed += max(int(round(mu)) - 1, 0)
-            st.gap_max = max(st.gap_max, interval)
-            if interval > self.config.max_gap:
-                st.gaps_over_bound += 1

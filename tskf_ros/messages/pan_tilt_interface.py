@@ -17,23 +17,32 @@
 The alignment node's two-axis mode (axes 2): its parameters and its outcome messages.
 
 One node, one schema (config/schema/alignment.yaml): `axes` chooses the session, and the
-parameters shared by both (dt, gain's controller choice, the supervisor's pat.enabled and
-pat.start, max_step, max_backward, state_limit, the input checks, the diagnostics) keep
-their one-axis meaning; the pan_tilt.* parameters are the mount's.  The topics are the
+parameters shared by both (dt, gain and the controller choice, the supervisor's
+pat.enabled, pat.start, pat.hold_samples, pat.detector_reference and pat.lock_*,
+max_step, max_backward, state_limit, the input checks, the diagnostics) keep their
+one-axis meaning; the pan_tilt.* parameters are the mount's.  x0, P0, Q and R are the
+one-axis EKF's 2 x 2 of [x1, x2] (Table I, a pair per sample) and the other pat.* the
+one-axis sweep's: the conical-scan EKF (5 states, one sample) and the spiral keep their
+own (its R from pan_tilt.noise).  The topics are the
 one-axis node's, with two entries in the command ([pan, tilt] in the order of
 pan_tilt.joints) and the conical-scan EKF's states in the estimate.
 """
 
+from dataclasses import replace
 from typing import Any
 
 from tskf_ros import led
+from tskf_ros.led.lock_detector import LockConfig
 from tskf_ros.led.pan_tilt_stream import PanTiltStep, PanTiltStreamConfig
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_session import PanTiltSessionConfig
+from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisorConfig
 from tskf_ros.messages.pan_tilt_messages import pan_tilt_command_to_msg, pan_tilt_state_to_msg
 from tskf_ros.messages.parameter_schema import ParameterError
 from tskf_ros.messages.parameters import NodeConfig
 
-__all__ = ['check_joints', 'JOINTS', 'pan_tilt_config', 'pan_tilt_outcome_messages']
+__all__ = ['check_joints', 'JOINTS', 'pan_tilt_config', 'pan_tilt_outcome_messages',
+           'supervisor_config']
 
 JOINTS = 'pan_tilt.joints'
 
@@ -61,6 +70,24 @@ def method(values: dict) -> str:
     return 'conical_ekf_pat' if values['pat.enabled'] else 'conical_ekf'
 
 
+def supervisor_config(values: dict) -> PanTiltSupervisorConfig:
+    """
+    Return the two-axis supervisor's settings from the shared pat.* parameters.
+
+    The ones with the same meaning (and default) in both modes: the lock tests
+    (lock_detector, unchanged), the hold and the CUSUM's reference.  The sweep's
+    (scan_*), the CUSUM's threshold and window, fade, clip_prior and reacquire are the
+    one-axis supervisor's: the spiral, its detector and the fade hold keep their own.
+    """
+    base = PanTiltSupervisorConfig()
+    lock = LockConfig(window=values['pat.lock_window'],
+                      low_count=values['pat.lock_low_count'], level=values['pat.lock_level'],
+                      nis_alpha=values['pat.lock_nis_alpha'],
+                      corroborate=values['pat.lock_corroborate'])
+    detector = replace(base.detector, reference=values['pat.detector_reference'])
+    return replace(base, lock=lock, detector=detector, hold_samples=values['pat.hold_samples'])
+
+
 def pan_tilt_config(values: dict) -> NodeConfig:
     """Build the two-axis node config from checked parameter values; AlignmentError if bad."""
     start = values['pat.start'] if values['pat.enabled'] else 'tracking'
@@ -68,7 +95,9 @@ def pan_tilt_config(values: dict) -> NodeConfig:
         method=method(values), start=start, dt=values['dt'], noise=values['pan_tilt.noise'],
         joints0=tuple(values['pan_tilt.initial']), max_step=values['max_step'],
         tilt_limits=tuple(values['pan_tilt.tilt_limits']),
-        max_backward=values['max_backward'], state_limit=values['state_limit'])
+        max_backward=values['max_backward'], state_limit=values['state_limit'],
+        ekf=replace(ConicalEKFConfig(), gain=values['gain']),
+        supervisor=supervisor_config(values))
     session.make_aligner()      # a method the core does not provide yet fails here, at once
     stream = PanTiltStreamConfig(session, values['algorithm'], values['negative_is_missing'],
                                  tuple(values['intensity_range']), values['max_gap'],

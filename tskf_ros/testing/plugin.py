@@ -22,6 +22,7 @@ rclpy import at load.  The ROS environment is set inside ``ros_environment`` (wh
 ``ros_context`` uses), for that test only, and put back afterwards.
 """
 
+import gc
 import os
 from typing import Any, Callable, Dict, Iterator, List
 
@@ -57,7 +58,16 @@ def ros_environment() -> Iterator[Dict[str, str]]:
 
 @pytest.fixture
 def ros_context(ros_environment: Dict[str, str]) -> Iterator[Any]:
-    """Yield an initialized rclpy Context of the test's own; shut it down afterwards."""
+    """
+    Yield an initialized rclpy Context of the test's own; shut it down and destroy it after.
+
+    Its DDS participant lives until every node of the context is finalized, and a node
+    in a reference cycle (every rclpy LifecycleNode is one: its state machine holds the node
+    handle) is finalized only by the garbage collector.  A test process that keeps such
+    participants gives its new ones ids beyond the 32 that localhost discovery tries per
+    domain, and a node started in another process then never meets them.  So the fixture
+    destroys the context and collects the garbage when the test ends.
+    """
     import rclpy
     from rclpy.context import Context
 
@@ -67,6 +77,8 @@ def ros_context(ros_environment: Dict[str, str]) -> Iterator[Any]:
         yield context
     finally:
         context.try_shutdown()
+        context.destroy()
+        gc.collect()
 
 
 @pytest.fixture

@@ -38,9 +38,13 @@ from tskf_ros.messages.estimator_interface import (BAG_OUTPUT_TOPICS, BAG_TRUTH_
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402, I100, I202
+from tskf_ros.tools.plot_pan_tilt import (is_pan_tilt_estimate,  # noqa: E402, I100
+                                          pan_tilt_figure)
 
 PROG = 'plot_bag'
 PREDICTED, CORRECTED = BAG_OUTPUT_TOPICS['predicted'], BAG_OUTPUT_TOPICS['corrected']
+# a two-axis run as tskf_make_sample_bags and the simulator's default namespace write it
+PAN_TILT_ESTIMATE, PAN_TILT_TRUTH = '/pan_tilt/estimate', '/pan_tilt/truth'
 
 
 class PlotDamageError(BagError):
@@ -255,6 +259,21 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
         fig = alignment_figure(data, f'{bag.name}: alignment node replayed offline (open '
                                'loop: the commands did not move the recorded receiver)',
                                replayed=True, intensity_topic=intensity)
+        written.append(_save(fig, out / 'alignment.png'))
+        return written
+    if PAN_TILT_ESTIMATE in reader.topics:
+        intensity = topic or '/photodiode'
+        data = _decode(reader, {PAN_TILT_ESTIMATE, PAN_TILT_TRUTH, intensity}
+                       & set(reader.topics))
+        _require(reader, data, [PAN_TILT_ESTIMATE])
+        if not is_pan_tilt_estimate(data[PAN_TILT_ESTIMATE]):
+            raise BagError(f'{bag}: {PAN_TILT_ESTIMATE} is not a two-axis alignment estimate '
+                           '(the states [x1, d_c, d_e, b_c, b_e]): nothing to plot')
+        written.damage = reader.damage
+        out.mkdir(parents=True, exist_ok=True)
+        fig = pan_tilt_figure(data[PAN_TILT_ESTIMATE], data.get(PAN_TILT_TRUTH, []),
+                              data.get(intensity, []),
+                              f'{bag.name}: two-axis (pan-tilt) conical-scan EKF alignment')
         written.append(_save(fig, out / 'alignment.png'))
         return written
     if '/alignment/estimate' in reader.topics:

@@ -26,6 +26,7 @@ from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_simulation import simulate_pan_tilt, tracking_fraction
 from tskf_ros.led.two_axis.pan_tilt_supervisor import (PanTiltSupervisor,
                                                        PanTiltSupervisorConfig)
+from tskf_ros.led.two_axis.pointing_geometry import joint_turn, log_offset
 
 
 def _acquired_within(theta, seconds, dt=0.05, window=20):
@@ -79,11 +80,87 @@ def test_a_loss_of_a_dim_light_is_held_for_fade_hold():
     """A light dimmer in lock than fade_peak: its loss is held fade_hold samples, steering."""
     sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
                             PanTiltSupervisorConfig(start='tracking', hold_samples=40,
-                                                    fade_peak=10.0, fade_hold=300))
+                                                    fade_peak=10.0, fade_hold=300,
+                                                    fade_seen=False, hold_after=0))
     link = PanTiltLinkConfig(noise=0.5, steps=200, blocked=(2.0, 12.0))
     simulate_pan_tilt(sup, link, 7)
     assert np.all(sup.state == LOST) and np.all(sup.steering)
     assert np.all(sup.hold_limit == 300)
+
+
+def test_a_light_never_seen_at_fade_peak_in_lock_has_not_faded():
+    """fade_seen: x1_lock never reached fade_peak since the start, so hold_samples only."""
+    sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
+                            PanTiltSupervisorConfig(start='tracking', hold_samples=40,
+                                                    fade_peak=10.0, fade_hold=300,
+                                                    hold_after=0))
+    link = PanTiltLinkConfig(noise=0.5, steps=200, blocked=(2.0, 12.0))
+    simulate_pan_tilt(sup, link, 7)
+    assert np.all(sup.x1_best * sup.response.peak < 10.0)
+    assert np.all(sup.hold_limit == 40) and not np.any(sup.steering)
+
+
+@pytest.mark.parametrize('hold_after, held', [(0, True), (40, False)])
+def test_a_lock_younger_than_hold_after_is_not_held(hold_after, held):
+    """Blocked at 2 s, about 20 samples after good lock: held only with hold_after 0."""
+    sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
+                            PanTiltSupervisorConfig(start='tracking', hold_samples=300,
+                                                    hold_after=hold_after))
+    simulate_pan_tilt(sup, PanTiltLinkConfig(noise=0.5, steps=120, blocked=(2.0, 12.0)), 7)
+    assert np.all(sup.state == LOST) and np.all(sup.losses == 1)
+    assert np.all(sup.lock_age < 40)
+    assert np.all(sup.steering == held)
+
+
+class _Watch:
+    """The supervisor, with what each step left: looking, steering, the mean pointing."""
+
+    def __init__(self, sup):
+        self.sup, self.runs = sup, sup.runs
+        self.looking, self.steering, self.mean, self.center = [], [], [], []
+        self.drift = []
+
+    @property
+    def scan_offset(self):
+        return self.sup.scan_offset
+
+    def step(self, stamp, z):
+        turn = self.sup.step(stamp, z)
+        s = self.sup
+        self.looking.append(s.looking.copy())
+        self.steering.append(s.steering.copy())
+        # the mean pointing of the next sample: the joints less the next scan offset
+        self.mean.append(s.joints - joint_turn(s.scan_offset, s.joints[:, 1]))
+        self.center.append(s.spiral.center.copy())
+        self.drift.append(s.tracker.x[:, 3:5].copy())
+        return turn
+
+
+def test_a_fade_hold_looks_around_and_comes_back_to_the_held_pointing():
+    """fade_look: one spiral pass (no light: blocked), then the hold at its moving centre."""
+    config = PanTiltSupervisorConfig(start='tracking', hold_samples=20, fade_peak=10.0,
+                                     fade_hold=40, fade_seen=False, fade_look=20.0,
+                                     hold_after=0)
+    watch = _Watch(PanTiltSupervisor(ConicalScanEKF(runs=10), config))
+    simulate_pan_tilt(watch, PanTiltLinkConfig(noise=0.5, steps=300, blocked=(2.0, 15.0)), 7)
+    looking, steering = np.array(watch.looking), np.array(watch.steering)
+    mean, center = np.array(watch.mean), np.array(watch.center)
+    drift = np.array(watch.drift)
+    for r in range(10):
+        k0 = int(np.argmax(looking[:, r]))          # the look's first sample
+        assert looking[k0, r] and not steering[k0, r]
+        k1 = k0 + int(np.argmax(~looking[k0:, r]))  # back to the hold
+        assert steering[k1, r] and 10 < k1 - k0 < 60
+        # the look went round its spiral, out to about fade_look from its centre
+        away = log_offset(center[k0:k1, r, 0], center[k0:k1, r, 1], mean[k0:k1, r, 0],
+                          mean[k0:k1, r, 1])
+        assert np.max(np.hypot(*away.T)) > 15.0
+        # and came back to the centre, which moved as the hold would have steered it
+        np.testing.assert_allclose(mean[k1, r], center[k1, r], atol=1e-9)
+        expected = mean[k0 - 1, r][None, :]         # where the look began, each sample
+        for _ in range(k0, k1 + 1):                 # moved by -bhat of that sample
+            expected = expected + joint_turn(-drift[k0, r][None, :], expected[:, 1])
+        np.testing.assert_allclose(center[k1, r], expected[0], rtol=0, atol=1e-9)
 
 
 def test_builds_every_method_by_name():
@@ -98,6 +175,7 @@ def test_builds_every_method_by_name():
 
 
 @pytest.mark.parametrize('bad', [{'start': 'now'}, {'hold_samples': -1}, {'max_step': 2.0},
+                                 {'fade_look': 5.0}, {'fade_look': -1.0},
                                  {'angle_var': (4.0, 1.0)}, {'noise': 0.0}])
 def test_bad_configs_say_why(bad):
     """Each bad setting is one AlignmentError."""

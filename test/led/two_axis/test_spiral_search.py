@@ -75,6 +75,30 @@ def test_starts_again_beyond_the_reach():
     assert search.spirals[0] == 1
 
 
+def test_a_moving_centre_follows_its_rate_on_the_joints():
+    """A rate [du_c, 0] per sample moves the centre du_c / cos e in pan per sample."""
+    search = SpiralSearch(SpiralConfig(), 2)
+    joints = np.array([[0.0, 30.0], [0.0, 30.0]])
+    search.start(np.ones(2, bool), joints, rate=np.array([[0.1, 0.0], [0.0, 0.0]]))
+    for _ in range(50):
+        joints = joints + joint_turn(search.turn(joints, np.ones(2, bool)), joints[:, 1])
+    np.testing.assert_allclose(search.center[0], [50 * 0.1 / np.cos(np.radians(30.0)), 30.0],
+                               rtol=1e-12)
+    np.testing.assert_array_equal(search.center[1], [0.0, 30.0])
+
+
+def test_a_spiral_started_with_a_shorter_reach_starts_again_sooner():
+    """A start with reach 20 starts again after samples_to_cover(20); 38 deg not yet."""
+    c = SpiralConfig()
+    search = SpiralSearch(c, 2)
+    joints = np.zeros((2, 2))
+    search.start(np.array([True, False]), joints, reach=20.0)
+    search.start(np.array([False, True]), joints)
+    for _ in range(c.samples_to_cover(20.0) + 1):
+        joints = joints + joint_turn(search.turn(joints, np.ones(2, bool)), joints[:, 1])
+    assert search.spirals.tolist() == [1, 0]
+
+
 @pytest.mark.parametrize('bad', [{'speed': 0.0}, {'pitch': -1.0}, {'reach': 5.0}])
 def test_bad_spirals_say_why(bad):
     """Each bad setting is one AlignmentError."""

@@ -25,7 +25,7 @@ beyond max_backward restarts the aligner; a reading that is None or not finite i
 missing sample (the filter predicts over it).  Angles in degrees, intensities in volts.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import Optional
 
@@ -35,8 +35,10 @@ from tskf_ros.core.units import MAX_STAMP_NS, NS
 from tskf_ros.led.intensity_model import AlignmentError, FloatArray
 from tskf_ros.led.scanning_ekf import PAPER_DT
 from tskf_ros.led.two_axis.aligners import make_two_axis_aligner, METHODS, STARTS
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_link import (PanTiltLink, PanTiltLinkConfig, PanTiltSample,
                                                  Seed)
+from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisorConfig
 from tskf_ros.led.two_axis.pointing_geometry import joint_turn, MAX_ELEVATION
 
 
@@ -53,6 +55,10 @@ class PanTiltSessionConfig:
     tilt_limits: tuple[float, float] = (-MAX_ELEVATION, MAX_ELEVATION)
     max_backward: float = 1.0                # s: an older stamp within this is stale
     state_limit: float = 1e4                 # |x| or sqrt(trace P) beyond: restart
+    # the conical-scan EKF's settings (its noise and dt are replaced by the two above) and
+    # the supervisor's (its start and noise replaced: make_two_axis_aligner)
+    ekf: ConicalEKFConfig = field(default_factory=ConicalEKFConfig)
+    supervisor: PanTiltSupervisorConfig = field(default_factory=PanTiltSupervisorConfig)
 
     def __post_init__(self) -> None:
         """Check the settings (building the aligner once); raise AlignmentError if bad."""
@@ -77,7 +83,8 @@ class PanTiltSessionConfig:
     def make_aligner(self, joints: Optional[tuple[float, float]] = None) -> object:
         """Build the configured aligner for one run, its mount at joints (None: joints0)."""
         return make_two_axis_aligner(self.method, runs=1, noise=self.noise, dt=self.dt,
-                                     start=self.start,
+                                     start=self.start, ekf=self.ekf,
+                                     supervisor=self.supervisor,
                                      joints0=self.joints0 if joints is None else joints)
 
 

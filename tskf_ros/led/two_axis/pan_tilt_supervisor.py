@@ -27,8 +27,11 @@ the one-axis supervisor's level that follows the light in lock, which a hand-ove
 the wrong side of the light teaches to take the dark for the light); lost, the EKF holds
 a declared loss for hold_samples (it keeps steering on its drift model; tracking again
 after a full window with few low samples), then the spiral again, centred on the last
-mean pointing seen in good lock.  The supervisor follows the mount's joints [pan, tilt]
-from `joints0` as the mount does (joint_turn of each turn at the tilt it is made at): a
+mean pointing seen in good lock; a lock younger than hold_after is not held, and a light
+that faded in lock (dim now, seen bright since the hand-over) is held fade_hold samples,
+then, with fade_look, looked for by one spiral pass that follows the drift model.  The
+supervisor follows the mount's joints [pan, tilt] from `joints0` as the mount does
+(joint_turn of each turn at the tilt it is made at): a
 search is a pattern of directions on the sphere, and tangent-plane turns do not add up to
 one (over a 30 deg spiral they would miss its centre by tens of degrees).  Vectorised
 over runs.
@@ -75,6 +78,19 @@ class PanTiltSupervisorConfig:
     # drift model keeps the pointing where a search in the dark would carry it away
     fade_peak: float = 2.0
     fade_hold: int = 400
+    # and only if x1_lock was at fade_peak or above since the hand-over: an EKF that
+    # diverges from its start (the mean pointing up to offset0 + r off, x1 from the prior)
+    # explains the dimming by x1, and never saw the light bright (False: any dim light)
+    fade_seen: bool = True
+    # deg: a fade hold that runs out looks (0: the search of a hold instead): one pass of
+    # the spiral out to fade_look around the pointing the hold carried, its centre moving
+    # as the drift model predicts the source; light seen: the hand-over; none: back to the
+    # centre and the EKF as it was, and the hold again (fade_hold samples, then a look)
+    fade_look: float = 0.0
+    # samples of good lock since the hand-over (or the start) before a loss is held: a
+    # lock lost sooner was on a fit off the light, and the hold would only delay the
+    # search (on a cold start at 1 V, 2 of the 10 s)
+    hold_after: int = 40
     # samples the spiral goes on after the CUSUM sees light, so that the fit sees the
     # light's crossing on both sides of its peak
     settle: int = 4
@@ -93,20 +109,23 @@ class PanTiltSupervisorConfig:
         """Check the supervisor's settings; raise AlignmentError with the reason."""
         if self.start not in STARTS:
             raise AlignmentError(f'start must be one of {STARTS}, got {self.start!r}')
-        for name in ('noise', 'max_step', 'inflate', 'min_peak', 'fade_peak'):
+        for name in ('noise', 'max_step', 'inflate', 'min_peak', 'fade_peak', 'fade_look'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise AlignmentError(f'{name} must be >= 0, got {value}')
         if not self.noise > 0 or not self.inflate > 0:
             raise AlignmentError('noise and inflate must be > 0')
-        if self.hold_samples < 0 or self.fade_hold < 0:
-            raise AlignmentError('hold_samples and fade_hold must be >= 0')
+        if self.hold_samples < 0 or self.fade_hold < 0 or self.hold_after < 0:
+            raise AlignmentError('hold_samples, fade_hold and hold_after must be >= 0')
         if self.settle < 0 or self.min_samples < 0:
             raise AlignmentError('settle and min_samples must be >= 0')
         for name in ('x1_var', 'angle_var'):
             lo, hi = getattr(self, name)
             if not (math.isfinite(hi) and 0.0 < lo <= hi):
                 raise AlignmentError(f'{name} must be [lo, hi] with 0 < lo <= hi')
+        if 0 < self.fade_look < self.spiral.pitch:
+            raise AlignmentError(f'fade_look ({self.fade_look:g} deg) is less than the '
+                                 f'spiral pitch ({self.spiral.pitch:g} deg)')
         if self.max_step > 0 and self.spiral.speed * 1.5 > self.max_step:
             raise AlignmentError('the spiral moves faster than max_step allows')
 
@@ -155,6 +174,12 @@ class PanTiltSupervisor:
         self.locked = np.zeros(n, dtype=bool)       # in good lock since the hand-over
         self.hold_limit = np.full(n, config.hold_samples)   # samples the current hold lasts
         self.x1_lock = np.full(n, np.nan)           # x1hat in good lock, averaged
+        self.fading = np.zeros(n, dtype=bool)       # the current hold is a fade hold
+        self.x1_best = np.full(n, np.nan)           # the highest x1_lock since hand-over
+        self.lock_age = np.zeros(n, dtype=int)      # samples in good lock since hand-over
+        self.looking = np.zeros(n, dtype=bool)      # a fade hold's look is under way
+        self.look_x = self.tracker.x.copy()         # the EKF when the look began
+        self.look_P = self.tracker.P.copy()
 
     @property
     def scan_offset(self) -> FloatArray:
@@ -186,6 +211,7 @@ class PanTiltSupervisor:
         self.spiral.start(mask, center)
         self.finder.reset(mask)
         self.searched[mask] = self.pending[mask] = 0
+        self.looking[mask] = False
         self.changed = old != self.state
 
     def correct_last_turn(self, delta: FloatArray) -> None:
@@ -212,11 +238,13 @@ class PanTiltSupervisor:
         mean = self.joints - joint_turn(s_now, self.joints[:, 1])
         self.last_good = np.where(good[:, None], mean, self.last_good)
         self.locked |= good
+        self.lock_age = np.where(good, self.lock_age + 1, self.lock_age)
         x1 = self.tracker.x[:, 0]
         # an exponential average over about a second (alpha = 1/20), only in good lock
         self.x1_lock = np.where(good, np.where(np.isfinite(self.x1_lock),
                                                self.x1_lock + (x1 - self.x1_lock) / 20.0, x1),
                                 self.x1_lock)
+        self.x1_best = np.fmax(self.x1_best, self.x1_lock)
         searching = ~steering
         seen_light = self.finder.update(z, self.joints, searching)
         self.searched = np.where(searching, self.searched + 1, 0)
@@ -234,6 +262,10 @@ class PanTiltSupervisor:
         search = (self.spiral.turn(self.joints, searching & ~fine)
                   + self.refine.turn(self.joints, fine))
         turn = np.where(steering[:, None], inner, search)
+        # a look that went round its spiral without seeing light: back to the hold
+        back = self.looking & searching & (self.spiral.spirals > 0) & (self.pending == 0)
+        if np.any(back):
+            turn[back] = self._back_to_hold(back)
         if np.any(found):
             turn[found] = self._hand_over(found)
         steered = steering.copy()
@@ -243,7 +275,9 @@ class PanTiltSupervisor:
             self.state[self.resumed] = TRACKING
             self.held[self.resumed] = 0
             timeout = holding & ~steady & (self.held > self.hold_limit)
-            self._search(timeout, turn)
+            look = timeout & self.fading & (cfg.fade_look > 0)
+            self._look(look, turn, mean)
+            self._search(timeout & ~look, turn)
             steered &= ~timeout
         dim = self.tracker.x[:, 0] * self.response.peak < cfg.min_peak
         lost = (verdict.lost | dim) & tracking
@@ -252,11 +286,18 @@ class PanTiltSupervisor:
             self.losses[lost] += 1
             self.tracked[lost] = 0
             self.state[lost] = LOST
-            # a hand-over that never came into good lock was onto no light: search again
-            hold = lost & self.locked & (cfg.hold_samples > 0)
-            faded = self.x1_lock * self.response.peak < cfg.fade_peak
+            # a hand-over that never came into good lock, or held it less than hold_after
+            # samples, was onto no light or a fit off it: search again at once
+            hold = (lost & self.locked & (self.lock_age >= cfg.hold_after)
+                    & (cfg.hold_samples > 0))
+            # faded: dim now, and seen at fade_peak or brighter in this lock (a lock that
+            # never saw the light bright may be an EKF that explains its own error by x1)
+            peak = self.response.peak
+            faded = ((self.x1_lock * peak < cfg.fade_peak)
+                     & ((self.x1_best * peak >= cfg.fade_peak) | (not cfg.fade_seen)))
             self.hold_limit = np.where(hold & faded, max(cfg.fade_hold, cfg.hold_samples),
                                        np.where(hold, cfg.hold_samples, self.hold_limit))
+            self.fading = np.where(lost, hold & faded, self.fading)
             self.held[hold] = 1
             self.lock.reset(hold)
             self._search(lost & ~hold, turn)
@@ -271,17 +312,50 @@ class PanTiltSupervisor:
         self.changed = old != self.state
         return turn
 
-    def _search(self, mask: Mask, turn: FloatArray) -> None:
-        """Start the spiral around the last good pointing for the runs in mask; set turn."""
+    def _search(self, mask: Mask, turn: FloatArray, center: Optional[FloatArray] = None,
+                rate: Optional[FloatArray] = None, reach: Optional[float] = None) -> None:
+        """Start the spiral for the runs in mask (centre: None, see below); set turn."""
         if np.any(mask):
             self.held[mask] = 0
+            self.looking[mask] = False
             # around the last good pointing; after a hand-over onto no light, around the
             # search's own centre again
-            self.spiral.start(mask, np.where(self.locked[:, None], self.last_good,
-                                             self.spiral.center))
+            if center is None:
+                center = np.where(self.locked[:, None], self.last_good, self.spiral.center)
+            self.spiral.start(mask, center, rate, reach)
             self.finder.reset(mask)
             self.searched[mask] = self.pending[mask] = 0
             turn[mask] = self.spiral.turn(self.joints, mask)[mask]
+
+    def _look(self, mask: Mask, turn: FloatArray, mean: FloatArray) -> None:
+        """Start a look for the runs in mask: one spiral pass that follows the drift model."""
+        if np.any(mask):
+            self.look_x[mask] = self.tracker.x[mask]
+            self.look_P[mask] = self.tracker.P[mask]
+            # around the hold's pointing (the mean pointing of this sample), the centre
+            # moving on as the hold would have steered, -bhat per step
+            self._search(mask, turn, mean, -self.tracker.x[:, 3:5], self.config.fade_look)
+            self.looking[mask] = True
+
+    def _back_to_hold(self, back: Mask) -> FloatArray:
+        """Turn the runs in `back` onto the look's centre and hold again; return the turns."""
+        cfg = self.config
+        s_next = self.tracker.scan_offset
+        center = self.spiral.center[back]
+        # the joints whose mean pointing (the joints less the scan offset, at their tilt)
+        # is the centre
+        target = center + joint_turn(s_next, center[:, 1] + s_next[1])
+        limit = cfg.max_step if cfg.max_step > 0 else np.inf
+        turn = np.clip(turn_between(self.joints[back], target), -limit, limit)
+        # the EKF as the look found it, its variances grown by the samples it looked
+        grown = self.searched[back, None, None] * self.tracker.Q
+        self.tracker.restart_runs(back, self.look_x[back], self.look_P[back] + grown)
+        self.looking[back] = False
+        self.held[back] = 1
+        self.hold_limit[back] = max(cfg.fade_hold, cfg.hold_samples)
+        self.tracked[back] = 0
+        self.lock.reset(back)
+        return turn
 
     def _scatter(self, mask: Mask, rows: FloatArray) -> FloatArray:
         """Return a (runs, 2) array with `rows` at the runs in mask, the joints elsewhere."""
@@ -316,7 +390,10 @@ class PanTiltSupervisor:
         self.state[found] = TRACKING
         self.handovers[found] += 1
         self.pending[found] = 0
+        self.looking[found] = False
         self.locked[found] = False
+        self.x1_best[found] = np.nan
+        self.lock_age[found] = 0
         self.x1_lock[found] = np.nan
         self.lock.reset(found)
         return turn

@@ -34,12 +34,13 @@ pi R^2 / (pitch speed) samples (the spiral's length): 96 samples (4.8 s) to 38 d
 
 from dataclasses import dataclass
 import math
+from typing import Optional
 
 import numpy as np
 
 from tskf_ros.led.acquisition_scan import Mask
 from tskf_ros.led.intensity_model import AlignmentError, FloatArray
-from tskf_ros.led.two_axis.pointing_geometry import displaced, turn_between
+from tskf_ros.led.two_axis.pointing_geometry import displaced, joint_turn, turn_between
 
 
 @dataclass(frozen=True)
@@ -81,10 +82,20 @@ class SpiralSearch:
         self.phi = np.zeros(self.runs)               # the spiral's angle parameter (rad)
         self.phase = np.zeros(self.runs)             # its orientation (rad)
         self.spirals = np.zeros(self.runs, dtype=int)
+        self.rate = np.zeros((self.runs, 2))        # tangent-plane turn of c per sample
+        self.reach = np.full(self.runs, config.reach)
 
-    def start(self, mask: Mask, center: FloatArray) -> None:
-        """Begin a new spiral around the joints `center` (runs, 2) for the runs in mask."""
+    def start(self, mask: Mask, center: FloatArray, rate: Optional[FloatArray] = None,
+              reach: Optional[float] = None) -> None:
+        """
+        Begin a new spiral around the joints `center` (runs, 2) for the runs in mask.
+
+        rate: the tangent-plane turn (runs, 2) of the centre per sample (None: still), for a
+        search that follows a drift model; reach: its widest radius (None: the config's).
+        """
         self.center[mask] = np.asarray(center, dtype=float)[mask]
+        self.rate[mask] = 0.0 if rate is None else np.asarray(rate, dtype=float)[mask]
+        self.reach[mask] = self.config.reach if reach is None else float(reach)
         self.phi[mask] = 0.0
         self.phase[mask] = 0.0
         self.spirals[mask] = 0
@@ -103,7 +114,10 @@ class SpiralSearch:
         # d phi = speed / |dp/dphi|, |dp/dphi| = a sqrt(1 + phi^2)
         step = c.speed / (a * np.sqrt(1.0 + self.phi * self.phi))
         self.phi = np.where(mask, self.phi + step, self.phi)
-        beyond = mask & (a * self.phi > c.reach)
+        # the centre follows its rate (zero unless the search follows a drift model)
+        moved = joint_turn(np.where(mask[:, None], self.rate, 0.0), self.center[:, 1])
+        self.center = self.center + moved
+        beyond = mask & (a * self.phi > self.reach)
         # a new spiral, half a turn round from the last
         self.phi[beyond] = 0.0
         self.phase[beyond] += math.pi
