@@ -205,7 +205,7 @@ class LQGAligner:
         have = np.repeat(np.isfinite(z), m)
         x, P = self._x.reshape(-1, 3), self._P.reshape(-1, 3, 3)
         a = x[:, 1] + self.scan_offset
-        g, dg = self.response.g_dg(a)
+        g, dg = self.response.g(a), self.response.dg(a)
         H = np.zeros((x.shape[0], 1, 3))
         H[:, 0, 0] = g                      # dh/dx1 = g(x2 + psi)
         H[:, 0, 1] = x[:, 0] * dg           # dh/dx2 = x1 g'(x2 + psi)
