@@ -132,7 +132,13 @@ class SpotDetector:
         c = self.config
         joints, z = self.position[mask], self.z[mask]                     # (m, W, 2), (m, W)
         ok = np.isfinite(z)
-        origin = joints[:, self._newest]                                  # (m, 2)
+        # the origin is the newest kept sample's position: the newest slot is empty when
+        # that sample was missing (a dropout); a run with none kept (the detector fires on a
+        # kept sample, so none here) would be fit around [0, 0]
+        age = (self._newest - np.arange(c.window)) % c.window              # 0: the newest
+        kept = np.argmin(np.where(ok, age[None, :], c.window), axis=1)
+        origin = joints[np.arange(joints.shape[0]), kept]                 # (m, 2)
+        origin = np.where(np.isfinite(origin), origin, 0.0)
         p = log_offset(origin[:, None, 0], origin[:, None, 1], np.where(ok, joints[..., 0], 0.0),
                        np.where(ok, joints[..., 1], 0.0))
         p0 = np.where(ok[..., None], p, 0.0)
