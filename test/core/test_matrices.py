@@ -53,3 +53,19 @@ def test_as_vector_gives_the_float_entries(value, size):
 def test_as_vector_refuses_with_the_reason(value, size, words):
     with pytest.raises(FilterError, match=words):
         as_vector(value, size, 'y')
+
+
+def test_the_stacked_psd_check_is_the_one_matrix_check_for_each():
+    # psd_stack over (K, n, n) against is_psd one matrix at a time, with matrices inside,
+    # at and beyond the tolerance band, huge entries and NaN
+    from tskf_ros.core.matrices import psd_stack
+    rng = np.random.default_rng(12)
+    for n in (1, 2, 3):
+        stack = []
+        for _ in range(300):
+            M = rng.normal(size=(n, n))
+            P = M @ M.T + rng.choice([-1.0, -1e-9, 0.0, 1e-9, 1.0]) * rng.random() * np.eye(n)
+            stack.append(P * rng.choice([1.0, 1e-12, 1e150, 1e300]))
+        stack.append(np.full((n, n), np.nan))
+        stack = np.array(stack)
+        np.testing.assert_array_equal(psd_stack(stack), [is_psd(P) for P in stack])

@@ -99,3 +99,56 @@ def test_the_taylor_series_stops_where_the_first_term_left_out_is_below_the_roun
     F, Qd = van_loan(np.zeros((2, 2)), GQGt, 0.01)
     np.testing.assert_array_equal(F, np.eye(2))
     np.testing.assert_allclose(Qd, 0.01 * GQGt, rtol=1e-15)
+
+
+def _van_loan_block(A, GQGt, mu):
+    """(F, Q_d) from scipy's expm of Van Loan's block matrix (Van Loan 1978), one mu."""
+    n = A.shape[0]
+    E = scipy.linalg.expm(np.block([[-A, GQGt], [np.zeros((n, n)), A.T]]) * mu)
+    F = E[n:, n:].T
+    return F, F @ E[:n, n:]
+
+
+def test_the_series_of_f_and_q_d_is_van_loans_block_exponential_at_every_size():
+    # the Taylor series in mu with the model's coefficients made once (van_loan_series),
+    # against scipy's expm of the 2n x 2n block: random stable models n = 1, 2, 6, 20,
+    # +-5 % jitter around 10 ms and jumps long enough to be halved and doubled back (up to
+    # 2 s: beyond, the block's e^{-A mu} grows so large that expm's own error, relative to
+    # the whole block, exceeds 1e-12 of F; F is also checked against expm(A mu) alone)
+    from tskf_ros.core.transitions import (van_loan_from, van_loan_series, van_loan_stack,
+                                           van_loan_stack_from)
+    rng = np.random.default_rng(32)
+    for n in (1, 2, 6, 20):
+        A = rng.normal(size=(n, n)) * 0.3 / np.sqrt(n) - np.eye(n)
+        G = rng.normal(size=(n, n))
+        GQGt = G @ G.T / n
+        mus = np.concatenate([0.01 * (1 + rng.uniform(-0.05, 0.05, 20)), [0.3, 2.0]])
+        series = van_loan_series(A, GQGt)
+        F, Qd = van_loan_stack_from(*series, mus)
+        for k, mu in enumerate(mus):
+            F_ref, Qd_ref = _van_loan_block(A, GQGt, mu)
+            np.testing.assert_allclose(F[k], F_ref, rtol=0, atol=1e-12 * np.abs(F_ref).max())
+            np.testing.assert_allclose(F[k], scipy.linalg.expm(A * mu), rtol=0,
+                                       atol=1e-12 * np.abs(F_ref).max())
+            np.testing.assert_allclose(Qd[k], Qd_ref, rtol=0,
+                                       atol=1e-12 * np.abs(Qd_ref).max())
+            # one mu at a time, and from the model alone: the same bits as the stack
+            one = van_loan_from(*series, mu)
+            np.testing.assert_array_equal(one[0], F[k])
+            np.testing.assert_array_equal(one[1], Qd[k])
+            np.testing.assert_array_equal(van_loan(A, GQGt, mu)[1], Qd[k])
+            assert np.array_equal(Qd[k], Qd[k].T)
+        np.testing.assert_array_equal(van_loan_stack(A, GQGt, mus)[0], F)
+
+
+def test_a_nilpotent_a_gives_the_closed_form_of_the_double_integrator():
+    # A = [[0, 1], [0, 0]], G = [0, 1]^T, Q = q: F = [[1, mu], [0, 1]] and
+    # Q_d = q [[mu^3 / 3, mu^2 / 2], [mu^2 / 2, mu]] (a white-noise acceleration)
+    A = np.array([[0.0, 1.0], [0.0, 0.0]])
+    q = 0.7
+    GQGt = np.array([[0.0, 0.0], [0.0, q]])
+    for mu in (1e-3, 0.0101, 1.0, 5.0, 60.0):
+        F, Qd = van_loan(A, GQGt, mu)
+        np.testing.assert_allclose(F, [[1.0, mu], [0.0, 1.0]], rtol=1e-14, atol=0)
+        ref = q * np.array([[mu ** 3 / 3, mu ** 2 / 2], [mu ** 2 / 2, mu]])
+        np.testing.assert_allclose(Qd, ref, rtol=1e-13, atol=0)

@@ -202,6 +202,21 @@ class TimeStampStatus:
         elif delta < self.min_delta:
             self.min_delta = delta
 
+    def tick_many(self, stamps_ns: list[int], nows_ns: list[int]) -> None:
+        """Note events in order, as tick() one at a time: the delays' running min and max."""
+        if 0 in stamps_ns:
+            for stamp_ns, now_ns in zip(stamps_ns, nows_ns):
+                self.tick(stamp_ns, now_ns)
+            return
+        deltas = [(now_ns - stamp_ns) / NS for stamp_ns, now_ns in zip(stamps_ns, nows_ns)]
+        if not deltas:
+            return
+        if not self.deltas_valid:
+            self.min_delta = self.max_delta = deltas[0]
+            self.deltas_valid = True
+        self.min_delta = min(self.min_delta, min(deltas))
+        self.max_delta = max(self.max_delta, max(deltas))
+
     def run(self, stat: Status) -> Status:
         """Fill stat with the level, message and keys of TimeStampStatus.run."""
         p = self.params
@@ -245,6 +260,16 @@ class InputStream:
             frequency.start(now_ns)
         frequency.count += 1
         self.stamps.tick(stamp_ns, now_ns)
+
+    def note_many(self, stamps_ns: list[int], nows_ns: list[int]) -> None:
+        """Count messages in order, as note() one at a time."""
+        if not stamps_ns:
+            return
+        frequency = self.frequency
+        if not frequency.times:
+            frequency.start(nows_ns[0])
+        frequency.count += len(stamps_ns)
+        self.stamps.tick_many(stamps_ns, nows_ns)
 
     def run(self, now_ns: int) -> list[Status]:
         """Return the statuses 'input frequency' and 'timestamp delay' at now_ns."""

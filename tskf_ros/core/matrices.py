@@ -16,7 +16,7 @@
 """Checked conversion of model matrices and vectors, and the covariance tests the filters use."""
 
 import math
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -84,6 +84,17 @@ def is_invertible(M: NDArray[np.float64], rtol: float = 1e-12) -> bool:
     return bound > 0 and abs(det) > rtol * bound
 
 
+def _smallest_eigenvalue(a: Any, b: Any, c: Any) -> Any:
+    """
+    Return the smallest eigenvalue of [[a, b], [b, c]], of floats or of arrays of them.
+
+    (a + c) / 2 - sqrt(((a - c) / 2)^2 + b^2), with (a - c) * (a - c), not ** 2, which
+    raises OverflowError past 1e154 on floats.
+    """
+    h = (a - c) / 2
+    return (a + c) / 2 - (h * h + b * b) ** 0.5
+
+
 def is_psd(P: NDArray[np.float64], tol: float = 1e-9) -> bool:
     """
     Tell whether a symmetric matrix is positive semi-definite within tol (relative).
@@ -98,16 +109,25 @@ def is_psd(P: NDArray[np.float64], tol: float = 1e-9) -> bool:
         return a >= -tol * max(1.0, abs(a))
     if n == 2:
         (a, b), (_, c) = P.tolist()
-        # smallest eigenvalue of [[a, b], [b, c]]: (a + c) / 2 - sqrt(((a - c) / 2)^2 + b^2)
-        # (a - c) * (a - c), not ** 2, which raises OverflowError past 1e154
-        h = (a - c) / 2
-        return (a + c) / 2 - (h * h + b * b) ** 0.5 >= -tol * max(1.0, abs(a), abs(c))
+        return bool(_smallest_eigenvalue(a, b, c) >= -tol * max(1.0, abs(a), abs(c)))
     eps = tol * max(1.0, float(np.max(np.abs(np.diag(P)))))
     try:
         np.linalg.cholesky(P + eps * np.eye(n))
     except np.linalg.LinAlgError:
         return False
     return True
+
+
+def psd_stack(P: NDArray[np.float64], tol: float = 1e-9) -> NDArray[np.bool_]:
+    """Return `is_psd` of each P[k] of a stack (K, n, n): vectorised up to 2 x 2."""
+    n = P.shape[1]
+    if n > 2:
+        return np.array([is_psd(M, tol) for M in P], dtype=bool)
+    a, c = P[:, 0, 0], P[:, -1, -1]
+    scale = np.maximum(np.maximum(1.0, np.abs(a)), np.abs(c))
+    with np.errstate(over='ignore', invalid='ignore'):
+        smallest = a if n == 1 else _smallest_eigenvalue(a, P[:, 0, 1], c)
+        return np.asarray(smallest >= -tol * scale)
 
 
 def as_vector(value: ArrayLike, size: int, name: str) -> NDArray[np.float64]:

@@ -17,14 +17,16 @@
 The jump of the time-scale filter over one graininess mu: F, Q_d and B_d.
 
 Euler (Bohner & Wintz 2013, Table 3): F = I + mu A, Q_d = mu G Q G^T, B_d = mu B.
-Exact (a continuous plant sampled at irregular instants): F = e^{A mu}, Q_d by Van Loan's
-method (Van Loan, "Computing integrals involving the matrix exponential", IEEE TAC 1978),
-B_d = int_0^mu e^{A s} ds B.  The transitions of many mu (the distinct graininesses of a run
-of jittered stamps) are made in one compiled call; a single mu is a stack of one.
+Exact (a continuous plant sampled at irregular instants): F = e^{A mu}, Q_d = Van Loan's
+integral (Van Loan, "Computing integrals involving the matrix exponential", IEEE TAC 1978),
+both as Taylor series in mu whose coefficients depend on the model only (made once per
+filter), B_d = int_0^mu e^{A s} ds B.  The transitions of many mu (the distinct
+graininesses of a run of jittered stamps) are made in one compiled call; a single mu is a
+stack of one.
 """
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 import numpy as np
 from numpy.typing import NDArray
@@ -96,42 +98,82 @@ def _halvings(norm: float, mu: float) -> int:
 
 
 @_jit
-def van_loan(A: Matrix, GQGt: Matrix, mu: float) -> tuple[Matrix, Matrix]:
+def van_loan_series(A: Matrix, GQGt: Matrix) -> tuple[Stack, Stack, float]:
     """
-    Return the exact (F, Q_d) of x' = A x + G w over mu.
+    Return the Taylor coefficients of F(h) and Q_d(h) in s = nu h, and ||A|| (`_norm`).
 
-    F = e^{A mu}, Q_d = int_0^mu F(s) GQG^T F(s)^T ds.
-    Van Loan (1978): expm([[-A, GQG^T], [0, A^T]] h) = [[., F(h)^-1 Q_d(h)], [0, F(h)^T]],
-    taken over h = mu / 2^k small enough for the Taylor series and doubled k times,
-    F(2h) = F(h)^2, Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T: the one-shot block exponential
-    holds e^{-A mu}, which for a stable A and a long mu (60 s of a spring-mass system) is
-    so large that F and Q_d lose every digit (F came out 1e10, Q_d indefinite).  Only the
-    right-hand block column of the exponential is used, and only it is summed (half the
-    products of the whole 2n x 2n series, the same sums).
+    F(h) = e^{A h} = sum_k s^k F_k,  F_k = (A / nu)^k / k!
+    Q_d(h) = int_0^h F(r) GQG^T F(r)^T dr = sum_k s^k D_k, the series of the solution of
+    Q_d' = A Q_d + Q_d A^T + GQG^T, Q_d(0) = 0 (Van Loan 1978, eq. 1.2):
+    D_1 = GQG^T / nu,  k D_k = (A / nu) D_{k-1} + D_{k-1} (A / nu)^T
+    with nu = ||A|| (1 for A = 0), k = 0 .. _TAYLOR_TERMS.  They depend on the model only:
+    a filter makes them once and sums them for every mu (`van_loan_from`), n^2 work per
+    term instead of the products of the 2n x 2n block exponential.
     """
     n = A.shape[0]
     norm = _norm(A)
-    k = _halvings(norm, mu)
+    nu = norm if norm > 0.0 else 1.0
+    X = np.ascontiguousarray(A / nu)
+    Fk = np.zeros((_TAYLOR_TERMS + 1, n, n))
+    Dk = np.zeros((_TAYLOR_TERMS + 1, n, n))
+    for i in range(n):
+        Fk[0, i, i] = 1.0
+    Dk[1] = GQGt / nu
+    for k in range(1, _TAYLOR_TERMS + 1):
+        # F_k = X F_{k-1} / k
+        Fk[k] = _mm(X, Fk[k - 1]) / k
+        if k > 1:
+            # D_k = (X D_{k-1} + D_{k-1} X^T) / k, D_{k-1} symmetric: (X D + (X D)^T) / k
+            XD = _mm(X, Dk[k - 1])
+            Dk[k] = (XD + XD.T) / k
+    return Fk, Dk, norm
+
+
+@_jit
+def van_loan_from(Fk: Stack, Dk: Stack, norm: float, mu: float) -> tuple[Matrix, Matrix]:
+    """
+    Return the exact (F, Q_d) over mu from `van_loan_series`'s coefficients.
+
+    The series are summed over h = mu / 2^k with 2 ||A|| h <= 1/2, in Horner's form, to
+    N = _taylor_terms(2 ||A|| h) terms (the first term of Q_d's series left out is at most
+    (2 ||A|| h)^N / (N + 1)! of GQG^T h), and doubled k times:
+    F(2h) = F(h)^2, Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T (the one-shot block exponential
+    holds e^{-A mu}, which for a stable A and a long mu, 60 s of a spring-mass system, is
+    so large that F and Q_d lose every digit).
+    """
+    k = _halvings(2.0 * norm, mu)
     h = math.ldexp(mu, -k)
-    # M h, M = [[-A, GQG^T], [0, A^T]]
-    Mh = np.zeros((2 * n, 2 * n))
-    for i in range(n):
-        for j in range(n):
-            Mh[i, j] = -A[i, j] * h
-            Mh[i, n + j] = GQGt[i, j] * h
-            Mh[n + i, n + j] = A[j, i] * h
-    right = np.zeros((2 * n, n))     # the right-hand columns of I
-    for i in range(n):
-        right[n + i, i] = 1.0
-    E = _expm_taylor(Mh, min(norm * h, 0.5), right)
-    F = np.ascontiguousarray(E[n:].T)
-    Qd = _mm(F, np.ascontiguousarray(E[:n]))
+    N = _taylor_terms(2.0 * norm * h)
+    s = h * norm if norm > 0.0 else h
+    # F = F_0 + s (F_1 + s (... + s F_N)),  Q_d = s (D_1 + s (D_2 + ... + s D_N))
+    F = Fk[N].copy()
+    Qd = Dk[N].copy()
+    for j in range(N - 1, 0, -1):
+        F *= s
+        F += Fk[j]
+        Qd *= s
+        Qd += Dk[j]
+    F *= s
+    F += Fk[0]
+    Qd *= s
     for _ in range(k):
         # Q_d(2h) = Q_d(h) + F(h) Q_d(h) F(h)^T
         Qd = Qd + _mm(_mm(F, Qd), np.ascontiguousarray(F.T))
         # F(2h) = F(h)^2
         F = _mm(F, F)
     return F, Qd / 2 + Qd.T / 2
+
+
+@_jit
+def van_loan(A: Matrix, GQGt: Matrix, mu: float) -> tuple[Matrix, Matrix]:
+    """
+    Return the exact (F, Q_d) of x' = A x + G w over mu.
+
+    F = e^{A mu}, Q_d = int_0^mu F(s) GQG^T F(s)^T ds (Van Loan 1978), summed as Taylor
+    series in mu (`van_loan_series`, `van_loan_from`).
+    """
+    Fk, Dk, norm = van_loan_series(A, GQGt)
+    return van_loan_from(Fk, Dk, norm, mu)
 
 
 @_jit
@@ -161,13 +203,21 @@ def exact_input_matrix(A: Matrix, B: Matrix, mu: float) -> Matrix:
 
 
 @_jit
-def van_loan_stack(A: Matrix, GQGt: Matrix, mus: NDArray[np.float64]) -> tuple[Stack, Stack]:
-    """Return `van_loan` over each mu of mus, stacked (K, n, n)."""
-    n, K = A.shape[0], mus.shape[0]
+def van_loan_stack_from(Fk: Stack, Dk: Stack, norm: float, mus: NDArray[np.float64]
+                        ) -> tuple[Stack, Stack]:
+    """Return `van_loan_from` over each mu of mus, stacked (K, n, n)."""
+    n, K = Fk.shape[1], mus.shape[0]
     F, Qd = np.empty((K, n, n)), np.empty((K, n, n))
     for i in range(K):
-        F[i], Qd[i] = van_loan(A, GQGt, mus[i])
+        F[i], Qd[i] = van_loan_from(Fk, Dk, norm, mus[i])
     return F, Qd
+
+
+@_jit
+def van_loan_stack(A: Matrix, GQGt: Matrix, mus: NDArray[np.float64]) -> tuple[Stack, Stack]:
+    """Return `van_loan` over each mu of mus, stacked (K, n, n): the series made once."""
+    Fk, Dk, norm = van_loan_series(A, GQGt)
+    return van_loan_stack_from(Fk, Dk, norm, mus)
 
 
 @_jit
@@ -233,18 +283,19 @@ def noise_over(R: Matrix, mu: float) -> Matrix:
 @_jit
 def jump_update_predict(x: NDArray[np.float64], P: Matrix, z: NDArray[np.float64], H: Matrix,
                         R: Matrix, d: NDArray[np.float64], A: Matrix, GQGt: Matrix,
-                        B: Matrix, mu: float, exact: bool
+                        B: Matrix, Fk: Stack, Dk: Stack, norm: float, mu: float, exact: bool
                         ) -> tuple[tuple[NDArray[np.float64], Matrix, NDArray[np.float64],
                                          Matrix, NDArray[np.float64], Matrix, int], bool]:
     """
     Return the step over mu in one compiled call, without an input (B u = 0).
 
     kalman.update_predict with R_d = R / mu and the jump's F, Q_d (Euler, or exact:
-    `euler` / `van_loan` above), and whether I + mu A is invertible: on jittered stamps
-    every mu is new, and building its jump apart costs a call and a cache entry more.
+    `euler` / `van_loan_from` over the model's series Fk, Dk, norm), and whether I + mu A
+    is invertible: on jittered stamps every mu is new, and building its jump apart costs
+    a call and a cache entry more.
     """
     if exact:
-        F, Qd = van_loan(A, GQGt, mu)
+        F, Qd = van_loan_from(Fk, Dk, norm, mu)
         regressive = True
     else:
         F, Qd, _, regressive = euler(A, GQGt, B, mu)
@@ -271,28 +322,30 @@ class Transitions(NamedTuple):
 
 
 def transitions(kind: str, A: Matrix, GQGt: Matrix, B: Matrix, mus: NDArray[np.float64],
-                *, input_matrix: bool = True) -> Transitions:
+                *, input_matrix: bool = True,
+                series: Optional[tuple[Stack, Stack, float]] = None) -> Transitions:
     """
     Return the jumps over every mu of mus in one compiled call: Euler or the exact plant.
 
     input_matrix=False leaves B_d at zero for the exact transition (a model without an
-    input needs no second exponential).
+    input needs no second exponential); series is `van_loan_series(A, GQGt)` if made.
     """
     mus = np.ascontiguousarray(mus, dtype=float)
     if kind == 'euler':
         return Transitions(*euler_stack(A, GQGt, B, mus))
-    F, Qd = van_loan_stack(A, GQGt, mus)
+    F, Qd = van_loan_stack_from(*(series or van_loan_series(A, GQGt)), mus)
     Bd = exact_input_stack(A, B, mus) if input_matrix else np.zeros((mus.size,) + B.shape)
     # e^{A mu} is always invertible
     return Transitions(F, Qd, Bd, np.ones(mus.size, dtype=np.bool_))
 
 
 def transition(kind: str, A: Matrix, GQGt: Matrix, B: Matrix, mu: float,
-               *, input_matrix: bool = True) -> Transition:
+               *, input_matrix: bool = True,
+               series: Optional[tuple[Stack, Stack, float]] = None) -> Transition:
     """(F, Q_d, B_d) for a jump of mu: the paper's Euler form or the exact sampled plant."""
     if kind == 'euler':
         return Transition(*euler(A, GQGt, B, mu))
-    F, Qd = van_loan(A, GQGt, mu)
+    F, Qd = van_loan_from(*(series or van_loan_series(A, GQGt)), mu)
     Bd = exact_input_matrix(A, B, mu) if input_matrix else np.zeros(B.shape)
     # e^{A mu} is always invertible
     return Transition(F, Qd, Bd, True)
@@ -307,10 +360,22 @@ class TransitionCache(dict[float, Transition]):
         self.kind, self.input_matrix = kind, input_matrix
         self.seen: set[float] = set()       # mu met once, not cached (see `once`)
         self.A, self.GQGt, self.B = (np.ascontiguousarray(M, dtype=float) for M in (A, GQGt, B))
+        self._series: Optional[tuple[Stack, Stack, float]] = None
+
+    @property
+    def series(self) -> tuple[Stack, Stack, float]:
+        """Return `van_loan_series` of the model (exact transition), made on first use."""
+        if self._series is None:
+            if self.kind == 'exact':
+                self._series = van_loan_series(self.A, self.GQGt)
+            else:       # Euler sums no series: empty stacks of the kernels' types
+                empty = np.empty((0,) + self.A.shape)
+                self._series = (empty, empty, 0.0)
+        return self._series
 
     def __missing__(self, mu: float) -> Transition:
         jump = transition(self.kind, self.A, self.GQGt, self.B, mu,
-                          input_matrix=self.input_matrix)
+                          input_matrix=self.input_matrix, series=self.series)
         if len(self) >= CACHE_SIZE:
             del self[next(iter(self))]
         self[mu] = jump
@@ -336,13 +401,13 @@ class TransitionCache(dict[float, Transition]):
                   ) -> tuple[tuple[NDArray[np.float64], Matrix, NDArray[np.float64], Matrix,
                                    NDArray[np.float64], Matrix, int], bool]:
         """Return jump_update_predict over mu (no input) and whether I + mu A is invertible."""
-        return jump_update_predict(x, P, z, H, R, d, self.A, self.GQGt, self.B, mu,
-                                   self.kind == 'exact')
+        return jump_update_predict(x, P, z, H, R, d, self.A, self.GQGt, self.B, *self.series,
+                                   mu, self.kind == 'exact')
 
     def stack(self, mus: NDArray[np.float64]) -> Transitions:
         """Return the transitions of every mu of mus (a run's distinct values) in one call."""
         return transitions(self.kind, self.A, self.GQGt, self.B, mus,
-                           input_matrix=self.input_matrix)
+                           input_matrix=self.input_matrix, series=self.series)
 
 
 def warm_up() -> None:
@@ -354,6 +419,8 @@ def warm_up() -> None:
     euler_stack(A, A, A[:, :1], mus)
     van_loan_stack(A, A, mus)
     exact_input_stack(A, A[:, :1], mus)
+    Fk, Dk, norm = van_loan_series(A, A)
+    van_loan_stack_from(Fk, Dk, norm, mus)
     x, z, H = np.zeros(2), np.zeros(1), np.ones((1, 2))
     for exact in (False, True):
-        jump_update_predict(x, A, z, H, np.eye(1), z, A, A, A[:, :1], 1.0, exact)
+        jump_update_predict(x, A, z, H, np.eye(1), z, A, A, A[:, :1], Fk, Dk, norm, 1.0, exact)

@@ -221,3 +221,21 @@ def test_gate_patience_ends_a_lockout_of_an_unstable_model():
     assert [o.reason for o in out[:3]] == ['gated'] * 3
     assert (out[3].status, out[3].reason) == ('reset', 'gate_lockout')
     assert all(o.status == 'accepted' for o in out[4:])
+
+
+def test_the_admission_of_a_run_at_once_is_check_sample_by_sample():
+    # Admission.passes (the arrays of add_many) against Admission.check one sample at a time
+    from tskf_ros.owc.session.admission import Admission
+    rng = np.random.default_rng(5)
+    n = 2000
+    stamps = rng.choice([0, -5, T0, MAX_STAMP_NS, MAX_STAMP_NS + 1], n)
+    ys = rng.choice([300.0, -1.0, 0.0, 1e308, math.inf, -math.inf, math.nan, 5e3], n)
+    variances = rng.choice([0.0, 1.0, -1.0, math.inf, math.nan], n)
+    nows = stamps + rng.choice([0, -3 * NS, 3 * NS], n)
+    for range_, future, gap in (((), 0.0, True), ((0.0, 1000.0), 1.0, False)):
+        config = EstimatorConfig(OWC, measurement_range=range_, max_future=future,
+                                 nonpositive_is_gap=gap)
+        admission = Admission(config, 1)
+        expected = [admission.check(int(t), float(y), float(v), int(now)) is None
+                    for t, y, v, now in zip(stamps, ys, variances, nows)]
+        np.testing.assert_array_equal(admission.passes(stamps, ys, variances, nows), expected)

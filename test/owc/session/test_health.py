@@ -110,3 +110,42 @@ def test_outputs_stay_finite_and_psd_under_hostile_input():
             assert np.all(np.isfinite(e.x)) and np.all(np.isfinite(e.P))
             np.testing.assert_array_equal(e.P, e.P.T)
             assert np.linalg.eigvalsh(e.P)[0] >= -1e-9 * max(1.0, np.abs(e.P).max())
+
+
+def test_the_health_of_a_run_at_once_is_checked_step_by_step():
+    # health.sound_steps over a run's stacks against health.checked one step at a time:
+    # the steps kept up to the first it refuses (indefinite P, |x| or trace P beyond the
+    # limit, NaN), and their trace P(sigma)
+    from tskf_ros.core.matrices import FilterError
+    from tskf_ros.core.timescale_kalman import StepResult
+    from tskf_ros.owc.session.health import checked, sound_steps
+    rng = np.random.default_rng(9)
+    for n in (1, 2, 3):
+        for _ in range(50):
+            K = 20
+            M = rng.normal(size=(K, n, n))
+            P_c = M @ M.transpose(0, 2, 1)
+            P_p = P_c + 0.1 * np.eye(n)
+            x_p = rng.normal(size=(K, n))
+            k = rng.integers(K)
+            bad = rng.integers(5)
+            if bad == 0:
+                P_c[k] -= 100.0 * np.eye(n)
+            elif bad == 1:
+                P_p[k] -= 100.0 * np.eye(n)
+            elif bad == 2:
+                x_p[k, -1] = 1e9
+            elif bad == 3:
+                P_p[k] *= 1e17
+            else:
+                x_p[k, 0] = np.nan
+            count, traces = sound_steps(P_c, x_p, P_p, 1e8)
+            expected = []
+            for j in range(K):
+                try:
+                    expected.append(checked(StepResult(0.01, x_p[j], P_c[j], x_p[j], P_p[j],
+                                                       x_p[j], P_p[j]), 1e8))
+                except FilterError:
+                    break
+            assert count == len(expected)
+            np.testing.assert_array_equal(traces, expected)

@@ -29,6 +29,7 @@ import math
 from typing import NamedTuple, Optional
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tskf_ros.core import kalman
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
@@ -102,6 +103,16 @@ class Admission:
             return Rejection('future', f'stamp {stamp_ns / NS:.9f} s is '
                              f'{(stamp_ns - now_ns) / NS:.3f} s ahead of the clock')
         return None
+
+    def passes(self, stamps_ns: NDArray[np.int64], ys: NDArray[np.float64],
+               variances: NDArray[np.float64], nows_ns: NDArray[np.int64]
+               ) -> NDArray[np.bool_]:
+        """Tell, for samples of one reading each (p = 1), which check() lets through."""
+        with np.errstate(invalid='ignore'):
+            return ((0 < stamps_ns) & (stamps_ns <= MAX_STAMP_NS) & np.isfinite(ys)
+                    & (0.0 <= variances) & (variances < _INF) & (self.p == 1)
+                    & (ys > self.low) & (self.lo <= ys) & (ys <= self.hi)
+                    & ~(stamps_ns - nows_ns > self.max_future_ns))
 
 
 class Gate:

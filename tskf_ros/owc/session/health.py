@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from tskf_ros.core.matrices import FilterError, is_psd
+from tskf_ros.core.matrices import FilterError, is_psd, psd_stack
 from tskf_ros.core.timescale_kalman import StepResult
 from tskf_ros.owc.session.outcome import FloatArray
 
@@ -93,3 +93,20 @@ def checked(res: StepResult, limit: float) -> float:
     if why:
         raise StateLimitError(why)
     return trace
+
+
+def sound_steps(P_corrected: FloatArray, x_predicted: FloatArray, P_predicted: FloatArray,
+                limit: float) -> tuple[int, FloatArray]:
+    """
+    Return how many steps of a run, from the first, `checked` keeps, and their trace P(sigma).
+
+    The same tests as `checked`, on the run's stacks at once: P(t|t) and P(sigma(t)) PSD
+    (`psd_stack`), max_i |x_i| <= limit and trace P(sigma(t)) <= limit^2 (`beyond`).
+    """
+    traces = np.trace(P_predicted, axis1=1, axis2=2)
+    largest = np.abs(x_predicted).max(axis=1) if x_predicted.shape[1] else np.zeros(len(traces))
+    with np.errstate(over='ignore'):
+        sound = (psd_stack(P_corrected) & psd_stack(P_predicted) & ~(largest > limit)
+                 & (traces <= limit * limit))
+    count = len(sound) if sound.all() else int(np.argmin(sound))
+    return count, traces[:count]

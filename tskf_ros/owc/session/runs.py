@@ -14,12 +14,14 @@
 # limitations under the License.
 
 """
-Samples taken in runs: admitted one by one, then stepped through the filter in one call.
+Samples taken in runs: admitted, stepped through the filter and checked, each in one call.
 
 For samples t_1 < t_2 < ... that pass the admission checks, each within max_jump of the
 one before, the session's steps are step(mu_k, y(t_{k-1})) with mu_k = t_k - t_{k-1}
 (Bohner & Wintz Table 3), each kept if y(t_k) passes the gate at the prediction
-xhat(t_k), P(t_k): TimeScaleKalmanFilter.run with the gate as its innovation test.
+xhat(t_k), P(t_k): TimeScaleKalmanFilter.run with the gate as its innovation test.  The
+admission checks (Admission.passes), the health checks of the steps (health.sound_steps),
+the intervals and the input's diagnostics take the run's arrays at once.
 """
 
 from typing import Optional, Union
@@ -28,11 +30,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tskf_ros.core.diagnostic_status import InputStream
-from tskf_ros.core.timescale_kalman import (FilterError, InnovationTest, StepResult,
-                                            TimeScaleKalmanFilter)
+from tskf_ros.core.timescale_kalman import InnovationTest, TimeScaleKalmanFilter
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session.admission import Admission, Gate
-from tskf_ros.owc.session.health import checked
+from tskf_ros.owc.session.health import sound_steps
 from tskf_ros.owc.session.history import History, Point
 from tskf_ros.owc.session.outcome import FloatArray, Outcome, Run, Stats
 from tskf_ros.owc.session.sampling_intervals import Intervals
@@ -74,12 +75,21 @@ class Runs:
         """
         stamps, ys = stamps_ns.tolist(), values.tolist()
         vs, nows = variances.tolist(), now_ns.tolist()
+        # the samples that can follow the one before in a run: admitted (Admission.check,
+        # at once for all) and within max_jump of it; `breaks` are the others, sorted
+        admitted = np.zeros(len(stamps), dtype=bool)
+        if len(stamps) and self.kf.p == 1:
+            admitted = self.admission.passes(stamps_ns, values, variances, now_ns)
+        step = np.diff(stamps_ns)
+        follows = admitted.copy()
+        follows[1:] &= (0 < step) & (step <= self._max_jump_ns)
+        breaks = np.flatnonzero(~follows)
         out: list[Union[Run, Outcome]] = []
         i = 0
         while i < len(stamps):
-            j = self._admitted(stamps, ys, vs, nows, i)
+            j = self._admitted(stamps, admitted, breaks, i)
             if j > i:
-                run = self._run(stamps_ns[i:j], values[i:j], nows[i:j])
+                run = self._run(stamps_ns[i:j], values[i:j], now_ns[i:j])
                 if run.count:
                     out.append(run)
                 i += run.count
@@ -89,8 +99,8 @@ class Runs:
             i += 1
         return out
 
-    def _admitted(self, stamps: list[int], ys: list[float], vs: list[float],
-                  nows: list[int], i: int) -> int:
+    def _admitted(self, stamps: list[int], admitted: NDArray[np.bool_],
+                  breaks: NDArray[np.intp], i: int) -> int:
         """Return j: samples i .. j-1 can be a run (see add_many)."""
         points = self.history.points
         if self.kf.p != 1 or self._use_variance or not points:
@@ -98,17 +108,14 @@ class Runs:
         last = points[-1]
         if last.y is None or last.variance != 0.0 or last.u is not self.u:
             return i
-        stamp, max_jump, check = last.stamp_ns, self._max_jump_ns, self.admission.check
-        j = i
-        for t, y, v, now in zip(stamps[i:], ys[i:], vs[i:], nows[i:]):
-            if not 0 < t - stamp <= max_jump or check(t, y, v, now) is not None:
-                break
-            stamp = t
-            j += 1
-        return j
+        # sample i follows the last point, the next ones each the one before
+        if not (admitted[i] and 0 < stamps[i] - last.stamp_ns <= self._max_jump_ns):
+            return i
+        k = int(np.searchsorted(breaks, i + 1))
+        return int(breaks[k]) if k < len(breaks) else len(stamps)
 
     def _run(self, stamps: NDArray[np.int64], values: NDArray[np.float64],
-             nows: list[int]) -> Run:
+             nows: NDArray[np.int64]) -> Run:
         """Run admitted samples in order through the filter; keep those accepted."""
         kf, points, st = self.kf, self.history.points, self.stats
         last = points[-1]
@@ -123,27 +130,27 @@ class Runs:
         saved = kf.x, kf.P
         res = kf.run(mu, z, self.u if self._uses_input else None, test=test)
         x_p, P_p = res.x_predicted, res.P_predicted
-        count, trace = res.steps, st.covariance_trace
-        for k, (t, y) in enumerate(zip(stamps[:count].tolist(), values.tolist())):
-            try:
-                trace = checked(StepResult(mu[k], res.x_corrected[k], res.P_corrected[k],
-                                           x_p[k], P_p[k], z, z), self._state_limit)
-            except FilterError:     # add() takes this sample again and decides
-                count = k
-                kf.x, kf.P = (x_p[k - 1], P_p[k - 1]) if k else saved
-                break
-            points.append(Point(t, y, x_p[k], P_p[k], self.u, False, 0.0))
-            self.intervals.measured(t)
+        # the health checks of every step at once; add() takes an unsound one again
+        count, traces = sound_steps(res.P_corrected[:res.steps], x_p[:res.steps],
+                                    P_p[:res.steps], self._state_limit)
+        if count < res.steps:
+            kf.x, kf.P = (x_p[count - 1], P_p[count - 1]) if count else saved
         if count:
-            for t, now in zip(stamps[:count].tolist(), nows[:count]):
-                self.input.note(t, now)
+            # the points kept (the deque keeps only its newest maxlen of them)
+            first = max(0, count - (points.maxlen or count))
+            u = self.u
+            points.extend(Point(t, y, x_p[k], P_p[k], u, False, 0.0) for k, t, y in zip(
+                range(first, count), stamps[first:count].tolist(),
+                values[first:count].tolist()))
+            self.intervals.measured_many(stamps[:count])
+            self.input.note_many(stamps[:count].tolist(), nows[:count].tolist())
             st.received += count
             st.accepted += count
             self.gated_in_a_row = 0
             st.mu_current = mu[count - 1].item()
             st.mu_max = max(st.mu_max, mu[:count].max().item())
             st.last_stamp_ns = max(st.last_stamp_ns, int(stamps[count - 1]))
-            st.covariance_trace = trace
+            st.covariance_trace = traces[count - 1].item()
             self.history.trim()
         return Run(count, stamps[:count], previous[:count], res.x_corrected[:count],
                    res.P_corrected[:count], x_p[:count], P_p[:count])

@@ -27,6 +27,9 @@ the measurement variance R / period at every sample.
 
 from typing import Optional
 
+import numpy as np
+from numpy.typing import NDArray
+
 from tskf_ros.core import irregular
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 from tskf_ros.core.units import NS
@@ -64,6 +67,35 @@ class Intervals:
             if self.kappa(J) in st.intervals and not J > self.jump_s:
                 self._quiet_ns = stamp_ns - last
         st.last_measurement_ns = max(last, stamp_ns)
+
+    def measured_many(self, stamps_ns: NDArray[np.int64]) -> None:
+        """
+        Record the intervals of measurement points in order, as measured() one at a time.
+
+        An interval of a kappa already seen and no gap records nothing: only the others
+        go through measured(), in order.
+        """
+        st = self.stats
+        if not stamps_ns.size:
+            return
+        previous = np.empty_like(stamps_ns)
+        previous[0], previous[1:] = st.last_measurement_ns, stamps_ns[:-1]
+        J = (stamps_ns - previous) / NS
+        kappa = np.rint(J / self.period)
+        plain = (0 < previous) & (previous < stamps_ns) & ~(J > self.jump_s)
+        start = 0
+        while start < stamps_ns.size:
+            seen = len(st.intervals)
+            known = plain[start:] & np.isin(kappa[start:], list(st.intervals))
+            for k in (start + np.flatnonzero(~known)).tolist():
+                st.last_measurement_ns = max(st.last_measurement_ns, int(previous[k]))
+                self.measured(int(stamps_ns[k]))
+                start = k + 1
+                if len(st.intervals) != seen:      # a new kappa: known again from here
+                    break
+            else:
+                break
+        st.last_measurement_ns = max(st.last_measurement_ns, int(stamps_ns.max()))
 
     def record(self, start_ns: int, end_ns: int) -> None:
         """Record the interval between two measurement points: a gap beyond jump_factor."""
