@@ -178,17 +178,28 @@ def _t(A: Stack) -> Stack:
 
 @_jit
 def _symmetric_runs(P: Stack) -> Stack:
-    """Return (P[r] + P[r]^T) / 2 for each run r, as halves (entries near 1e308 stay finite)."""
-    return P / 2 + _t(P) / 2
+    """
+    Return (P[r] + P[r]^T) / 2 for each run r, as halves (entries near 1e308 stay finite).
+
+    In place: P is an intermediate of its caller.
+    """
+    n = P.shape[1]
+    for r in range(P.shape[0]):
+        for i in range(n):
+            for j in range(i, n):
+                P[r, i, j] = P[r, j, i] = P[r, i, j] / 2 + P[r, j, i] / 2
+    return P
 
 
 @_jit
 def predict_runs(x: Stack, P: Stack, F: Stack, Q: Stack, Bu: Stack) -> tuple[Stack, Stack]:
     """Time update of each run; Bu is B u (zeros without an input)."""
-    # x = F x + B u
-    x = _mv_runs(F, x) + Bu
+    # x = F x + B u (each sum in place on the product, a new array: the same sums)
+    x = _mv_runs(F, x)
+    x += Bu
     # P = F P F^T + Q
-    P = _mm_runs(_mm_runs(F, P), _t(F)) + Q
+    P = _mm_runs(_mm_runs(F, P), _t(F))
+    P += Q
     return x, _symmetric_runs(P)
 
 
@@ -204,10 +215,13 @@ def innovation_runs(x: Stack, P: Stack, z: Stack, H: Stack, R: Stack, d: Stack
                     ) -> tuple[Stack, Stack, Stack]:
     """Return the innovation y, its covariance S and P H^T of each run."""
     # y = z - (H x + d)
-    y = z - (_mv_runs(H, x) + d)
+    Hx_d = _mv_runs(H, x)
+    Hx_d += d
+    y = z - Hx_d
     # S = H P H^T + R
     PHt = _mm_runs(P, _t(H))
-    S = _mm_runs(H, PHt) + R
+    S = _mm_runs(H, PHt)
+    S += R
     return y, S, PHt
 
 
@@ -247,7 +261,9 @@ def update_runs(x: Stack, P: Stack, z: Stack, H: Stack, R: Stack, d: Stack
     # K = P H^T S^-1
     K = _mm_runs(PHt, _inv_runs(S))
     # x = x + K y
-    x = x + _mv_runs(K, y)
+    Ky = _mv_runs(K, y)
+    Ky += x
+    x = Ky
     # P = (I - K H) P (I - K H)^T + K R K^T: the Joseph form (Bucy & Joseph 1968; Simon
     # eq. 5.19), right for any K, so that an error in K changes P only to second order.  It
     # is evaluated as written, as congruences of P and R, which keeps P positive
@@ -255,7 +271,8 @@ def update_runs(x: Stack, P: Stack, z: Stack, H: Stack, R: Stack, d: Stack
     # P - K (H P) - (P H^T) K^T + K S K^T keeps the algebra but not that property
     # (test/core/test_kalman.py measures both)
     I_KH = np.eye(P.shape[1]) - _mm_runs(K, H)
-    P = _mm_runs(_mm_runs(I_KH, P), _t(I_KH)) + _mm_runs(_mm_runs(K, R), _t(K))
+    P = _mm_runs(_mm_runs(I_KH, P), _t(I_KH))
+    P += _mm_runs(_mm_runs(K, R), _t(K))
     return x, _symmetric_runs(P), y, S, K
 
 
@@ -270,6 +287,9 @@ def update(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector
 @_jit
 def finite(x: Vector, P: Matrix) -> bool:
     """Tell whether every entry of x and P is finite."""
+    # a sum is finite when every entry is; only a sum that is not needs the full check
+    if np.isfinite(x.sum()) and np.isfinite(P.sum()):
+        return True
     return bool(np.all(np.isfinite(x)) and np.all(np.isfinite(P)))
 
 
