@@ -222,5 +222,6 @@ def _smoothed_mb(bag: Path) -> float:
     n = int(round((-1 + (1 + 4 * size) ** 0.5) / 2))
     return count * 8 * (2 + n + n * n) / 1e6
 
+
 if __name__ == '__main__':
     main()

@@ -128,3 +128,26 @@ def test_the_bootstrap_in_rows_is_the_bootstrap_at_once(monkeypatch):
     ratio = lqg_comparison.phi_ratio(a, b, 2)
     ratios = a[index].mean(axis=1) / b[index].mean(axis=1)
     assert ratio['ci95'] == [float(v) for v in np.percentile(ratios, [2.5, 97.5])]
+
+
+def test_a_dask_scheduler_gives_the_sequential_results(tmp_path, capsys):
+    # the tasks on a Dask cluster's workers: the same numbers as on one process
+    distributed = pytest.importorskip('dask.distributed')
+    args = ['--runs', '3', '--steps', '30', '--betas', '0,14']
+    outs = []
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        for extra in (['--workers', '1'], ['--scheduler', cluster.scheduler_address]):
+            out = tmp_path / f'{len(outs)}.json'
+            assert lqg_comparison.main(args + extra + ['--json', str(out)]) == 0
+            data = json.loads(out.read_text())
+            data.pop('elapsed_s')
+            outs.append(data)
+    assert outs[0] == outs[1]
+
+
+def test_a_scheduler_not_reached_is_one_line(tmp_path, capsys):
+    assert lqg_comparison.main(['--runs', '2', '--steps', '3', '--betas', '1',
+                                '--scheduler', 'tcp://127.0.0.1:9']) == 1
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'cannot use the Dask scheduler at tcp://127.0.0.1:9' in err

@@ -154,22 +154,24 @@ def run_batch(points: Sequence[Point]) -> list[tuple[np.ndarray, np.ndarray, dic
 
 
 def run_points(points: Sequence[Point], workers: int,
-               part_runs: Optional[int] = None,
-               batch_runs: Optional[int] = None) -> Iterator[tuple]:
+               part_runs: Optional[int] = None, batch_runs: Optional[int] = None,
+               scheduler: Optional[str] = None) -> Iterator[tuple]:
     """Yield run_point of each point, in order, on `workers` processes (monte_carlo)."""
-    return monte_carlo.run_points(points, workers, ALIGNMENT, part_runs, batch_runs)
+    return monte_carlo.run_points(points, workers, ALIGNMENT, part_runs, batch_runs,
+                                  scheduler)
 
 
 def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.TrackingLinkConfig,
           seed: int, response: led.IncidenceResponse, ekf: led.EKFConfig,
           algorithms: Sequence[str] = led.ALGORITHMS, clip: bool = False,
           controller: str = 'p', progress: Optional[Progress] = None,
-          workers: int = 1) -> dict:
+          workers: int = 1, scheduler: Optional[str] = None) -> dict:
     """
     Run every algorithm at each value of a LinkConfig field ('noise' or 'dropout').
 
-    The points (value, algorithm) run on `workers` processes; each starts its own
-    generator from `seed`, so the results do not depend on the number of workers.
+    The points (value, algorithm) run on `workers` processes (or a Dask scheduler's
+    workers); each starts its own generator from `seed`, so the results do not depend on
+    the number of workers.
     """
     results = _empty(algorithms)
     start = time.perf_counter()
@@ -178,7 +180,7 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
                progress is not None)
     points = [Point(name, runs, dataclasses.replace(link, **{parameter: float(value)}), seed,
                     response, ekf, clip, controller) for value in values for name in algorithms]
-    done = run_points(points, workers)
+    done = run_points(points, workers, scheduler=scheduler)
     for i, value in enumerate(values):
         tic = time.perf_counter()
         parts = []
@@ -248,6 +250,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--beta', type=arguments.rate_deg_s,
                    default=1.2, help='disturbance rate, deg/s (1.2)')
     arguments.add_run_options(p, dt=led.PAPER_DT)
+    arguments.add_scheduler(p)
     p.add_argument('--dropout', type=float, default=0.0,
                    help='probability that a measurement is missing (0)')
     p.add_argument('--x2-0', type=arguments.angle_deg,
@@ -307,7 +310,15 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     axes.add_argument('--axes', type=int, choices=(1, 2), default=1)
     if axes.parse_known_args(argv)[0].axes == 2:
         return alignment_mc_two_axis.main(argv)
-    args = parser().parse_args(argv)
+    try:
+        return _main(parser().parse_args(argv))
+    except monte_carlo.SchedulerError as exc:
+        print(f'alignment_mc: {exc}', file=sys.stderr)
+        return 1
+
+
+def _main(args: argparse.Namespace) -> int:
+    """Run the experiments of parsed arguments; return the exit status."""
     if not 0.0 <= args.dropout < 1.0 or any(not 0.0 <= d < 1.0 for d in args.dropout_levels):
         parser().error('dropout probabilities must be in [0, 1)')
 
@@ -346,7 +357,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                   blocked=tuple(args.blocked))
     common = {'runs': args.runs, 'seed': args.seed, 'response': response, 'ekf': ekf,
               'clip': args.clip_three_point, 'controller': args.controller,
-              'progress': progress, 'workers': args.workers}
+              'progress': progress, 'workers': args.workers, 'scheduler': args.scheduler}
     if not observable.guaranteed:
         progress(f'note: {observable.message}')
     progress(f'g at {response.units_per_degree:.4g} fit units per degree; beta {args.beta:g} '

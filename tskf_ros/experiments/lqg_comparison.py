@@ -170,10 +170,11 @@ COMPARISON = Comparison()
 
 
 def run_points(points: Sequence[monte_carlo.Point], workers: int,
-               part_runs: Optional[int] = None,
-               batch_runs: Optional[int] = None) -> Iterator[RunValues]:
+               part_runs: Optional[int] = None, batch_runs: Optional[int] = None,
+               scheduler: Optional[str] = None) -> Iterator[RunValues]:
     """Yield the RunValues of each point, in order, on `workers` processes (monte_carlo)."""
-    return monte_carlo.run_points(points, workers, COMPARISON, part_runs, batch_runs)
+    return monte_carlo.run_points(points, workers, COMPARISON, part_runs, batch_runs,
+                                  scheduler)
 
 
 def phi_ratio(lqg: np.ndarray, p: np.ndarray, seed: int) -> dict:
@@ -231,6 +232,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--effort-beta', type=arguments.rate_deg_s, default=2.8,
                    help='effort point drift rate, deg/s (2.8, Fig. 14)')
     arguments.add_run_options(p, dt=led.PAPER_DT)
+    arguments.add_scheduler(p)
     p.add_argument('--ablation', action='store_true',
                    help='also run the LQG variants of ABLATIONS at --ablation-beta (noise '
                         '--noise) and at the effort point')
@@ -256,7 +258,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.ablation:
         points += [point('lqg', beta=beta, noise=noise, lqg=config, **common)
                    for config in ABLATIONS.values() for beta, noise in abl]
-    done = run_points(points, args.workers)
+    try:
+        return _compare(args, where, abl, run_points(points, args.workers,
+                                                     scheduler=args.scheduler), start)
+    except monte_carlo.SchedulerError as exc:
+        print(f'lqg_comparison: {exc}', file=sys.stderr)
+        return 1
+
+
+def _compare(args: argparse.Namespace, where: list, abl: tuple, done: Iterator[RunValues],
+             start: float) -> int:
+    """Take the points' RunValues as they come; print and write the results."""
+    common = {'runs': args.runs, 'steps': args.steps, 'dt': args.dt, 'seed': args.seed}
     sweep: dict = {name: [] for name in CONTROLLERS}
     effort = {}
     # mean |phi| of the LQG over that of each P, at each beta and at the effort point

@@ -34,8 +34,8 @@ import numpy as np
 
 from tskf_ros import led
 
-__all__ = ['BATCH_RUNS', 'Experiment', 'PART_RUNS', 'Point', 'batches', 'parts', 'run_batch',
-           'run_points']
+__all__ = ['BATCH_RUNS', 'Experiment', 'PART_RUNS', 'Point', 'SchedulerError', 'batches',
+           'parts', 'run_batch', 'run_points']
 
 # runs drawn from one generator: a point of more runs is split into parts, part k > 0
 # drawing from the generator [seed, k] (the numbers of a seed do not depend on anything else)
@@ -82,6 +82,10 @@ class Experiment(Protocol):
 
     def join(self, parts: list) -> Any:
         """Return the measures of the parts of a point, in order, as of one simulation."""
+
+
+class SchedulerError(RuntimeError):
+    """The Dask scheduler given cannot be used (not installed, or not reached)."""
 
 
 def parts(p: Point, size: int) -> list[Point]:
@@ -152,10 +156,13 @@ def run_batch(points: Sequence[Point], experiment: Experiment) -> list:
 
 
 def run_points(points: Sequence[Point], workers: int, experiment: Experiment,
-               part_runs: Optional[int] = None,
-               batch_runs: Optional[int] = None) -> Iterator[Any]:
+               part_runs: Optional[int] = None, batch_runs: Optional[int] = None,
+               scheduler: Optional[str] = None) -> Iterator[Any]:
     """
     Yield the measures of each point, in order, computed on `workers` processes.
+
+    scheduler: the address of a Dask scheduler (e.g. tcp://host:8786), whose workers run
+    the tasks instead (they need this package); raises SchedulerError if it cannot be used.
 
     Each point runs in parts of at most part_runs runs (PART_RUNS), and the parts of points
     of one kind side by side, at most batch_runs runs (BATCH_RUNS) a task; the parts are
@@ -167,11 +174,29 @@ def run_points(points: Sequence[Point], workers: int, experiment: Experiment,
     tasks = batches(flat, batch_runs or BATCH_RUNS)
     work = [[flat[i] for i in task] for task in tasks]
     task = functools.partial(run_batch, experiment=experiment)
+    if scheduler is not None:
+        with _client(scheduler) as client:
+            futures = client.map(task, work, pure=False)
+            yield from _joined(split, tasks, (f.result() for f in futures), experiment)
+        return
     if workers <= 1 or len(work) <= 1:
         yield from _joined(split, tasks, map(task, work), experiment)
         return
     with ProcessPoolExecutor(max_workers=min(workers, len(work))) as pool:
         yield from _joined(split, tasks, pool.map(task, work), experiment)
+
+
+def _client(address: str) -> Any:
+    """Return a dask.distributed Client of the scheduler at address."""
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise SchedulerError('--scheduler needs dask.distributed (the analysis extra: '
+                             "pip install '.[analysis]')") from None
+    try:
+        return Client(address, timeout=10)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise SchedulerError(f'cannot use the Dask scheduler at {address}: {exc}') from None
 
 
 def _joined(split: list[list[Point]], tasks: list[list[int]], done: Iterator[list],

@@ -25,9 +25,10 @@ each segment is smoothed on its own.  See doc/design/smoother.md.
 
 Memory: the newest points (those a late sample may still revise: a few times the
 session's history_size) are kept by stamp; older ones are final and are kept as rows of
-arrays (stamp, sigma, x(t|t), P(t|t), x(sigma|t), P(sigma|t)), about 1.75 times the
-smoothed output at n = 2.  The backward pass writes the output from the newest row back
-and frees each chunk of rows as it has used it.
+columns grown in place (stamp, sigma, segment, x(t|t), P(t|t), x(sigma|t), P(sigma|t)),
+15 + 2 n + 2 n^2 numbers a point against the output's 2 + n + n^2: 1.75x at n = 1, 1.9x
+at n = 2.  The backward pass smooths x(t|t), P(t|t) in place, a chunk at a time from the
+newest point, and the output is those columns.
 """
 
 from dataclasses import dataclass, field
@@ -56,32 +57,52 @@ class SmoothedRows(NamedTuple):
     segment: NDArray[np.int64]      # which segment (0 first; a reset starts the next)
 
 
-@dataclass
 class _Rows:
-    """Final points of a segment, oldest first: what the backward pass reads."""
+    """
+    The final points, oldest first (segment by segment), as columns grown in place.
 
-    stamp: NDArray[np.int64]
-    sigma: NDArray[np.int64]        # the next point (ns)
-    x_f: Array                      # x(t|t), P(t|t)
-    P_f: Array
-    x_p: Array                      # x(sigma|t), P(sigma|t)
-    P_p: Array
+    stamp, sigma (the next point, ns), segment; x(t|t), P(t|t); x(sigma|t), P(sigma|t).
+    ndarray.resize grows an array in place (a large one by remapping its pages), so the
+    memory held is the rows written, not the room made.
+    """
+
+    def __init__(self, n: int) -> None:
+        self.count = 0
+        self.stamp, self.sigma, self.segment = (np.empty(0, np.int64) for _ in range(3))
+        self.x_f, self.x_p = np.empty((0, n)), np.empty((0, n))
+        self.P_f, self.P_p = np.empty((0, n, n)), np.empty((0, n, n))
+
+    def columns(self) -> tuple[np.ndarray, ...]:
+        """Return the columns."""
+        return self.stamp, self.sigma, self.segment, self.x_f, self.P_f, self.x_p, self.P_p
+
+    def grow(self, k: int) -> slice:
+        """Make room for k more rows; return their slice."""
+        need = self.count + k
+        if need > self.stamp.shape[0]:
+            size = max(need, self.stamp.shape[0] * 3 // 2, CHUNK)
+            for arr in self.columns():
+                arr.resize((size, *arr.shape[1:]), refcheck=False)
+        rows = slice(self.count, need)
+        self.count = need
+        return rows
+
+    def trim(self) -> None:
+        """Shrink every column to the rows written."""
+        for arr in self.columns():
+            arr.resize((self.count, *arr.shape[1:]), refcheck=False)
 
 
 @dataclass
 class _Segment:
-    """The forward run of one segment: the newest estimates by stamp, older ones as rows."""
+    """The newest points of a segment by stamp (the older ones are rows)."""
 
+    index: int                      # 0 first; a reset starts the next
     predicted: dict[int, tuple[Array, Array]] = field(default_factory=dict)
     corrected: dict[int, tuple[Array, Array]] = field(default_factory=dict)
     sigma: dict[int, int] = field(default_factory=dict)     # point -> next point (ns)
-    rows: list[_Rows] = field(default_factory=list)
-    final: Optional[int] = None     # the newest stamp in rows
-
-    @property
-    def points(self) -> int:
-        """Return the number of stepped points."""
-        return len(self.sigma) + sum(r.stamp.size for r in self.rows)
+    final: Optional[int] = None     # the newest stamp in the rows
+    start: int = -1                 # its first row (-1: none yet)
 
 
 class SmoothingRecorder:
@@ -90,7 +111,8 @@ class SmoothingRecorder:
     def __init__(self, config: EstimatorConfig) -> None:
         self.kf = config.model.make_filter(config.transition)
         self.n = self.kf.n
-        self.segments: list[_Segment] = [_Segment()]
+        self.segments: list[_Segment] = [_Segment(0)]
+        self.rows = _Rows(self.n)
         # points a late sample may still revise: those of the session's history, with room
         self.live = 4 * config.history_size + CHUNK
         self._result: Optional[tuple[SmoothedRows, NDArray[np.int64]]] = None
@@ -98,9 +120,10 @@ class SmoothingRecorder:
     def outcome(self, out: Outcome) -> None:
         """Take what the session made of a sample or an input (any status)."""
         if out.status == 'reset':
-            if self.segments[-1].predicted or self.segments[-1].rows:
-                self._freeze(self.segments[-1], len(self.segments[-1].sigma))
-                self.segments.append(_Segment())
+            seg = self.segments[-1]
+            if seg.predicted or seg.start >= 0:
+                self._freeze(seg, len(seg.sigma))
+                self.segments.append(_Segment(seg.index + (seg.start >= 0)))
         if out.status not in ('accepted', 'inserted', 'reset'):
             return
         seg = self.segments[-1]
@@ -122,15 +145,17 @@ class SmoothingRecorder:
                                f'before a point it had made final ({seg.final} ns)')
 
     def _freeze(self, seg: _Segment, count: int) -> None:
-        """Make the `count` oldest stepped points of seg final: rows of arrays."""
+        """Make the `count` oldest stepped points of seg final: rows."""
         stamps = sorted(seg.sigma)[:count]
         if not stamps:
             return
-        K, n = len(stamps), self.n
-        rows = _Rows(np.array(stamps, dtype=np.int64), np.empty(K, np.int64),
-                     np.empty((K, n)), np.empty((K, n, n)), np.empty((K, n)),
-                     np.empty((K, n, n)))
-        for k, t in enumerate(stamps):
+        rows = self.rows
+        at = rows.grow(len(stamps))
+        if seg.start < 0:
+            seg.start = at.start
+        rows.stamp[at] = stamps
+        rows.segment[at] = seg.index
+        for k, t in enumerate(stamps, at.start):
             sigma = rows.sigma[k] = seg.sigma.pop(t)
             # x(t_k|t_k): the corrected estimate, or (no measurement) the prediction into t_k
             rows.x_f[k], rows.P_f[k] = seg.corrected.get(t) or seg.predicted[t]
@@ -141,7 +166,6 @@ class SmoothingRecorder:
         for kept in (seg.predicted, seg.corrected):
             for t in [t for t in kept if t <= last]:
                 del kept[t]
-        seg.rows.append(rows)
         seg.final = last
 
     def smoothed(self) -> SmoothedRows:
@@ -152,49 +176,35 @@ class SmoothingRecorder:
         """
         Return smoothed() and each row's next point sigma (ns).
 
-        The rows kept are freed as they are smoothed: the result is made once, and kept.
+        The smoothing is done in place over the rows kept: the result is made once, and kept.
         """
         if self._result is not None:
             return self._result
-        segments = [seg for seg in self.segments if seg.sigma or seg.rows]
-        for seg in segments:
+        for seg in self.segments:
             self._freeze(seg, len(seg.sigma))
-        K, n = sum(seg.points for seg in segments), self.n
-        out = SmoothedRows(np.empty(K, np.int64), np.empty((K, n)), np.empty((K, n, n)),
-                           np.empty(K, np.int64))
-        sigma = np.empty(K, np.int64)
-        end = K
-        for i in range(len(segments) - 1, -1, -1):
-            seg = segments[i]
-            start = end - seg.points
-            out.segment[start:end] = i
-            self._smooth(seg, out, sigma, start, end)
-            end = start
-        self.segments = []
-        self._result = out, sigma
+        rows = self.rows
+        rows.trim()
+        starts = [seg.start for seg in self.segments if seg.start >= 0] + [rows.count]
+        for a, b in zip(starts[:-1], starts[1:]):
+            self._smooth(a, b)
+        self._result = (SmoothedRows(rows.stamp, rows.x_f, rows.P_f, rows.segment), rows.sigma)
+        self.segments, self.rows = [], _Rows(self.n)
         return self._result
 
-    def _smooth(self, seg: _Segment, out: SmoothedRows, sigma: NDArray[np.int64], start: int,
-                end: int) -> None:
-        """Smooth one segment's rows into out[start:end], newest chunk first, freeing each."""
-        last = end                  # the segment's newest point is row last - 1
-        while seg.rows:
-            rows = seg.rows.pop()
-            K = rows.stamp.size
-            a, b = end - K, end
-            out.stamp_ns[a:b] = rows.stamp
-            sigma[a:b] = rows.sigma
-            G = np.empty((K, self.n, self.n))
-            for k in range(K):
+    def _smooth(self, start: int, end: int) -> None:
+        """Smooth rows start..end-1 (one segment) in place, a chunk at a time from the newest."""
+        rows, n = self.rows, self.n
+        b = end - 1                 # the newest point: x(T|T) is its x(t|t)
+        while b > start:
+            a = max(start, b - CHUNK)
+            G = np.empty((b - a, n, n))
+            for k in range(a, b):
                 F = self.kf.transition_matrices((int(rows.sigma[k]) - int(rows.stamp[k]))
                                                 / NS)[0]
-                G[k] = smoother_gain(rows.P_f[k], np.ascontiguousarray(F), rows.P_p[k])
-            x_f, P_f, count = rows.x_f, rows.P_f, K
-            if b < last:
-                # the next point, smoothed already, closes this chunk: the x(T|T) of its pass
-                x_f = np.concatenate([x_f, out.x[b:b + 1]])
-                P_f = np.concatenate([P_f, out.P[b:b + 1]])
-                count = K + 1
-            backward_pass(x_f, P_f, rows.x_p, rows.P_p, G, 0, count, out.x[a:a + count],
-                          out.P[a:a + count])
-            end = a
+                G[k - a] = smoother_gain(rows.P_f[k], np.ascontiguousarray(F), rows.P_p[k])
+            # rows a..b: row b is smoothed already (the x(T|T) of this pass); the pass reads
+            # each row's x(t|t) before it writes its x(t|T) there
+            backward_pass(rows.x_f[a:b + 1], rows.P_f[a:b + 1], rows.x_p[a:b],
+                          rows.P_p[a:b], G, 0, b + 1 - a, rows.x_f[a:b + 1],
+                          rows.P_f[a:b + 1])
+            b = a
