@@ -29,6 +29,12 @@ Time and memory of the alignment Monte Carlo against its goals, in one run.
 PYTHONPATH: its default comparison on every core is alternated with this tree's, and its
 1e3..1e5 runs follow this tree's, for a before / after ratio measured in the same run.
 
+    python bench/bench_monte_carlo.py --lqg [--repeats 3] [--against DIR]
+
+3. (--lqg, instead of 1 and 2) `lqg_comparison` (3 controllers x 10 points of 1000 runs),
+   on every core and on one, alternated (and DIR's on every core); then its two points
+   at --betas 14 (6 points) at 1e3 and 1e4 runs: peak RSS, which should be flat.
+
 Each command runs in a fresh process; RSS is sampled every 0.1 s over the process and its
 workers: the peak of their sum, and of the largest.  The load average is printed beside
 each figure: the machine may be shared, so the CPU time of the process and its workers is
@@ -49,6 +55,7 @@ import time
 from typing import Optional
 
 MODULE = 'tskf_ros.experiments.alignment_mc'
+LQG_MODULE = 'tskf_ros.experiments.lqg_comparison'
 GOAL_DEFAULT_S = 5.0
 GOAL_1E5_S = 60.0
 
@@ -93,8 +100,8 @@ class Measured:
     load: float
 
 
-def measure(args: list[str], tree: Optional[str] = None) -> Measured:
-    """Run `python -m alignment_mc args` (tree's, if given) in a fresh process; sample RSS."""
+def measure(args: list[str], tree: Optional[str] = None, module: str = MODULE) -> Measured:
+    """Run `python -m module args` (tree's, if given) in a fresh process; sample RSS."""
     load = os.getloadavg()[0]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     env = dict(os.environ)
@@ -102,7 +109,7 @@ def measure(args: list[str], tree: Optional[str] = None) -> Measured:
         env['PYTHONPATH'] = os.pathsep.join([tree, *filter(None, [env.get('PYTHONPATH')])])
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, '-m', MODULE, *args], cwd=tmp, env=env,
+        proc = subprocess.Popen([sys.executable, '-m', module, *args], cwd=tmp, env=env,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         peak_sum = peak_one = 0
         while proc.poll() is None:
@@ -113,7 +120,7 @@ def measure(args: list[str], tree: Optional[str] = None) -> Measured:
         wall = time.perf_counter() - start
         err = proc.stderr.read().decode() if proc.stderr else ''
         if proc.returncode:
-            raise SystemExit(f'{MODULE} {" ".join(args)} failed:\n{err}')
+            raise SystemExit(f'{module} {" ".join(args)} failed:\n{err}')
     # the CPU time of the process and of the workers it waited for
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -143,6 +150,8 @@ def main() -> None:
                         help='part 1 once, part 2 up to 1e4 runs')
     parser.add_argument('--against', metavar='DIR',
                         help="another commit's source tree, measured alongside (before / after)")
+    parser.add_argument('--lqg', action='store_true',
+                        help='measure lqg_comparison (part 3) instead of alignment_mc')
     args = parser.parse_args()
     if args.against and not os.path.isdir(os.path.join(args.against, 'tskf_ros')):
         raise SystemExit(f'--against {args.against}: no tskf_ros package in it')
@@ -150,6 +159,9 @@ def main() -> None:
     print(f'{platform.machine()}, {cores} CPUs, Python {platform.python_version()}; '
           'load average (1 min) beside each figure')
 
+    if args.lqg:
+        lqg(args, cores)
+        return
     print(f'\n1. the default comparison, --runs 1000 (7 algorithms x 11 levels): '
           f'--workers {cores} vs --workers 1, alternated'
           + (f'; and {args.against} on --workers {cores}' if args.against else ''))
@@ -190,6 +202,39 @@ def main() -> None:
             print(f'   {name[-10:]:>10} {runs:7d}   {m.wall_s:8.1f}   {m.cpu_s:7.1f}   '
                   f'{m.peak_sum_mb:12.0f}   {m.peak_one_mb:16.0f}   {m.load:4.1f}   {goal}',
                   flush=True)
+
+
+def lqg(args: argparse.Namespace, cores: int) -> None:
+    """Part 3: lqg_comparison's default on every core and one; its RSS against the runs."""
+    print(f'\n3. lqg_comparison --runs 1000 (3 controllers x 10 points): --workers {cores} vs '
+          '--workers 1, alternated' + (f'; and {args.against}' if args.against else ''))
+    cases = [('this tree', cores, None), ('this tree', 1, None)]
+    if args.against:
+        cases += [(args.against, cores, args.against), (args.against, 1, args.against)]
+    got: dict[tuple, list[Measured]] = {case: [] for case in cases}
+    for _ in range(1 if args.quick else args.repeats):
+        for case in cases:
+            got[case].append(measure(['--runs', '1000', '--workers', str(case[1])], case[2],
+                                     LQG_MODULE))
+    for (name, workers, tree), runs in got.items():
+        print(f'   {name}, --workers {workers}: {summary(runs)}')
+    if args.against:
+        for w in (cores, 1):
+            now, before = got[('this tree', w, None)], got[(args.against, w, args.against)]
+            wall, cpu = (statistics.median(getattr(m, key) for m in now)
+                         / statistics.median(getattr(m, key) for m in before)
+                         for key in ('wall_s', 'cpu_s'))
+            print(f'   this tree / {args.against}, --workers {w}: wall {wall:.2f}, '
+                  f'CPU {cpu:.2f}')
+    print(f'\n   --betas 14 (6 points), --workers {cores}: time and peak RSS against the runs')
+    print('   tree         runs    wall (s)   CPU (s)   RSS all (MB)   RSS largest (MB)   load')
+    trees = [('this tree', None)] + ([(args.against, args.against)] if args.against else [])
+    for runs in (1000, 10000):
+        for name, tree in trees:
+            m = measure(['--runs', str(runs), '--betas', '14', '--workers', str(cores)], tree,
+                        LQG_MODULE)
+            print(f'   {name[-10:]:>10} {runs:7d}   {m.wall_s:8.1f}   {m.cpu_s:7.1f}   '
+                  f'{m.peak_sum_mb:12.0f}   {m.peak_one_mb:16.0f}   {m.load:4.1f}', flush=True)
 
 
 if __name__ == '__main__':

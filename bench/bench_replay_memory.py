@@ -26,7 +26,15 @@ process and its peak RSS (ru_maxrss of os.wait4, the kernel's high-water mark) i
 - rosbags read: rosbags' Reader over every message, each deserialized and dropped (the
   reference: what reading the bag costs at all);
 - replay --npz: `replay_offline BAG --npz OUT` (the arrays streamed into the .npz);
-- replay -> bag: `replay_offline BAG OUT` (the output bag written as it goes).
+- replay -> bag: `replay_offline BAG OUT` (the output bag written as it goes);
+- npz-smooth, bag-smooth: the same with --smooth (the RTS estimates at the end); beside
+  them the smoothed output's size in memory (stamp, x, P, segment: 8 (2 + n + n^2) bytes
+  a point) and the growth over the case without --smooth, in units of it;
+- fit_noise: `tskf_fit_noise BAG --json OUT` (Q and R fitted by maximum likelihood);
+- sweep: `tskf_sweep --bags BAG --workers 0 --out OUT` (one row, in this process).
+
+--against DIR runs every case a second time with DIR (another commit's source tree, its
+`tskf_ros` and `config`) first on PYTHONPATH, for a before / after in the same run.
 
 The outputs are deleted after each case (a 1e7 output bag is several GB).  Also printed:
 each case's wall time, the output's size, and the load average.
@@ -116,13 +124,17 @@ def main() -> None:
     parser.add_argument('--sizes', type=int, nargs='+', default=[100_000, 1_000_000, 10_000_000])
     parser.add_argument('--work', type=Path, default=Path('/tmp/tskf_replay_memory'))
     parser.add_argument('--cases', nargs='*', default=['read', 'npz', 'bag'],
-                        help='read, npz, bag (none: only make the bags)')
+                        help=f'some of {", ".join(CASES)} (none: only make the bags)')
+    parser.add_argument('--against', type=Path, metavar='DIR',
+                        help="another commit's source tree, each case run with it too")
     args = parser.parse_args()
+    unknown = set(args.cases) - set(CASES)
+    if unknown:
+        parser.error(f'--cases: unknown {sorted(unknown)}; expected some of {CASES}')
     args.work.mkdir(parents=True, exist_ok=True)
     params = args.work / 'params.yaml'
     params.write_text(PARAMS)
     env = dict(os.environ, OPENBLAS_NUM_THREADS='1')
-    tool = [sys.executable, '-m', 'tskf_ros.bag.replay.cli']
     print(f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs; python '
           f'{sys.version.split()[0]}', flush=True)
     print(f'{"messages":>10} {"case":<14} {"peak RSS MB":>11} {"wall s":>8} {"output MB":>9}',
@@ -134,24 +146,81 @@ def main() -> None:
             make_bag(bag, n)
             print(f'# wrote {bag} ({size_mb(bag):.0f} MB) in {time.perf_counter() - t0:.0f} s',
                   flush=True)
+        trees = [('', None)] + ([(' before', args.against)] if args.against else [])
+        plain: dict[tuple, float] = {}
         for case in args.cases:
-            out = args.work / ('out.npz' if case == 'npz' else 'out_bag')
-            if case == 'read':
-                command = [sys.executable, '-c', READ, str(bag)]
-            elif case == 'npz':
-                command = tool + [str(bag), '--npz', str(out), '--params-file', str(params),
-                                  '--overwrite', '-q']
-            else:
-                command = tool + [str(bag), str(out), '--params-file', str(params),
-                                  '--overwrite', '-q']
-            rss, wall, _ = peak_rss(command, env)
-            made = size_mb(out) if out.exists() else 0.0
-            print(f'{n:>10} {case:<14} {rss:>11.0f} {wall:>8.1f} {made:>9.0f}   '
-                  f'(load {os.getloadavg()[0]:.2f})', flush=True)
-            if out.is_dir():
-                shutil.rmtree(out)
-            elif out.exists():
-                out.unlink()
+            for label, tree in trees:
+                run_env = env if tree is None else dict(env, PYTHONPATH=str(tree))
+                rss, wall, made, smoothed = run_case(case, bag, params, args.work, run_env)
+                note = ''
+                if case in ('npz', 'bag'):
+                    plain[(case, label)] = rss
+                if smoothed and (case[:3], label) in plain:
+                    growth = rss - plain[(case[:3], label)]
+                    note = (f'   smoothed {smoothed:.0f} MB; growth over {case[:3]} '
+                            f'{growth:.0f} MB = {growth / smoothed:.2f}x')
+                print(f'{n:>10} {case + label:<14} {rss:>11.0f} {wall:>8.1f} {made:>9.0f}   '
+                      f'(load {os.getloadavg()[0]:.2f}){note}', flush=True)
+
+
+CASES = ('read', 'npz', 'bag', 'npz-smooth', 'bag-smooth', 'fit_noise', 'sweep')
+
+
+def run_case(case: str, bag: Path, params: Path, work: Path,
+             env: dict) -> tuple[float, float, float, float]:
+    """Run one case; return peak RSS MB, wall s, output MB, the smoothed rows' MB (or 0)."""
+    tool = [sys.executable, '-m', 'tskf_ros.bag.replay.cli']
+    out = work / ('out.npz' if case.startswith('npz') else 'out_bag' if case.startswith('bag')
+                  else 'out.json' if case == 'fit_noise' else 'out.csv')
+    smooth = ['--smooth'] if case.endswith('smooth') else []
+    if case == 'read':
+        command = [sys.executable, '-c', READ, str(bag)]
+    elif case.startswith('npz'):
+        command = tool + [str(bag), '--npz', str(out), '--params-file', str(params),
+                          '--overwrite', '-q', *smooth]
+    elif case.startswith('bag'):
+        command = tool + [str(bag), str(out), '--params-file', str(params), '--overwrite',
+                          '-q', *smooth]
+    elif case == 'fit_noise':
+        command = [sys.executable, '-m', 'tskf_ros.experiments.fit_noise', str(bag),
+                   '--params-file', str(params), '--json', str(out), '-q']
+    else:
+        command = [sys.executable, '-m', 'tskf_ros.experiments.sweep', '--bags', str(bag),
+                   '--params-file', str(params), '--workers', '0', '--out', str(out),
+                   '--no-resume', '--no-progress']
+    try:
+        rss, wall, _ = peak_rss(command, env)
+        made = size_mb(out) if out.exists() else 0.0
+        smoothed = 0.0
+        if case == 'npz-smooth':
+            with np.load(out) as z:
+                smoothed = sum(z[k].nbytes for k in z.files
+                               if k.startswith('estimate/smoothed.')) / 1e6
+        elif case == 'bag-smooth':
+            smoothed = _smoothed_mb(out)
+        return rss, wall, made, smoothed
+    finally:
+        if out.is_dir():
+            shutil.rmtree(out)
+        elif out.exists():
+            out.unlink()
+
+
+def _smoothed_mb(bag: Path) -> float:
+    """Return the in-memory size of a bag's smoothed rows: 8 (2 + n + n^2) bytes a message."""
+    from rosbags.rosbag2 import Reader
+    with Reader(bag) as reader:
+        conns = [c for c in reader.connections if c.topic == '/estimate/smoothed']
+        count = sum(c.msgcount for c in conns)
+        if not count:
+            return 0.0
+        from rosbags.typesys import get_typestore, Stores
+        store = get_typestore(Stores.ROS2_JAZZY)
+        _, _, raw = next(reader.messages(connections=conns))
+        # data = [sec, nanosec, mu, x (n), P (n x n)]
+        size = len(store.deserialize_cdr(raw, conns[0].msgtype).data) - 3
+    n = int(round((-1 + (1 + 4 * size) ** 0.5) / 2))
+    return count * 8 * (2 + n + n * n) / 1e6
 
 
 if __name__ == '__main__':

@@ -15,6 +15,7 @@
 
 """The LQG-against-P comparison (tskf_ros.experiments.lqg_comparison): its JSON and PNG."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -73,3 +74,80 @@ def test_workers_give_the_sequential_results(tmp_path, capsys):
         data.pop('elapsed_s')
         outs.append(data)
     assert outs[0] == outs[1]
+
+
+def test_points_in_parts_and_batches_are_each_part_alone_run_for_run():
+    # the sequential path: each part (of at most 3 runs) on its own aligner, from its own
+    # generator (part 0: the seed's, part k: [seed, k]); the points in parts side by side
+    # (several drift rates and noise levels on one aligner), on one worker or two, give
+    # the same numbers, run for run
+    common = {'runs': 7, 'steps': 40, 'dt': 0.05, 'seed': 5}
+    points = [lqg_comparison.point(name, beta=beta, noise=noise, **common)
+              for beta, noise in ((0.0, 0.2), (14.0, 0.2), (2.8, 1.0))
+              for name in lqg_comparison.CONTROLLERS]
+    points.append(lqg_comparison.point('lqg', beta=14.0, noise=0.2,
+                                       lqg=lqg_comparison.ABLATIONS['no_bank'], **common))
+    alone = []
+    for p in points:
+        parts = []
+        for k, start in enumerate(range(0, 7, 3)):
+            part = dataclasses.replace(p, runs=min(3, 7 - start))
+            aligner = lqg_comparison.COMPARISON.build([part], part.runs)
+            traj = led.simulate_tracking(aligner, p.link,
+                                         np.random.default_rng(5 if k == 0 else [5, k]))
+            parts.append(lqg_comparison.run_values(traj, aligner.scan_offset))
+        alone.append(lqg_comparison.COMPARISON.join(parts))
+    for workers, batch in ((1, 3), (1, 10**6), (2, 6)):
+        together = list(lqg_comparison.run_points(points, workers, part_runs=3,
+                                                  batch_runs=batch))
+        assert len(together) == len(points)
+        for a, b in zip(alone, together):
+            for field in dataclasses.fields(lqg_comparison.RunValues):
+                np.testing.assert_array_equal(getattr(a, field.name), getattr(b, field.name),
+                                              err_msg=field.name)
+
+
+def test_a_point_of_at_most_one_part_is_simulate_point():
+    # the first part draws what an undivided point draws from the seed
+    common = {'beta': 14.0, 'noise': 0.2, 'runs': 5, 'steps': 40, 'dt': 0.05, 'seed': 2}
+    record, phi = lqg_comparison.simulate_point('lqg', **common)
+    (values,) = lqg_comparison.run_points([lqg_comparison.point('lqg', **common)], 1)
+    np.testing.assert_array_equal(values.abs_phi, phi)
+    assert lqg_comparison.point_record(14.0, 0.2, values, 2) == record
+
+
+def test_the_bootstrap_in_rows_is_the_bootstrap_at_once(monkeypatch):
+    # the index drawn a few rows at a time is the same numbers as (resamples, runs) at once
+    rng = np.random.default_rng(9)
+    a, b = rng.random(37), rng.random(37)
+    index = np.random.default_rng(4).integers(0, 37, size=(lqg_comparison.BOOTSTRAP, 37))
+    monkeypatch.setattr(lqg_comparison, 'BOOTSTRAP_CHUNK', 37 * 3 + 5)
+    means_a, means_b = lqg_comparison.bootstrap_means([a, b], 4)
+    np.testing.assert_array_equal(means_a, a[index].mean(axis=1))
+    np.testing.assert_array_equal(means_b, b[index].mean(axis=1))
+    ratio = lqg_comparison.phi_ratio(a, b, 2)
+    ratios = a[index].mean(axis=1) / b[index].mean(axis=1)
+    assert ratio['ci95'] == [float(v) for v in np.percentile(ratios, [2.5, 97.5])]
+
+
+def test_a_dask_scheduler_gives_the_sequential_results(tmp_path, capsys):
+    # the tasks on a Dask cluster's workers: the same numbers as on one process
+    distributed = pytest.importorskip('dask.distributed')
+    args = ['--runs', '3', '--steps', '30', '--betas', '0,14']
+    outs = []
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        for extra in (['--workers', '1'], ['--scheduler', cluster.scheduler_address]):
+            out = tmp_path / f'{len(outs)}.json'
+            assert lqg_comparison.main(args + extra + ['--json', str(out)]) == 0
+            data = json.loads(out.read_text())
+            data.pop('elapsed_s')
+            outs.append(data)
+    assert outs[0] == outs[1]
+
+
+def test_a_scheduler_not_reached_is_one_line(tmp_path, capsys):
+    assert lqg_comparison.main(['--runs', '2', '--steps', '3', '--betas', '1',
+                                '--scheduler', 'tcp://127.0.0.1:9']) == 1
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'cannot use the Dask scheduler at tcp://127.0.0.1:9' in err

@@ -56,22 +56,26 @@ def test_large_beta_fails():
     assert angular == pytest.approx(LARGE_BETA_50_RUNS, abs=0.05)
 
 
-@pytest.mark.parametrize('name', ['ekf', 'three_point'])
-def test_blocks_side_by_side_are_each_run_alone(name):
-    # two noise levels and dropouts sharing one draw, a third block with its own: each
-    # block's runs are, number for number, what simulate_tracking gives them alone
+@pytest.mark.parametrize('name, controller', [('ekf', 'p'), ('three_point', 'p'),
+                                              ('ekf', 'lqg')])
+def test_blocks_side_by_side_are_each_run_alone(name, controller):
+    # two noise levels and dropouts sharing one draw, a third block with its own at
+    # another drift rate: each block's runs are, number for number, what
+    # simulate_tracking gives them alone
     base = led.TrackingLinkConfig(beta=1.2, steps=120, x2_0_spread=3.0)
     links = [dataclasses.replace(base, noise=0.5), dataclasses.replace(base, noise=2.0,
-                                                                       dropout=0.3)]
+                                                                       dropout=0.3),
+             dataclasses.replace(base, noise=2.0, beta=9.5)]
     shared = led.draw_disturbances(base, np.random.default_rng(7), 4)
     other = led.draw_disturbances(base, np.random.default_rng(8), 3)
     blocks = [led.Block(links[0], shared), led.Block(links[1], shared),
-              led.Block(links[1], other)]
-    together = led.simulate_blocks(led.make_aligner(name, runs=11), blocks)
+              led.Block(links[2], other)]
+    together = led.simulate_blocks(led.make_aligner(name, runs=11, controller=controller),
+                                   blocks)
     start = 0
-    for link, seed, runs in ((links[0], 7, 4), (links[1], 7, 4), (links[1], 8, 3)):
-        alone = led.simulate_tracking(led.make_aligner(name, runs=runs), link,
-                                      np.random.default_rng(seed))
+    for link, seed, runs in ((links[0], 7, 4), (links[1], 7, 4), (links[2], 8, 3)):
+        alone = led.simulate_tracking(led.make_aligner(name, runs=runs, controller=controller),
+                                      link, np.random.default_rng(seed))
         cols = slice(start, start + runs)
         for field in ('phi', 'x2', 'x1', 'clean', 'z', 'command'):
             np.testing.assert_array_equal(getattr(together, field)[:, cols],
@@ -79,13 +83,13 @@ def test_blocks_side_by_side_are_each_run_alone(name):
         start += runs
 
 
-def test_blocks_must_share_all_but_noise_and_dropout():
+def test_blocks_must_share_all_but_noise_dropout_and_beta():
     base = led.TrackingLinkConfig(steps=20)
     noise = led.draw_disturbances(base, np.random.default_rng(0), 2)
-    with pytest.raises(led.AlignmentError, match='differ in noise and dropout only'):
+    with pytest.raises(led.AlignmentError, match='differ in noise, dropout and beta only'):
         led.simulate_blocks(led.make_aligner('ekf', runs=4),
                             [led.Block(base, noise),
-                             led.Block(dataclasses.replace(base, beta=2.0), noise)])
+                             led.Block(dataclasses.replace(base, max_intensity=2.0), noise)])
     with pytest.raises(led.AlignmentError, match='the aligner has 3 runs'):
         led.simulate_blocks(led.make_aligner('ekf', runs=3), [led.Block(base, noise)])
 

@@ -114,7 +114,7 @@ TOOLS = {
          '--run-noise', '--dropout-levels', '--dropout-noise', '--dropout-beta', '--blocked',
          '--workers', '--axes'),
         ('--algorithms', '--controller', '--json', '--png', '--acquisition-png', '--fig8',
-         '--fig9', '--pat-run', '--dropout-png', '--dropout-json')),
+         '--fig9', '--pat-run', '--dropout-png', '--dropout-json', '--scheduler')),
     'alignment_ablation': Tool(alignment_ablation.main, lambda d: [
         '--runs', '2', '--steps', '3', '--noise-levels', '0.5', '--rows', 'ekf',
         '--workers', '1'],
@@ -123,7 +123,7 @@ TOOLS = {
     'lqg_comparison': Tool(lqg_comparison.main, lambda d: [
         '--runs', '2', '--steps', '3', '--betas', '1', '--workers', '1'],
         ('--runs', '--betas', '--noise', '--effort-noise', '--effort-beta', '--steps', '--dt',
-         '--seed', '--ablation-beta', '--workers'), ('--json', '--png')),
+         '--seed', '--ablation-beta', '--workers'), ('--json', '--png', '--scheduler')),
     'drogue': Tool(drogue.main, lambda d: ['--out', str(d), '--hours', '0.05'],
                    ('--seed', '--hours'), ('--out',)),
     'demo': Tool(lambda argv: demo.parse_args(argv) and 0, lambda d: [],

@@ -16,9 +16,7 @@
 """Monte Carlo comparison of LED alignment algorithms (Solanki et al. 2018, Fig. 8-10)."""
 
 import argparse
-from concurrent.futures import ProcessPoolExecutor
 import dataclasses
-import functools
 import math
 from pathlib import Path
 import sys
@@ -29,8 +27,11 @@ import numpy as np
 
 from tskf_ros import led
 from tskf_ros.bag.progress import bar
-from tskf_ros.experiments import alignment_mc_two_axis, alignment_pat, arguments, output
+from tskf_ros.experiments import (alignment_mc_two_axis, alignment_pat, arguments,
+                                  monte_carlo, output)
 from tskf_ros.experiments.alignment_figures import plot_run, plot_tracking
+from tskf_ros.experiments.monte_carlo import (BATCH_RUNS, batches, PART_RUNS,  # noqa: F401
+                                              Point)
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -99,71 +100,47 @@ def _record(results: dict, name: str, angular: np.ndarray, measure: np.ndarray) 
         results[name][metric]['std'].append(float(np.std(values)))
 
 
-# runs drawn from one generator: a point of more runs is split into parts, part k > 0
-# drawing from the generator [seed, k] (the numbers of a seed do not depend on anything else)
-PART_RUNS = 1000
-# runs simulated side by side by one task (the parts, and the levels of a sweep, of one
-# algorithm): memory is bounded by this, not by the runs of a point
-BATCH_RUNS = 4000
-
-
 @dataclasses.dataclass(frozen=True)
-class Point:
-    """One algorithm on one link (or part of its runs: `part`)."""
+class Alignment:
+    """The comparison's Experiment: the tracking % per run (angular, measure), the metrics."""
 
-    name: str
-    runs: int
-    link: led.TrackingLinkConfig
-    seed: int
-    response: led.IncidenceResponse
-    ekf: led.EKFConfig
-    clip: bool
-    controller: str
-    part: int = 0       # part k > 0 of a point's runs draws from the generator [seed, k]
+    # what tracking and the metrics read: the angle and the clean intensity
+    keep: tuple[str, ...] = ('phi', 'clean')
 
-    def kind(self) -> 'Point':
-        """Return what points simulated side by side share: all but runs, part, noise, dropout."""
-        return dataclasses.replace(self, runs=0, part=0, link=dataclasses.replace(
-            self.link, noise=0.0, dropout=0.0))
+    def build(self, points: Sequence[Point], runs: int) -> led.Aligner:
+        """Return the aligner of points of one kind side by side (the supervised: recorded)."""
+        first = points[0]
+        if first.name in PAT_ALGORITHMS:
+            R = np.repeat([alignment_pat.ekf_settings(first.name, p.link, first.ekf).R
+                           for p in points], [p.runs for p in points], axis=0)
+            return alignment_pat.build_pat(first.name, runs, first.link, first.response,
+                                           first.ekf, first.clip, R=R)
+        return build(first.name, runs, first.link, first.response, first.ekf, first.clip,
+                     first.controller)
 
+    def finish(self, aligner: led.Aligner) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """Return the supervisor's states and declared losses (steps, runs), or None."""
+        if isinstance(aligner, alignment_pat.Recorded):
+            return np.array(aligner.states), np.array(aligner.declared)
+        return None
 
-def parts(p: Point, size: int) -> list[Point]:
-    """Split a point's runs into parts of at most `size` runs (the first draws the seed's)."""
-    return [dataclasses.replace(p, runs=min(size, p.runs - start), part=k)
-            for k, start in enumerate(range(0, p.runs, size))]
+    def measure(self, traj: led.Trajectory, p: Point,
+                end: Optional[tuple[np.ndarray, np.ndarray]],
+                cols: slice) -> tuple[np.ndarray, np.ndarray, dict]:
+        """Return the tracking % per run (angular, measure) and the metrics of point p."""
+        angular, measure = led.tracking(traj, threshold=led.TRACKING_LEVEL
+                                        * p.link.max_intensity)
+        states, declared = (None, None) if end is None else (end[0][:, cols], end[1][:, cols])
+        return angular, measure, alignment_pat.metrics(traj, states, declared,
+                                                       blocked=p.link.blocked)
 
-
-def batches(points: Sequence[Point], size: int = BATCH_RUNS) -> list[list[int]]:
-    """
-    Group points (parts) into the tasks of run_batch: indices, at most `size` runs each.
-
-    A task holds points of one kind (Point.kind), in order; at least one point.  The
-    tasks take the kinds in turn (the first task of each, then the second, ...), so that
-    the workers' last tasks are of every kind, not all of the last one.
-    """
-    kinds: dict[Point, list[list[int]]] = {}
-    for i, p in enumerate(points):
-        tasks = kinds.setdefault(p.kind(), [[]])
-        if tasks[-1] and sum(points[j].runs for j in tasks[-1]) + p.runs > size:
-            tasks.append([])
-        tasks[-1].append(i)
-    rounds = max(len(tasks) for tasks in kinds.values())
-    return [tasks[k] for k in range(rounds) for tasks in kinds.values() if k < len(tasks)]
+    def join(self, parts: list) -> tuple[np.ndarray, np.ndarray, dict]:
+        """Return the measures of a point's parts together."""
+        return (np.concatenate([g[0] for g in parts]), np.concatenate([g[1] for g in parts]),
+                alignment_pat.join_metrics([g[2] for g in parts]))
 
 
-@functools.lru_cache(maxsize=4)
-def _draws(seed: int, part: int, runs: int,
-           link: led.TrackingLinkConfig) -> led.Disturbances:
-    """
-    Return the random numbers of a part (kept: every algorithm and level draws the same).
-
-    Read-only: the simulations share them.
-    """
-    rng = np.random.default_rng(seed if part == 0 else [seed, part])
-    noise = led.draw_disturbances(link, rng, runs)
-    for field in dataclasses.fields(noise):
-        getattr(noise, field.name).setflags(write=False)
-    return noise
+ALIGNMENT = Alignment()
 
 
 def run_point(p: Point) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -172,99 +149,29 @@ def run_point(p: Point) -> tuple[np.ndarray, np.ndarray, dict]:
 
 
 def run_batch(points: Sequence[Point]) -> list[tuple[np.ndarray, np.ndarray, dict]]:
-    """
-    Simulate points of one kind side by side (one aligner); return run_point of each.
-
-    Each point draws its numbers as it would alone: common random numbers, the same draws
-    for every algorithm and level of a part.  Each run is, number for number, what the
-    point gives alone (led.simulate_blocks).
-    """
-    first = points[0]
-    if any(p.kind() != first.kind() for p in points):
-        raise ValueError('run_batch simulates points of one kind (Point.kind) side by side')
-    blocks = [led.Block(p.link, _draws(p.seed, p.part, p.runs, first.kind().link))
-              for p in points]
-    runs = sum(p.runs for p in points)
-    record: Optional[alignment_pat.Recorded] = None
-    if first.name in PAT_ALGORITHMS:
-        R = np.repeat([alignment_pat.ekf_settings(first.name, p.link, first.ekf).R
-                       for p in points], [p.runs for p in points], axis=0)
-        record = alignment_pat.build_pat(first.name, runs, first.link, first.response,
-                                         first.ekf, first.clip, R=R)
-        aligner: led.Aligner = record
-    else:
-        aligner = build(first.name, runs, first.link, first.response, first.ekf, first.clip,
-                        first.controller)
-    # what tracking and the metrics read: the angle and the clean intensity
-    traj = led.simulate_blocks(aligner, blocks, first.response, keep=('phi', 'clean'))
-    states = declared = None
-    if record is not None:
-        states, declared = np.array(record.states), np.array(record.declared)
-    out = []
-    start = 0
-    for p in points:
-        cols = slice(start, start + p.runs)
-        start += p.runs
-        part = led.Trajectory(t=traj.t, phi=traj.phi[:, cols], x2=traj.x2[:, cols],
-                              x1=traj.x1[:, cols], clean=traj.clean[:, cols], z=traj.z[:, cols],
-                              command=traj.command[:, cols])
-        angular, measure = led.tracking(part,
-                                        threshold=led.TRACKING_LEVEL * p.link.max_intensity)
-        m = alignment_pat.metrics(part, None if states is None else states[:, cols],
-                                  None if declared is None else declared[:, cols],
-                                  blocked=p.link.blocked)
-        out.append((angular, measure, m))
-    return out
+    """Simulate points of one kind side by side (one aligner); return run_point of each."""
+    return monte_carlo.run_batch(points, ALIGNMENT)
 
 
 def run_points(points: Sequence[Point], workers: int,
-               part_runs: Optional[int] = None,
-               batch_runs: Optional[int] = None) -> Iterator[tuple]:
-    """
-    Yield run_point of each point, in order, computed on `workers` processes.
-
-    Each point runs in parts of at most part_runs runs (PART_RUNS), and the parts of points
-    of one kind side by side, at most batch_runs runs (BATCH_RUNS) a task; the parts are
-    joined in order: the results depend on neither the workers, nor the batches, nor the
-    order the tasks end in.
-    """
-    split = [parts(p, part_runs or PART_RUNS) for p in points]
-    flat = [q for point in split for q in point]
-    tasks = batches(flat, batch_runs or BATCH_RUNS)
-    work = [[flat[i] for i in task] for task in tasks]
-    if workers <= 1 or len(work) <= 1:
-        yield from _joined(split, tasks, map(run_batch, work))
-        return
-    with ProcessPoolExecutor(max_workers=min(workers, len(work))) as pool:
-        yield from _joined(split, tasks, pool.map(run_batch, work))
-
-
-def _joined(split: list[list[Point]], tasks: list[list[int]],
-            done: Iterator[list[tuple]]) -> Iterator[tuple]:
-    """Join the parts of each point in order, as the tasks (indices into the parts) end."""
-    got: dict[int, tuple] = {}
-    first = 0                       # index of the first part of the next point to yield
-    point = 0
-    for task, results in zip(tasks, done):
-        got.update(zip(task, results))
-        while point < len(split) and all(first + j in got for j in range(len(split[point]))):
-            mine = [got.pop(first + j) for j in range(len(split[point]))]
-            yield (np.concatenate([g[0] for g in mine]), np.concatenate([g[1] for g in mine]),
-                   alignment_pat.join_metrics([g[2] for g in mine]))
-            first += len(split[point])
-            point += 1
+               part_runs: Optional[int] = None, batch_runs: Optional[int] = None,
+               scheduler: Optional[str] = None) -> Iterator[tuple]:
+    """Yield run_point of each point, in order, on `workers` processes (monte_carlo)."""
+    return monte_carlo.run_points(points, workers, ALIGNMENT, part_runs, batch_runs,
+                                  scheduler)
 
 
 def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.TrackingLinkConfig,
           seed: int, response: led.IncidenceResponse, ekf: led.EKFConfig,
           algorithms: Sequence[str] = led.ALGORITHMS, clip: bool = False,
           controller: str = 'p', progress: Optional[Progress] = None,
-          workers: int = 1) -> dict:
+          workers: int = 1, scheduler: Optional[str] = None) -> dict:
     """
     Run every algorithm at each value of a LinkConfig field ('noise' or 'dropout').
 
-    The points (value, algorithm) run on `workers` processes; each starts its own
-    generator from `seed`, so the results do not depend on the number of workers.
+    The points (value, algorithm) run on `workers` processes (or a Dask scheduler's
+    workers); each starts its own generator from `seed`, so the results do not depend on
+    the number of workers.
     """
     results = _empty(algorithms)
     start = time.perf_counter()
@@ -273,7 +180,7 @@ def sweep(parameter: str, values: Sequence[float], *, runs: int, link: led.Track
                progress is not None)
     points = [Point(name, runs, dataclasses.replace(link, **{parameter: float(value)}), seed,
                     response, ekf, clip, controller) for value in values for name in algorithms]
-    done = run_points(points, workers)
+    done = run_points(points, workers, scheduler=scheduler)
     for i, value in enumerate(values):
         tic = time.perf_counter()
         parts = []
@@ -343,6 +250,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--beta', type=arguments.rate_deg_s,
                    default=1.2, help='disturbance rate, deg/s (1.2)')
     arguments.add_run_options(p, dt=led.PAPER_DT)
+    arguments.add_scheduler(p)
     p.add_argument('--dropout', type=float, default=0.0,
                    help='probability that a measurement is missing (0)')
     p.add_argument('--x2-0', type=arguments.angle_deg,
@@ -402,7 +310,15 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     axes.add_argument('--axes', type=int, choices=(1, 2), default=1)
     if axes.parse_known_args(argv)[0].axes == 2:
         return alignment_mc_two_axis.main(argv)
-    args = parser().parse_args(argv)
+    try:
+        return _main(parser().parse_args(argv))
+    except monte_carlo.SchedulerError as exc:
+        print(f'alignment_mc: {exc}', file=sys.stderr)
+        return 1
+
+
+def _main(args: argparse.Namespace) -> int:
+    """Run the experiments of parsed arguments; return the exit status."""
     if not 0.0 <= args.dropout < 1.0 or any(not 0.0 <= d < 1.0 for d in args.dropout_levels):
         parser().error('dropout probabilities must be in [0, 1)')
 
@@ -441,7 +357,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                   blocked=tuple(args.blocked))
     common = {'runs': args.runs, 'seed': args.seed, 'response': response, 'ekf': ekf,
               'clip': args.clip_three_point, 'controller': args.controller,
-              'progress': progress, 'workers': args.workers}
+              'progress': progress, 'workers': args.workers, 'scheduler': args.scheduler}
     if not observable.guaranteed:
         progress(f'note: {observable.message}')
     progress(f'g at {response.units_per_degree:.4g} fit units per degree; beta {args.beta:g} '

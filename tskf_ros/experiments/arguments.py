@@ -125,3 +125,11 @@ def add_run_options(p: argparse.ArgumentParser, dt: Optional[float] = None) -> N
     p.add_argument('--workers', type=count(1, 1024), default=os.cpu_count() or 1,
                    help='processes the points run on (default: every core); the results do '
                         'not depend on it')
+
+
+def add_scheduler(p: argparse.ArgumentParser) -> None:
+    """Add --scheduler, a Dask scheduler whose workers run the Monte Carlo's tasks."""
+    p.add_argument('--scheduler', metavar='ADDRESS',
+                   help='address of a Dask scheduler (e.g. tcp://localhost:8786): its workers '
+                        'run the points instead of --workers processes (they need this '
+                        'package); the results do not depend on it')

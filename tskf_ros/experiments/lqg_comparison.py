@@ -16,20 +16,18 @@
 """LQG against the paper's P controller on the scanning EKF: tracking % against beta, effort."""
 
 import argparse
-from concurrent.futures import ProcessPoolExecutor
 import dataclasses
 import math
 from pathlib import Path
 import sys
 import time
-from typing import Any, Iterator, Optional, Sequence
+from typing import Iterator, Optional, Sequence
 
 from matplotlib.figure import Figure
 import numpy as np
 
 from tskf_ros import led
-from tskf_ros.experiments import arguments
-from tskf_ros.experiments.alignment_ablation_report import bootstrap_ci
+from tskf_ros.experiments import arguments, monte_carlo
 from tskf_ros.experiments.alignment_mc import save_figure, write_json
 
 DEFAULT_BETAS = (0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0)
@@ -43,6 +41,7 @@ LABELS = {'p': 'EKF + P controller (paper, eq. (21), Table I P0)',
           'lqg': 'EKF + drift + time-scale LQR'}
 COLORS = {'p': 'tab:blue', 'p_prior': 'tab:green', 'lqg': 'tab:red'}
 BOOTSTRAP = 1000                # resamples of the 95 % intervals (over runs)
+BOOTSTRAP_CHUNK = 1 << 22       # entries of the bootstrap index drawn at a time (32 MB)
 _LQG = led.LQGConfig()
 # the LQG with one part changed: what each part is worth
 ABLATIONS = {
@@ -55,67 +54,133 @@ ABLATIONS = {
 }
 
 
+@dataclasses.dataclass
+class RunValues:
+    """What a point gives per run (runs,): tracking %, mean |phi| (deg), actuation (deg)."""
+
+    angular: np.ndarray
+    measure: np.ndarray
+    abs_phi: np.ndarray
+    actuation: np.ndarray           # sum of |command| over the steps
+    control: np.ndarray             # sum of |command - the scan's own step| over the steps
+
+
+def run_values(traj: led.Trajectory, scan_offset: float) -> RunValues:
+    """Return the RunValues of a simulation (scan_offset: the aligner's, after it)."""
+    angular, measure = led.tracking(traj)
+    psi = traj.phi - traj.x2
+    dpsi = np.vstack([np.diff(psi, axis=0), scan_offset - psi[-1:]])
+    return RunValues(angular, measure, np.abs(led.wrap_degrees(traj.phi)).mean(axis=0),
+                     np.abs(traj.command).sum(axis=0), np.abs(traj.command - dpsi).sum(axis=0))
+
+
+def bootstrap_means(values: Sequence[np.ndarray], seed: int) -> list[np.ndarray]:
+    """
+    Return the BOOTSTRAP resampled means of each of values (runs,), one index for all.
+
+    The index (BOOTSTRAP x runs, from default_rng(seed)) is drawn in rows of about 4 M
+    entries: the same numbers as at once, in bounded memory.
+    """
+    runs = values[0].size
+    rng = np.random.default_rng(seed)
+    rows = max(1, BOOTSTRAP_CHUNK // runs)
+    means: list[list[np.ndarray]] = [[] for _ in values]
+    for start in range(0, BOOTSTRAP, rows):
+        index = rng.integers(0, runs, size=(min(rows, BOOTSTRAP - start), runs))
+        for m, v in zip(means, values):
+            m.append(v[index].mean(axis=1))
+    return [np.concatenate(m) for m in means]
+
+
+def interval(means: np.ndarray) -> list[float]:
+    """Return the 95 % percentile interval of bootstrap means."""
+    lo, hi = np.percentile(means, [2.5, 97.5])
+    return [float(lo), float(hi)]
+
+
+def point_record(beta: float, noise: float, v: RunValues, seed: int) -> dict:
+    """Return the metrics of one point from its RunValues (intervals: bootstrap over runs)."""
+    angular_means, phi_means = bootstrap_means([v.angular, v.abs_phi], seed + 1)
+    return {'beta_deg_per_s': beta, 'noise_v': noise,
+            'angular': {'mean': float(v.angular.mean()), 'std': float(v.angular.std()),
+                        'ci95': interval(angular_means)},
+            'mean_abs_phi_deg_ci95': interval(phi_means),
+            'measure': {'mean': float(v.measure.mean()), 'std': float(v.measure.std())},
+            'mean_abs_phi_deg': float(v.abs_phi.mean()),
+            'lost_runs': int(np.sum(v.angular < 50.0)),
+            'actuation_deg': float(v.actuation.mean()),
+            'control_actuation_deg': float(v.control.mean())}
+
+
+def point(controller: str, *, beta: float, noise: float, runs: int, steps: int, dt: float,
+          seed: int, lqg: Optional[led.LQGConfig] = None) -> monte_carlo.Point:
+    """Return the Monte Carlo point of one controller (of CONTROLLERS) at (beta, noise)."""
+    link = led.TrackingLinkConfig(beta=beta, noise=noise, steps=steps, dt=dt)
+    ekf = dataclasses.replace(EKF_CONFIGS.get(controller, led.EKFConfig()), dt=dt)
+    return monte_carlo.Point('ekf', runs, link, seed, led.IncidenceResponse(), ekf, False,
+                             'lqg' if controller == 'lqg' else 'p',
+                             lqg=None if lqg is None else dataclasses.replace(lqg, dt=dt))
+
+
 def simulate_point(controller: str, *, beta: float, noise: float, runs: int, steps: int,
                    dt: float, seed: int, lqg: Optional[led.LQGConfig] = None
                    ) -> tuple[dict, np.ndarray]:
-    """Run one controller (of CONTROLLERS) at one (beta, noise); return metrics, per-run |phi|."""
-    link = led.TrackingLinkConfig(beta=beta, noise=noise, steps=steps, dt=dt)
-    if lqg is not None:
-        lqg = dataclasses.replace(lqg, dt=dt)
-    kind = 'lqg' if controller == 'lqg' else 'p'
-    ekf = dataclasses.replace(EKF_CONFIGS.get(controller, led.EKFConfig()), dt=dt)
-    aligner = led.make_aligner('ekf', runs=runs, dt=dt, controller=kind, lqg=lqg, ekf=ekf)
-    traj = led.simulate_tracking(aligner, link, np.random.default_rng(seed))
-    angular, measure = led.tracking(traj)
-    psi = traj.phi - traj.x2
-    dpsi = np.vstack([np.diff(psi, axis=0), aligner.scan_offset - psi[-1:]])
-    abs_phi = np.abs(led.wrap_degrees(traj.phi)).mean(axis=0)
-    index = np.random.default_rng(seed + 1).integers(0, runs, size=(BOOTSTRAP, runs))
-    record = {'beta_deg_per_s': beta, 'noise_v': noise,
-              'angular': {'mean': float(angular.mean()), 'std': float(angular.std()),
-                          'ci95': bootstrap_ci(angular, index)},
-              'mean_abs_phi_deg_ci95': bootstrap_ci(abs_phi, index),
-              'measure': {'mean': float(measure.mean()), 'std': float(measure.std())},
-              'mean_abs_phi_deg': float(abs_phi.mean()),
-              'lost_runs': int(np.sum(angular < 50.0)),
-              'actuation_deg': float(np.abs(traj.command).sum(axis=0).mean()),
-              'control_actuation_deg': float(np.abs(traj.command - dpsi).sum(axis=0).mean())}
-    return record, abs_phi
+    """
+    Run one controller at one (beta, noise) on one aligner; return metrics, per-run |phi|.
 
-
-def run_point(controller: str, **kwargs: Any) -> dict:
-    """Run one controller at one (beta, noise); return its metrics (simulate_point)."""
-    return simulate_point(controller, **kwargs)[0]
+    The sequential path, all runs from default_rng(seed): what run_points gives a point
+    of at most monte_carlo.PART_RUNS runs.
+    """
+    p = point(controller, beta=beta, noise=noise, runs=runs, steps=steps, dt=dt, seed=seed,
+              lqg=lqg)
+    aligner = COMPARISON.build([p], runs)
+    traj = led.simulate_tracking(aligner, p.link, np.random.default_rng(seed))
+    values = run_values(traj, aligner.scan_offset)
+    return point_record(beta, noise, values, seed), values.abs_phi
 
 
 @dataclasses.dataclass(frozen=True)
-class Task:
-    """One point of the comparison: a controller and simulate_point's keyword arguments."""
+class Comparison:
+    """The comparison's monte_carlo.Experiment: RunValues per point."""
 
-    controller: str
-    kwargs: dict
+    keep: tuple[str, ...] = ('phi', 'x2', 'clean', 'command')
+
+    def build(self, points: Sequence[monte_carlo.Point], runs: int) -> led.Aligner:
+        """Return the EKF with the points' controller, `runs` runs."""
+        p = points[0]
+        return led.make_aligner('ekf', runs=runs, dt=p.link.dt, response=p.response,
+                                controller=p.controller, lqg=p.lqg, ekf=p.ekf)
+
+    def finish(self, aligner: led.Aligner) -> float:
+        """Return the aligner's scan offset after the simulation."""
+        return aligner.scan_offset
+
+    def measure(self, traj: led.Trajectory, p: monte_carlo.Point, end: float,
+                cols: slice) -> RunValues:
+        """Return the RunValues of point p."""
+        return run_values(traj, end)
+
+    def join(self, parts: list) -> RunValues:
+        """Return the RunValues of a point's parts, in order."""
+        return RunValues(*(np.concatenate([getattr(v, f.name) for v in parts])
+                           for f in dataclasses.fields(RunValues)))
 
 
-def run_task(task: Task) -> tuple[dict, np.ndarray]:
-    """Run simulate_point for one task (a worker process's job)."""
-    return simulate_point(task.controller, **task.kwargs)
+COMPARISON = Comparison()
 
 
-def run_tasks(tasks: Sequence[Task], workers: int) -> Iterator[tuple[dict, np.ndarray]]:
-    """Yield run_task of each task, in order, computed on `workers` processes."""
-    if workers <= 1 or len(tasks) <= 1:
-        yield from map(run_task, tasks)
-        return
-    with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
-        yield from pool.map(run_task, tasks)
+def run_points(points: Sequence[monte_carlo.Point], workers: int,
+               part_runs: Optional[int] = None, batch_runs: Optional[int] = None,
+               scheduler: Optional[str] = None) -> Iterator[RunValues]:
+    """Yield the RunValues of each point, in order, on `workers` processes (monte_carlo)."""
+    return monte_carlo.run_points(points, workers, COMPARISON, part_runs, batch_runs,
+                                  scheduler)
 
 
 def phi_ratio(lqg: np.ndarray, p: np.ndarray, seed: int) -> dict:
     """Return mean|phi| of the LQG over that of P, with a paired 95 % bootstrap interval."""
-    index = np.random.default_rng(seed + 2).integers(0, lqg.size, size=(BOOTSTRAP, lqg.size))
-    ratios = lqg[index].mean(axis=1) / p[index].mean(axis=1)
-    lo, hi = np.percentile(ratios, [2.5, 97.5])
-    return {'ratio': float(lqg.mean() / p.mean()), 'ci95': [float(lo), float(hi)]}
+    lqg_means, p_means = bootstrap_means([lqg, p], seed + 2)
+    return {'ratio': float(lqg.mean() / p.mean()), 'ci95': interval(lqg_means / p_means)}
 
 
 def plot(betas: Sequence[float], results: dict, *, title: str) -> Figure:
@@ -167,6 +232,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--effort-beta', type=arguments.rate_deg_s, default=2.8,
                    help='effort point drift rate, deg/s (2.8, Fig. 14)')
     arguments.add_run_options(p, dt=led.PAPER_DT)
+    arguments.add_scheduler(p)
     p.add_argument('--ablation', action='store_true',
                    help='also run the LQG variants of ABLATIONS at --ablation-beta (noise '
                         '--noise) and at the effort point')
@@ -184,39 +250,52 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         parser().error('the noise levels must be >= 0')
     common = {'runs': args.runs, 'steps': args.steps, 'dt': args.dt, 'seed': args.seed}
     start = time.perf_counter()
-    # every point (controller, beta, noise): the sweep, the effort point, the ablation
-    tasks = [Task(name, {'beta': beta, 'noise': args.noise, **common})
-             for name in CONTROLLERS for beta in args.betas]
-    tasks += [Task(name, {'beta': args.effort_beta, 'noise': args.effort_noise, **common})
-              for name in CONTROLLERS]
-    points = ((args.noise, args.ablation_beta), (args.effort_noise, args.effort_beta))
+    # every point (beta, noise) x controller: the sweep, the effort point, then the ablation
+    where = [(beta, args.noise) for beta in args.betas] + [(args.effort_beta, args.effort_noise)]
+    points = [point(name, beta=beta, noise=noise, **common)
+              for beta, noise in where for name in CONTROLLERS]
+    abl = ((args.ablation_beta, args.noise), (args.effort_beta, args.effort_noise))
     if args.ablation:
-        tasks += [Task('lqg', {'beta': beta, 'noise': noise, 'lqg': config, **common})
-                  for config in ABLATIONS.values() for noise, beta in points]
-    done = run_tasks(tasks, args.workers)
+        points += [point('lqg', beta=beta, noise=noise, lqg=config, **common)
+                   for config in ABLATIONS.values() for beta, noise in abl]
+    try:
+        return _compare(args, where, abl, run_points(points, args.workers,
+                                                     scheduler=args.scheduler), start)
+    except monte_carlo.SchedulerError as exc:
+        print(f'lqg_comparison: {exc}', file=sys.stderr)
+        return 1
+
+
+def _compare(args: argparse.Namespace, where: list, abl: tuple, done: Iterator[RunValues],
+             start: float) -> int:
+    """Take the points' RunValues as they come; print and write the results."""
+    common = {'runs': args.runs, 'steps': args.steps, 'dt': args.dt, 'seed': args.seed}
     sweep: dict = {name: [] for name in CONTROLLERS}
     effort = {}
-    phi: dict = {name: [] for name in CONTROLLERS}      # per-run mean |phi|, each point
-    for name in CONTROLLERS:
-        for beta in args.betas:
-            point, runs_phi = next(done)
-            sweep[name].append(point)
-            phi[name].append(runs_phi)
-            print(f'[lqg_comparison] {name} beta {beta:g}: '
-                  f'{sweep[name][-1]["angular"]["mean"]:.1f}%', file=sys.stderr, flush=True)
-    for name in CONTROLLERS:
-        effort[name], runs_phi = next(done)
-        phi[name].append(runs_phi)
     # mean |phi| of the LQG over that of each P, at each beta and at the effort point
-    ratios = {p: [phi_ratio(phi['lqg'][i], phi[p][i], args.seed) for i in range(len(phi[p]))]
-              for p in ('p', 'p_prior')}
+    ratios: dict = {p: [] for p in ('p', 'p_prior')}
+    for i, (beta, noise) in enumerate(where):
+        phi = {}                    # per-run mean |phi| of each controller at this point
+        for name in CONTROLLERS:
+            values = next(done)
+            record = point_record(beta, noise, values, args.seed)
+            phi[name] = values.abs_phi
+            if i < len(args.betas):
+                sweep[name].append(record)
+                print(f'[lqg_comparison] {name} beta {beta:g}: '
+                      f'{record["angular"]["mean"]:.1f}%', file=sys.stderr, flush=True)
+            else:
+                effort[name] = record
+        for p in ratios:
+            ratios[p].append(phi_ratio(phi['lqg'], phi[p], args.seed))
     ablation: dict = {}
     if args.ablation:
         for name in ABLATIONS:
-            ablation[name] = [next(done)[0] for _ in points]
+            ablation[name] = [point_record(beta, noise, next(done), args.seed)
+                              for beta, noise in abl]
     elapsed = time.perf_counter() - start
     print(table(sweep))
-    print(table({name: [point] for name, point in effort.items()}))
+    print(table({name: [rec] for name, rec in effort.items()}))
     if ablation:
         print(table(ablation))
     data = {'config': {**common, 'noise_v': args.noise, 'effort_noise_v': args.effort_noise,

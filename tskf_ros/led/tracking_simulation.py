@@ -157,10 +157,11 @@ def simulate_blocks(aligner: Aligner, blocks: Sequence[Block],
     Run `simulate_tracking` on blocks of runs side by side: the aligner steps all at once.
 
     Block i's runs are the columns after those of blocks 0 .. i-1; its link gives their
-    measurement noise and dropout, its Disturbances their random numbers (blocks may share
-    them: the same draws at several noise levels).  The links differ in noise and dropout
-    only.  Each run is what simulate_tracking gives it alone, number for number.  keep:
-    the Trajectory fields recorded (FIELDS; the others have no steps: less memory).
+    measurement noise, dropout and drift rate beta, its Disturbances their random numbers
+    (blocks may share them: the same draws at several noise levels).  The links differ in
+    noise, dropout and beta only.  Each run is what simulate_tracking gives it alone,
+    number for number.  keep: the Trajectory fields recorded (FIELDS; the others have no
+    steps: less memory).
     """
     response = response if response is not None else IncidenceResponse()
     if not blocks:
@@ -168,8 +169,10 @@ def simulate_blocks(aligner: Aligner, blocks: Sequence[Block],
     link = blocks[0].link
     for b in blocks:
         _check(b.link)
-        if dataclasses.replace(b.link, noise=link.noise, dropout=link.dropout) != link:
-            raise AlignmentError('the blocks of one simulation differ in noise and dropout only')
+        if dataclasses.replace(b.link, noise=link.noise, dropout=link.dropout,
+                               beta=link.beta) != link:
+            raise AlignmentError('the blocks of one simulation differ in noise, dropout and '
+                                 'beta only')
     n, steps = aligner.runs, int(link.steps)
     sizes = [b.noise.runs for b in blocks]
     if sum(sizes) != n or any(b.noise.w1.shape[0] != steps for b in blocks):
@@ -197,7 +200,10 @@ def simulate_blocks(aligner: Aligner, blocks: Sequence[Block],
     rows = [f for f in kept if f in keep]
     x1 = np.full(n, link.max_intensity / response.peak)
     phi = np.concatenate([b.noise.x2_0 for b in blocks]) + aligner.scan_offset
-    drift = link.beta * link.dt
+    # beta dt per run (one number when the blocks share beta)
+    betas = {b.link.beta for b in blocks}
+    drift = link.beta * link.dt if len(betas) == 1 else \
+        np.repeat([b.link.beta for b in blocks], sizes) * link.dt
     for k in range(steps):
         clean = x1 * response.g(wrap_degrees(phi))
         if link.blocked and link.blocked[0] <= t[k] < link.blocked[1]:

@@ -15,6 +15,8 @@
 
 """replay_offline --smooth: the RTS estimates of a replayed stream, per segment, arrays and bag."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader
@@ -140,3 +142,92 @@ def test_smooth_with_the_alignment_filter_is_a_usage_error(tmp_path, capsys):
               '--smooth'])
     assert exc.value.code == 2
     assert '--smooth' in capsys.readouterr().err
+
+
+class DictRecorder:
+    """The definition: every estimate and jump by stamp (the newest kept), RTS in numpy."""
+
+    def __init__(self, config):
+        self.kf = config.model.make_filter(config.transition)
+        self.segments = [({}, {}, {})]
+
+    def outcome(self, out):
+        if out.status == 'reset' and self.segments[-1][0]:
+            self.segments.append(({}, {}, {}))
+        if out.status not in ('accepted', 'inserted', 'reset'):
+            return
+        predicted, corrected, sigma = self.segments[-1]
+        for e in out.estimates:
+            (predicted if e.kind == 'predicted' else corrected)[e.stamp_ns] = (e.x, e.P)
+        for j in out.jumps:
+            sigma[j.stamp_ns] = j.sigma_ns
+
+    def smoothed(self):
+        ts, xs, Ps = [], [], []
+        for predicted, corrected, sigma in self.segments:
+            stamps = sorted(sigma)
+            x, P = [None] * len(stamps), [None] * len(stamps)
+            for k in range(len(stamps) - 1, -1, -1):
+                t = stamps[k]
+                x_f, P_f = corrected.get(t) or predicted[t]
+                if k == len(stamps) - 1:
+                    x[k], P[k] = x_f, P_f
+                    continue
+                x_p, P_p = predicted[sigma[t]]
+                F = self.kf.transition_matrices((sigma[t] - t) / NS)[0]
+                # G = P(t|t) F^T P(sigma|t)^-1; x(t|T), P(t|T) (Rauch, Tung & Striebel 1965)
+                G = P_f @ F.T @ np.linalg.inv(P_p)
+                x[k] = x_f + G @ (x[k + 1] - x_p)
+                P[k] = P_f + G @ (P[k + 1] - P_p) @ G.T
+            ts += stamps
+            xs += x
+            Ps += P
+        return np.array(ts), np.array(xs), np.array(Ps)
+
+
+@pytest.mark.parametrize('name', ['reference_estimator', 'owc_estimator'])
+def test_rows_made_final_in_chunks_are_the_estimates_kept_by_stamp(monkeypatch, name):
+    # 3000 samples at 1 kHz, every 13th pair swapped (the second arrives late: inserted,
+    # the filter re-run from its left neighbour) and a reset in the middle; a history of
+    # 3 points and chunks of 8 make all but the newest points final rows early: the same
+    # numbers as the recorder that keeps everything by stamp (the same bits), and as the
+    # definition (RTS written out in numpy)
+    from tskf_ros.bag.replay import rts_replay
+    from tskf_ros.owc.innovation_trace import Measurement, run_stream
+    config = dataclasses.replace(load_config(CONFIG / f'{name}.yaml').session, history_size=3)
+    rng = np.random.default_rng(2)
+    stamps = (1_700_000_000 * NS + np.cumsum(rng.integers(990_000, 1_010_000, 3000))
+              + np.where(np.arange(3000) >= 1500, 70 * NS, 0)).tolist()
+    for i in range(0, 2999, 13):
+        stamps[i], stamps[i + 1] = stamps[i + 1], stamps[i]
+    events = [Measurement(t, 1.0 + 0.1 * np.sin(i / 40) + 0.01 * rng.standard_normal(), 0.0,
+                          max(stamps[:i + 1]) + 50_000) for i, t in enumerate(stamps)]
+    kept = rts_replay.SmoothingRecorder(config)
+    monkeypatch.setattr(rts_replay, 'CHUNK', 8)
+    chunked = rts_replay.SmoothingRecorder(config)
+    assert chunked.live == 4 * 3 + 8
+    definition = DictRecorder(config)
+    statuses = []
+
+    def observe(out):
+        statuses.append(out.status)
+        for recorder in (kept, chunked, definition):
+            recorder.outcome(out)
+    kept.live = 10**9                       # never made final before the end
+    run_stream(config, events, use_now=True, observe=observe)
+    assert statuses.count('inserted') > 100 and statuses.count('reset') == 1
+    # the first segment made final at the reset; the second's oldest points as they age
+    assert len(chunked.segments) == 2 and len(kept.segments) == 2
+    assert kept.rows.count == 1498 and chunked.rows.count > 1498 + 1400
+    got, sigma = chunked.smoothed_rows()
+    want = kept.smoothed()
+    for field in got._fields:
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
+    t, x, P = definition.smoothed()
+    np.testing.assert_array_equal(got.stamp_ns, t)
+    np.testing.assert_allclose(got.x, x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got.P, P, rtol=0, atol=1e-9)
+    # sigma: the next point of the segment
+    same = np.diff(got.segment) == 0
+    np.testing.assert_array_equal(sigma[:-1][same], got.stamp_ns[1:][same])
+    assert chunked.smoothed() is got       # made once (its rows are freed), then kept

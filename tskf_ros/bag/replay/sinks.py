@@ -128,6 +128,10 @@ class Collector:
         self.result.outputs.append((topic, log_ns, msg))
 
 
+# smoothed messages serialized and written at a time
+SMOOTHED_CHUNK = 4096
+
+
 class BagSink:
     """Outputs written to a bag, serialized to canonical CDR; the inputs copied as read."""
 
@@ -165,15 +169,17 @@ class BagSink:
         """Write the smoothed estimates (if smoothing), logged at the last input's time."""
         if self.smoother is None:
             return
-        rows = self.smoother.smoothed()
+        rows, sigma = self.smoother.smoothed_rows()
         enc = est.encoder()
-        # mu of each point's step, from the segment it belongs to
-        stepped = [seg.sigma for seg in self.smoother.segments if seg.sigma]
-        pairs = [(SMOOTHED_TOPIC, enc.estimate('smoothed', t, (stepped[s][t] - t) / NS, x, P))
-                 for t, s, x, P in zip(rows.stamp_ns.tolist(), rows.segment.tolist(), rows.x,
-                                       rows.P)]
-        self.written[SMOOTHED_TOPIC] += len(pairs)
-        if pairs:
+        self.written[SMOOTHED_TOPIC] += 0
+        # mu of each point's step (to the next point of its segment); written a chunk of
+        # messages at a time
+        for a in range(0, rows.stamp_ns.size, SMOOTHED_CHUNK):
+            b = a + SMOOTHED_CHUNK
+            pairs = [(SMOOTHED_TOPIC, enc.estimate('smoothed', t, (s - t) / NS, x, P))
+                     for t, s, x, P in zip(rows.stamp_ns[a:b].tolist(),
+                                           sigma[a:b].tolist(), rows.x[a:b], rows.P[a:b])]
+            self.written[SMOOTHED_TOPIC] += len(pairs)
             self.writer.write_many(self.last_log_ns, pairs)
 
     def diagnostics(self, stamp_ns: int, msg: Any) -> None:
