@@ -17,6 +17,7 @@
 
 from dataclasses import fields
 import math
+import time
 from typing import Any, Callable, Optional, Protocol, Sequence, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -111,6 +112,8 @@ class ReconfigurableNode(Node):
         self.parameters_given = self.schema.declare(self)
         self.config = self.start_watching_parameters()
         self.session = self.SESSION(self.config.session)
+        # the node clock's time in ns (see watch_clock_jumps)
+        self.now_ns: Callable[[], int] = self.clock_ns
 
     def start_watching_parameters(self) -> NodeSettings:
         """Build the config from the declared parameters and validate every later change."""
@@ -173,16 +176,33 @@ class ReconfigurableNode(Node):
         self.diag_pub.publish(msg)
         return msg
 
+    def clock_ns(self) -> int:
+        """Return the node clock's time in ns (self.now_ns() may read it more cheaply)."""
+        return self.get_clock().now().nanoseconds
+
     def watch_clock_jumps(self) -> None:
-        """Restart the session when the clock jumps back by 1 ms or more or changes source."""
-        self._jump_handle = self.get_clock().create_jump_callback(
+        """
+        Restart the session when the clock jumps back by 1 ms or more or changes source.
+
+        From here on self.now_ns() (before: clock_ns()) follows the clock's source without
+        asking rclpy for it on each call: while ROS time is inactive the node clock is the
+        system clock (rcutils reads CLOCK_REALTIME, as time.time_ns does), read without
+        building a Time; while it is active (use_sim_time with /clock), the clock's now().
+        """
+        clock = self.get_clock()
+        self._follow_clock(getattr(clock, 'ros_time_is_active', True))
+        self._jump_handle = clock.create_jump_callback(
             JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1_000_000),
                           on_clock_change=True),
             post_callback=self._on_clock_jump)
 
+    def _follow_clock(self, ros_time: bool) -> None:
+        self.now_ns = self.clock_ns if ros_time else time.time_ns
+
     def _on_clock_jump(self, jump: TimeJump) -> None:
         if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED,
                                  ClockChange.ROS_TIME_DEACTIVATED):
+            self._follow_clock(jump.clock_change == ClockChange.ROS_TIME_ACTIVATED)
             why = f'clock source changed ({jump.clock_change.name})'
         else:
             why = f'clock jumped {jump.delta.nanoseconds / 1e9:.3f} s'
