@@ -16,6 +16,7 @@
 """The timescale_estimator's interface: parameters, topics, QoS, outcome-to-message mapping."""
 
 from dataclasses import dataclass
+from operator import attrgetter
 from pathlib import Path
 from typing import Any, Callable, Iterator, Optional, Union
 
@@ -294,8 +295,18 @@ def extractor(msgtype: str) -> Callable[[Any, int], tuple[int, float, float]]:
     value, variance = kind.value, kind.variance
     if not kind.stamped:
         return lambda msg, log_ns: (int(log_ns), float(getattr(msg, value)), 0.0)
+    # the fields in one call (the live node's every input): stamp sec, nanosec, value[,
+    # variance]
+    to_ns = conversions.sec_nanosec_to_ns
+    fields = attrgetter('header.stamp.sec', 'header.stamp.nanosec', value,
+                        *((variance,) if variance else ()))
     if variance is None:
-        return lambda msg, log_ns: (conversions.stamp_to_ns(msg.header.stamp),
-                                    float(getattr(msg, value)), 0.0)
-    return lambda msg, log_ns: (conversions.stamp_to_ns(msg.header.stamp),
-                                float(getattr(msg, value)), float(getattr(msg, variance)))
+        def stamped(msg: Any, log_ns: int) -> tuple[int, float, float]:
+            sec, nanosec, y = fields(msg)
+            return to_ns(sec, nanosec), float(y), 0.0
+        return stamped
+
+    def with_variance(msg: Any, log_ns: int) -> tuple[int, float, float]:
+        sec, nanosec, y, var = fields(msg)
+        return to_ns(sec, nanosec), float(y), float(var)
+    return with_variance

@@ -16,6 +16,7 @@
 """What the nodes share: parameters from their schema, diagnostics, the simulators' clock."""
 
 from dataclasses import fields
+import gc
 import math
 import time
 from typing import Any, Callable, Optional, Protocol, Sequence, TypeVar
@@ -101,6 +102,9 @@ class ReconfigurableNode(Node):
     CONFIG_ERRORS: tuple = (KeyError, TypeError, ValueError)
     # the session class of the core, built from config.session
     SESSION: Callable[[Any], Any]
+    # gc.freeze() at the first /diagnostics after a sample (node_runner sets it in a
+    # process of the node's own)
+    freeze_heap = False
 
     def __init__(self, node_name: str, *, context=None, namespace: Optional[str] = None,
                  parameter_overrides: Optional[list] = None,
@@ -172,6 +176,13 @@ class ReconfigurableNode(Node):
 
     def publish_diagnostics(self) -> DiagnosticArray:
         """Publish (and return) the session's counters on /diagnostics."""
+        if self.freeze_heap and self.status_count():
+            # the process's start-up objects (modules, numba's and LLVM's once the first
+            # sample compiled the kernels) are moved out of the collector's reach: a full
+            # collection walks only what came after (tens of ms of a node's executor
+            # otherwise, in which its input queue fills)
+            gc.freeze()
+            self.freeze_heap = False
         msg = self.diagnostics_message(self.get_clock().now().nanoseconds)
         self.diag_pub.publish(msg)
         return msg
