@@ -346,12 +346,16 @@ def in_process_costs(messages: int, repeat: int = 3) -> dict:
         for out in outcomes:
             for _, msg in outcome_messages(out, config):
                 serialize_message(msg)
+    def encode() -> None:
+        for out in outcomes:
+            reused.serialized(out)
     parts = {'session.add': run_session,
              'build 2 messages (outcome_messages)': lambda: [
                  outcome_messages(o, config) for o in outcomes],
              'fill 2 reused (OutcomeMessages)': fill,
              'build + serialize_message': build_and_serialize,
-             'fill + serialize_message': fill_and_serialize}
+             'fill + serialize_message': fill_and_serialize,
+             'serialized, as the node publishes (OutcomeMessages.serialized)': encode}
     return {name: min(timeit.repeat(f, timer=time.thread_time, number=1, repeat=repeat))
             / messages * 1e6
             for name, f in parts.items()}
