@@ -346,6 +346,7 @@ def in_process_costs(messages: int, repeat: int = 3) -> dict:
         for out in outcomes:
             for _, msg in outcome_messages(out, config):
                 serialize_message(msg)
+
     def encode() -> None:
         for out in outcomes:
             reused.serialized(out)
