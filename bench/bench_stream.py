@@ -66,10 +66,19 @@ T0_NS = 1_000 * NS
 STAMP = struct.Struct('<dd')
 ESTIMATE_DOUBLES = 5
 TIMEOUT = 60.0          # s: a bound on discovery and on the node settling, never a result
+WARMUP_RATE = 200.0     # Hz of a warm-up before the stream (publish's warmup)
+WARMUP_PAUSE = 0.5      # s between the warm-up and the stream
 
 
-def publish(namespace: str, rate: float, seconds: float) -> None:
-    """Publish rate Hz for seconds once the node matched; print {sent, wall} as JSON."""
+def publish(namespace: str, rate: float, seconds: float, warmup: float = 0.0) -> None:
+    """
+    Publish rate Hz for seconds once the node matched; print {sent, wall} as JSON.
+
+    With warmup > 0, first WARMUP_RATE Hz for warmup seconds (the same stamps, one period
+    apart), a pause of WARMUP_PAUSE s, then the stream: the node's first inputs (its
+    kernels are compiled, or loaded from numba's cache, as they come) before the rate.
+    'streaming' is printed when the stream starts; `sent` counts the warm-up as well.
+    """
     context = Context()
     rclpy.init(context=context)
     node = rclpy.create_node('stream', namespace=namespace, context=context)
@@ -82,16 +91,25 @@ def publish(namespace: str, rate: float, seconds: float) -> None:
         time.sleep(0.01)
     print('matched', flush=True)
     period_ns = int(round(NS / rate))
-    total = int(round(rate * seconds))
-    start = time.perf_counter()
     sent = 0
+    for _ in range(int(round(WARMUP_RATE * warmup))):
+        sent += 1
+        pub.publish(conversions.power_to_msg(T0_NS + sent * period_ns,
+                                             165.6 + (sent % 7) - 3.0))
+        time.sleep(1.0 / WARMUP_RATE)
+    if warmup > 0:
+        time.sleep(WARMUP_PAUSE)
+    print('streaming', flush=True)
+    first = sent
+    total = first + int(round(rate * seconds))
+    start = time.perf_counter()
     while sent < total:
-        due = min(total, int((time.perf_counter() - start) * rate) + 1)
+        due = min(total, first + int((time.perf_counter() - start) * rate) + 1)
         while sent < due:
             sent += 1
             pub.publish(conversions.power_to_msg(T0_NS + sent * period_ns,
                                                  165.6 + (sent % 7) - 3.0))
-        time.sleep(max(0.0, start + sent / rate - time.perf_counter()))
+        time.sleep(max(0.0, start + (sent - first) / rate - time.perf_counter()))
     wall = time.perf_counter() - start
     node.destroy_node()
     context.try_shutdown()
@@ -118,7 +136,8 @@ def cpu_seconds(pid: int) -> float:
 def main() -> None:
     """Run the node, the publisher and the monitor; print the figures."""
     if len(sys.argv) > 1 and sys.argv[1] == 'publish':
-        publish(sys.argv[2], float(sys.argv[3]), float(sys.argv[4]))
+        publish(sys.argv[2], float(sys.argv[3]), float(sys.argv[4]),
+                float(sys.argv[5]) if len(sys.argv) > 5 else 0.0)
         return
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--seconds', type=float, default=60.0)

@@ -105,6 +105,26 @@ def test_the_reused_messages_are_what_rosbags_serializes_from_the_estimates(case
         assert got == expected_bytes(out, config)
         assert {key: [serialize(m) for _, m in outcome_messages(out, config) if _ == key]
                 for key in got} == got
+        # what the node publishes: the same bytes, written without filling the messages
+        written = {}
+        for key, data in reused.serialized(out):
+            written.setdefault(key, []).append(data)
+        assert written == got
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(configs_and_outcomes(), stamps, finite, st.data())
+def test_a_smoothed_estimate_serialized_is_its_message_serialized(case, stamp_ns, mu, data):
+    config = case[0]
+    n = len(config.session.model.state_names)
+    x = np.array(data.draw(st.lists(finite, min_size=n, max_size=n)))
+    P = np.array(data.draw(st.lists(finite, min_size=n * n, max_size=n * n))).reshape(n, n)
+    reused = OutcomeMessages(config)
+    assert reused.smoothed_serialized(stamp_ns, mu, x, P) == library_bytes(
+        'smoothed', stamp_ns, mu, x, P, config.session.model.state_names)
+    # a transposed (not C-contiguous) P is written row by row, as the message holds it
+    assert reused.smoothed_serialized(stamp_ns, mu, x, P.T) == serialize(
+        reused.smoothed(stamp_ns, mu, x, P.T))
 
 
 def test_each_field_is_what_the_estimate_says():

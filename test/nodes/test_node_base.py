@@ -303,3 +303,20 @@ def test_the_input_check_runs_on_its_own_after_the_delay(ros_context, monkeypatc
             'nothing to filter yet']
     finally:
         close(executor, node, client)
+
+
+def test_the_node_reads_the_clock_of_the_source_in_force(ros_context):
+    # ROS time inactive: the system clock, read without rclpy; active (use_sim_time, no
+    # /clock yet): the node clock's now(), 0 until /clock says otherwise
+    node = TimescaleEstimator(context=ros_context)
+    try:
+        assert node.now_ns is time.time_ns
+        before = time.time_ns()
+        assert before <= node.now_ns() <= node.clock_ns() <= time.time_ns()
+        node.set_parameters([Parameter('use_sim_time', value=True)])
+        assert node.get_clock().ros_time_is_active
+        assert node.now_ns() == node.clock_ns() == 0
+        node.set_parameters([Parameter('use_sim_time', value=False)])
+        assert node.now_ns is time.time_ns
+    finally:
+        node.destroy_node()

@@ -25,12 +25,12 @@ from rosbags.interfaces import Nodetype
 
 from tskf_ros.bag.message_types import typestore
 from tskf_ros.core.units import NS
-from tskf_ros.messages.conversions import ESTIMATE_OFFSET
+# the estimates' fixed-layout encoder is the live node's as well (messages layer)
+from tskf_ros.messages.estimate_cdr import EstimateEncoder
 
 __all__ = ['EstimateEncoder', 'fixed_decoder', 'fixed_fields', 'serialize', 'to_store',
            'type_name']
 
-CDR_HEADER = b'\x00\x01\x00\x00'    # XCDR1, little endian, no options
 _NUMPY = {'d': np.float64, 'f': np.float32, 'b': np.int8, 'B': np.uint8, 'h': np.int16,
           'H': np.uint16, 'i': np.int32, 'I': np.uint32, 'l': np.int64, 'L': np.uint64,
           'q': np.int64, 'Q': np.uint64}
@@ -78,71 +78,6 @@ def to_store(msg: Any) -> Any:
 def serialize(msg: Any) -> bytes:
     """Return the canonical CDR bytes of an rclpy message (rosbags' serializer)."""
     return bytes(typestore().serialize_cdr(to_store(msg), type_name(msg)))
-
-
-class _Layout:
-    """CDR bytes being laid out: pos is the offset in the body (after the 4-byte header)."""
-
-    def __init__(self, pos: int) -> None:
-        self.data = bytearray()
-        self.pos = pos
-
-    def put(self, raw: bytes, align: int = 1) -> None:
-        pad = -self.pos % align
-        self.data += b'\0' * pad + raw
-        self.pos += pad + len(raw)
-
-    def string(self, text: str) -> None:
-        raw = text.encode('utf-8') + b'\0'
-        self.put(struct.pack('<I', len(raw)) + raw, 4)
-
-    def cut(self, skip: int) -> bytes:
-        """Return the bytes so far and start anew after `skip` bytes laid out elsewhere."""
-        out = bytes(self.data)
-        self.data = bytearray()
-        self.pos += skip
-        return out
-
-
-class EstimateEncoder:
-    """
-    The estimator's outputs as canonical CDR, written directly in their fixed layout.
-
-    Each is a std_msgs/msg/Float64MultiArray in the layout of
-    conversions.state_estimate_to_msg.  One encoder per replay: the state names are fixed,
-    so the layout of each kind of estimate is laid out once; each message is then one
-    struct.pack of its data.
-    """
-
-    KINDS = ('predicted', 'corrected', 'smoothed')
-
-    def __init__(self, names: Sequence[str]) -> None:
-        n = len(names)
-        if not n:
-            raise ValueError('an estimate needs at least one state')
-        self.n = n
-        count = ESTIMATE_OFFSET + n + n * n
-        self._prefix = {}
-        for kind in self.KINDS:
-            lay = _Layout(0)
-            lay.put(struct.pack('<I', 2), 4)
-            lay.string(kind)
-            lay.put(struct.pack('<II', n + 1, (n + 1) * n), 4)
-            lay.string(','.join(names))
-            lay.put(struct.pack('<II', n, n), 4)
-            lay.put(struct.pack('<II', ESTIMATE_OFFSET, count), 4)
-            lay.put(b'', 8)
-            self._prefix[kind] = CDR_HEADER + lay.cut(0)
-        self._data = struct.Struct(f'<{count}d')
-
-    def estimate(self, kind: str, stamp_ns: int, mu: float, x: np.ndarray,
-                 P: np.ndarray) -> bytes:
-        """Return conversions.state_estimate_to_msg(kind, ...) serialized."""
-        n = self.n
-        sec, nsec = divmod(int(stamp_ns), NS)
-        return self._prefix[kind] + self._data.pack(
-            sec, nsec, mu, *np.asarray(x, dtype=float).reshape(n).tolist(),
-            *np.asarray(P, dtype=float).reshape(n * n).tolist())
 
 
 # struct codes of the fixed-size base types a fixed-layout decoder reads

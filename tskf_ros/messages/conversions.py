@@ -38,7 +38,12 @@ LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
 
 def stamp_to_ns(stamp: Time) -> int:
     """Convert builtin_interfaces/Time -> integer nanoseconds."""
-    return int(stamp.sec) * NS + int(stamp.nanosec)
+    return sec_nanosec_to_ns(stamp.sec, stamp.nanosec)
+
+
+def sec_nanosec_to_ns(sec: int, nanosec: int) -> int:
+    """Convert a stamp's sec and nanosec fields -> integer nanoseconds."""
+    return int(sec) * NS + int(nanosec)
 
 
 def ns_to_stamp(ns: int) -> Time:

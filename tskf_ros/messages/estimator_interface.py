@@ -16,6 +16,7 @@
 """The timescale_estimator's interface: parameters, topics, QoS, outcome-to-message mapping."""
 
 from dataclasses import dataclass
+from operator import attrgetter
 from pathlib import Path
 from typing import Any, Callable, Iterator, Optional, Union
 
@@ -28,6 +29,7 @@ from std_msgs.msg import Float32, Float64, Float64MultiArray
 
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATE_ESTIMATE_TYPE
+from tskf_ros.messages.estimate_cdr import EstimateEncoder
 from tskf_ros.messages.parameter_schema import load_schema, ParameterError
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, reliable_qos
@@ -180,6 +182,9 @@ class OutcomeMessages:
     field (test_outcome_messages), but each message is reused: it is valid until the next
     one is yielded (a late sample's revisions fill the same message one after the other),
     which suits a publisher (rclpy serializes in publish) and nothing that keeps them.
+    `serialized(out)` returns the same messages serialized without filling them (what the
+    node publishes: canonical CDR, estimate_cdr.EstimateEncoder), the bytes rosbags
+    serializes from each message.
     """
 
     def __init__(self, config: NodeConfig) -> None:
@@ -187,6 +192,7 @@ class OutcomeMessages:
         self.msgs = {(key, kind): Float64MultiArray(
             layout=conversions.state_estimate_layout(kind, names))
             for key in OUTPUT_TOPICS for kind in ('predicted', 'corrected', 'smoothed')}
+        self.encoder = EstimateEncoder(names)
 
     def messages(self, out: Outcome,
                  wanted: Optional[Callable[[str], bool]] = None) -> Iterator[tuple]:
@@ -205,11 +211,28 @@ class OutcomeMessages:
                     msgs[key, e.kind], e.stamp_ns, estimate_mu(e.kind, e.stamp_ns, mus),
                     e.x, e.P)
 
+    def serialized(self, out: Outcome,
+                   wanted: Optional[Callable[[str], bool]] = None) -> list[tuple[str, bytes]]:
+        """Return the (output, serialized message) pairs of messages(out, wanted), in order."""
+        encode, mus, pairs = self.encoder.estimate, None, []
+        for e in out.estimates:
+            key = output_key(e.kind, e.revised)
+            if wanted is None or wanted(key):
+                mus = mus or step_mus(out)
+                pairs.append((key, encode(e.kind, e.stamp_ns,
+                                          estimate_mu(e.kind, e.stamp_ns, mus), e.x, e.P)))
+        return pairs
+
     def smoothed(self, stamp_ns: int, mu: float, x: np.ndarray,
                  P: np.ndarray) -> Float64MultiArray:
         """Return the smoothed output's message filled with one fixed-lag estimate."""
         return conversions.fill_state_estimate(self.msgs['smoothed', 'smoothed'], stamp_ns,
                                                mu, x, P)
+
+    def smoothed_serialized(self, stamp_ns: int, mu: float, x: np.ndarray,
+                            P: np.ndarray) -> bytes:
+        """Return smoothed(stamp_ns, mu, x, P) serialized."""
+        return self.encoder.estimate('smoothed', stamp_ns, mu, x, P)
 
 
 def bag_outcome_messages(out: Outcome, config: NodeConfig) -> list[tuple[str, Any]]:
@@ -272,8 +295,18 @@ def extractor(msgtype: str) -> Callable[[Any, int], tuple[int, float, float]]:
     value, variance = kind.value, kind.variance
     if not kind.stamped:
         return lambda msg, log_ns: (int(log_ns), float(getattr(msg, value)), 0.0)
+    # the fields in one call (the live node's every input): stamp sec, nanosec, value[,
+    # variance]
+    to_ns = conversions.sec_nanosec_to_ns
+    fields = attrgetter('header.stamp.sec', 'header.stamp.nanosec', value,
+                        *((variance,) if variance else ()))
     if variance is None:
-        return lambda msg, log_ns: (conversions.stamp_to_ns(msg.header.stamp),
-                                    float(getattr(msg, value)), 0.0)
-    return lambda msg, log_ns: (conversions.stamp_to_ns(msg.header.stamp),
-                                float(getattr(msg, value)), float(getattr(msg, variance)))
+        def stamped(msg: Any, log_ns: int) -> tuple[int, float, float]:
+            sec, nanosec, y = fields(msg)
+            return to_ns(sec, nanosec), float(y), 0.0
+        return stamped
+
+    def with_variance(msg: Any, log_ns: int) -> tuple[int, float, float]:
+        sec, nanosec, y, var = fields(msg)
+        return to_ns(sec, nanosec), float(y), float(var)
+    return with_variance

@@ -71,6 +71,7 @@ class TimescaleEstimator(ReconfigurableNode):
             qos_overriding_options=overridable())
             for key, topic in OUTPUT_TOPICS.items() if key != 'smoothed' or self.lagged}
         self.outputs = OutcomeMessages(self.config)
+        self.subscribed: set[str] = set()      # outputs with a subscriber (see _subscribed)
         self.start_diagnostics()
         self.watch_clock_jumps()
         self.start_services()
@@ -106,7 +107,7 @@ class TimescaleEstimator(ReconfigurableNode):
     # -- data -----------------------------------------------------------------------------
 
     def _on_measurement(self, msg: Any) -> None:
-        now_ns = self.get_clock().now().nanoseconds
+        now_ns = self.now_ns()
         # an unstamped type (std_msgs Float64, Float32) is stamped with its time of arrival
         stamp_ns, value, variance = self.extract(msg, now_ns)
         out = self.session.add(stamp_ns, value, variance, now_ns=now_ns)
@@ -124,6 +125,8 @@ class TimescaleEstimator(ReconfigurableNode):
         self._publish(out)
 
     def _report(self, out: Outcome) -> None:
+        if out.status == 'accepted':        # the usual case: nothing to say
+            return
         log = self.get_logger()
         if out.status == 'rejected':
             log.warning(f'sample rejected ({out.reason}): {out.message}')
@@ -135,24 +138,37 @@ class TimescaleEstimator(ReconfigurableNode):
             log.debug(out.message)
 
     def _publish(self, out: Outcome) -> None:
-        # each message is reused: published (serialized) before the next one is filled; an
-        # output nobody subscribes to (unless made transient_local) is neither filled nor
-        # published
-        for key, msg in self.outputs.messages(out, self._subscribed):
-            self.pubs[key].publish(msg)
+        # each message goes out serialized (the bytes rclpy would make of it); an output
+        # nobody subscribes to (unless made transient_local) is neither filled nor published
+        pubs = self.pubs
+        for key, data in self.outputs.serialized(out, self._subscribed):
+            pubs[key].publish(data)
         if self.lagged is not None:
             self._publish_smoothed(self.lagged.outcome(out))
 
     def _publish_smoothed(self, estimates: list[LaggedEstimate]) -> None:
-        pub = self.pubs['smoothed']
+        pub, outputs = self.pubs['smoothed'], self.outputs
         for e in estimates:
-            pub.publish(self.outputs.smoothed(e.stamp_ns, e.mu, e.x, e.P))
+            pub.publish(outputs.smoothed_serialized(e.stamp_ns, e.mu, e.x, e.P))
 
     def _subscribed(self, key: str) -> bool:
-        # a transient_local output (a durability override) is kept for late subscribers
+        # a transient_local output (a durability override) is kept for late subscribers; a
+        # subscriber once seen is taken as there until the next /diagnostics message (one
+        # rclpy call per output and diagnostics period, not per input); none seen: asked
+        # again at each estimate, so a new subscriber misses nothing
+        if key in self.subscribed:
+            return True
         pub = self.pubs[key]
-        return (pub.get_subscription_count() > 0
-                or pub.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL)
+        if (pub.get_subscription_count() > 0
+                or pub.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL):
+            self.subscribed.add(key)
+            return True
+        return False
+
+    def publish_diagnostics(self) -> DiagnosticArray:
+        """Publish (and return) the session's counters on /diagnostics; recount subscribers."""
+        self.subscribed.clear()
+        return super().publish_diagnostics()
 
     def restart(self, why: str, reason: str = 'clock_jump') -> None:
         """Re-initialise the filter, saying why (nothing to do before a sample)."""
