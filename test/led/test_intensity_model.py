@@ -48,6 +48,43 @@ def test_zone_unit_puts_20_percent_at_15_degrees():
     np.testing.assert_allclose(r.g(phi), g_paper(phi * r.units_per_degree), rtol=1e-13)
 
 
+@pytest.mark.parametrize('coefficients', [
+    led.intensity_model.PAPER_G_COEFFICIENTS,
+    (0.5, 3.0, 40.0, 0.5, -8.0, 90.0),
+    (0.9, -2.0, 200.0, 0.1, 12.0, 60.0),
+])
+def test_peak_and_zone_unit_equal_scipys(coefficients):
+    """The start-up's bisections give scipy.optimize's numbers (to 1e-12), without it."""
+    import scipy.optimize
+    from tskf_ros.led import intensity_model as im
+
+    def slope(u):
+        return im._slope(u, *im._gaussians(u, coefficients), coefficients, 1.0)
+
+    b1, b2 = coefficients[1], coefficients[4]
+    u_ref = scipy.optimize.brentq(slope, min(b1, b2), max(b1, b2), xtol=1e-14, rtol=1e-15)
+    u, peak = im._fit_peak(coefficients)
+    assert u == pytest.approx(u_ref, rel=1e-12, abs=1e-12)
+    assert peak == pytest.approx(float(im._fit(u_ref, coefficients)), rel=1e-12)
+    bounded = scipy.optimize.minimize_scalar(lambda x: -float(im._fit(x, coefficients)),
+                                             bounds=(min(b1, b2), max(b1, b2)),
+                                             method='bounded', options={'xatol': 1e-10})
+    assert peak == pytest.approx(-bounded.fun, rel=1e-12)
+
+    def excess(scale):
+        mean = 0.5 * (im._fit(15.0 * scale, coefficients) + im._fit(-15.0 * scale, coefficients))
+        return float(mean) / peak - 0.2
+
+    scale_ref = scipy.optimize.brentq(excess, 1e-3, 1e3, xtol=1e-14, rtol=1e-15)
+    assert im.zone_units_per_degree(tuple(coefficients)) == pytest.approx(scale_ref, rel=1e-12)
+
+
+def test_zone_unit_without_a_crossing_is_one_clear_error():
+    from tskf_ros.led import intensity_model as im
+    with pytest.raises(led.AlignmentError, match='never averages'):
+        im.zone_units_per_degree(im.PAPER_G_COEFFICIENTS, level=1.5)
+
+
 def test_literal_unit_is_nearly_flat():
     r = led.IncidenceResponse(units_per_degree=led.LITERAL_UNITS_PER_DEGREE)
     peak = paper_peak()

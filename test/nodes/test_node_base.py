@@ -320,3 +320,20 @@ def test_the_node_reads_the_clock_of_the_source_in_force(ros_context):
         assert node.now_ns is time.time_ns
     finally:
         node.destroy_node()
+
+
+def test_when_spinning_runs_once_from_the_executor_not_before(ros_context, executor_kind):
+    node = TimescaleEstimator(context=ros_context)
+    ran = []
+    node.when_spinning(lambda: ran.append(len(ran)))
+    assert ran == []                    # nothing at the call: the constructor stays short
+    executor = make_executor(executor_kind, context=ros_context)
+    executor.add_node(node)
+    try:
+        spin_until(executor, lambda: len(ran) >= 1, 'the deferred action')
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.01)
+        assert ran == [0]               # once, whatever the executor's turns after
+    finally:
+        executor.shutdown()
+        node.destroy_node()

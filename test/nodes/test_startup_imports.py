@@ -25,12 +25,12 @@ import pytest
 NEVER = ('scipy.stats', 'scipy.integrate', 'scipy.optimize', 'matplotlib', 'dask', 'numba',
          'mcap', 'rosbags', 'tskf_ros.experiments', 'tskf_ros.bag.reader',
          'tskf_ros.tools.plot_bag')
-# the estimator's path has no LED code
-ESTIMATOR_NEVER = NEVER + ('tskf_ros.led',)
+# the estimator's path has no LED code, and no scipy beyond its package (numpy's linalg)
+ESTIMATOR_NEVER = NEVER + ('tskf_ros.led', 'scipy.linalg', 'scipy.special', 'scipy.sparse')
 
 
-def _imported(module: str) -> set[str]:
-    code = f'import sys, {module}; print("\\n".join(sys.modules))'
+def _imported(module: str, then: str = 'pass') -> set[str]:
+    code = f'import sys, {module}; {then}; print("\\n".join(sys.modules))'
     result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                             env=dict(os.environ), timeout=300)
     assert result.returncode == 0, result.stderr
@@ -49,6 +49,12 @@ def _offending(modules: set[str], never: tuple) -> list[str]:
 ])
 def test_a_node_module_imports_only_its_path(module, never):
     assert _offending(_imported(module), never) == []
+
+
+def test_the_alignment_configuration_needs_no_scipy_optimize():
+    # the default configuration (the intensity fit's peak and zone width) at start
+    then = 'from tskf_ros.led.alignment_config import AlignmentConfig; AlignmentConfig()'
+    assert _offending(_imported('tskf_ros.nodes.alignment', then), NEVER) == []
 
 
 def test_the_check_sees_a_forbidden_module():

@@ -87,13 +87,12 @@ class Alignment(ReconfigurableNode):
         cfg = self.config.session
         if isinstance(cfg, PanTiltStreamConfig):
             s = cfg.session
-            self.get_logger().info(
+            self._log_start(
                 f'aligning a pan-tilt mount ({self.joints[0]}, {self.joints[1]}) with '
                 f'{s.method}, starting at [{s.joints0[0]:g}, {s.joints0[1]:g}] deg'
                 + ('' if s.method == 'conical_ekf' else f', starting {s.start}'))
-            self._report_transitions()
             return
-        self.get_logger().info(
+        self._log_start(
             f'aligning with {cfg.algorithm}'
             + (' and the time-scale LQG controller' if cfg.algorithm == 'ekf'
                and cfg.controller == 'lqg' else
@@ -102,7 +101,13 @@ class Alignment(ReconfigurableNode):
             + f', base starting at {cfg.base_initial:g} deg'
             + (f'; pointing supervisor on, starting {cfg.pat.start}' if cfg.pat.enabled
                else '; no pointing supervisor'))
-        self._report_transitions()
+
+    def _log_start(self, line: str) -> None:
+        """Log the start line and the supervisor's first state once the node spins."""
+        def log() -> None:
+            self.get_logger().info(line)
+            self._report_transitions()
+        self.when_spinning(log)
 
     # -- parameters -----------------------------------------------------------------------
 

@@ -119,6 +119,23 @@ class ReconfigurableNode(Node):
         # the node clock's time in ns (see watch_clock_jumps)
         self.now_ns: Callable[[], int] = self.clock_ns
 
+    def when_spinning(self, action: Callable[[], None]) -> None:
+        """
+        Run action once, from the executor's first turn (a one-shot 0 s timer), not now.
+
+        For a node's start-up log lines: rclpy's first log line of a process finds its
+        caller's source file through `inspect`, which walks every loaded module (about
+        0.2 s with numpy and rclpy loaded); from the executor it overlaps the middleware's
+        discovery of the node's topics instead of delaying them.
+        """
+        timer = None
+
+        def once() -> None:
+            if timer is not None:
+                timer.cancel()
+            action()
+        timer = self.create_timer(0.0, once)
+
     def start_watching_parameters(self) -> NodeSettings:
         """Build the config from the declared parameters and validate every later change."""
         self._pending = None

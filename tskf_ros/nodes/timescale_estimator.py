@@ -80,10 +80,11 @@ class TimescaleEstimator(ReconfigurableNode):
             f'parameters ({", ".join(self.matrices_given)} given)' if self.matrices_given else
             "the built-in default, Cai et al.'s model (3): no A, C, ... given; pass "
             '--params-file config/<model>_estimator.yaml to choose a model')
-        self.get_logger().info(
+        start_line = (
             f'estimating {m.name} (n = {m.A.shape[0]}, states {", ".join(m.state_names)}) '
             f'with the {self.config.session.transition} transition; the model comes from '
             f'{self.model_source}')
+        self.when_spinning(lambda: self.get_logger().info(start_line))
 
     # -- parameters -----------------------------------------------------------------------
 
