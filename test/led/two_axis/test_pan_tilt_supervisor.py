@@ -199,10 +199,10 @@ def test_a_noiseless_cold_start_is_acquired_within_10_s():
 @pytest.mark.parametrize('early', [True, False])
 def test_light_seen_in_the_first_samples_is_handed_over_at_min_samples(early):
     """
-    3 V at the first three samples of a search, then 0 V: the CUSUM (h 3 V) sees light at
-    the second and has fallen under h by the 6th.
+    3 V at the first three samples of a search, then 0 V.
 
-    early_light: the hand-over comes settle + refine samples after the search's
+    The CUSUM (h 3 V) sees light at the second sample and is under h again by the 6th.
+    With early_light: the hand-over comes settle + refine samples after the search's
     min_samples-th sample; without it none comes.
     """
     config = PanTiltSupervisorConfig(early_light=early)

@@ -58,7 +58,7 @@ def _page_cusum_by_hand(z, k):
 
 
 def test_the_threshold_is_three_sigma_of_the_noise_below_one_volt():
-    """h = min(3 V, 3 sigma): 0.6 V at sigma 0.2, 3 V at 1 V and above; None keeps 3 V."""
+    """The threshold h = min(3 V, 3 sigma): 0.6 V at sigma 0.2, 3 V from 1 V (None: 3 V)."""
     response = RadialResponse()
     for noise, h in ((0.2, 0.6), (0.5, 1.5), (1.0198, 3.0), (2.5, 3.0), (None, 3.0)):
         assert SpotDetector(SpotConfig(), response, 1, noise).threshold == pytest.approx(h)
@@ -86,7 +86,7 @@ def test_a_noiseless_crossing_is_seen_at_three_sigma_and_missed_at_three_volts()
 
 
 def _last_cusum(z, k):
-    """The CUSUM after the last sample, by the same plain loop."""
+    """Return the CUSUM after the last sample, by the same plain loop."""
     s = 0.0
     for value in z:
         s = max(0.0, s + value - k)
