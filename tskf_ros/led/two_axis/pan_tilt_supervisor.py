@@ -99,10 +99,11 @@ class PanTiltSupervisorConfig:
     refine: Optional[SpiralConfig] = field(
         default_factory=lambda: SpiralConfig(speed=3.0, pitch=5.0, reach=9.0))
     min_samples: int = 10         # samples of a search before the CUSUM may see light
-    # light the CUSUM saw before min_samples counts at min_samples: the CUSUM falls again
-    # once the spiral has left the light, and a light near the search's centre is crossed
-    # in its first samples (at 0 V a light 7 deg off was seen at the 2nd sample, then lost)
-    early_light: bool = True
+    # light the CUSUM saw before min_samples counts at min_samples (off by default): the
+    # CUSUM falls again once the spiral has left a light crossed in its first samples; at
+    # 1 V it gains 0 to 3 runs in 1000 of the cold start, but from 1.5 V it hands over
+    # onto the dark's early false alarms (2.5 V: 73.9 % acquired within 10 s, not 79.2 %)
+    early_light: bool = False
     # V: lost, too, when the EKF's peak x1hat g_r(0) falls below this (0: off).  At 1 V
     # of noise a pointing 15-20 deg off is explained as well by a dim light, but the link's
     # x1 walk dims 5 % of the lights below 1 V within 20 s, and the EKF that keeps steering
