@@ -16,6 +16,7 @@
 """The spot detector's fit: a missing newest sample changes nothing (a dropout during a search)."""
 
 import numpy as np
+import pytest
 
 from tskf_ros.led.two_axis.pointing_geometry import off_axis_angle
 from tskf_ros.led.two_axis.radial_response import RadialResponse
@@ -45,3 +46,48 @@ def test_a_missing_newest_sample_leaves_the_fit_as_it_was():
     # a line of samples along azimuth places the light in azimuth (to the fine grid's
     # step); seen from one side, its elevation trades against its brightness
     assert abs(after.center[0, 0] - 10.0) <= 0.25
+
+
+def _page_cusum_by_hand(z, k):
+    """S_n = max(0, S_{n-1} + z_n - k) (Page 1954), a plain loop; return the largest S."""
+    s, top = 0.0, 0.0
+    for value in z:
+        s = max(0.0, s + value - k)
+        top = max(top, s)
+    return top
+
+
+def test_the_threshold_is_three_sigma_of_the_noise_below_one_volt():
+    """The threshold h = min(3 V, 3 sigma): 0.6 V at sigma 0.2, 3 V from 1 V (None: 3 V)."""
+    response = RadialResponse()
+    for noise, h in ((0.2, 0.6), (0.5, 1.5), (1.0198, 3.0), (2.5, 3.0), (None, 3.0)):
+        assert SpotDetector(SpotConfig(), response, 1, noise).threshold == pytest.approx(h)
+
+
+def test_a_noiseless_crossing_is_seen_at_three_sigma_and_missed_at_three_volts():
+    """
+    A straight pass 7 deg from a 3 V light at 4 deg per sample, no noise.
+
+    The CUSUM (k_ref 1 V) of the pass, by hand, peaks at 2.4 V: the fixed 3 V threshold
+    misses it, as the spiral missed lights at 0 V (its curved arms peaked at 2.3 to 2.9
+    V); h = 3 sigma (sigma 0.2 V) sees it.
+    """
+    response = RadialResponse()
+    track = np.array([[-40.0 + 4.0 * k, 7.0] for k in range(21)])
+    z = 3.0 * response.g(off_axis_angle(track[:, 0], track[:, 1], 0.0, 0.0))
+    top = _page_cusum_by_hand(z, 1.0)
+    assert top == pytest.approx(2.38, abs=0.01)
+    for noise, seen in ((None, False), (0.2, True)):
+        detector = SpotDetector(SpotConfig(), response, 1, noise)
+        fired = [bool(detector.update(np.array([v]), p[None, :], np.ones(1, dtype=bool))[0])
+                 for v, p in zip(z, track)]
+        assert any(fired) is seen
+        np.testing.assert_allclose(detector.cusum, _last_cusum(z, 1.0), atol=1e-12)
+
+
+def _last_cusum(z, k):
+    """Return the CUSUM after the last sample, by the same plain loop."""
+    s = 0.0
+    for value in z:
+        s = max(0.0, s + value - k)
+    return s

@@ -49,6 +49,13 @@ class SpotConfig:
     # V: h; below light_detector's 4 V: a spiral crosses the light in a few samples (the
     # dark's false alarms cost a hand-over and a loss, a missed crossing a whole spiral)
     threshold: float = 3.0
+    # h in standard deviations of the noise the detector is told (SpotDetector's noise):
+    # h = min(threshold, threshold_sigmas sigma).  The run length of Page's CUSUM in the
+    # dark is a function of h / sigma and k_ref / sigma (Page 1954), so at a noise below
+    # 1 V (k_ref >= sigma) h = 3 sigma keeps the dark's false alarms at or below those of
+    # 3 V at 1 V; a fixed 3 V at 0 V needs the light above k_ref for longer than a
+    # crossing of an arm lasts (at 0 V the CUSUM peaked at 2.3 to 2.9 V over crossings)
+    threshold_sigmas: float = 3.0
     window: int = 40             # samples (position, intensity) the hand-over fits
     coarse: float = 1.5          # deg between the source positions of the coarse grid
     fine: float = 0.25           # deg: the fine grid around the coarse grid's best
@@ -60,7 +67,8 @@ class SpotConfig:
 
     def __post_init__(self) -> None:
         """Check the detector; raise AlignmentError with the reason."""
-        for name in ('reference', 'threshold', 'coarse', 'fine', 'margin', 'span', 'max_peak'):
+        for name in ('reference', 'threshold', 'threshold_sigmas', 'coarse', 'fine', 'margin',
+                     'span', 'max_peak'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise AlignmentError(f'detector {name} must be positive, got {value}')
@@ -80,8 +88,13 @@ class SpotSighting(NamedTuple):
 class SpotDetector:
     """CUSUM detection and the least-squares fit of the source position, for every run."""
 
-    def __init__(self, config: SpotConfig, response: RadialResponse, runs: int) -> None:
+    def __init__(self, config: SpotConfig, response: RadialResponse, runs: int,
+                 noise: Optional[float] = None) -> None:
+        """Keep `runs` CUSUMs; noise: sigma of v (V) for h (None: h = config.threshold)."""
         self.config = config
+        # h (V): min(threshold, threshold_sigmas sigma) for a known sigma
+        self.threshold = (config.threshold if noise is None
+                          else min(config.threshold, config.threshold_sigmas * float(noise)))
         self.response = response
         self.runs = int(runs)
         self.cusum = np.zeros(self.runs)
@@ -112,7 +125,7 @@ class SpotDetector:
         newest = self.head
         self.head = (self.head + 1) % c.window
         self._newest = newest
-        return have & (self.cusum > c.threshold / scale)
+        return have & (self.cusum > self.threshold / scale)
 
     def _best(self, p: FloatArray, z: FloatArray, ok: Mask,
               centers: FloatArray) -> tuple[FloatArray, FloatArray]:
