@@ -15,6 +15,7 @@
 
 """The conical-scan EKF: Jacobians, consistency (NEES, NIS), mu from the stamps, one axis."""
 
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -23,8 +24,8 @@ import scipy.stats
 
 from tskf_ros.led.intensity_model import AlignmentError, IncidenceResponse
 from tskf_ros.led.scanning_ekf import StampClock
-from tskf_ros.led.two_axis.conical_ekf import (ConicalEKFConfig, ConicalScanEKF, scan_loss,
-                                               transition)
+from tskf_ros.led.two_axis.conical_ekf import (ConicalEKFConfig, ConicalScanEKF, CONSISTENT,
+                                               scan_loss, transition)
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLink, PanTiltLinkConfig
 from tskf_ros.led.two_axis.pointing_geometry import joint_turn, tangent_error
 from tskf_ros.led.two_axis.radial_response import RadialResponse
@@ -78,17 +79,33 @@ def test_mu_comes_from_the_stamps_with_jitter():
     np.testing.assert_allclose(ekf.P[0], F @ P[0] @ F.T + 2.6 * ekf.Q, rtol=1e-12)
 
 
-def _nees_nis(noise, runs=200, steps=300, seed=0, jitter=0.0):
+@dataclass(frozen=True)
+class Consistency:
+    """The ANEES of [x1, d_c, d_e] with its 95 % band, and the mean NIS with its band."""
+
+    anees: float
+    band: tuple[float, float]
+    nis: float
+    nis_band: tuple[float, float]
+
+
+def _nees_nis(noise, runs=200, steps=300, seed=0, jitter=0.0, config=CONSISTENT):
     """
-    Run the EKF in closed loop at `noise`; return the ANEES of [x1, d_c, d_e], its band.
+    Run the filter `config` in closed loop at `noise`; return its Consistency over the runs.
 
     The truth: x1, and the error of the mean pointing (the boresight less the scan offset)
-    in the tangent plane at the source.  Runs that leave the 15 deg cone are not the
-    filter's domain (its x1 and error trade off in the dark) and are left out; the first
-    2 s (the convergence from P0) too.  Returns (ANEES, band, mean NIS).
+    in the tangent plane at the source.  A run counts until it first leaves the 15 deg
+    cone (a stopping time: only its past decides; outside, the light is under the noise
+    and x1 and the error trade off): leaving out whole runs that leave later would keep
+    only the runs whose errors stayed small.  The first 2 s (the convergence from the wide
+    P0) are left out.  The ANEES is the mean of the NEES over runs and steps; its band is
+    that of one step's ANEES over the m runs in the cone at every step, chi^2(3m)/m
+    (Bar-Shalom, Li & Kirubarajan 2001, Sec. 5.4.2): the mean over 260 correlated steps
+    varies less than one step's, so this band is the wider, lenient one.  The NIS of a
+    consistent filter is white, so the mean of its n samples has the band chi^2(n)/n.
     """
     plant = PanTiltLink(PanTiltLinkConfig(noise=noise, jitter=jitter), runs=runs, seed=seed)
-    ekf = ConicalScanEKF(ConicalEKFConfig(noise=noise), runs=runs)
+    ekf = ConicalScanEKF(replace(config, noise=noise), runs=runs)
     nees, nis, theta = (np.empty((steps, runs)) for _ in range(3))
     for k in range(steps):
         s = plant.sample()
@@ -99,44 +116,102 @@ def _nees_nis(noise, runs=200, steps=300, seed=0, jitter=0.0):
         nees[k] = np.einsum('ri,rij,rj->r', e, np.linalg.inv(ekf.P[:, :3, :3]), e)
         nis[k], theta[k] = ekf.nis, s.theta
         plant.command_turn(turn)
-    keep = theta.max(axis=0) <= 15.0
-    m = int(keep.sum())
-    lo, hi = scipy.stats.chi2.ppf([0.025, 0.975], 3 * m) / m
-    return float(np.mean(nees[40:, keep])), (lo, hi), float(np.nanmean(nis[40:, keep]))
+    inside = np.cumprod(theta <= 15.0, axis=0).astype(bool)[40:]
+    m = int(inside[-1].sum())
+    kept = nis[40:][inside & np.isfinite(nis[40:])]
+    n = kept.size
+    return Consistency(float(np.mean(nees[40:][inside])),
+                       tuple(scipy.stats.chi2.ppf([0.025, 0.975], 3 * m) / m),
+                       float(np.mean(kept)),
+                       tuple(scipy.stats.chi2.ppf([0.025, 0.975], n) / n))
 
 
-def test_nees_is_in_its_band_at_1_volt():
-    """At 1 V, the mean over steps of the ANEES of [x1, d] (200 runs) is in its 95 % band."""
-    anees, (lo, hi), _ = _nees_nis(1.0)
-    assert lo < anees < hi, (anees, lo, hi)
+@pytest.mark.parametrize('noise', [
+    0.0, 0.5, 1.0,
+    *(pytest.param(v, marks=pytest.mark.xfail(strict=True, reason=reason)) for v, reason in (
+        (1.5, 'measured 3.73 over [2.65, 3.37]'), (2.0, 'measured 4.06 over [2.63, 3.39]'),
+        (2.5, 'measured 4.04 over [2.58, 3.45]')))])
+def test_nees_is_in_its_band(noise):
+    """
+    The ANEES of [x1, d] (200 runs) is in its 95 % band.
+
+    Not from 1.5 V (expected failures): far off axis the posterior of [x1, d] is not
+    Gaussian (a dim sample is a dim light or a far pointing), which the second-order
+    update does not capture; doc/design/two_axis.md gives the numbers.
+    """
+    c = _nees_nis(noise)
+    assert c.band[0] < c.anees < c.band[1], c
+
+
+@pytest.mark.parametrize('noise', [
+    1.0,
+    *(pytest.param(v, marks=pytest.mark.xfail(strict=True, reason=reason)) for v, reason in (
+        (0.0, 'measured 1.35 under [2.67, 3.35]'), (0.5, 'measured 2.51 under [2.67, 3.35]'),
+        (1.5, 'measured 3.96 over [2.66, 3.36]'), (2.0, 'measured 4.69 over [2.64, 3.39]'),
+        (2.5, 'measured 4.83 over [2.59, 3.44]')))])
+def test_the_closed_loop_filter_is_consistent_at_1_volt_only(noise):
+    """
+    The default (closed-loop) filter: the first-order update, R with a 0.2 V floor, Q 0.02.
+
+    Conservative at 0 and 0.5 V (the floor is 60 times what h misses), overconfident from
+    1.5 V (the linearisation far off axis).
+    """
+    c = _nees_nis(noise, config=ConicalEKFConfig())
+    assert c.band[0] < c.anees < c.band[1], c
 
 
 def test_nees_with_jittered_stamps_at_1_volt():
     """Stamps jittered by up to +-20 ms: mu from the stamps keeps the ANEES in its band."""
-    anees, (lo, hi), _ = _nees_nis(1.0, jitter=0.02)
-    assert lo < anees < hi, (anees, lo, hi)
+    c = _nees_nis(1.0, jitter=0.02)
+    assert c.band[0] < c.anees < c.band[1], c
 
 
-@pytest.mark.xfail(strict=True, reason='measured outside the band: conservative at 0 and '
-                   '0.5 V (ANEES 1.35, 2.51; R has a 0.2 V model-error floor), overconfident '
-                   'from 1.5 V (3.9 to 4.5 against 3.4: the EKF linearisation far off axis)')
-@pytest.mark.parametrize('noise', [0.0, 0.5, 1.5, 2.0, 2.5])
-def test_nees_in_band_at_the_other_noise_levels(noise):
-    """The same test at the other reported noise levels (not met yet)."""
-    anees, (lo, hi), _ = _nees_nis(noise)
-    assert lo < anees < hi, (anees, lo, hi)
-
-
-@pytest.mark.xfail(strict=True, reason='measured: the mean NIS is 0.13 at 0 V, 0.84 at '
-                   '0.5 V, 0.94 to 0.98 from 1 V, below the band of some 50 000 samples '
-                   '(about 1 +- 0.01)')
+@pytest.mark.xfail(strict=True, reason='measured: the mean NIS is 0.92 at 0 V and 0.96 to 0.98 '
+                   'from 0.5 V, below the band of 40 000 to 52 000 samples (about 1 +- 0.013): '
+                   'the filter is conservative along H (S above the mean y^2)')
 @pytest.mark.parametrize('noise', NOISE_LEVELS)
 def test_nis_in_band(noise):
-    """The mean NIS of the kept runs in the 95 % band of its chi^2 (not met yet)."""
-    _, _, nis = _nees_nis(noise)
-    n = 200 * 260
-    lo, hi = scipy.stats.chi2.ppf([0.025, 0.975], n) / n
-    assert lo < nis < hi, (nis, lo, hi)
+    """The mean NIS in the 95 % band of its chi^2 (not met)."""
+    c = _nees_nis(noise)
+    assert c.nis_band[0] < c.nis < c.nis_band[1], c
+
+
+def test_second_order_update_against_the_moments_of_h():
+    """
+    Order 2: the predicted sample and S are the moments of h's second-order expansion.
+
+    h(x) + tr(h_xx P)/2 and H P H^T + tr(h_xx P h_xx P)/2 + R: the mean and variance of
+    the second-order Taylor expansion of h over x ~ N(xhat, P), from 400 000 samples.
+    """
+    rng = np.random.default_rng(3)
+    ekf = ConicalScanEKF(replace(CONSISTENT, noise=0.5), runs=1)
+    ekf.x = np.array([[2.5, 3.0, -1.0, 0.02, 0.0]])
+    ekf.P = np.diag([0.2, 2.0, 1.5, 1e-3, 1e-3])[None] + 0.1 * np.eye(5)[None]
+    P, s = ekf.P[0], ekf.scan_offset
+    H = ekf.jacobian(ekf.x, s)[0, 0]
+    Hxx = ekf.hessian(ekf.x, s)[0]
+    dx = rng.multivariate_normal(np.zeros(5), P, 400_000)
+    taylor = ekf.h(ekf.x, s)[0] + dx @ H + 0.5 * np.einsum('ni,ij,nj->n', dx, Hxx, dx)
+    z = ekf.h(ekf.x, s)[0] + 0.3
+    ekf.update(np.array([z]))
+    assert z - ekf.y[0] == pytest.approx(taylor.mean(), abs=4e-3)
+    assert ekf.S[0] == pytest.approx(taylor.var() + ekf.R[0, 0, 0], rel=1e-2)
+
+
+def test_hessian_matches_finite_differences():
+    """h_xx against central differences of the Jacobian, at random states and offsets."""
+    rng = np.random.default_rng(4)
+    ekf = ConicalScanEKF(runs=50)
+    x = np.column_stack([rng.uniform(0.5, 4.0, 50), rng.uniform(-12, 12, (50, 2)),
+                         rng.normal(0, 0.1, (50, 2))])
+    for offset in ekf.scan[::5]:
+        Hxx = ekf.hessian(x, offset)
+        for i in range(5):
+            up, down = x.copy(), x.copy()
+            up[:, i] += 1e-6
+            down[:, i] -= 1e-6
+            fd = (ekf.jacobian(up, offset) - ekf.jacobian(down, offset))[:, 0, :] / 2e-6
+            np.testing.assert_allclose(Hxx[:, :, i], fd, rtol=1e-5, atol=1e-8)
 
 
 class _SignedRadial:
@@ -156,7 +231,8 @@ def test_reduces_to_the_one_axis_filter():
     """
     The elevation states pinned (P0 = Q = 0) and the scan on the cross-elevation axis.
 
-    The correspondence: [x1, d_c, b_c] of the conical EKF with the LQR is the state
+    The correspondence: [x1, d_c, b_c] of the conical EKF (the first-order update,
+    order 1) with the LQR is the state
     [x1, x2, b] of lqg_alignment's EKF and LQR on the same (signed, one-axis) response
     g_r, the same triangle scan, R = 1 and the same stamps and samples: x, P and the
     turns agree to rounding.
@@ -221,7 +297,8 @@ def test_closed_loop_boresight_within_mean_error_plus_radius():
 
 @pytest.mark.parametrize('bad', [{'controller': 'pid'}, {'gain': 2.0}, {'points': 2},
                                  {'x0': (1.0, 2.0)}, {'Q': (1, 1, 1, 1, -1)},
-                                 {'noise': 0.0, 'model_noise': 0.0}, {'radius': math.inf}])
+                                 {'noise': 0.0, 'model_noise': 0.0}, {'radius': math.inf},
+                                 {'order': 3}])
 def test_bad_configs_say_why(bad):
     """Each bad setting is one AlignmentError."""
     with pytest.raises(AlignmentError):

@@ -55,3 +55,24 @@ def test_gradient_against_finite_differences():
         de[i] = h
         fd = (r.g(np.hypot(*(e + de).T)) - r.g(np.hypot(*(e - de).T))) / (2 * h)
         np.testing.assert_allclose(r.gradient(e)[:, i], fd, rtol=1e-5, atol=1e-9)
+
+
+def test_hessian_against_finite_differences():
+    """The Hessian of g_r(|e|) against central differences of the gradient, at and near 0."""
+    r = RadialResponse()
+    rng = np.random.default_rng(1)
+    e = np.vstack([rng.uniform(-20, 20, (50, 2)), [[0.0, 0.0], [1e-4, -2e-4], [3e-3, 1e-3]]])
+    h = 1e-5
+    for i in range(2):
+        de = np.zeros(2)
+        de[i] = h
+        fd = (r.gradient(e + de) - r.gradient(e - de)) / (2 * h)
+        np.testing.assert_allclose(r.hessian(e)[:, :, i], fd, rtol=1e-6, atol=1e-10)
+
+
+def test_hessian_at_zero_is_g_r_second_derivative_times_identity():
+    """At e = 0 the Hessian is g_r''(0) I, g_r'' by a central second difference of g_r."""
+    r = RadialResponse()
+    h = 1e-3
+    second = (r.g(np.array([h]))[0] - 2 * r.peak + r.g(np.array([-h]))[0]) / h ** 2
+    np.testing.assert_allclose(r.hessian(np.zeros(2)), second * np.eye(2), rtol=1e-5)

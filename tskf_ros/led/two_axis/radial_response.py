@@ -48,6 +48,14 @@ def _sinhc(x: FloatArray) -> FloatArray:
     return np.where(small, 1.0 + x * x / 6.0, np.sinh(safe) / safe)
 
 
+def _coshc3(x: FloatArray) -> FloatArray:
+    """Return (x cosh(x) - sinh(x)) / x^3, 1/3 at x = 0 (a Taylor series below |x| = 1e-2)."""
+    small = np.abs(x) < 1e-2
+    safe = np.where(small, 1.0, x)
+    return np.where(small, 1.0 / 3.0 + x * x / 30.0,
+                    (safe * np.cosh(safe) - np.sinh(safe)) / safe ** 3)
+
+
 @dataclass(frozen=True)
 class RadialResponse:
     """g_r(theta) of the one-axis fit, theta in degrees; `peak` is g_r(0)."""
@@ -86,6 +94,34 @@ class RadialResponse:
         weight, s2c2, kappa, th = self._terms(theta)
         return np.sum(weight * (-2.0 * s2c2 * np.cosh(kappa * th)
                                 + kappa * kappa * _sinhc(kappa * th)), axis=-1)
+
+    def slope_over_theta_rate(self, theta: FloatArray) -> FloatArray:
+        """
+        (g_r'(theta) / theta)' / theta, finite at theta = 0 (where it is g_r''''(0) / 3).
+
+        g_r'/theta = sum_i w_i f_i with w_i = a e^{..}, f_i = -2 s^2/c^2 cosh(kappa theta)
+        + kappa^2 sinhc(kappa theta); w_i'/theta = -2 s^2/c^2 w_i and f_i'/theta =
+        -2 s^2/c^2 kappa^2 sinhc(kappa theta) + kappa^4 coshc3(kappa theta), where
+        coshc3(u) = (u cosh u - sinh u) / u^3.
+        """
+        weight, s2c2, kappa, th = self._terms(theta)
+        u = kappa * th
+        f = -2.0 * s2c2 * np.cosh(u) + kappa * kappa * _sinhc(u)
+        f_rate = -2.0 * s2c2 * kappa * kappa * _sinhc(u) + kappa ** 4 * _coshc3(u)
+        return np.sum(weight * (-2.0 * s2c2 * f + f_rate), axis=-1)
+
+    def hessian(self, error: FloatArray) -> FloatArray:
+        """
+        Return d^2 g_r(|e|) / de de^T (..., 2, 2) for tangent-plane errors e (..., 2).
+
+        The gradient is (g_r'/theta) e, so the Hessian is (g_r'/theta) I +
+        ((g_r'/theta)'/theta) e e^T (`slope_over_theta`, `slope_over_theta_rate`).
+        """
+        error = np.asarray(error, dtype=float)
+        theta = np.hypot(error[..., 0], error[..., 1])
+        outer = error[..., :, None] * error[..., None, :]
+        return (self.slope_over_theta(theta)[..., None, None] * np.eye(2)
+                + self.slope_over_theta_rate(theta)[..., None, None] * outer)
 
     def gradient(self, error: FloatArray) -> FloatArray:
         """Return d g_r(|e|) / d e for tangent-plane errors e (..., 2): g_r'(theta)/theta e."""
