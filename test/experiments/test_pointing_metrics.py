@@ -78,6 +78,17 @@ def test_events_of_a_scripted_run():
     assert re.observed.tolist() == [True, True, False]
 
 
+@pytest.mark.parametrize('dt', [3.05e-230, 5e-324, 1e-3])
+def test_a_hold_longer_than_the_run_is_never_seen(dt):
+    # hold_s / dt beyond the run's 20 steps (or beyond any int): nothing is acquired,
+    # every run censored at time 0, as for any run shorter than its hold; no overflow
+    phi = np.zeros((20, 3))
+    acq, re = pm.pointing_events(phi, dt, angle=15.0, hold_s=1.0)
+    assert acq.observed.tolist() == [False] * 3
+    np.testing.assert_allclose(acq.times, 0.0, atol=1e-300)
+    assert re.times.size == 0
+
+
 def test_an_event_in_the_dark_starts_when_the_light_is_back():
     # out at step 3 in the dark (2-6), back in the cone at 8: 1 step after the light (7)
     phi = np.array([[0, 0, 0, 30, 30, 30, 30, 30, 0, 0, 0, 0, 0]], dtype=float).T
@@ -119,7 +130,7 @@ def reference_events(inside, dt, hold, dark):
     last = steps - hold
     back = [k for k in range(last + 1) if inside[k:k + hold].all()]
     if not back:
-        return ((last + 1) * dt, False), []
+        return (max(last + 1, 0) * dt, False), []   # a run shorter than its hold: 0
     events, k = [], back[0] + hold
     while True:
         leave = next((s for s in range(max(k, 1), steps) if inside[s - 1] and not inside[s]),

@@ -115,7 +115,9 @@ def pointing_events(phi: NDArray[np.float64], dt: float, *, angle: float,
     time order; all runs take their next event at once.
     """
     steps, runs = phi.shape
-    hold = max(int(round(hold_s / dt)), 1)
+    # a hold longer than the run is never seen (and hold_s / dt may be 1e300 or inf)
+    hold_steps = hold_s / dt
+    hold = max(int(round(hold_steps)), 1) if hold_steps < steps + 1 else steps + 1
     inside = np.abs(phi) <= angle
     dark = np.zeros(steps, dtype=bool) if dark is None else np.asarray(dark, dtype=bool)
     # the first lit step at or after each step (steps: none)
