@@ -183,9 +183,7 @@ def main() -> None:
     if args.against:
         before = got[(args.against, cores, args.against)]
         now = got[('this tree', cores, None)]
-        wall, cpu = (statistics.median(getattr(m, key) for m in now)
-                     / statistics.median(getattr(m, key) for m in before)
-                     for key in ('wall_s', 'cpu_s'))
+        wall, cpu = median_ratios(now, before)
         print(f'   this tree / {args.against}, --workers {cores}: wall {wall:.2f}, '
               f'CPU {cpu:.2f}')
 
@@ -202,6 +200,14 @@ def main() -> None:
             print(f'   {name[-10:]:>10} {runs:7d}   {m.wall_s:8.1f}   {m.cpu_s:7.1f}   '
                   f'{m.peak_sum_mb:12.0f}   {m.peak_one_mb:16.0f}   {m.load:4.1f}   {goal}',
                   flush=True)
+
+
+def median_ratios(now: list[Measured], before: list[Measured]) -> tuple[float, float]:
+    """Return the medians' ratios now / before of the wall time and of the CPU time."""
+    wall, cpu = (statistics.median(getattr(m, key) for m in now)
+                 / statistics.median(getattr(m, key) for m in before)
+                 for key in ('wall_s', 'cpu_s'))
+    return wall, cpu
 
 
 def lqg(args: argparse.Namespace, cores: int) -> None:
@@ -221,9 +227,7 @@ def lqg(args: argparse.Namespace, cores: int) -> None:
     if args.against:
         for w in (cores, 1):
             now, before = got[('this tree', w, None)], got[(args.against, w, args.against)]
-            wall, cpu = (statistics.median(getattr(m, key) for m in now)
-                         / statistics.median(getattr(m, key) for m in before)
-                         for key in ('wall_s', 'cpu_s'))
+            wall, cpu = median_ratios(now, before)
             print(f'   this tree / {args.against}, --workers {w}: wall {wall:.2f}, '
                   f'CPU {cpu:.2f}')
     print(f'\n   --betas 14 (6 points), --workers {cores}: time and peak RSS against the runs')

@@ -33,12 +33,17 @@ from tskf_ros.led.two_axis.radial_response import RadialResponse
 NOISE_LEVELS = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5)
 
 
+def random_states(rng, runs):
+    """States [x1, d_c, d_e, b_c, b_e] of `runs` runs, spread over the tracking cone."""
+    return np.column_stack([rng.uniform(0.5, 4.0, runs), rng.uniform(-12, 12, (runs, 2)),
+                            rng.normal(0, 0.1, (runs, 2))])
+
+
 def test_jacobian_matches_finite_differences():
     """H = dh/dx against central differences at random states and scan offsets."""
     rng = np.random.default_rng(0)
     ekf = ConicalScanEKF(runs=50)
-    x = np.column_stack([rng.uniform(0.5, 4.0, 50), rng.uniform(-12, 12, (50, 2)),
-                         rng.normal(0, 0.1, (50, 2))])
+    x = random_states(rng, 50)
     for offset in ekf.scan[::5]:
         H = ekf.jacobian(x, offset)[:, 0, :]
         for i in range(5):
@@ -202,8 +207,7 @@ def test_hessian_matches_finite_differences():
     """h_xx against central differences of the Jacobian, at random states and offsets."""
     rng = np.random.default_rng(4)
     ekf = ConicalScanEKF(runs=50)
-    x = np.column_stack([rng.uniform(0.5, 4.0, 50), rng.uniform(-12, 12, (50, 2)),
-                         rng.normal(0, 0.1, (50, 2))])
+    x = random_states(rng, 50)
     for offset in ekf.scan[::5]:
         Hxx = ekf.hessian(x, offset)
         for i in range(5):
