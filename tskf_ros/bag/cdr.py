@@ -21,6 +21,7 @@ import struct
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 from rosbags.interfaces import Nodetype
 
 from tskf_ros.bag.message_types import typestore
@@ -28,8 +29,8 @@ from tskf_ros.core.units import NS
 # the estimates' fixed-layout encoder is the live node's as well (messages layer)
 from tskf_ros.messages.estimate_cdr import EstimateEncoder
 
-__all__ = ['EstimateEncoder', 'fixed_decoder', 'fixed_fields', 'serialize', 'to_store',
-           'type_name']
+__all__ = ['EstimateEncoder', 'fixed_block_decoder', 'fixed_decoder', 'fixed_fields',
+           'serialize', 'to_store', 'type_name']
 
 _NUMPY = {'d': np.float64, 'f': np.float32, 'b': np.int8, 'B': np.uint8, 'h': np.int16,
           'H': np.uint16, 'i': np.int32, 'I': np.uint32, 'l': np.int64, 'L': np.uint64,
@@ -114,14 +115,23 @@ def fixed_fields(msgtype: str) -> tuple[bool, list]:
     return stamped, out
 
 
-def _tail(codes: str, start: int) -> struct.Struct:
-    """Return the Struct of `codes` laid out from body offset `start` (CDR alignment)."""
-    fmt, pos = '<', start
+def _offsets(codes: str, start: int) -> list[int]:
+    """Return where each of `codes` lies, laid out from body offset `start` (CDR alignment)."""
+    out, pos = [], start
     for code in codes:
         size = struct.calcsize(code)
-        pad = -pos % size
-        fmt += 'x' * pad + code
-        pos += pad + size
+        pos += -pos % size
+        out.append(pos - start)
+        pos += size
+    return out
+
+
+def _tail(codes: str, start: int) -> struct.Struct:
+    """Return the Struct of `codes` laid out from body offset `start` (CDR alignment)."""
+    fmt, pos = '<', 0
+    for code, at in zip(codes, _offsets(codes, start)):
+        fmt += 'x' * (at - pos) + code
+        pos = at + struct.calcsize(code)
     return struct.Struct(fmt)
 
 
@@ -174,4 +184,66 @@ def fixed_decoder(msgtype: str, fields: Sequence[str]) -> Callable[[Any], Option
         except UnicodeDecodeError:
             return None
         return (sec * NS + nanosec, *pick(tail.unpack_from(data, end)))
+    return decode
+
+
+def _column(rows: NDArray[np.uint8], at: int, code: str) -> NDArray[Any]:
+    """Return the little-endian `code` values at byte `at` of every row."""
+    size = struct.calcsize(code)
+    return np.ascontiguousarray(rows[:, at:at + size]).view('<' + code)[:, 0]
+
+
+def _cdr_header(rows: NDArray[np.uint8]) -> bool:
+    """Whether every row starts with the little-endian CDR encapsulation (0, 1)."""
+    return bool((rows[:, 0] == 0).all() and (rows[:, 1] == 1).all())
+
+
+def fixed_block_decoder(msgtype: str, fields: Sequence[str]
+                        ) -> Callable[[NDArray[np.uint8]], Optional[tuple]]:
+    """
+    Return decode(rows) -> (stamps ns or None, *the columns of `fields`), or None.
+
+    rows: messages of one length, one per row (uint8).  Row for row what fixed_decoder
+    gives (stamps int64, the values in their own types), read with numpy; None unless
+    fixed_decoder gives a value for every row from one layout: one frame_id, the same in
+    every row (the caller then decodes the rows one by one).
+    """
+    stamped, layout = fixed_fields(msgtype)
+    names = [name for name, _ in layout]
+    picks = [names.index(f) for f in fields]
+    codes = ''.join(code for _, code in layout)
+    wanted = [codes[p] for p in picks]
+    if not stamped:
+        at = _offsets(codes, 0)
+        need = 4 + _tail(codes, 0).size
+
+        def decode_plain(rows: NDArray[np.uint8]) -> Optional[tuple]:
+            if not need <= rows.shape[1] <= need + _TRAILING or not _cdr_header(rows):
+                return None
+            return (None, *(_column(rows, 4 + at[p], c) for p, c in zip(picks, wanted)))
+        return decode_plain
+    sizes = [_tail(codes, k).size for k in range(8)]
+    places = [_offsets(codes, k) for k in range(8)]
+
+    def decode(rows: NDArray[np.uint8]) -> Optional[tuple]:
+        size = rows.shape[1]
+        if size < 16 or not _cdr_header(rows):
+            return None
+        lengths = _column(rows, 12, 'I')
+        length = int(lengths[0])
+        end = 16 + length
+        k = (end - 4) & 7
+        if (not length or not end + sizes[k] <= size <= end + sizes[k] + _TRAILING
+                or not (lengths == length).all() or rows[:, end - 1].any()):
+            return None
+        frame = rows[0, 16:end - 1]
+        if not (rows[:, 16:end - 1] == frame).all():
+            return None
+        try:
+            frame.tobytes().decode()
+        except UnicodeDecodeError:
+            return None
+        stamps = _column(rows, 4, 'i').astype(np.int64) * NS + _column(rows, 8, 'I')
+        return (stamps, *(_column(rows, end + places[k][p], c)
+                          for p, c in zip(picks, wanted)))
     return decode

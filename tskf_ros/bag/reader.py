@@ -20,20 +20,22 @@ from io import BytesIO
 import os
 from pathlib import Path
 import struct
-from typing import Iterable, Iterator, NamedTuple, Optional, Union
+from typing import Iterable, Iterator, Optional, Union
 
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, McapError, RecordLengthLimitExceeded
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
-from mcap.stream_reader import CRCValidationError, get_chunk_data_stream, StreamReader
+from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import parse_qos as rosbags_parse_qos
 
 from tskf_ros.bag.bag_errors import (BagEmptyError, BagError, BagFormatError,
                                      BagNotFoundError, check_exists, Damage, error_exit,
                                      EXIT_DAMAGED, exit_status, MetadataError, resolved)
+from tskf_ros.bag.mcap_records import DataRecords, MCAP_MAGIC
+from tskf_ros.bag.message_block import MessageBlock, RawMessage, uniform_blocks
 from tskf_ros.bag.sqlite3_storage import compression_mode, sqlite3_messages, StorageFileError
 
 import yaml
@@ -42,10 +44,9 @@ import zstandard
 # the errors are bag_errors', here too for the modules that import them from the reader
 __all__ = ['BagEmptyError', 'BagError', 'BagFormatError', 'BagNotFoundError', 'BagReader',
            'check_exists', 'Damage', 'error_exit', 'EXIT_DAMAGED', 'exit_status',
-           'MetadataError', 'RawMessage', 'resolved', 'TopicInfo']
+           'MessageBlock', 'MetadataError', 'RawMessage', 'resolved', 'TopicInfo']
 
 PathLike = Union[str, os.PathLike]
-MCAP_MAGIC = b'\x89MCAP0\r\n'
 # what the mcap package raises on bytes that are not a valid MCAP record sequence
 # (CRCValidationError is a ValueError; lz4 raises RuntimeError on a bad frame)
 DAMAGE_ERRORS = (McapError, EOFError, struct.error, ValueError, UnicodeDecodeError,
@@ -58,15 +59,6 @@ MESSAGE = int(Opcode.MESSAGE)
 
 def _int_or_none(value: object) -> Optional[int]:
     return None if value is None else int(value)
-
-
-class RawMessage(NamedTuple):
-    """One serialized message: topic, type, log (receive) time in ns, CDR bytes."""
-
-    topic: str
-    msgtype: str
-    log_time_ns: int
-    data: bytes
 
 
 @dataclass
@@ -202,6 +194,19 @@ class BagReader:
 
         On damage, stop, and leave the description in `self.damage`.
         """
+        for item in self.message_blocks(topics, blocks=False):
+            yield item  # type: ignore[misc]  # blocks=False: RawMessage only
+
+    def message_blocks(self, topics: Optional[Iterable[str]] = None, *, blocks: bool = True
+                       ) -> Iterator[Union[RawMessage, MessageBlock]]:
+        """
+        Yield what messages() yields, with runs of a chunk's messages as MessageBlocks.
+
+        A chunk whose messages (after its schemas and channels) all have one record length
+        gives its runs of one topic as blocks (message_block.uniform_blocks: a numpy view
+        of the chunk, no object per message); other messages come one by one.
+        blocks=False: one by one only (messages()).
+        """
         self.damage = None
         wanted = set(topics) if topics is not None else None
         count = 0
@@ -211,8 +216,8 @@ class BagReader:
                 yield msg
         else:
             for path in self.files:
-                for msg in self._mcap(path, wanted, count):
-                    count += 1
+                for msg in self._mcap(path, wanted, count, blocks):
+                    count += 1 if msg.__class__ is RawMessage else len(msg)
                     yield msg
                 if self.damage is not None:
                     return
@@ -241,12 +246,14 @@ class BagReader:
                 raise BagFormatError(str(exc)) from None
             self.damage = Damage(str(exc.path), -1, exc.problem, count)
 
-    def _mcap(self, path: Path, wanted: Optional[set], before: int) -> Iterator[RawMessage]:
+    def _mcap(self, path: Path, wanted: Optional[set], before: int,
+              blocks: bool) -> Iterator[Union[RawMessage, MessageBlock]]:
         """
         Yield the messages of one MCAP file up to DataEnd, or up to the first damaged record.
 
-        The mcap package reads the records and checks the CRCs (its StreamReader, and
-        get_chunk_data_stream for each chunk); at its first error the damage is kept in
+        The records are walked by mcap_records.data_records (the mcap package's record
+        classes; the data section's CRC) and the chunks decompressed and checked by the
+        package's get_chunk_data_stream; at the first error the damage is kept in
         self.damage (doc/design/bags.md).
         """
         channels: dict[int, tuple] = {}
@@ -254,15 +261,14 @@ class BagReader:
         count = 0
         size = path.stat().st_size
         with path.open('rb') as f:
-            offset = len(MCAP_MAGIC)
+            # a record longer than the file is truncation, not a reason to allocate it
+            walk = DataRecords(f, size)
             try:
-                # a record longer than the file is truncation, not a reason to allocate it
-                for record in StreamReader(f, emit_chunks=True, validate_crcs=True,
-                                           record_size_limit=size).records:
+                for record in walk:
                     if isinstance(record, Chunk):
-                        for msg in self._chunk(record, schemas, channels, wanted):
-                            count += 1
-                            yield msg
+                        for item in self._chunk(record, schemas, channels, wanted, blocks):
+                            count += 1 if item.__class__ is RawMessage else len(item)
+                            yield item
                     elif isinstance(record, Message):
                         msg = self._message(record.channel_id, record.log_time, record.data,
                                             channels, wanted)
@@ -277,8 +283,8 @@ class BagReader:
                         break
                     elif isinstance(record, Footer):
                         return
-                    offset = f.tell()
             except DAMAGE_ERRORS as exc:
+                offset = walk.start
                 self.damage = Damage(str(path), offset, self._problem(exc, path, offset, size),
                                      before + count)
                 return
@@ -345,14 +351,14 @@ class BagReader:
             return None
         return RawMessage(ch[0], ch[1], log_time, data)
 
-    def _chunk(self, chunk: Chunk, schemas: dict, channels: dict,
-               wanted: Optional[set]) -> Iterator[RawMessage]:
+    def _chunk(self, chunk: Chunk, schemas: dict, channels: dict, wanted: Optional[set],
+               blocks: bool) -> Iterator[Union[RawMessage, MessageBlock]]:
         """
         Yield the messages of a chunk (decompressed and CRC-checked by the mcap package).
 
         The records inside are walked here (MCAP record framing: opcode, length), schemas
         and channels read by the package's record classes; a record that does not fit the
-        chunk is damage.
+        chunk is damage.  blocks: from the first message on, try uniform_blocks once.
         """
         stream, end = get_chunk_data_stream(chunk, validate_crc=True)
         if end != chunk.uncompressed_size:
@@ -370,6 +376,12 @@ class BagReader:
             if pos > end:
                 raise ValueError(f'record of {length} bytes overruns its chunk')
             if opcode == MESSAGE:
+                if blocks:
+                    blocks = False
+                    got = uniform_blocks(data, body - 9, end, channels, wanted)
+                    if got is not None:
+                        yield from got
+                        return
                 if length < 22:
                     raise ValueError('message record too short')
                 cid, log_time = message_head(data, body)

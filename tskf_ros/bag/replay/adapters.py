@@ -17,10 +17,12 @@
 
 from typing import Any, Callable, Optional, Union
 
+import numpy as np
+from numpy.typing import NDArray
 from rclpy.qos import QoSProfile
 from rosbags.serde import SerdeError
 
-from tskf_ros.bag.cdr import EstimateEncoder, fixed_decoder, serialize
+from tskf_ros.bag.cdr import EstimateEncoder, fixed_block_decoder, fixed_decoder, serialize
 from tskf_ros.bag.message_types import typestore
 from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
@@ -32,7 +34,8 @@ from tskf_ros.messages.estimator_interface import (bag_outcome_messages, BAG_OUT
                                                    output_key, output_qos, step_mus)
 from tskf_ros.owc.session import EstimatorSession, Outcome
 
-__all__ = ['ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimator', 'sample_reader', 'Sample',
+__all__ = ['block_reader', 'ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimator',
+           'sample_reader', 'Sample',
            'UNDECODABLE']
 
 # what deserializing a message that is not of its type raises (rosbags' deserializer)
@@ -75,6 +78,32 @@ def sample_reader(msgtype: str,
     return read
 
 
+Columns = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
+
+
+def block_reader(msgtype: str) -> Callable[[NDArray[np.uint8], NDArray[np.int64]],
+                                           Optional[Columns]]:
+    """
+    Return read(rows, log ns) -> (stamps ns, values, variances) of messages of one length.
+
+    Row for row what sample_reader's read gives through cdr.fixed_decoder, as arrays; None
+    where the fixed layout does not take every row (the caller reads them one by one).
+    """
+    kind = INPUT_TYPES[msgtype]
+    decode = fixed_block_decoder(msgtype,
+                                 [kind.value] + ([kind.variance] if kind.variance else []))
+
+    def read(rows: NDArray[np.uint8], logs: NDArray[np.int64]) -> Optional[Columns]:
+        got = decode(rows)
+        if got is None:
+            return None
+        stamps = got[0] if kind.stamped else logs
+        variances = (got[2].astype(np.float64) if kind.variance
+                     else np.zeros(len(logs)))
+        return stamps, got[1].astype(np.float64), variances
+    return read
+
+
 class OfflineEstimator:
     """The live timescale_estimator node's work on one message at a time."""
 
@@ -87,6 +116,7 @@ class OfflineEstimator:
         self.session = self.session_class(config.session)
         self.extract = extractor(msgtype)
         self.read_sample = sample_reader(msgtype, self.extract)
+        self.read_block = block_reader(msgtype)
         self._deserialize = typestore().deserialize_cdr
         self.period_ns = int(round(config.diagnostics_period * NS))
         self.next_diag: Optional[int] = None

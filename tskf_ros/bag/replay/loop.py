@@ -20,14 +20,16 @@ import gc
 import os
 from pathlib import Path
 import time
-from typing import Callable, Iterator, Optional, Union
+from typing import Callable, Iterator, NamedTuple, Optional, Union
+
+import numpy as np
 
 from numpy.typing import NDArray
 
 from tskf_ros.bag.message_types import qos_from_rclpy, typestore
 from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.progress import DeferredInterrupt, wrap
-from tskf_ros.bag.reader import BagReader, Damage
+from tskf_ros.bag.reader import BagReader, Damage, MessageBlock, RawMessage
 from tskf_ros.bag.replay.adapters import (AnyConfig, OfflineAligner, OfflineEstimator,
                                           UNDECODABLE)
 from tskf_ros.bag.replay.array_sink import ArraySink
@@ -255,7 +257,10 @@ def run_replay(reader: BagReader, est: OfflineEstimator, sink: Sink, result: Rep
     read = 0                    # result.read, kept in a local
     gathered = Gathered(est.read_sample)
     gather = est.batched
-    messages = reader.messages()
+    # runs of measurements read at once (MessageBlock) where nothing is copied
+    blocks = gather and copy is None and not progress
+    messages: Iterator = (_decoded(reader.message_blocks(), topic, est.read_block)
+                          if blocks else reader.messages())
     if progress:
         counts = [i.count for i in reader.topics.values()]
         total = sum(counts) if all(c is not None for c in counts) else None
@@ -265,10 +270,39 @@ def run_replay(reader: BagReader, est: OfflineEstimator, sink: Sink, result: Rep
     start: Optional[Callable[[], list]] = est.start_messages
 
     def flush() -> None:
-        if gathered.logs or gathered.held:
+        if gathered.pending or gathered.held:
             gathered.hand_over(est, sink, statuses)
     try:
         for raw in messages:
+            if raw.__class__ is Decoded:
+                if start is not None:
+                    for name, msg in start():
+                        sink.message(name, int(raw.logs[0]), msg)
+                    start = None
+                n = len(raw.logs)
+                if (read + n) >> 10 != read >> 10:
+                    check()
+                read += n
+                i = 0
+                while i < n:
+                    j = n
+                    if due_at is not None:
+                        late = np.flatnonzero(raw.logs[i:] >= due_at)
+                        j = i + int(late[0]) if len(late) else n
+                    while i < j:
+                        k = min(j, i + GATHER - len(gathered.held) - gathered.pending)
+                        gathered.add_block(raw.stamps[i:k], raw.values[i:k],
+                                           raw.variances[i:k], raw.logs[i:k])
+                        i = k
+                        if len(gathered.held) + gathered.pending >= GATHER:
+                            flush()
+                    if j < n:
+                        log_j = int(raw.logs[j])
+                        flush()
+                        for t, msg in est.diagnostics_due(log_j):
+                            sink.diagnostics(t, msg)
+                        due_at = est.next_diag
+                continue
             read += 1
             if not read & CHECK_EVERY:
                 check()
@@ -289,7 +323,7 @@ def run_replay(reader: BagReader, est: OfflineEstimator, sink: Sink, result: Rep
                 except UNDECODABLE as exc:
                     flush()
                     return _undecodable(reader, read, name, result.msgtype, exc)
-                if len(gathered.held) + len(gathered.logs) >= GATHER:
+                if len(gathered.held) + gathered.pending >= GATHER:
                     flush()
                 continue
             flush()
@@ -319,6 +353,29 @@ def run_replay(reader: BagReader, est: OfflineEstimator, sink: Sink, result: Rep
     if result.samples == 0 and reader.damage is None:
         raise InputError(f'{reader.path}: no messages on {topic}')
     return reader.damage
+
+
+class Decoded(NamedTuple):
+    """A MessageBlock of measurements, decoded (adapters.block_reader)."""
+
+    stamps: NDArray[np.int64]
+    values: NDArray[np.float64]
+    variances: NDArray[np.float64]
+    logs: NDArray[np.int64]
+
+
+def _decoded(items: Iterator[Union[RawMessage, MessageBlock]], topic: str,
+             read_block: Callable) -> Iterator[Union[RawMessage, Decoded]]:
+    """Yield the blocks of `topic` that read_block decodes as Decoded, all else one by one."""
+    for item in items:
+        if item.__class__ is MessageBlock:
+            got = read_block(item.payloads, item.log_times) if item.topic == topic else None
+            if got is None:
+                yield from item.messages()
+            else:
+                yield Decoded(*got, item.log_times)
+        else:
+            yield item
 
 
 def _undecodable(reader: BagReader, read: int, topic: str, msgtype: str,
