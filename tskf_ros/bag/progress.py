@@ -19,7 +19,7 @@ import signal
 import sys
 import threading
 from types import FrameType, TracebackType
-from typing import Generator, Iterable, Optional, TypeVar
+from typing import Callable, Generator, Iterable, Optional, TypeVar
 
 from tqdm import tqdm
 
@@ -36,13 +36,18 @@ def bar(total: Optional[int], desc: str, unit: str, enabled: bool = True) -> tqd
 
 
 def wrap(items: Iterable[T], total: Optional[int], desc: str, unit: str,
-         enabled: bool = True) -> Generator[T, None, None]:
-    """Yield items while a bar counts them (closed at the end, on an error or a break)."""
+         enabled: bool = True, weight: Optional[Callable[[T], int]] = None
+         ) -> Generator[T, None, None]:
+    """
+    Yield items while a bar counts them (closed at the end, on an error or a break).
+
+    weight: the units an item counts for (default 1 each).
+    """
     b = bar(total, desc, unit, enabled)
     try:
         for item in items:
             yield item
-            b.update(1)
+            b.update(1 if weight is None else weight(item))
     finally:
         b.close()
 

@@ -168,3 +168,30 @@ def test_runs_give_the_outputs_of_one_sample_at_a_time(tmp_path, bag, monkeypatc
         np.testing.assert_array_equal(value, single[key], err_msg=key)
     runs, single_bag = (mcap_file(tmp_path / name).read_bytes() for name in ('runs', 'single'))
     assert runs == single_bag
+
+
+@pytest.mark.parametrize('compress', [False, True])
+def test_the_arrays_read_in_blocks_are_the_arrays_read_one_by_one(tmp_path, compress,
+                                                                  monkeypatch):
+    rng = np.random.default_rng(3)
+    path = tmp_path / 'bag'
+    with BagWriter(path, compress=compress, chunk_size=3000) as w:
+        w.add_topic('/received_power', 'sensor_msgs/msg/Illuminance')
+        for k in range(3000):
+            stamp = T0 + k * 1_000_000 + int(rng.integers(-10_000, 10_001))
+            msg = conversions.power_to_msg(stamp, 300.0 + rng.normal(0.0, 2.0), 4.0)
+            if 1200 <= k < 1300:
+                msg.header.frame_id = 'pm' + 'x' * (k % 5)     # lengths differ: one by one
+            w.write('/received_power', stamp + 200_000, serialize_message(msg))
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    period: 0.001\n')
+    fast = replay_arrays(path, params)
+    assert any(not isinstance(i, RawMessage) for i in BagReader(path).message_blocks())
+    blocks = BagReader.message_blocks
+    monkeypatch.setattr(BagReader, 'message_blocks',     # the per-message path
+                        lambda self, topics=None: blocks(self, topics, blocks=False))
+    slow = replay_arrays(path, params)
+    assert fast.keys() == slow.keys() and len(fast['sample.log_ns']) == 3000
+    for key in fast:
+        assert fast[key].dtype == slow[key].dtype and np.array_equal(fast[key], slow[key]), key
+    assert len(fast['diagnostics.log_ns']) >= 2

@@ -258,13 +258,14 @@ def run_replay(reader: BagReader, est: OfflineEstimator, sink: Sink, result: Rep
     gathered = Gathered(est.read_sample)
     gather = est.batched
     # runs of measurements read at once (MessageBlock) where nothing is copied
-    blocks = gather and copy is None and not progress
+    blocks = gather and copy is None
     messages: Iterator = (_decoded(reader.message_blocks(), topic, est.read_block)
                           if blocks else reader.messages())
     if progress:
         counts = [i.count for i in reader.topics.values()]
         total = sum(counts) if all(c is not None for c in counts) else None
-        messages = wrap(messages, total, 'replaying', 'msg')
+        messages = wrap(messages, total, 'replaying', 'msg',
+                        weight=lambda item: len(item.logs) if item.__class__ is Decoded else 1)
 
     # what the node publishes as it starts, written at the first message's log time
     start: Optional[Callable[[], list]] = est.start_messages
