@@ -50,6 +50,10 @@ _mode: Optional[str] = None
 _kernels: dict[str, list['Kernel']] = {}        # module name -> its kernels, in order
 _queue: list[tuple['Kernel', tuple]] = []       # (kernel, argument types' sample) to compile
 _worker: Optional[threading.Thread] = None
+# a kernel called from inside another kernel's interpreted source is compiled inside its
+# caller (numba compiles the callees of a signature): queued on its own it would load a
+# second, unused copy of its code (about 2 to 10 MB a kernel)
+_inside = threading.local()
 
 
 def mode() -> str:
@@ -106,9 +110,14 @@ class Kernel:
         if now == 'wait':
             _compile_module(self.py_func.__module__)
             return self._call(*args)
-        if now == 'background':
+        nested = getattr(_inside, 'depth', 0)
+        if now == 'background' and not nested:
             self._enqueue(args)
-        return self.interpreted(*args)
+        _inside.depth = nested + 1
+        try:
+            return self.interpreted(*args)
+        finally:
+            _inside.depth = nested
 
     def _enqueue(self, args: tuple) -> None:
         global _worker
