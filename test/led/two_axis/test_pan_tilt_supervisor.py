@@ -216,3 +216,29 @@ def test_light_seen_in_the_first_samples_is_handed_over_at_min_samples(early):
     # sample k is the search's (k + 1)-th: the min_samples-th is k = min_samples - 1
     expected = config.min_samples - 1 + config.settle + aligner.refine_samples
     assert first == (expected if early else None)
+
+
+@pytest.mark.parametrize('resume', [True, False])
+def test_a_hand_over_that_never_locks_resumes_the_search_where_it_stopped(resume):
+    """
+    Dark for 40 samples, 3 V for 5, then dark: a hand-over, no good lock, a loss.
+
+    With resume the spiral goes on from where the CUSUM stopped it (its phi no smaller);
+    without it the spiral starts again at its centre.
+    """
+    config = PanTiltSupervisorConfig(resume=resume)
+    sup = make_two_axis_aligner('conical_ekf_pat', runs=1, noise=0.5, start='acquiring',
+                                supervisor=config)
+    phi_at_handover = None
+    for k in range(200):
+        sup.step(0.05 * k, np.array([3.0 if 40 <= k < 45 else 0.0]))
+        if phi_at_handover is None and sup.handovers[0] > 0:
+            phi_at_handover = sup.spiral.phi[0]
+        if sup.losses[0] > 0:
+            break
+    assert phi_at_handover is not None and phi_at_handover > 0.0
+    assert sup.losses[0] == 1 and not sup.locked[0] and not sup.steering[0]
+    if resume:
+        assert sup.spiral.phi[0] >= phi_at_handover
+    else:
+        assert sup.spiral.phi[0] < phi_at_handover / 4
