@@ -27,7 +27,8 @@ the one-axis supervisor's level that follows the light in lock, which a hand-ove
 the wrong side of the light teaches to take the dark for the light); lost, the EKF holds
 a declared loss for hold_samples (it keeps steering on its drift model; tracking again
 after a full window with few low samples), then the spiral again, centred on the last
-mean pointing seen in good lock; a lock younger than hold_after is not held, and a light
+mean pointing seen in good lock (a hand-over that never came into good lock resumes the
+spiral where it stopped); a lock younger than hold_after is not held, and a light
 that faded in lock (dim now, seen bright since the hand-over) is held fade_hold samples,
 then, with fade_look, looked for by one spiral pass that follows the drift model.  The
 supervisor follows the mount's joints [pan, tilt] from `joints0` as the mount does
