@@ -282,12 +282,12 @@ class ConicalScanEKF:
         if self.config.linearisation != 'taylor':
             nodes, weights = SIGMA_POINTS[self.config.linearisation]
             L = np.linalg.cholesky(P[:, :3, :3])
-            spread = np.einsum('rij,pj->rpi', L, nodes)                       # (n, p, 3)
+            spread = nodes @ L.transpose(0, 2, 1)                    # L xi_p, (n, p, 3)
             X = x[:, None, :3] + spread
             e = X[:, :, 1:3] + offset
             Z = X[:, :, 0] * self.response.g(np.hypot(e[..., 0], e[..., 1]))
             hx = Z @ weights
-            Pxz = np.einsum('rpi,rp,p->ri', spread, Z - hx[:, None], weights)
+            Pxz = (((Z - hx[:, None]) * weights)[:, None, :] @ spread)[:, 0, :]
             H3 = np.linalg.solve(P[:, :3, :3], Pxz[:, :, None])[:, :, 0]
             H = np.zeros((n, 1, 5))
             H[:, 0, :3] = H3
