@@ -119,8 +119,9 @@ def _nees_nis(noise, runs=200, steps=300, seed=0, jitter=0.0, dropout=0.0, confi
     is that of one step's ANEES over the m runs in the cone at every step, chi^2(3m)/m
     (Bar-Shalom, Li & Kirubarajan 2001, Sec. 5.4.2): the mean of identically distributed
     steps is less spread than one step (Jensen: it is below one step in the convex
-    order), however they are correlated, so this band is a valid, lenient one; the band
-    over all samples, chi^2(3mK)/(mK), would hold only for independent steps.  The NEES
+    order), however they are correlated, so this band is a lenient one (not an exact
+    95 % region); that of all samples, chi^2(3mK)/(mK), would hold only for independent
+    steps.  The NEES
     counts every step (a dropout's too: the estimate is the prior there); the NIS only
     the steps with a sample, from the y and S of the update itself.  The NIS of a
     consistent filter is white, so the mean of its n samples has the band chi^2(n)/n.
@@ -167,7 +168,7 @@ def test_nees_is_in_its_band(noise, seed):
     """
     The ANEES of [x1, d] (200 runs) is in its 95 % band at every noise level, seeds 0 and 5.
 
-    CONSISTENT (the Gauss-Hermite regression, iterated once, the link's noise and walks);
+    CONSISTENT (the Gauss-Hermite regression, two passes, the link's noise and walks);
     seed 0 chose it, seed 5 was held out.  The runs' interval (from the runs' spread, not
     the chi^2 assumption) holds 3 too, from 0.5 V: at 0 V it is 3.02-3.26 and 3.04-3.28,
     a little overconfident (doc/design/two_axis.md).
