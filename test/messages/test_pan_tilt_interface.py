@@ -24,7 +24,7 @@ from tskf_ros.led.pan_tilt_stream import PanTiltStream, PanTiltStreamConfig
 from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_session import pan_tilt_closed_loop, PanTiltSession
-from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisorConfig
+from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
 from tskf_ros.messages.alignment_interface import default_parameters, parameters_to_config
 from tskf_ros.messages.pan_tilt_interface import pan_tilt_outcome_messages
 

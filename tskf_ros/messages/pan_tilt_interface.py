@@ -36,7 +36,7 @@ from tskf_ros.led.lock_detector import LockConfig
 from tskf_ros.led.pan_tilt_stream import PanTiltStep, PanTiltStreamConfig
 from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_session import PanTiltSessionConfig
-from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisorConfig
+from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
 from tskf_ros.messages.pan_tilt_messages import pan_tilt_command_to_msg, pan_tilt_state_to_msg
 from tskf_ros.messages.parameter_schema import ParameterError
 from tskf_ros.messages.parameters import NodeConfig
