@@ -97,11 +97,11 @@ def make_bag(path: Path, n: int, seed: int = 0, jitter_ns: int = PERIOD_NS // 10
                 w.write('/received_power', t + 200_000, illuminance_cdr(t, v, 4.0))
 
 
-def peak_rss(command: list, env: dict) -> tuple[float, float, str]:
-    """Run command; return (peak RSS MB, wall s, last line of its output)."""
+def peak_rss(command: list, env: dict, cwd: Path = REPO) -> tuple[float, float, str]:
+    """Run command in cwd; return (peak RSS MB, wall s, last line of its output)."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            env=env, cwd=REPO, text=True)
+                            env=env, cwd=cwd, text=True)
     out = proc.stdout.read()
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
@@ -151,7 +151,8 @@ def main() -> None:
         for case in args.cases:
             for label, tree in trees:
                 run_env = env if tree is None else dict(env, PYTHONPATH=str(tree))
-                rss, wall, made, smoothed = run_case(case, bag, params, args.work, run_env)
+                rss, wall, made, smoothed = run_case(case, bag, params, args.work, run_env,
+                                                     tree or REPO)
                 note = ''
                 if case in ('npz', 'bag'):
                     plain[(case, label)] = rss
@@ -166,9 +167,14 @@ def main() -> None:
 CASES = ('read', 'npz', 'bag', 'npz-smooth', 'bag-smooth', 'fit_noise', 'sweep')
 
 
-def run_case(case: str, bag: Path, params: Path, work: Path,
-             env: dict) -> tuple[float, float, float, float]:
-    """Run one case; return peak RSS MB, wall s, output MB, the smoothed rows' MB (or 0)."""
+def run_case(case: str, bag: Path, params: Path, work: Path, env: dict,
+             tree: Path = REPO) -> tuple[float, float, float, float]:
+    """
+    Run one case in `tree`; return peak RSS MB, wall s, output MB, the smoothed MB (or 0).
+
+    The process runs in the tree's folder: `python -m` puts the working directory first
+    on sys.path, before PYTHONPATH, so run elsewhere it would import this tree's code.
+    """
     tool = [sys.executable, '-m', 'tskf_ros.bag.replay.cli']
     out = work / ('out.npz' if case.startswith('npz') else 'out_bag' if case.startswith('bag')
                   else 'out.json' if case == 'fit_noise' else 'out.csv')
@@ -189,7 +195,7 @@ def run_case(case: str, bag: Path, params: Path, work: Path,
                    '--params-file', str(params), '--workers', '0', '--out', str(out),
                    '--no-resume', '--no-progress']
     try:
-        rss, wall, _ = peak_rss(command, env)
+        rss, wall, _ = peak_rss(command, env, tree)
         made = size_mb(out) if out.exists() else 0.0
         smoothed = 0.0
         if case == 'npz-smooth':

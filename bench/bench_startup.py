@@ -31,6 +31,10 @@ the relay (bench/minimal_relay.py) to that first message, for each of:
   own: `unshare --mount`, as root), numba's cache in NUMBA_CACHE_DIR (warmed beforehand,
   or empty), so nothing can be written next to the sources.
 
+The nodes' kernels compiled ahead of time (tskf_ros.core.aot, built by ./run) are part of
+the install: present in every set-up ($TSKF_AOT=off in this script's environment leaves
+them out, the nodes then compile with numba in the background).
+
 The cases alternate (relay, estimator, alignment, relay, ...) over `--repeats` rounds, on
 the jittered stamps; medians are printed with their ratio to the relay's median in the
 same set-up.  Then each process

@@ -114,5 +114,24 @@ def test_background_runs_the_source_then_switches_to_the_compiled_kernel():
         assert jit.ready(timeout=500)
         after = kalman.predict(x, P, P, P, x)
         print(before, kalman.predict.compiled, np.array_equal(first[1], after[1]))
-        """)
+        """, TSKF_AOT='off')
     assert out.split() == ['False', 'True', 'True']
+
+
+def test_background_compiles_the_kernel_called_not_the_kernels_its_source_calls():
+    # update_predict's source calls update and predict: compiled inside update_predict, they
+    # get no signature of their own until they are called from outside a kernel
+    out = _run("""
+        import numpy as np
+        from tskf_ros.core import jit, kalman
+        jit.set_mode('background')
+        x, P, z, H = np.zeros(2), np.eye(2), np.zeros(1), np.ones((1, 2))
+        kalman.update_predict(x, P, z, H, np.eye(1), np.zeros(1), P, P, x)
+        assert jit.ready(timeout=500)
+        print(kalman.update_predict.compiled, len(kalman.update_predict.dispatcher.signatures),
+              len(kalman.update.dispatcher.signatures), len(kalman.predict.dispatcher.signatures))
+        kalman.predict(x, P, P, P, x)
+        assert jit.ready(timeout=500)
+        print(kalman.predict.compiled, len(kalman.predict.dispatcher.signatures))
+        """, TSKF_AOT='off')
+    assert out.split() == ['True', '1', '0', '0', 'True', '1']

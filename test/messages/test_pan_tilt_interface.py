@@ -24,7 +24,7 @@ from tskf_ros.led.pan_tilt_stream import PanTiltStream, PanTiltStreamConfig
 from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_session import pan_tilt_closed_loop, PanTiltSession
-from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisorConfig
+from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
 from tskf_ros.messages.alignment_interface import default_parameters, parameters_to_config
 from tskf_ros.messages.pan_tilt_interface import pan_tilt_outcome_messages
 
@@ -86,7 +86,8 @@ def test_gain_and_the_shared_pat_parameters_reach_the_two_axis_configs():
                     'pat.lock_window': 30, 'pat.lock_low_count': 20, 'pat.lock_level': 0.4,
                     'pat.lock_nis_alpha': 1e-3, 'pat.lock_corroborate': 5}).session.session
     assert s.ekf.gain == 1.2 and s.supervisor.hold_samples == 7
-    assert s.supervisor.detector.reference == 0.8
+    # the spiral's CUSUM keeps its own k_ref (the one-axis sweep's is pat.detector_reference)
+    assert s.supervisor.detector == PanTiltSupervisorConfig().detector
     lock = s.supervisor.lock
     assert (lock.window, lock.low_count, lock.level, lock.nis_alpha, lock.corroborate) == (
         30, 20, 0.4, 1e-3, 5)

@@ -94,7 +94,9 @@ def test_a_sigint_while_numba_compiles_the_kernels_is_quiet(node, tmp_path):
             log = tempfile.TemporaryFile('w+', dir=tmp_path)
             proc = subprocess.Popen(command(node, random.Random(k)), stdout=log,
                                     stderr=subprocess.STDOUT, text=True,
-                                    env={**os.environ, 'NUMBA_CACHE_DIR': str(cache)})
+                                    env={**os.environ, 'NUMBA_CACHE_DIR': str(cache),
+                                         # numba's compile, not the ahead-of-time kernels
+                                         'TSKF_AOT': 'off'})
             deadline = time.monotonic() + START_TIMEOUT
             while not llvm_loaded(proc.pid) and proc.poll() is None:
                 assert time.monotonic() < deadline, 'numba never loaded'

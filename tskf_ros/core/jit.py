@@ -26,7 +26,8 @@ before its kernel is compiled depends on the mode, `set_mode()` or $TSKF_JIT:
   its nested kernels interpreted as well) while a thread compiles the signatures called so
   far; each kernel switches to its compiled form once that is ready.  A node publishes
   its first estimate without waiting for numba, with a cold cache, a read-only install,
-  or none at all.
+  or none at all.  A kernel built ahead of time (tskf_ros.core.aot) runs that form from
+  its first call: the process never imports numba for it.
 - 'off': never compile, never import numba (the least memory: numba and LLVM take about
   100 MB of a process).
 
@@ -41,6 +42,8 @@ import threading
 import types
 from typing import Any, Callable, Optional
 
+from tskf_ros.core import aot
+
 MODES = ('wait', 'background', 'off')
 MODE_VARIABLE = 'TSKF_JIT'
 # numba.njit's options for every kernel: cache=True, error_model='numpy', nogil=True
@@ -50,6 +53,10 @@ _mode: Optional[str] = None
 _kernels: dict[str, list['Kernel']] = {}        # module name -> its kernels, in order
 _queue: list[tuple['Kernel', tuple]] = []       # (kernel, argument types' sample) to compile
 _worker: Optional[threading.Thread] = None
+# a kernel called from inside another kernel's interpreted source is compiled inside its
+# caller (numba compiles the callees of a signature): queued on its own it would load a
+# second, unused copy of its code (about 2 to 10 MB a kernel)
+_inside = threading.local()
 
 
 def mode() -> str:
@@ -85,6 +92,7 @@ class Kernel:
         self.dispatcher: Any = None
         self._call: Callable = self._first
         self._queued = False
+        self._no_ahead = False
         _kernels.setdefault(func.__module__, []).append(self)
 
     def __call__(self, *args: Any) -> Any:
@@ -93,7 +101,9 @@ class Kernel:
 
     def __repr__(self) -> str:
         """Say which kernel, and whether it runs compiled."""
-        state = 'compiled' if self._call is self.dispatcher else 'interpreted'
+        state = ('compiled' if self._call is self.dispatcher else
+                 'interpreted' if self._call in (self._first, self.interpreted) else
+                 'compiled ahead of time')
         return f'<kernel {self.py_func.__module__}.{self.name} ({state})>'
 
     @property
@@ -106,9 +116,38 @@ class Kernel:
         if now == 'wait':
             _compile_module(self.py_func.__module__)
             return self._call(*args)
-        if now == 'background':
+        if now == 'background' and not getattr(_inside, 'depth', 0):
+            ahead = None if self._no_ahead else aot.function(self.py_func.__module__,
+                                                             self.name)
+            if ahead is not None:
+                self._call = self._ahead_of_time(ahead)
+                return self._call(*args)
             self._enqueue(args)
-        return self.interpreted(*args)
+        return self._interpret(args)
+
+    def _interpret(self, args: tuple) -> Any:
+        """Run the source interpreted (its nested kernels are not queued on their own)."""
+        nested = getattr(_inside, 'depth', 0)
+        _inside.depth = nested + 1
+        try:
+            return self.interpreted(*args)
+        finally:
+            _inside.depth = nested
+
+    def _ahead_of_time(self, compiled: Callable) -> Callable:
+        """Return a call of the kernel's ahead-of-time compiled form (tskf_ros.core.aot)."""
+        def call(*args: Any) -> Any:
+            try:
+                return compiled(*args)
+            except TypeError:       # not the argument types it was built for: numba's way
+                self._no_ahead = True
+                self._call = self._first
+                return self._first(*args)
+            except ZeroDivisionError:
+                # numba.pycc compiles with Python's error model, the dispatchers with
+                # numpy's (a division by zero is inf or nan): this call interpreted
+                return self._interpret(args)
+        return call
 
     def _enqueue(self, args: tuple) -> None:
         global _worker

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 import scipy.optimize
 
+from tskf_ros.core.growing_column import Column
 from tskf_ros.core.linear_models import LinearModel
 from tskf_ros.core.timescale_kalman import FilterError
 
@@ -110,8 +111,8 @@ def run_trace(model: LinearModel, transition: str, segments: Sequence[Sequence[S
     (use_message_variance) is run with R = variance * mu, so that R / mu is that variance,
     as the estimator session does.  Raises FilterError if a step fails.
     """
-    es: list[FloatArray] = []
-    Ss: list[FloatArray] = []
+    p = model.C.shape[0]
+    es, Ss = Column(np.float64, (p,)), Column(np.float64, (p, p))
     for segment in segments:
         kf = model.make_filter(transition, allow_nonregressive=True)
         R_model = kf.R
@@ -127,10 +128,9 @@ def run_trace(model: LinearModel, transition: str, segments: Sequence[Sequence[S
             if rec.y is not None:
                 es.append(res.innovation)
                 Ss.append(res.S)
-    p = model.C.shape[0]
-    if not es:
+    if not len(es):
         return Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0), np.zeros(0))
-    e, S = np.array(es), np.array(Ss)
+    e, S = es.view(), Ss.view()
     nis, log_det = innovation_terms(e, S)
     return Innovations(e, S, nis, log_det)
 
@@ -275,7 +275,7 @@ def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
     R_ii = v_i dt / 2 (R / mu per sample, twice per difference), or all on the process
     noise, Q_jj = mean(v) / (dt |(C G)_j|^2), with dt the median spacing.
     """
-    dys, dts = [], []
+    dys, dts = Column(np.float64, (model.C.shape[0],)), Column(np.float64)
     for segment in segments:
         t, last = 0.0, None
         for rec in segment:
@@ -290,8 +290,8 @@ def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
     if len(dys) < 2:
         return theta
     with np.errstate(all='ignore'):
-        v = np.median(np.square(dys), axis=0) / 0.455
-        dt = float(np.median(dts))
+        v = np.median(np.square(dys.view()), axis=0) / 0.455
+        dt = float(np.median(dts.view()))
         G = model.G if model.G is not None else np.eye(model.A.shape[0])
         cg = np.sum(np.square(model.C @ G), axis=0)
         k = 0

@@ -13,13 +13,20 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Read a bag into a measurement and input stream, and evaluate the estimator on it."""
+"""
+Read a bag into a measurement and input stream, and evaluate the estimator on it.
+
+Memory: the events are kept as columns (`owc.stream_events.EventColumns`, about 41 bytes
+a measurement), the truth topics as columns of (stamp, value) per joint (16 bytes a
+value), the session's final estimates as columns (`owc.trace_columns`) and the smoothed
+ones as the smoother's rows: no object per message is kept.
+"""
 
 from collections import defaultdict
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional, Protocol
 
 import numpy as np
 from rclpy.serialization import deserialize_message
@@ -28,13 +35,15 @@ from tskf_ros.bag.message_types import DESERIALIZE_ERRORS, message_class
 from tskf_ros.bag.progress import wrap
 from tskf_ros.bag.reader import BagReader, Damage
 from tskf_ros.bag.replay.model_check import check_model
-from tskf_ros.bag.replay.rts_replay import SmoothingRecorder
+from tskf_ros.bag.replay.rts_replay import SmoothedRows, SmoothingRecorder
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic
+from tskf_ros.core.growing_column import Column
 from tskf_ros.core.nis_check import nis_summary
 from tskf_ros.messages import conversions
-from tskf_ros.messages.conversions import STATES_TYPE
+from tskf_ros.messages.conversions import SLOTS, STATES_TYPE
 from tskf_ros.messages.estimator_interface import extractor, INPUT_TYPE, NodeConfig
-from tskf_ros.owc.innovation_trace import Input, Measurement, run_stream, StreamRun
+from tskf_ros.owc.innovation_trace import (Event, EventColumns, Input, Measurement,
+                                           StreamRun, StreamRunner)
 from tskf_ros.owc.session import EstimatorConfig, REJECT_REASONS, RESET_REASONS
 
 # metrics of evaluate_bag, in this order (the sweep's CSV columns after the key and settings)
@@ -46,6 +55,59 @@ METRICS = (['n_messages', 'accepted', 'inputs', 'steps', 'gaps', 'resets',
            + ['damage'])
 
 
+class EventSink(Protocol):
+    """What read_stream appends the events to: EventColumns, StreamRunner."""
+
+    @property
+    def measurements(self) -> int:
+        """Return the number of measurements appended."""
+
+    def append(self, event: Event) -> None:
+        """Take an event."""
+
+
+class TruthSeries:
+    """One joint's values of a truth topic: stamps (ns, sorted, unique) and values."""
+
+    def __init__(self) -> None:
+        self._stamp, self._value = Column(np.int64), Column(np.float64)
+        self._sorted: Optional[tuple[np.ndarray, np.ndarray]] = None
+
+    def add(self, stamp_ns: int, value: float) -> None:
+        """Add a value (a later one at the same stamp replaces it)."""
+        self._stamp.append(stamp_ns)
+        self._value.append(value)
+        self._sorted = None
+
+    def _columns(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._sorted is None:
+            stamps, values = self._stamp.view(), self._value.view()
+            order = np.argsort(stamps, kind='stable')
+            stamps, values = stamps[order], values[order]
+            last = np.r_[stamps[1:] != stamps[:-1], True]   # the last value of each stamp
+            self._sorted = (stamps[last], values[last])
+        return self._sorted
+
+    @property
+    def stamps(self) -> np.ndarray:
+        """Return the times (ns) with a value, sorted, each once."""
+        return self._columns()[0]
+
+    @property
+    def values(self) -> np.ndarray:
+        """Return the value at each stamp (the last one read there)."""
+        return self._columns()[1]
+
+    def at(self, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return (which of `stamps` have a value, the values there)."""
+        have, values = self._columns()
+        if not have.size:
+            return np.zeros(len(stamps), bool), np.zeros(0)
+        i = np.searchsorted(have, stamps).clip(0, have.size - 1)
+        hit = have[i] == stamps
+        return hit, values[i[hit]]
+
+
 @dataclass
 class Stream:
     """A bag read into events (Measurement, Input) plus the truth JointState topics."""
@@ -54,20 +116,21 @@ class Stream:
     topic: str
     msgtype: str
     input_topic: str
-    events: list = field(default_factory=list)
-    truth: dict = field(default_factory=dict)    # topic -> {name: {stamp_ns: value}}
+    events: 'EventSink' = field(default_factory=EventColumns)
+    truth: dict = field(default_factory=dict)    # topic -> {name: TruthSeries}
     assumptions: list = field(default_factory=list)
     damage: Optional[Damage] = None
 
     @property
     def measurements(self) -> int:
         """Return the number of measurement messages read."""
-        return sum(isinstance(ev, Measurement) for ev in self.events)
+        return self.events.measurements
 
 
 def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[str] = None,
                 input_topic: Optional[str] = None, truth: bool = True,
-                progress: bool = False) -> Stream:
+                progress: bool = False,
+                sink: Optional[Callable[[bool], EventSink]] = None) -> Stream:
     """
     Read a bag's measurements, inputs and (with truth) JointState topics in storage order.
 
@@ -76,20 +139,25 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
     Raises BagError / BagTypeError (one line) if the bag or its topics cannot be used, or
     WrongModelError if the bag is one of another model (bag/replay/model_check); damage
     met while reading stops it, and `Stream.damage` says where.  progress: a bar of the
-    messages read (on a terminal).
+    messages read (on a terminal).  sink: called with whether the bag has truth topics
+    (with truth), it returns what the events are appended to as they are read (e.g. an
+    innovation_trace.StreamRunner: the bag is run as it is read, no event kept); by
+    default an EventColumns (`Stream.events`).
     """
     reader = BagReader(bag)
     topic, msgtype, notes = choose_topic(reader, topic)
     in_topic, more = choose_input_topic(reader, input_topic)
     check_model(reader, in_topic, config.model)
-    stream = Stream(str(bag), topic, msgtype, in_topic, assumptions=notes + more)
-    cls, extract = message_class(msgtype), extractor(msgtype)
     m = config.model.B.shape[1] if config.model.B is not None else 1
     truth_topics = {t for t, i in reader.topics.items()
                     if truth and i.msgtype == STATES_TYPE}
+    events = (EventColumns(1, min(m, SLOTS)) if sink is None
+              else sink(bool(truth_topics)))
+    stream = Stream(str(bag), topic, msgtype, in_topic, events, assumptions=notes + more)
+    cls, extract = message_class(msgtype), extractor(msgtype)
     in_cls = message_class(INPUT_TYPE) if in_topic else None
     js_cls = message_class(STATES_TYPE) if truth_topics else None
-    values: dict = defaultdict(lambda: defaultdict(dict))
+    values: dict = defaultdict(lambda: defaultdict(TruthSeries))
     wanted = [topic] + ([in_topic] if in_topic else []) + sorted(truth_topics)
     counts = [reader.topics[t].count for t in wanted]
     total = sum(c for c in counts if c) if all(c is not None for c in counts) else None
@@ -107,7 +175,7 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
                 msg = deserialize_message(raw.data, js_cls)
                 stamp, pos = conversions.msg_to_angle(msg)
                 for name, v in zip(msg.name, pos):
-                    values[raw.topic][name][stamp] = float(v)
+                    values[raw.topic][name].add(stamp, float(v))
         except DESERIALIZE_ERRORS as exc:
             # as the offline replay: what came before is used, the rest is damage
             stream.damage = Damage(str(reader.path), -1, f'message {count + 1} on {raw.topic} '
@@ -120,14 +188,15 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
 
 
 def truth_errors(run: StreamRun, stream: Stream, state_names: tuple,
-                 smoothed: Optional[dict] = None) -> tuple[str, list, int, float, float, float]:
+                 smoothed: Optional[SmoothedRows] = None
+                 ) -> tuple[str, list, int, float, float, float]:
     """
     Return (truth topic, states matched, points, RMS corrected, predicted, smoothed).
 
     The truth topic is the JointState topic sharing the most joint names with the model's
     state names; the error is taken at every estimate stamp the truth has, over the
-    matched states (root mean square over stamps and states).  smoothed: the RTS
-    estimates as {(segment, stamp_ns): x} (NaN without).
+    matched states (root mean square over stamps and states).  run: a run_stream with
+    estimates=True; smoothed: the RTS estimates (NaN without).
     """
     best, names = '', []
     for t, joints in sorted(stream.truth.items()):
@@ -139,25 +208,27 @@ def truth_errors(run: StreamRun, stream: Stream, state_names: tuple,
     joints = stream.truth[best]
     index = [state_names.index(n) for n in names]
 
-    def rms(estimates: dict) -> tuple[int, float]:
-        errs = []
-        for (_, stamp), x in estimates.items():
-            row = [x[i] - joints[n][stamp] for i, n in zip(index, names) if stamp in joints[n]]
-            if len(row) == len(names):
-                errs.append(row)
-        if not errs:
+    def rms(stamps: np.ndarray, x: np.ndarray) -> tuple[int, float]:
+        hit = np.ones(len(stamps), bool)
+        for n in names:
+            hit &= joints[n].at(stamps)[0]
+        if not hit.any():
             return 0, float('nan')
-        e = np.asarray(errs)
-        return len(errs), float(np.sqrt(np.mean(e * e)))
+        e = np.column_stack([x[hit, i] - joints[n].at(stamps[hit])[1]
+                             for i, n in zip(index, names)])
+        return int(hit.sum()), float(np.sqrt(np.mean(e * e)))
 
-    points, rms_c = rms(run.corrected)
-    _, rms_p = rms(run.predicted)
-    _, rms_s = rms(smoothed) if smoothed is not None else (0, float('nan'))
+    if run.estimates is None:
+        raise ValueError('truth_errors needs a run with its estimates (estimates=True)')
+    points, rms_c = rms(*run.estimates.rows('corrected'))
+    _, rms_p = rms(*run.estimates.rows('predicted'))
+    _, rms_s = (rms(smoothed.stamp_ns, smoothed.x) if smoothed is not None
+                else (0, float('nan')))
     return best, names, points, rms_c, rms_p, rms_s
 
 
 def stream_metrics(run: StreamRun, stream: Stream, config: EstimatorConfig,
-                   smoothed: Optional[dict] = None) -> dict:
+                   smoothed: Optional[SmoothedRows] = None) -> dict:
     """Return the metrics of METRICS for a session run over a stream (and its smoothing)."""
     st = run.stats
     p = config.model.C.shape[0]
@@ -191,11 +262,23 @@ def evaluate_bag(bag: os.PathLike, config: NodeConfig, *, topic: Optional[str] =
     or ValueError (one line) if the bag cannot be used; damage is reported in 'damage'.
     """
     session_config = config.session
-    stream = read_stream(Path(bag), session_config, topic=topic, input_topic=input_topic)
+    smoother: Optional[SmoothingRecorder] = None
+    runner: Optional[StreamRunner] = None
+
+    def make_runner(has_truth: bool) -> StreamRunner:
+        # the session runs as the bag is read; the estimates (and the smoother) are kept
+        # only for a bag with truth topics: the errors against it are all they are for
+        nonlocal smoother, runner
+        smoother = SmoothingRecorder(session_config) if has_truth else None
+        runner = StreamRunner(session_config, use_now=True, trace=False, estimates=has_truth,
+                              observe=smoother.outcome if smoother is not None else None)
+        return runner
+    stream = read_stream(Path(bag), session_config, topic=topic, input_topic=input_topic,
+                         sink=make_runner)
     if stream.measurements == 0 and stream.damage is None:
         raise ValueError(f'{bag}: no messages on {stream.topic}')
-    smoother = SmoothingRecorder(session_config)
-    run = run_stream(session_config, stream.events, use_now=True, observe=smoother.outcome)
-    rows = smoother.smoothed()
-    smoothed = {(int(seg), int(t)): x for seg, t, x in zip(rows.segment, rows.stamp_ns, rows.x)}
-    return stream_metrics(run, stream, session_config, smoothed)
+    if runner is None:      # pragma: no cover - read_stream makes it before reading
+        raise RuntimeError('read_stream did not make the runner')
+    run = runner.result()
+    return stream_metrics(run, stream, session_config,
+                          smoother.smoothed() if smoother is not None else None)

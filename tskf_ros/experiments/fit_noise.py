@@ -26,7 +26,7 @@ import copy
 from dataclasses import replace
 from pathlib import Path
 import sys
-from typing import Optional
+from typing import Iterable, Optional
 
 import numpy as np
 import scipy.stats
@@ -44,7 +44,7 @@ from tskf_ros.experiments.bag_analysis import read_stream
 from tskf_ros.experiments.output import json_bytes, write_all
 from tskf_ros.messages.estimator_interface import load_config, NODE_NAME, ParamsError
 from tskf_ros.messages.parameters import read_params_yaml
-from tskf_ros.owc.innovation_trace import fit_stream, Measurement, run_stream, StreamFit
+from tskf_ros.owc.innovation_trace import Event, fit_stream, run_stream, StreamFit, without
 from tskf_ros.owc.session import EstimatorConfig
 
 import yaml
@@ -80,17 +80,20 @@ def kept_values(config: EstimatorConfig, res: FitResult) -> tuple[np.ndarray, np
     return Q, R
 
 
-def fit_events(config: EstimatorConfig, events: list, *, fit_Q: bool = True,
+def fit_events(config: EstimatorConfig, events: Iterable[Event], *, fit_Q: bool = True,
                fit_R: bool = True, progress: Optional[FitProgress] = None
                ) -> tuple[StreamFit, dict]:
-    """Fit Q and R to a stream; return the fit and its JSON-ready report."""
+    """
+    Fit Q and R to a stream; return the fit and its JSON-ready report.
+
+    events: an EventColumns (read_stream's) or a list, iterated once per session run.
+    """
     sf = fit_stream(config, events, fit_Q=fit_Q, fit_R=fit_R, progress=progress)
     res, run = sf.result, sf.run
     p = config.model.C.shape[0]
     # the parameter file's own Q and R on the same steps, for a likelihood-ratio test
     base = replace(config, gate=0.0, use_message_variance=False)
-    trace = run_stream(base, [ev for ev in events if not isinstance(ev, Measurement)
-                              or int(ev.stamp_ns) not in sf.excluded])
+    trace = run_stream(base, without(events, sf.excluded))
     ll0 = -negative_log_likelihood(config.model, config.transition, trace.segments)
     lr = 2.0 * (res.log_likelihood - ll0)
     k = len(res.names)

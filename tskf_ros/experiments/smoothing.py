@@ -92,8 +92,7 @@ def compare(bags_dir: Path, bag: SampleBag, config_dir: Path) -> Comparison:
     arrays = replay_arrays(bags_dir / bag.name, config, smooth=True)
     truth = read_stream(bags_dir / bag.name, config.session).truth[bag.truth_topic][bag.joint]
     t0 = int(arrays['sample.stamp_ns'][0])
-    stamps = np.array(sorted(truth), dtype=np.int64)
-    values = np.array([truth[s] for s in stamps.tolist()])
+    stamps, values = truth.stamps, truth.values
     series = {}
     for kind in KINDS:
         name = SMOOTHED_TOPIC.lstrip('/') if kind == 'smoothed' else f'estimate/{kind}'

@@ -18,7 +18,7 @@ The alignment node's two-axis mode (axes 2): its parameters and its outcome mess
 
 One node, one schema (config/schema/alignment.yaml): `axes` chooses the session, and the
 parameters shared by both (dt, gain and the controller choice, the supervisor's
-pat.enabled, pat.start, pat.hold_samples, pat.detector_reference and pat.lock_*,
+pat.enabled, pat.start, pat.hold_samples and pat.lock_*,
 max_step, max_backward, state_limit, the input checks, the diagnostics) keep their
 one-axis meaning; the pan_tilt.* parameters are the mount's.  x0, P0, Q and R are the
 one-axis EKF's 2 x 2 of [x1, x2] (Table I, a pair per sample) and the other pat.* the
@@ -36,7 +36,7 @@ from tskf_ros.led.lock_detector import LockConfig
 from tskf_ros.led.pan_tilt_stream import PanTiltStep, PanTiltStreamConfig
 from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_session import PanTiltSessionConfig
-from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisorConfig
+from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
 from tskf_ros.messages.pan_tilt_messages import pan_tilt_command_to_msg, pan_tilt_state_to_msg
 from tskf_ros.messages.parameter_schema import ParameterError
 from tskf_ros.messages.parameters import NodeConfig
@@ -75,17 +75,17 @@ def supervisor_config(values: dict) -> PanTiltSupervisorConfig:
     Return the two-axis supervisor's settings from the shared pat.* parameters.
 
     The ones with the same meaning (and default) in both modes: the lock tests
-    (lock_detector, unchanged), the hold and the CUSUM's reference.  The sweep's
-    (scan_*), the CUSUM's threshold and window, fade, clip_prior and reacquire are the
-    one-axis supervisor's: the spiral, its detector and the fade hold keep their own.
+    (lock_detector, unchanged) and the hold.  The sweep's (scan_*), the CUSUM's
+    reference, threshold and window, fade, clip_prior and reacquire are the one-axis
+    supervisor's: the spiral, its detector (k_ref 0.8 V, spot_detector) and the fade hold
+    keep their own.
     """
     base = PanTiltSupervisorConfig()
     lock = LockConfig(window=values['pat.lock_window'],
                       low_count=values['pat.lock_low_count'], level=values['pat.lock_level'],
                       nis_alpha=values['pat.lock_nis_alpha'],
                       corroborate=values['pat.lock_corroborate'])
-    detector = replace(base.detector, reference=values['pat.detector_reference'])
-    return replace(base, lock=lock, detector=detector, hold_samples=values['pat.hold_samples'])
+    return replace(base, lock=lock, hold_samples=values['pat.hold_samples'])
 
 
 def pan_tilt_config(values: dict) -> NodeConfig:

@@ -35,15 +35,21 @@ No ROS, no I/O.
 
 from bisect import bisect_right
 from dataclasses import dataclass, field, replace
-from typing import Callable, Iterable, Optional, Union
+from typing import Callable, Iterable, Optional
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
+from tskf_ros.core.growing_column import Column
 from tskf_ros.core.noise_fit import (fit, FitError, FitProgress, FitResult, innovation_terms,
                                      Innovations, StepRecord, with_noise)
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session import EstimatorConfig, EstimatorSession, Outcome, Stats
+from tskf_ros.owc.stream_events import Event, EventColumns, Input, Measurement
+from tskf_ros.owc.trace_columns import EstimateColumns, TraceColumns
+
+__all__ = ['EstimateColumns', 'Event', 'EventColumns', 'fit_stream', 'Input', 'Measurement',
+           'run_stream', 'StreamFit', 'StreamRun', 'StreamRunner', 'TraceColumns']
 
 FloatArray = NDArray[np.float64]
 # a point of a segment: (segment, stamp ns)
@@ -51,54 +57,40 @@ Key = tuple[int, int]
 
 # statuses of a measurement or input that the session took as (part of) a point
 TAKEN = ('accepted', 'inserted', 'reset')
-
-
-@dataclass(frozen=True)
-class Measurement:
-    """A measurement sample: stamp (ns), value(s), variance, and the receiver time (ns)."""
-
-    stamp_ns: int
-    value: ArrayLike
-    variance: float = 0.0
-    log_ns: Optional[int] = None
-
-
-@dataclass(frozen=True)
-class Input:
-    """An input sample u at a stamp (ns)."""
-
-    stamp_ns: int
-    u: ArrayLike
+# points made final at a time
+FINAL_AT_ONCE = 4096
 
 
 @dataclass
 class StreamRun:
     """What a session did over a stream (see the module docstring)."""
 
-    segments: list[list[StepRecord]]
+    segments: TraceColumns
     innovations: Innovations
-    corrected: dict[Key, FloatArray]        # x(t|t)
-    predicted: dict[Key, FloatArray]        # xhat(t)
+    estimates: Optional[EstimateColumns]    # x(t|t) and xhat(t) (if asked for)
     stats: Stats
     measurements: int
     inputs: int
     gated_stamps: set[int]                  # stamps the innovation gate rejected
-
-    @property
-    def steps(self) -> int:
-        """Return the number of filter steps in the trace."""
-        return sum(len(s) for s in self.segments)
+    steps: int                              # filter steps (those of segments, if kept)
 
 
 class _Collector:
-    """Follow the session's outcomes; keep the final revision of everything per stamp."""
+    """
+    Follow the session's outcomes; keep the final revision of everything per stamp.
 
-    def __init__(self, config: EstimatorConfig) -> None:
+    The newest points (those a late sample may still revise) are kept by (segment,
+    stamp); older ones go, final, into columns (trace_columns).
+    """
+
+    def __init__(self, config: EstimatorConfig, *, trace: bool = True,
+                 estimates: bool = False) -> None:
         self.config = config
         m = config.model
         self.C = m.C
         self.D = np.zeros(m.C.shape[0]) if m.D is None else np.asarray(m.D, dtype=float)
         self.R = m.R
+        p = m.C.shape[0]
         self.segment = 0
         self.y: dict[Key, tuple[FloatArray, float]] = {}    # y and its variance
         self.jumps: dict[Key, int] = {}                     # sigma_ns
@@ -107,18 +99,32 @@ class _Collector:
         self.terms: dict[Key, tuple[FloatArray, FloatArray]] = {}   # (e, S)
         # seg -> [(stamp, u)] accepted, in order; the input in force when it started
         self.inputs: dict[int, list[tuple[int, FloatArray]]] = {0: []}
+        self.input_stamps: dict[int, list[int]] = {0: []}
         self.carry: dict[int, Optional[FloatArray]] = {0: None}
         self.last_u: Optional[FloatArray] = None
+        # the final points
+        self.live = 4 * config.history_size + FINAL_AT_ONCE
+        self.final: Optional[Key] = None
+        self.steps = 0
+        self.trace = TraceColumns() if trace else None
+        self.e, self.S = Column(np.float64, (p,)), Column(np.float64, (p, p))
+        self.estimates = EstimateColumns() if estimates else None
 
     def new_segment(self) -> None:
         self.segment += 1
         self.inputs.setdefault(self.segment, [])
+        self.input_stamps.setdefault(self.segment, [])
         self.carry[self.segment] = self.last_u
 
     def u_at(self, seg: int, stamp_ns: int) -> Optional[FloatArray]:
-        held = self.inputs[seg]
-        i = bisect_right([s for s, _ in held], stamp_ns)
-        return held[i - 1][1] if i else self.carry[seg]
+        i = bisect_right(self.input_stamps[seg], stamp_ns)
+        return self.inputs[seg][i - 1][1] if i else self.carry[seg]
+
+    def _check(self, key: Key) -> None:
+        """Refuse a revision of a point already final (older than the session's history)."""
+        if self.final is not None and key <= self.final:
+            raise RuntimeError(f'the innovation trace was sent a point at {key[1]} ns, at or '
+                               f'before one it had made final ({self.final[1]} ns)')
 
     def outcome(self, out: Outcome, *, y: Optional[FloatArray] = None, variance: float = 0.0,
                 stamp_ns: int = 0) -> None:
@@ -126,12 +132,15 @@ class _Collector:
             self.new_segment()
         seg = self.segment
         if y is not None and out.status in TAKEN:
+            self._check((seg, stamp_ns))
             self.y[(seg, stamp_ns)] = (y, variance)
         jumps = {j.stamp_ns: j for j in out.jumps}
         for j in out.jumps:
+            self._check((seg, j.stamp_ns))
             self.jumps[(seg, j.stamp_ns)] = j.sigma_ns
         for est in out.estimates:
             key = (seg, est.stamp_ns)
+            self._check(key)
             if est.kind == 'predicted':
                 self.pred[key] = (est.x, est.P)
                 continue
@@ -146,72 +155,132 @@ class _Collector:
                   else self.R / mu)
             e = yk - self.C @ x - self.D
             self.terms[key] = (e, self.C @ P @ self.C.T + Rd)
+        if len(self.jumps) >= self.live + FINAL_AT_ONCE:
+            self._freeze(sorted(self.jumps)[FINAL_AT_ONCE - 1])
 
     def input_outcome(self, out: Outcome, stamp_ns: int, u: FloatArray) -> None:
         if out.status in TAKEN:
             # the input is in force from its stamp: in the new segment after a reset
             seg = self.segment + (out.status == 'reset')
             self.inputs.setdefault(seg, []).append((stamp_ns, u))
+            self.input_stamps.setdefault(seg, []).append(stamp_ns)
             self.last_u = u
         self.outcome(out)       # an input point steps the filter from the previous point
 
-    def segments(self) -> list[list[StepRecord]]:
-        by_seg: dict[int, list[StepRecord]] = {}
-        for (seg, t), sigma in sorted(self.jumps.items()):
+    def _freeze(self, last: Key) -> None:
+        """Make every point at or before `last` final: into the columns, out of the dicts."""
+        for seg, t in sorted(k for k in self.jumps if k <= last):
+            sigma = self.jumps.pop((seg, t))
+            self.steps += 1
             meas = self.y.get((seg, t))
-            # a point with a measurement that was later stepped from; input-only: y None
-            rec = StepRecord(mu=(sigma - t) / NS, y=None if meas is None else meas[0],
-                             u=self.u_at(seg, t),
-                             variance=(meas[1] if meas is not None
-                                       and self.config.use_message_variance else 0.0))
-            by_seg.setdefault(seg, []).append(rec)
-        return [by_seg[s] for s in sorted(by_seg)]
+            if self.trace is not None:
+                # a point with a measurement that was later stepped from; input-only: y None
+                self.trace.append(seg, StepRecord(
+                    mu=(sigma - t) / NS, y=None if meas is None else meas[0],
+                    u=self.u_at(seg, t),
+                    variance=(meas[1] if meas is not None
+                              and self.config.use_message_variance else 0.0)))
+        for key in sorted(k for k in self.terms if k <= last):
+            e, S = self.terms.pop(key)
+            self.e.append(e)
+            self.S.append(S)
+        points = sorted({k for k in self.corr if k <= last}
+                        | {k for k in self.pred if k <= last})
+        for key in points:
+            x_c, x_p = self.corr.pop(key, None), self.pred.pop(key, None)
+            if self.estimates is not None:
+                self.estimates.append(key[0], key[1], x_c, None if x_p is None else x_p[0])
+        for key in [k for k in self.y if k <= last]:
+            del self.y[key]
+        # the inputs a later point may still be in: those after `last`, and the one before
+        for seg in [s for s in self.inputs if s < last[0]]:
+            del self.inputs[seg], self.input_stamps[seg], self.carry[seg]
+        stamps = self.input_stamps.get(last[0], [])
+        drop = bisect_right(stamps, last[1]) - 1
+        if drop > 0:
+            del stamps[:drop], self.inputs[last[0]][:drop]
+        self.final = last
+
+    def finish(self) -> None:
+        """Make every point final."""
+        keys = list(self.jumps) + list(self.terms) + list(self.corr) + list(self.pred)
+        if keys:
+            self._freeze(max(keys))
 
 
-def run_stream(config: EstimatorConfig, events: Iterable[Union[Measurement, Input]], *,
+class StreamRunner:
+    """
+    A session fed one event at a time (`append`), as read; `result()` is the StreamRun.
+
+    Passed to `bag_analysis.read_stream` as its events, the bag is run as it is read and
+    no event is kept.  The arguments are run_stream's.
+    """
+
+    def __init__(self, config: EstimatorConfig, *, use_now: bool = False,
+                 observe: Optional[Callable[[Outcome], None]] = None,
+                 trace: bool = True, estimates: bool = False) -> None:
+        self.config, self.use_now, self.observe = config, use_now, observe
+        self.session = EstimatorSession(config)
+        self.col = _Collector(config, trace=trace, estimates=estimates)
+        self.measurements, self.inputs = 0, 0
+        self.gated: set[int] = set()
+
+    def append(self, ev: Event) -> None:
+        """Feed one event to the session."""
+        session, col, observe = self.session, self.col, self.observe
+        if isinstance(ev, Input):
+            self.inputs += 1
+            u = np.asarray(ev.u, dtype=float).reshape(-1)
+            out = session.add_input(ev.stamp_ns, u)
+            if observe is not None:
+                observe(out)
+            col.input_outcome(out, int(ev.stamp_ns), u)
+            return
+        self.measurements += 1
+        out = session.add(ev.stamp_ns, ev.value, ev.variance,
+                          now_ns=ev.log_ns if self.use_now else None)
+        if observe is not None:
+            observe(out)
+        if out.status == 'rejected' and out.reason == 'gated':
+            self.gated.add(int(ev.stamp_ns))
+        y = np.atleast_1d(np.asarray(ev.value, dtype=float)).reshape(-1)
+        col.outcome(out, y=y, variance=float(ev.variance), stamp_ns=int(ev.stamp_ns))
+
+    def result(self) -> StreamRun:
+        """Make every point final; return what the session did."""
+        col = self.col
+        col.finish()
+        e, S = col.e.view(), col.S.view()
+        if len(e):
+            nis, log_det = innovation_terms(e, S)
+            innovations = Innovations(e, S, nis, log_det)
+        else:
+            p = self.config.model.C.shape[0]
+            innovations = Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0),
+                                      np.zeros(0))
+        return StreamRun(col.trace or TraceColumns(), innovations, col.estimates,
+                         self.session.stats, self.measurements, self.inputs, self.gated,
+                         col.steps)
+
+
+def run_stream(config: EstimatorConfig, events: Iterable[Event], *,
                use_now: bool = False,
-               observe: Optional[Callable[[Outcome], None]] = None) -> StreamRun:
+               observe: Optional[Callable[[Outcome], None]] = None,
+               trace: bool = True, estimates: bool = False) -> StreamRun:
     """
     Feed Measurement and Input events to a fresh EstimatorSession; return a StreamRun.
 
     use_now passes each measurement's log_ns as the receiver clock (now_ns), as the
     offline replay does (it matters only for max_future and the input-rate statistics).
     observe, if given, is called with every outcome, in order (e.g. a smoother's).
+    trace: keep the filter steps (StreamRun.segments; else empty); estimates: keep the
+    final estimates (StreamRun.estimates; else None).
     """
-    session = EstimatorSession(config)
-    col = _Collector(config)
-    measurements, inputs, gated = 0, 0, set()
+    runner = StreamRunner(config, use_now=use_now, observe=observe, trace=trace,
+                          estimates=estimates)
     for ev in events:
-        if isinstance(ev, Input):
-            inputs += 1
-            u = np.asarray(ev.u, dtype=float).reshape(-1)
-            out = session.add_input(ev.stamp_ns, u)
-            if observe is not None:
-                observe(out)
-            col.input_outcome(out, int(ev.stamp_ns), u)
-            continue
-        measurements += 1
-        out = session.add(ev.stamp_ns, ev.value, ev.variance,
-                          now_ns=ev.log_ns if use_now else None)
-        if observe is not None:
-            observe(out)
-        if out.status == 'rejected' and out.reason == 'gated':
-            gated.add(int(ev.stamp_ns))
-        y = np.atleast_1d(np.asarray(ev.value, dtype=float)).reshape(-1)
-        col.outcome(out, y=y, variance=float(ev.variance), stamp_ns=int(ev.stamp_ns))
-    keys = sorted(col.terms)
-    p = config.model.C.shape[0]
-    if keys:
-        e = np.array([col.terms[k][0] for k in keys]).reshape(len(keys), p)
-        S = np.array([col.terms[k][1] for k in keys]).reshape(len(keys), p, p)
-        nis, log_det = innovation_terms(e, S)
-        innovations = Innovations(e, S, nis, log_det)
-    else:
-        innovations = Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0),
-                                  np.zeros(0))
-    return StreamRun(col.segments(), innovations, col.corr,
-                     {k: v[0] for k, v in col.pred.items()}, session.stats, measurements,
-                     inputs, gated)
+        runner.append(ev)
+    return runner.result()
 
 
 # the fewest measurement steps per fitted parameter
@@ -233,7 +302,15 @@ class StreamFit:
     notes: list[str] = field(default_factory=list)
 
 
-def fit_stream(config: EstimatorConfig, events: list[Union[Measurement, Input]], *,
+def without(events: Iterable[Event], stamps: set[int]) -> Iterable[Event]:
+    """Return the events (again iterable) leaving out the measurements stamped in `stamps`."""
+    if isinstance(events, EventColumns):
+        return events.events(without=stamps)
+    return [ev for ev in events
+            if not (isinstance(ev, Measurement) and int(ev.stamp_ns) in stamps)]
+
+
+def fit_stream(config: EstimatorConfig, events: Iterable[Event], *,
                fit_Q: bool = True, fit_R: bool = True,
                progress: Optional[FitProgress] = None) -> StreamFit:
     """
@@ -247,7 +324,8 @@ def fit_stream(config: EstimatorConfig, events: list[Union[Measurement, Input]],
     handling and resets are the session's.  use_message_variance is turned off (with it R
     would not be used).
     Raises FitError with the reason (too few samples, no convergence).  progress: see
-    noise_fit.fit.
+    noise_fit.fit.  events: iterated once per run of the session (an EventColumns, or a
+    list).
     """
     notes = []
     if config.use_message_variance:
@@ -256,11 +334,9 @@ def fit_stream(config: EstimatorConfig, events: list[Union[Measurement, Input]],
     base = replace(config, gate=0.0)
     # start from what the node's gate rejects at the file's own Q and R (an absurd reading
     # would make the likelihood infinite with the gate off)
-    excluded: set = set(run_stream(config, events).gated_stamps)
+    excluded: set = set(run_stream(config, events, trace=False).gated_stamps)
     for rounds in range(1, GATE_ROUNDS + 1):
-        kept = [ev for ev in events
-                if not (isinstance(ev, Measurement) and int(ev.stamp_ns) in excluded)]
-        trace = run_stream(base, kept)
+        trace = run_stream(base, without(events, excluded))
         k = ((config.model.Q.shape[0] if fit_Q else 0)
              + (config.model.C.shape[0] if fit_R else 0))
         n = trace.innovations.count
@@ -269,8 +345,9 @@ def fit_stream(config: EstimatorConfig, events: list[Union[Measurement, Input]],
                            f'(at least {MIN_STEPS_PER_PARAMETER * max(k, 1)} needed)')
         result = fit(base.model, base.transition, trace.segments, fit_Q=fit_Q, fit_R=fit_R,
                      progress=progress)
+        del trace           # the next round's is made before this one would be let go
         fitted = replace(config, model=with_noise(config.model, result.Q, result.R))
-        run = run_stream(fitted, events)
+        run = run_stream(fitted, events, trace=False)
         stable = run.gated_stamps == excluded
         if stable:
             break

@@ -16,6 +16,7 @@
 """The conical-scan EKF: Jacobians, consistency (NEES, NIS), mu from the stamps, one axis."""
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 import math
 
 import numpy as np
@@ -25,7 +26,7 @@ import scipy.stats
 from tskf_ros.led.intensity_model import AlignmentError, IncidenceResponse
 from tskf_ros.led.scanning_ekf import StampClock
 from tskf_ros.led.two_axis.conical_ekf import (ConicalEKFConfig, ConicalScanEKF, CONSISTENT,
-                                               scan_loss, transition)
+                                               scan_loss, SIGMA_POINTS, transition)
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLink, PanTiltLinkConfig
 from tskf_ros.led.two_axis.pointing_geometry import joint_turn, tangent_error
 from tskf_ros.led.two_axis.radial_response import RadialResponse
@@ -86,15 +87,26 @@ def test_mu_comes_from_the_stamps_with_jitter():
 
 @dataclass(frozen=True)
 class Consistency:
-    """The ANEES of [x1, d_c, d_e] with its 95 % band, and the mean NIS with its band."""
+    """
+    The ANEES of [x1, d_c, d_e] with its 95 % bands, and the mean NIS with its band.
+
+    anees: the mean NEES over runs and steps; band: that of one step's ANEES over the m
+    runs, chi^2(3m)/m; steps_in_band: the fraction of steps whose ANEES over the runs is
+    in its own band (Bar-Shalom, Li & Kirubarajan's form, about 0.95 if consistent);
+    interval: anees +- 1.96 standard errors of the runs' own means, a 95 % interval of
+    the mean NEES (the runs are independent, their steps are not).
+    """
 
     anees: float
     band: tuple[float, float]
+    steps_in_band: float
+    interval: tuple[float, float]
     nis: float
     nis_band: tuple[float, float]
 
 
-def _nees_nis(noise, runs=200, steps=300, seed=0, jitter=0.0, config=CONSISTENT):
+@lru_cache(maxsize=None)        # the NEES and NIS tests share a run
+def _nees_nis(noise, runs=200, steps=300, seed=0, jitter=0.0, dropout=0.0, config=CONSISTENT):
     """
     Run the filter `config` in closed loop at `noise`; return its Consistency over the runs.
 
@@ -103,17 +115,25 @@ def _nees_nis(noise, runs=200, steps=300, seed=0, jitter=0.0, config=CONSISTENT)
     cone (a stopping time: only its past decides; outside, the light is under the noise
     and x1 and the error trade off): leaving out whole runs that leave later would keep
     only the runs whose errors stayed small.  The first 2 s (the convergence from the wide
-    P0) are left out.  The ANEES is the mean of the NEES over runs and steps; its band is
-    that of one step's ANEES over the m runs in the cone at every step, chi^2(3m)/m
-    (Bar-Shalom, Li & Kirubarajan 2001, Sec. 5.4.2): the mean over 260 correlated steps
-    varies less than one step's, so this band is the wider, lenient one.  The NIS of a
+    P0) are left out.  The ANEES is the mean of the NEES over runs and steps.  Its band
+    is that of one step's ANEES over the m runs in the cone at every step, chi^2(3m)/m
+    (Bar-Shalom, Li & Kirubarajan 2001, Sec. 5.4.2): the mean of identically distributed
+    steps is less spread than one step (Jensen: it is below one step in the convex
+    order), however they are correlated, so this band is a lenient one (not an exact
+    95 % region); that of all samples, chi^2(3mK)/(mK), would hold only for independent
+    steps.  The NEES
+    counts every step (a dropout's too: the estimate is the prior there); the NIS only
+    the steps with a sample, from the y and S of the update itself.  The NIS of a
     consistent filter is white, so the mean of its n samples has the band chi^2(n)/n.
     """
-    plant = PanTiltLink(PanTiltLinkConfig(noise=noise, jitter=jitter), runs=runs, seed=seed)
+    plant = PanTiltLink(PanTiltLinkConfig(noise=noise, jitter=jitter, dropout=dropout),
+                        runs=runs, seed=seed)
     ekf = ConicalScanEKF(replace(config, noise=noise), runs=runs)
     nees, nis, theta = (np.empty((steps, runs)) for _ in range(3))
+    missing = np.zeros((steps, runs), dtype=bool)
     for k in range(steps):
         s = plant.sample()
+        missing[k] = s.missing
         mean = s.joints - joint_turn(ekf.scan_offset, s.joints[:, 1])
         d = tangent_error(mean[:, 0], mean[:, 1], s.source[:, 0], s.source[:, 1])
         turn = ekf.step(s.t, s.z)
@@ -121,31 +141,42 @@ def _nees_nis(noise, runs=200, steps=300, seed=0, jitter=0.0, config=CONSISTENT)
         nees[k] = np.einsum('ri,rij,rj->r', e, np.linalg.inv(ekf.P[:, :3, :3]), e)
         nis[k], theta[k] = ekf.nis, s.theta
         plant.command_turn(turn)
+    assert np.array_equal(np.isnan(nis), missing)       # the NIS of exactly the samples had
     inside = np.cumprod(theta <= 15.0, axis=0).astype(bool)[40:]
+    nees = nees[40:]
     m = int(inside[-1].sum())
+    m_k = inside.sum(axis=1)
+    per_step = np.where(inside, nees, 0.0).sum(axis=1) / m_k
+    lo, hi = (scipy.stats.chi2.ppf(q, 3 * m_k) / m_k for q in (0.025, 0.975))
+    counted = inside.sum(axis=0) > 0
+    run_means = np.where(inside, nees, 0.0).sum(axis=0)[counted] / inside.sum(axis=0)[counted]
+    half = 1.96 * run_means.std(ddof=1) / math.sqrt(run_means.size)
     kept = nis[40:][inside & np.isfinite(nis[40:])]
     n = kept.size
-    return Consistency(float(np.mean(nees[40:][inside])),
+    anees = float(np.mean(nees[inside]))
+    return Consistency(anees,
                        tuple(scipy.stats.chi2.ppf([0.025, 0.975], 3 * m) / m),
+                       float(np.mean((lo < per_step) & (per_step < hi))),
+                       (anees - half, anees + half),
                        float(np.mean(kept)),
                        tuple(scipy.stats.chi2.ppf([0.025, 0.975], n) / n))
 
 
-@pytest.mark.parametrize('noise', [
-    0.0, 0.5, 1.0,
-    *(pytest.param(v, marks=pytest.mark.xfail(strict=True, reason=reason)) for v, reason in (
-        (1.5, 'measured 3.73 over [2.65, 3.37]'), (2.0, 'measured 4.06 over [2.63, 3.39]'),
-        (2.5, 'measured 4.04 over [2.58, 3.45]')))])
-def test_nees_is_in_its_band(noise):
+@pytest.mark.parametrize('noise', NOISE_LEVELS)
+@pytest.mark.parametrize('seed', [0, 5])
+def test_nees_is_in_its_band(noise, seed):
     """
-    The ANEES of [x1, d] (200 runs) is in its 95 % band.
+    The ANEES of [x1, d] (200 runs) is in its 95 % band at every noise level, seeds 0 and 5.
 
-    Not from 1.5 V (expected failures): far off axis the posterior of [x1, d] is not
-    Gaussian (a dim sample is a dim light or a far pointing), which the second-order
-    update does not capture; doc/design/two_axis.md gives the numbers.
+    CONSISTENT (the Gauss-Hermite regression, two passes, the link's noise and walks);
+    seed 0 chose it, seed 5 was held out.  The runs' interval (from the runs' spread, not
+    the chi^2 assumption) holds 3 too, from 0.5 V: at 0 V it is 3.02-3.26 and 3.04-3.28,
+    a little overconfident (doc/design/two_axis.md).
     """
-    c = _nees_nis(noise)
+    c = _nees_nis(noise, seed=seed)
     assert c.band[0] < c.anees < c.band[1], c
+    if noise > 0.0:
+        assert c.interval[0] < 3.0 < c.interval[1], c
 
 
 @pytest.mark.parametrize('noise', [
@@ -165,19 +196,26 @@ def test_the_closed_loop_filter_is_consistent_at_1_volt_only(noise):
     assert c.band[0] < c.anees < c.band[1], c
 
 
-def test_nees_with_jittered_stamps_at_1_volt():
-    """Stamps jittered by up to +-20 ms: mu from the stamps keeps the ANEES in its band."""
-    c = _nees_nis(1.0, jitter=0.02)
+def test_nees_with_jittered_stamps_and_dropouts_at_1_volt():
+    """Stamps jittered by up to +-20 ms and 10 % dropouts: the ANEES stays in its band."""
+    c = _nees_nis(1.0, jitter=0.02, dropout=0.1)
     assert c.band[0] < c.anees < c.band[1], c
 
 
-@pytest.mark.xfail(strict=True, reason='measured: the mean NIS is 0.92 at 0 V and 0.96 to 0.98 '
-                   'from 0.5 V, below the band of 40 000 to 52 000 samples (about 1 +- 0.013): '
-                   'the filter is conservative along H (S above the mean y^2)')
-@pytest.mark.parametrize('noise', NOISE_LEVELS)
+@pytest.mark.parametrize('noise', [
+    0.5,
+    *(pytest.param(v, marks=pytest.mark.xfail(strict=True, reason=reason)) for v, reason in (
+        (0.0, 'measured 0.966 under [0.988, 1.012]'), (1.0, 'measured 0.985 under [0.988, 1.012]'),
+        (1.5, 'measured 0.980 under [0.988, 1.012]'), (2.0, 'measured 0.962 under [0.987, 1.013]'),
+        (2.5, 'measured 0.930 under [0.986, 1.014]')))])
 def test_nis_in_band(noise):
-    """The mean NIS in the 95 % band of its chi^2 (not met)."""
-    c = _nees_nis(noise)
+    """
+    The mean NIS of CONSISTENT in the 95 % band of its chi^2 (seed 0).
+
+    Met at 0.5 V only (and at 0.5 to 1.5 V on the held-out seed 5): S is 1 to 7 % above
+    the mean y^2, most at 2.5 V where the regression's R_h is largest.
+    """
+    c = _nees_nis(noise, seed=0)
     assert c.nis_band[0] < c.nis < c.nis_band[1], c
 
 
@@ -189,7 +227,7 @@ def test_second_order_update_against_the_moments_of_h():
     the second-order Taylor expansion of h over x ~ N(xhat, P), from 400 000 samples.
     """
     rng = np.random.default_rng(3)
-    ekf = ConicalScanEKF(replace(CONSISTENT, noise=0.5), runs=1)
+    ekf = ConicalScanEKF(ConicalEKFConfig(order=2, noise=0.5, model_noise=0.0035), runs=1)
     ekf.x = np.array([[2.5, 3.0, -1.0, 0.02, 0.0]])
     ekf.P = np.diag([0.2, 2.0, 1.5, 1e-3, 1e-3])[None] + 0.1 * np.eye(5)[None]
     P, s = ekf.P[0], ekf.scan_offset
@@ -216,6 +254,103 @@ def test_hessian_matches_finite_differences():
             down[:, i] -= 1e-6
             fd = (ekf.jacobian(up, offset) - ekf.jacobian(down, offset))[:, 0, :] / 2e-6
             np.testing.assert_allclose(Hxx[:, :, i], fd, rtol=1e-5, atol=1e-8)
+
+
+def test_gauss_hermite_points_integrate_the_gaussian_moments():
+    """
+    The sigma-point rules against the moments of N(0, I_3) in closed form.
+
+    Gauss-Hermite: E x_i^2 = 1, E x_i^4 = 3, E x_i^2 x_j^2 = 1, odd moments 0.  The
+    cubature rule gets E x_i^4 = 3 but E x_i^2 x_j^2 = 0: the variance of a product term
+    such as x1 d of h, which is why it is not CONSISTENT's.
+    """
+    for rule, cross in (('gauss_hermite', 1.0), ('cubature', 0.0)):
+        X, w = SIGMA_POINTS[rule]
+        assert w.sum() == pytest.approx(1.0, abs=1e-15)
+        np.testing.assert_allclose(w @ X, 0.0, atol=1e-15)
+        np.testing.assert_allclose(np.einsum('p,pi,pj->ij', w, X, X), np.eye(3), atol=1e-14)
+        np.testing.assert_allclose(w @ X ** 4, 3.0, rtol=1e-14)
+        assert float(w @ (X[:, 0] ** 2 * X[:, 1] ** 2)) == pytest.approx(cross, abs=1e-14)
+        np.testing.assert_allclose(w @ (X[:, 0] * X[:, 1] ** 2), 0.0, atol=1e-14)
+
+
+def test_cubature_update_is_filterpys_unscented_update():
+    """
+    'cubature' against FilterPy's UnscentedKalmanFilter on [x1, d] (b uncorrelated).
+
+    MerweScaledSigmaPoints(3, alpha=1, beta=0, kappa=0) are the cubature points
+    x +- sqrt(3) rows of chol(P), weights 1/6; the statistical linear regression with
+    R + R_h in core.kalman's update gives FilterPy's x and P, and leaves b alone.
+    """
+    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+    ekf = ConicalScanEKF(replace(CONSISTENT, linearisation='cubature', iterations=1,
+                                 noise=0.5), runs=1)
+    ekf.x = np.array([[2.5, 3.0, -1.0, 0.02, -0.01]])
+    P3 = np.array([[0.3, 0.1, -0.05], [0.1, 2.0, 0.3], [-0.05, 0.3, 1.5]])
+    ekf.P = np.zeros((1, 5, 5))
+    ekf.P[0, :3, :3], ekf.P[0, 3:, 3:] = P3, 1e-3 * np.eye(2)
+    s = ekf.scan_offset
+    points = MerweScaledSigmaPoints(3, alpha=1.0, beta=0.0, kappa=0.0)
+    ukf = UnscentedKalmanFilter(3, 1, 0.05, lambda x: ekf.h(np.r_[x, 0, 0][None], s),
+                                lambda x, dt: x, points)
+    ukf.x, ukf.P = ekf.x[0, :3].copy(), P3.copy()
+    ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)
+    z = float(ekf.h(ekf.x, s)[0]) - 0.4
+    ukf.update(np.array([z]), R=ekf.R[0])
+    b = ekf.x[0, 3:].copy()
+    ekf.update(np.array([z]))
+    np.testing.assert_allclose(ekf.x[0, :3], ukf.x, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(ekf.P[0, :3, :3], ukf.P, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(ekf.x[0, 3:], b, atol=1e-15)
+    assert ekf.S[0] == pytest.approx(float(ukf.S[0, 0]), rel=1e-10)
+
+
+def test_gauss_hermite_regression_against_samples():
+    """
+    'gauss_hermite': hx, H and R_h against the regression of h over 400 000 draws of N(x, P).
+
+    The mean of h, Cov(x, h) P^-1 and Var h - H P H^T by Monte Carlo (independent of the
+    rule); 3 Gauss-Hermite points per axis integrate the smooth g_r to 1 % here.
+    """
+    rng = np.random.default_rng(6)
+    ekf = ConicalScanEKF(replace(CONSISTENT, noise=0.5), runs=1)
+    x = np.array([[2.5, 3.0, -1.0, 0.02, 0.0]])
+    P = np.diag([0.2, 2.0, 1.5, 1e-3, 1e-3])[None] + 0.1 * np.eye(5)[None]
+    s = ekf.scan_offset
+    H, hx, R_h = ekf.linearise(x, P, s)
+    draws = rng.multivariate_normal(x[0], P[0], 400_000)
+    h = ekf.h(draws, s)
+    cov = np.cov(draws[:, :3].T, h)
+    H_mc = np.linalg.solve(P[0, :3, :3], cov[:3, 3])
+    assert hx[0] == pytest.approx(h.mean(), rel=1e-2)
+    np.testing.assert_allclose(H[0, 0, :3], H_mc, rtol=2e-2, atol=2e-3)
+    assert R_h[0] == pytest.approx(cov[3, 3] - H_mc @ cov[:3, 3], rel=0.1)
+    np.testing.assert_allclose(H[0, 0, 3:], 0.0)
+
+
+def test_iterated_ekf_converges_to_the_map_estimate():
+    """
+    'taylor' order 1, 20 iterations: the Gauss-Newton fixed point of the update.
+
+    The iterated EKF's estimate minimises (x - xp)^T P^-1 (x - xp) + (z - h(x))^2 / R
+    (Bell & Cathey, IEEE TAC 1993), so at it P^-1 (x - xp) = H(x)^T (z - h(x)) / R.
+    """
+    ekf = ConicalScanEKF(ConicalEKFConfig(iterations=20, noise=0.3, model_noise=0.0), runs=1)
+    xp = np.array([[2.5, 3.0, -1.0, 0.02, 0.0]])
+    P = np.diag([0.2, 2.0, 1.5, 1e-3, 1e-3]) + 0.05 * np.eye(5)
+    ekf.x, ekf.P = xp.copy(), P[None].copy()
+    s = ekf.scan_offset
+    z = float(ekf.h(xp, s)[0]) + 0.5
+    ekf.update(np.array([z]))
+    x = ekf.x
+    gradient = np.linalg.solve(P, (x - xp)[0]) - ekf.jacobian(x, s)[0, 0] * (
+        z - float(ekf.h(x, s)[0])) / 0.09
+    np.testing.assert_allclose(gradient, 0.0, atol=1e-8)
+    once = ConicalScanEKF(ConicalEKFConfig(noise=0.3, model_noise=0.0), runs=1)
+    once.x, once.P = xp.copy(), P[None].copy()
+    once.update(np.array([z]))
+    assert ekf.y[0] == pytest.approx(once.y[0], rel=1e-12)    # the NIS: the prior's
+    assert ekf.S[0] == pytest.approx(once.S[0], rel=1e-12)
 
 
 class _SignedRadial:
@@ -302,7 +437,7 @@ def test_closed_loop_boresight_within_mean_error_plus_radius():
 @pytest.mark.parametrize('bad', [{'controller': 'pid'}, {'gain': 2.0}, {'points': 2},
                                  {'x0': (1.0, 2.0)}, {'Q': (1, 1, 1, 1, -1)},
                                  {'noise': 0.0, 'model_noise': 0.0}, {'radius': math.inf},
-                                 {'order': 3}])
+                                 {'order': 3}, {'linearisation': 'ukf'}, {'iterations': 0}])
 def test_bad_configs_say_why(bad):
     """Each bad setting is one AlignmentError."""
     with pytest.raises(AlignmentError):

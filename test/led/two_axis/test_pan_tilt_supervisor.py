@@ -24,8 +24,8 @@ from tskf_ros.led.two_axis.aligners import make_two_axis_aligner, METHODS
 from tskf_ros.led.two_axis.conical_ekf import ConicalScanEKF
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_simulation import simulate_pan_tilt, tracking_fraction
-from tskf_ros.led.two_axis.pan_tilt_supervisor import (PanTiltSupervisor,
-                                                       PanTiltSupervisorConfig)
+from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisor
+from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
 from tskf_ros.led.two_axis.pointing_geometry import joint_turn, log_offset
 
 
@@ -41,7 +41,8 @@ def test_cold_start_in_a_30_degree_cone_at_1_volt():
     """
     Uniform in a 30 deg cone, 1 V: acquired within 10 s in >= 95 % of 300 runs.
 
-    Measured over 1000 runs: 96.4 % (seed 1), 98.0 % (seed 2); the goal is 99 %.
+    Over 1000 runs (alignment_mc --axes 2 --cold-start 30, seeds 0-6): 99.4 to 99.7 %; the
+    goal is 99 %.
     """
     aligner = make_two_axis_aligner('conical_ekf_pat', runs=300, noise=1.0, start='acquiring')
     traj = simulate_pan_tilt(aligner, PanTiltLinkConfig(noise=1.0, cone=30.0), 4)
@@ -174,15 +175,6 @@ def test_builds_every_method_by_name():
         make_two_axis_aligner('three_point')
 
 
-@pytest.mark.parametrize('bad', [{'start': 'now'}, {'hold_samples': -1}, {'max_step': 2.0},
-                                 {'fade_look': 5.0}, {'fade_look': -1.0},
-                                 {'angle_var': (4.0, 1.0)}, {'noise': 0.0}])
-def test_bad_configs_say_why(bad):
-    """Each bad setting is one AlignmentError."""
-    with pytest.raises(AlignmentError):
-        PanTiltSupervisorConfig(**bad)
-
-
 def test_a_noiseless_cold_start_is_acquired_within_10_s():
     """
     0 V, 100 runs uniform in a 30 deg cone (seed 3): all acquired within 10 s.
@@ -216,3 +208,29 @@ def test_light_seen_in_the_first_samples_is_handed_over_at_min_samples(early):
     # sample k is the search's (k + 1)-th: the min_samples-th is k = min_samples - 1
     expected = config.min_samples - 1 + config.settle + aligner.refine_samples
     assert first == (expected if early else None)
+
+
+@pytest.mark.parametrize('resume', [True, False])
+def test_a_hand_over_that_never_locks_resumes_the_search_where_it_stopped(resume):
+    """
+    Dark for 40 samples, 3 V for 5, then dark: a hand-over, no good lock, a loss.
+
+    With resume the spiral goes on from where the CUSUM stopped it (its phi no smaller);
+    without it the spiral starts again at its centre.
+    """
+    config = PanTiltSupervisorConfig(resume=resume)
+    sup = make_two_axis_aligner('conical_ekf_pat', runs=1, noise=0.5, start='acquiring',
+                                supervisor=config)
+    phi_at_handover = None
+    for k in range(200):
+        sup.step(0.05 * k, np.array([3.0 if 40 <= k < 45 else 0.0]))
+        if phi_at_handover is None and sup.handovers[0] > 0:
+            phi_at_handover = sup.spiral.phi[0]
+        if sup.losses[0] > 0:
+            break
+    assert phi_at_handover is not None and phi_at_handover > 0.0
+    assert sup.losses[0] == 1 and not sup.locked[0] and not sup.steering[0]
+    if resume:
+        assert sup.spiral.phi[0] >= phi_at_handover
+    else:
+        assert sup.spiral.phi[0] < phi_at_handover / 4

@@ -104,3 +104,22 @@ def test_bad_spirals_say_why(bad):
     """Each bad setting is one AlignmentError."""
     with pytest.raises(AlignmentError):
         SpiralConfig(**bad)
+
+
+def test_a_spiral_left_and_resumed_goes_back_to_where_it_stopped():
+    """Away 20 deg and back: it holds phi while it travels, then goes on from there."""
+    c = SpiralConfig()
+    search, _ = _run(c, (0.0, 20.0), 60)
+    phi = search.phi[0]
+    joints = np.array([[25.0, 20.0]])          # the mount elsewhere (a hand-over)
+    for _ in range(20):
+        turn = search.turn(joints, np.ones(1, bool))
+        assert np.hypot(*turn[0]) <= c.speed * 1.5 + 1e-9
+        joints = joints + joint_turn(turn, joints[:, 1])
+        if search.phi[0] != phi:
+            break
+    # back on the path one step further along it than where it was left, not at the centre
+    assert search.phi[0] > phi and search.spirals[0] == 0
+    np.testing.assert_allclose(joints[0], search.point()[0], atol=1e-9)
+    radius = np.hypot(*log_offset(0.0, 20.0, joints[0, 0], joints[0, 1]))
+    assert radius >= c.pitch / (2 * np.pi) * phi

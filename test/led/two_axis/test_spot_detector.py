@@ -78,11 +78,30 @@ def test_a_noiseless_crossing_is_seen_at_three_sigma_and_missed_at_three_volts()
     top = _page_cusum_by_hand(z, 1.0)
     assert top == pytest.approx(2.38, abs=0.01)
     for noise, seen in ((None, False), (0.2, True)):
-        detector = SpotDetector(SpotConfig(), response, 1, noise)
+        detector = SpotDetector(SpotConfig(reference=1.0), response, 1, noise)
         fired = [bool(detector.update(np.array([v]), p[None, :], np.ones(1, dtype=bool))[0])
                  for v, p in zip(z, track)]
         assert any(fired) is seen
         np.testing.assert_allclose(detector.cusum, _last_cusum(z, 1.0), atol=1e-12)
+
+
+def test_the_default_reference_sees_a_dimmer_crossing_at_three_volts():
+    """
+    A pass 4 deg from a light dimmed to 2.3 V (the link's x1 walk), no noise, h 3 V.
+
+    By hand the CUSUM with k_ref 1 V peaks at 2.52 V (missed), with the default 0.8 V at
+    3.52 V (seen): the light is above 0.8 V for more samples of the pass.
+    """
+    response = RadialResponse()
+    track = np.array([[-40.0 + 4.0 * k, 4.0] for k in range(21)])
+    z = 2.3 * response.g(off_axis_angle(track[:, 0], track[:, 1], 0.0, 0.0))
+    assert _page_cusum_by_hand(z, 1.0) < 3.0 < _page_cusum_by_hand(z, 0.8)
+    assert SpotConfig().reference == 0.8
+    detector = SpotDetector(SpotConfig(), response, 1, None)
+    fired = [bool(detector.update(np.array([v]), p[None, :], np.ones(1, dtype=bool))[0])
+             for v, p in zip(z, track)]
+    assert any(fired)
+    np.testing.assert_allclose(detector.cusum, _last_cusum(z, 0.8), atol=1e-12)
 
 
 def _last_cusum(z, k):

@@ -282,3 +282,68 @@ def test_bad_inputs_are_rejected_without_touching_the_state():
     plain = EstimatorSession(EstimatorConfig(owc()))
     assert plain.add_input(1 * NS, [1.0]).reason == 'no_input_matrix'
     assert plain.diagnostics()[0].as_dict()['Rejected (no_input_matrix)'] == '1'
+
+
+# what a fresh process feeds a session after its first samples: every other path of `add`
+# (the node's config: the OWC model (3), period 1 ms); prints the kernel signatures each
+# phase compiled (numba's public Dispatcher.signatures), as JSON
+_PATHS_SCRIPT = """
+import json
+import math
+from tskf_ros.core import jit
+from tskf_ros.messages.estimator_interface import load_config
+from tskf_ros.owc.session import EstimatorSession
+
+jit.set_mode('wait')
+session = EstimatorSession(load_config(overrides={'period': 0.001}).session)
+MS, t = 1_000_000, 1_000_000_000_000
+
+
+def signatures():
+    return {f'{module}.{k.name}': len(k.dispatcher.signatures)
+            for module, kernels in jit._kernels.items() for k in kernels
+            if k.dispatcher is not None}
+
+
+def run(samples):
+    before = signatures()
+    outcomes = [session.add(stamp, y) for stamp, y in samples]
+    after = signatures()
+    return {'outcomes': sorted({f'{o.status}:{o.reason}' for o in outcomes}),
+            'compiled': sorted(k for k in after if after[k] != before.get(k, 0))}
+
+
+phases = {'start': run([(t + k * MS, 165.0 + k % 3) for k in range(1, 101)])}
+t += 100 * MS
+for name, samples in [
+        ('gap', [(t + MS, 0.0), (t + 2 * MS, 165.0)]),
+        ('non_finite', [(t + 3 * MS, math.nan)]),
+        ('gated', [(t + 4 * MS, 1e4), (t + 5 * MS, 165.0)]),
+        ('jittered', [(t + 6 * MS + 7, 165.0), (t + 7 * MS - 5, 165.1)]),
+        ('late', [(t + 6 * MS + 500_000, 165.0), (t + 8 * MS, 165.0)]),
+        ('duplicate', [(t + 8 * MS, 165.0)]),
+        ('forward_jump', [(t + 61_000 * MS, 165.0), (t + 61_001 * MS, 165.0)]),
+        ('backward_jump', [(t + 8 * MS, 165.0), (t + 9 * MS, 165.0)]),
+        ('long_interval', [(t + 509 * MS, 165.0), (t + 510 * MS, 165.0)])]:
+    phases[name] = run(samples)
+print(json.dumps(phases))
+"""
+
+
+def test_after_the_first_samples_no_path_of_add_compiles_a_kernel():
+    # a kernel compiled (or loaded from numba's cache) in the middle of a stream stops the
+    # node's executor for tens of ms (seconds with an empty cache) while its inputs queue:
+    # every path a sample can take after the first ones runs the signatures those compiled
+    import json
+    import os
+    import subprocess
+    import sys
+    result = subprocess.run([sys.executable, '-c', _PATHS_SCRIPT], capture_output=True,
+                            text=True, env={**os.environ, 'TSKF_JIT': 'wait'}, timeout=600)
+    assert result.returncode == 0, result.stderr
+    phases = json.loads(result.stdout.strip().splitlines()[-1])
+    assert phases.pop('start')['compiled'], 'the first samples compiled nothing: no test'
+    outcomes = {o for phase in phases.values() for o in phase['outcomes']}
+    assert {'gap:invalid_power', 'rejected:non_finite', 'rejected:gated', 'inserted:late',
+            'rejected:duplicate', 'reset:forward_jump', 'reset:backward_jump'} <= outcomes
+    assert {name: p['compiled'] for name, p in phases.items() if p['compiled']} == {}

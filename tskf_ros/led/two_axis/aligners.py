@@ -29,7 +29,8 @@ from typing import Optional, Union
 from tskf_ros.led.intensity_model import AlignmentError
 from tskf_ros.led.scanning_ekf import PAPER_DT
 from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig, ConicalScanEKF
-from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisor, PanTiltSupervisorConfig
+from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisor
+from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
 from tskf_ros.led.two_axis.radial_response import RadialResponse
 
 METHODS = ('conical_ekf', 'conical_ekf_pat', 'conical_lqg')

@@ -38,7 +38,7 @@ from tskf_ros.led.two_axis.aligners import make_two_axis_aligner, METHODS, START
 from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_link import (PanTiltLink, PanTiltLinkConfig, PanTiltSample,
                                                  Seed)
-from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisorConfig
+from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
 from tskf_ros.led.two_axis.pointing_geometry import joint_turn, MAX_ELEVATION
 
 

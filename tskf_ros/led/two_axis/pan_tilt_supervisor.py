@@ -27,7 +27,8 @@ the one-axis supervisor's level that follows the light in lock, which a hand-ove
 the wrong side of the light teaches to take the dark for the light); lost, the EKF holds
 a declared loss for hold_samples (it keeps steering on its drift model; tracking again
 after a full window with few low samples), then the spiral again, centred on the last
-mean pointing seen in good lock; a lock younger than hold_after is not held, and a light
+mean pointing seen in good lock (a hand-over that never came into good lock resumes the
+spiral where it stopped); a lock younger than hold_after is not held, and a light
 that faded in lock (dim now, seen bright since the hand-over) is held fade_hold samples,
 then, with fade_look, looked for by one spiral pass that follows the drift model.  The
 supervisor follows the mount's joints [pan, tilt] from `joints0` as the mount does
@@ -37,102 +38,22 @@ one (over a 30 deg spiral they would miss its centre by tens of degrees).  Vecto
 over runs.
 """
 
-from dataclasses import dataclass, field
-import math
 from typing import Optional
 
 import numpy as np
 
 from tskf_ros.led.acquisition_scan import Mask
-from tskf_ros.led.intensity_model import AlignmentError, FloatArray
-from tskf_ros.led.lock_detector import LockConfig, LockDetector, LockVerdict
+from tskf_ros.led.intensity_model import FloatArray
+from tskf_ros.led.lock_detector import LockDetector, LockVerdict
 from tskf_ros.led.scanning_ekf import as_measurement, Measurement
-from tskf_ros.led.supervisor import ACQUIRING, LOST, STARTS, STATES, TRACKING
+from tskf_ros.led.supervisor import ACQUIRING, LOST, STATES, TRACKING
 from tskf_ros.led.two_axis.conical_ekf import ConicalScanEKF
+from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
 from tskf_ros.led.two_axis.pointing_geometry import (joint_turn, tangent_error,
                                                      turn_between)
 from tskf_ros.led.two_axis.radial_response import RadialResponse
-from tskf_ros.led.two_axis.spiral_search import SpiralConfig, SpiralSearch
-from tskf_ros.led.two_axis.spot_detector import SpotConfig, SpotDetector
-
-
-@dataclass(frozen=True)
-class PanTiltSupervisorConfig:
-    """The supervisor's search, detection and lock tests, and its actuation budget."""
-
-    spiral: SpiralConfig = field(default_factory=SpiralConfig)
-    detector: SpotConfig = field(default_factory=SpotConfig)
-    lock: LockConfig = field(default_factory=LockConfig)
-    noise: float = 1.0            # V: sigma of v the fit assumes
-    max_step: float = 45.0        # deg a command turns each axis at most; 0: no limit
-    start: str = 'acquiring'      # or 'tracking': from the EKF's own x0, P0
-    inflate: float = 4.0          # the hand-over variances are this times the Fisher bound,
-    x1_var: tuple[float, float] = (0.01, 4.0)      # V^2: clipped to this range
-    angle_var: tuple[float, float] = (2.0, 25.0)   # deg^2: and this one, per axis
-    hold_samples: int = 100       # samples the EKF holds a declared loss before the search
-    # V and samples: a loss of a light whose peak in good lock (x1hat g_r(0), averaged over
-    # about a second, so that a sudden block leaves it high) was below fade_peak is held
-    # for fade_hold samples instead: the two-axis form of the one-axis fade test.  The
-    # link's x1 walk dims some lights under the noise (5 % below 1 V within 20 s), where
-    # no intensity test tells a faded light from a pointing loss, and steering on the
-    # drift model keeps the pointing where a search in the dark would carry it away
-    fade_peak: float = 2.0
-    fade_hold: int = 400
-    # and only if x1_lock was at fade_peak or above since the hand-over: an EKF that
-    # diverges from its start (the mean pointing up to offset0 + r off, x1 from the prior)
-    # explains the dimming by x1, and never saw the light bright (False: any dim light)
-    fade_seen: bool = True
-    # deg: a fade hold that runs out looks (0: the search of a hold instead): one pass of
-    # the spiral out to fade_look around the pointing the hold carried, its centre moving
-    # as the drift model predicts the source; light seen: the hand-over; none: back to the
-    # centre and the EKF as it was, and the hold again (fade_hold samples, then a look)
-    fade_look: float = 0.0
-    # samples of good lock since the hand-over (or the start) before a loss is held: a
-    # lock lost sooner was on a fit off the light, and the hold would only delay the
-    # search (on a cold start at 1 V, 2 of the 10 s)
-    hold_after: int = 40
-    # samples the spiral goes on after the CUSUM sees light, so that the fit sees the
-    # light's crossing on both sides of its peak
-    settle: int = 4
-    # then a small spiral around the first fit (None: none), and the fit again from the
-    # samples of both: one crossing of the light leaves c uncertain across the arm
-    refine: Optional[SpiralConfig] = field(
-        default_factory=lambda: SpiralConfig(speed=3.0, pitch=5.0, reach=9.0))
-    min_samples: int = 10         # samples of a search before the CUSUM may see light
-    # light the CUSUM saw before min_samples counts at min_samples (off by default): the
-    # CUSUM falls again once the spiral has left a light crossed in its first samples; at
-    # 1 V it gains 0 to 3 runs in 1000 of the cold start, but from 1.5 V it hands over
-    # onto the dark's early false alarms (2.5 V: 73.9 % acquired within 10 s, not 79.2 %)
-    early_light: bool = False
-    # V: lost, too, when the EKF's peak x1hat g_r(0) falls below this (0: off).  At 1 V
-    # of noise a pointing 15-20 deg off is explained as well by a dim light, but the link's
-    # x1 walk dims 5 % of the lights below 1 V within 20 s, and the EKF that keeps steering
-    # on its drift through the dim spell does better than a search; so off by default
-    min_peak: float = 0.0
-
-    def __post_init__(self) -> None:
-        """Check the supervisor's settings; raise AlignmentError with the reason."""
-        if self.start not in STARTS:
-            raise AlignmentError(f'start must be one of {STARTS}, got {self.start!r}')
-        for name in ('noise', 'max_step', 'inflate', 'min_peak', 'fade_peak', 'fade_look'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise AlignmentError(f'{name} must be >= 0, got {value}')
-        if not self.noise > 0 or not self.inflate > 0:
-            raise AlignmentError('noise and inflate must be > 0')
-        if self.hold_samples < 0 or self.fade_hold < 0 or self.hold_after < 0:
-            raise AlignmentError('hold_samples, fade_hold and hold_after must be >= 0')
-        if self.settle < 0 or self.min_samples < 0:
-            raise AlignmentError('settle and min_samples must be >= 0')
-        for name in ('x1_var', 'angle_var'):
-            lo, hi = getattr(self, name)
-            if not (math.isfinite(hi) and 0.0 < lo <= hi):
-                raise AlignmentError(f'{name} must be [lo, hi] with 0 < lo <= hi')
-        if 0 < self.fade_look < self.spiral.pitch:
-            raise AlignmentError(f'fade_look ({self.fade_look:g} deg) is less than the '
-                                 f'spiral pitch ({self.spiral.pitch:g} deg)')
-        if self.max_step > 0 and self.spiral.speed * 1.5 > self.max_step:
-            raise AlignmentError('the spiral moves faster than max_step allows')
+from tskf_ros.led.two_axis.spiral_search import SpiralSearch
+from tskf_ros.led.two_axis.spot_detector import SpotDetector
 
 
 class PanTiltSupervisor:
@@ -331,10 +252,13 @@ class PanTiltSupervisor:
             self.held[mask] = 0
             self.looking[mask] = False
             # around the last good pointing; after a hand-over onto no light, around the
-            # search's own centre again
+            # search's own centre again (or on from where it stopped: resume)
+            resumed = np.zeros(self.runs, dtype=bool)
             if center is None:
                 center = np.where(self.locked[:, None], self.last_good, self.spiral.center)
-            self.spiral.start(mask, center, rate, reach)
+                if self.config.resume:
+                    resumed = mask & ~self.locked & (self.handovers > 0)
+            self.spiral.start(mask & ~resumed, center, rate, reach)
             self.finder.reset(mask)
             self.searched[mask] = self.pending[mask] = 0
             self.early[mask] = False

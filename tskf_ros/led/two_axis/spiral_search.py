@@ -113,6 +113,7 @@ class SpiralSearch:
         a = c.pitch / (2.0 * math.pi)
         # d phi = speed / |dp/dphi|, |dp/dphi| = a sqrt(1 + phi^2)
         step = c.speed / (a * np.sqrt(1.0 + self.phi * self.phi))
+        before = self.phi.copy()
         self.phi = np.where(mask, self.phi + step, self.phi)
         # the centre follows its rate (zero unless the search follows a drift model)
         moved = joint_turn(np.where(mask[:, None], self.rate, 0.0), self.center[:, 1])
@@ -128,6 +129,8 @@ class SpiralSearch:
         scale = np.minimum(1.0, c.speed * 1.5 / np.maximum(size, 1e-12))
         jump = beyond | (size > c.speed * 1.5)
         turn = np.where(jump[:, None], turn * scale[:, None], turn)
-        # a run still travelling back holds its spiral at the centre
-        self.phi[jump & (scale < 1.0)] = 0.0
+        # a run still travelling holds its spiral where it was: at the centre after a new
+        # spiral, or where a resumed one stopped
+        travelling = jump & (scale < 1.0)
+        self.phi[travelling] = np.where(beyond, 0.0, before)[travelling]
         return np.where(mask[:, None], turn, 0.0)

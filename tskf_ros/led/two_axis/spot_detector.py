@@ -45,7 +45,10 @@ from tskf_ros.led.two_axis.radial_response import RadialResponse
 class SpotConfig:
     """CUSUM reference and threshold (V), samples kept for the fit, the fit's grids."""
 
-    reference: float = 1.0       # V: k_ref, about half the intensity in the beam
+    # V: k_ref, half the light a crossing sees (Page's k for a shift from 0 to 2 k_ref):
+    # 1.6 V is a light 6 deg off an arm of the spiral (70 % of its peak) that the link's
+    # x1 walk has dimmed to 2.3 V; at 1 V, 1.0 V missed 53 runs of 7000 within 10 s, 0.8 V 30
+    reference: float = 0.8
     # V: h; below light_detector's 4 V: a spiral crosses the light in a few samples (the
     # dark's false alarms cost a hand-over and a loss, a missed crossing a whole spiral)
     threshold: float = 3.0

@@ -1,0 +1,119 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The kernels compiled ahead of time against numba's dispatchers of the same sources."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from tskf_ros.core import aot, kalman, transitions
+
+
+@pytest.fixture(scope='module')
+def built():
+    module = aot.load()
+    if module is None:      # ./run builds it; else once here (about a minute)
+        pytest.skip('the ahead-of-time module is not built: python -m tskf_ros.core.aot')
+    return module
+
+
+def _step_args(n: int, rng: np.random.Generator) -> tuple:
+    A = rng.normal(size=(n, n))
+    P = A @ A.T + np.eye(n)
+    H = rng.normal(size=(1, n))
+    Fk, Dk, norm = transitions.van_loan_series(-np.eye(n) + 0.1 * A, 0.01 * np.eye(n))
+    return (rng.normal(size=n), P, rng.normal(size=1), H, 0.1 * np.eye(1), np.zeros(1),
+            -np.eye(n) + 0.1 * A, 0.01 * np.eye(n), np.zeros((n, 1)), Fk, Dk, norm)
+
+
+@pytest.mark.parametrize('n', [1, 2, 3, 6])
+@pytest.mark.parametrize('exact', [False, True])
+def test_the_step_over_a_new_mu_is_numbas_to_the_bit(built, n, exact):
+    rng = np.random.default_rng(10 * n + exact)
+    args = _step_args(n, rng) + (1e-3 * (1 + 0.01 * rng.uniform(-1, 1)), exact)
+    ahead = built.transitions__jump_update_predict(*args)
+    jitted = transitions.jump_update_predict.dispatcher(*args)
+    for a, b in zip(ahead[0], jitted[0]):
+        np.testing.assert_array_equal(a, b)
+    assert ahead[1] == jitted[1]
+
+
+@pytest.mark.parametrize('n', [1, 2, 3, 6])
+def test_the_other_node_kernels_are_numbas_to_the_bit(built, n):
+    rng = np.random.default_rng(n)
+    x, P, z, H, R, d, A, GQGt, B = _step_args(n, rng)[:9]
+    F, Q, _, _ = transitions.euler(A, GQGt, B, 1e-3)
+    for name, args in (('update_predict', (x, P, z, H, R, d, F, Q, np.zeros(n))),
+                       ('mahalanobis2', (x, P, z, H, R, d)),
+                       ('euler', (A, GQGt, B, 1e-3)),
+                       ('update_batch', (x[None], P[None], z[None], H[None], R[None],
+                                         d[None]))):
+        module = 'transitions' if name == 'euler' else 'kalman'
+        ahead = getattr(built, f'{module}__{name}')(*args)
+        jitted = getattr(kalman if module == 'kalman' else transitions,
+                         name).dispatcher(*args)
+        for a, b in zip(ahead, jitted):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_a_module_of_other_sources_is_not_loaded(tmp_path, monkeypatch):
+    for name in aot.SOURCES:
+        (tmp_path / name).write_bytes((aot.CORE / name).read_bytes())
+    monkeypatch.setattr(aot, 'CORE', tmp_path)
+    same = aot.digest()
+    (tmp_path / 'kalman.py').write_bytes((aot.CORE / 'kalman.py').read_bytes() + b'\n# ')
+    assert aot.digest() != same
+
+
+def _run(code: str) -> str:
+    result = subprocess.run([sys.executable, '-c', textwrap.dedent(code)],
+                            capture_output=True, text=True, env=dict(os.environ), timeout=600)
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+def test_a_node_step_runs_ahead_of_time_without_numba(built):
+    out = _run("""
+        import sys
+        import numpy as np
+        from tskf_ros.core import jit, kalman
+        jit.set_mode('background')
+        x, P, z, H = np.zeros(2), np.eye(2), np.zeros(1), np.ones((1, 2))
+        step = kalman.update_predict(x, P, z, H, np.eye(1), np.zeros(1), P, P, x)
+        print(repr(kalman.update_predict).endswith('(compiled ahead of time)>'),
+              'numba' in sys.modules, step[-1])
+        """)
+    assert out.split() == ['True', 'False', '0']
+
+
+def test_arguments_of_other_types_fall_back_to_numba(built):
+    # a strided H: not the layout built ahead of time; compiled by numba in the background
+    out = _run("""
+        import numpy as np
+        from tskf_ros.core import jit, kalman
+        jit.set_mode('background')
+        x, P, z, H = np.zeros(2), np.eye(2), np.ones(1), np.ones((1, 4))[:, ::2]
+        first = kalman.mahalanobis2(x, P, z, H, np.eye(1), np.zeros(1))
+        assert jit.ready(timeout=500)
+        print(kalman.mahalanobis2.compiled, first[0],
+              kalman.mahalanobis2(x, P, z, H, np.eye(1), np.zeros(1))[0])
+        """)
+    # y = 1, S = H P H^T + R = 3: d^2 = 1 / 3
+    assert out.split() == ['True', repr(1 / 3), repr(1 / 3)]

@@ -1,0 +1,213 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The nodes' kernels compiled ahead of time: the same sources, no numba in the process.
+
+numba's ahead-of-time compiler (`numba.pycc`) builds the kernels that the nodes call from
+Python, for the float64 arrays they call them with, into one extension module.  A node
+(tskf_ros.core.jit's 'background' mode) calls that module's functions: it does not import
+numba or LLVM, which take about 130 MiB of a process to load a kernel from numba's cache
+(the extension module about 1 MiB).  The kernels these functions call are compiled into
+them from the same Python sources as numba's just-in-time dispatchers.
+
+    python -m tskf_ros.core.aot [--output DIR]
+
+builds the module (about 1 to 3 minutes; a C compiler is needed) into DIR, else the first
+writable of the package's `core/__pycache__` and the per-user cache (`$XDG_CACHE_HOME`, or
+`~/.cache`, `/tskf_ros`).  Its file name carries a digest of the kernels' sources: a module
+built from other sources is never loaded.  Without the module a node compiles its kernels
+in the background as before; so does a process with $TSKF_AOT=off.
+"""
+
+import hashlib
+import os
+from pathlib import Path
+import sys
+import sysconfig
+import types
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+CORE = Path(__file__).resolve().parent
+SOURCES = ('kalman.py', 'transitions.py', 'jit.py', 'aot.py')  # what the module is built from
+SWITCH = 'TSKF_AOT'           # 'off': never load the module (numba's dispatchers only)
+ENVIRONMENT = 'TSKF_AOT_DIR'    # a directory searched first (and built into, if writable)
+# argument codes: a C-contiguous float64 vector 'v', matrix 'm', stack 's'; float64 'f';
+# boolean 'b'
+EXPORTS: tuple[tuple[str, str, str], ...] = (
+    # the estimator: a step over a new mu (jittered stamps), over a cached mu, the
+    # innovation test, the Euler jump
+    ('transitions', 'jump_update_predict', 'vmvmmvmmmssffb'),
+    ('kalman', 'update_predict', 'vmvmmvmmv'),
+    ('kalman', 'mahalanobis2', 'vmvmmv'),
+    ('transitions', 'euler', 'mmmf'),
+    # the alignment node: the EKF's update over a stack of one
+    ('kalman', 'update_batch', 'msmssm'),
+)
+
+_FLOAT64 = np.dtype(np.float64)
+_loaded: Optional[types.ModuleType] = None
+_looked = False
+
+
+def digest() -> str:
+    """Return a digest of the kernels' sources (and of this list of exports)."""
+    h = hashlib.sha256()
+    for name in SOURCES:
+        h.update((CORE / name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def module_name() -> str:
+    """Return the extension module's name for the sources as they are."""
+    return f'tskf_kernels_{digest()}'
+
+
+def directories() -> list[Path]:
+    """Return where the module is looked for, in order (and built into: the first writable)."""
+    found = [Path(os.environ[ENVIRONMENT])] if os.environ.get(ENVIRONMENT) else []
+    cache = Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache')
+    return found + [CORE / '__pycache__', cache / 'tskf_ros']
+
+
+def export_name(module: str, kernel: str) -> str:
+    """Return the name of a kernel's function in the extension module."""
+    return f'{module.rpartition(".")[2]}__{kernel}'
+
+
+def load() -> Optional[types.ModuleType]:
+    """Return the extension module built from these sources, or None if there is none."""
+    global _loaded, _looked
+    if _looked:
+        return _loaded
+    _looked = True
+    if os.environ.get(SWITCH) == 'off':
+        return None
+    try:
+        name = module_name()
+    except OSError:         # a source file not readable: no module can be trusted
+        return None
+    filename = name + sysconfig.get_config_var('EXT_SUFFIX')
+    for directory in directories():
+        path = directory / filename
+        if path.is_file():
+            import importlib.util      # noqa: I900 - only where a module is there to load
+            spec = importlib.util.spec_from_file_location(name, path)
+            if spec is None or spec.loader is None:
+                continue
+            module = importlib.util.module_from_spec(spec)
+            try:
+                spec.loader.exec_module(module)
+            except ImportError:     # built for another interpreter or a damaged file
+                continue
+            _loaded = module
+            return module
+    return None
+
+
+def function(module: str, kernel: str) -> Optional[Callable[..., Any]]:
+    """
+    Return the ahead-of-time compiled form of a kernel, or None if there is none.
+
+    It raises TypeError for arguments of other types than it was built for (numba.pycc's
+    own functions do not check an array's dtype, dimensions or layout: they would read it
+    as the type built).
+    """
+    built = load()
+    compiled = None if built is None else getattr(built, export_name(module, kernel), None)
+    codes = next((c for m, k, c in EXPORTS if f'tskf_ros.core.{m}' == module and k == kernel),
+                 None)
+    if compiled is None or codes is None:
+        return None
+    dims = tuple((i, 'vms'.index(c) + 1) for i, c in enumerate(codes) if c in 'vms')
+
+    def checked(*args: Any) -> Any:
+        if len(args) != len(codes):
+            raise TypeError(f'{kernel} takes {len(codes)} arguments, got {len(args)}')
+        for i, ndim in dims:
+            a = args[i]
+            if not (type(a) is np.ndarray and a.dtype == _FLOAT64 and a.ndim == ndim
+                    and a.flags.c_contiguous and a.flags.writeable):
+                raise TypeError(f'{kernel}: argument {i} is not a writeable C-contiguous '
+                                f'{ndim}-d float64 array')
+        return compiled(*args)
+    checked.__name__ = kernel
+    return checked
+
+
+def _types(codes: str) -> tuple:
+    from numba import types      # noqa: I900 - only to build
+    of = {'v': types.float64[::1], 'm': types.float64[:, ::1],
+          's': types.float64[:, :, ::1], 'f': types.float64, 'b': types.boolean}
+    return tuple(of[c] for c in codes)
+
+
+def build(output: Optional[Path] = None) -> Path:
+    """Build the extension module into output (else the first writable directory)."""
+    from numba.pycc import CC      # noqa: I900 - only to build
+    import importlib              # noqa: I900
+    from tskf_ros.core import jit
+    targets = [output] if output else directories()
+    for target in targets:
+        try:
+            target.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            continue
+        if os.access(target, os.W_OK):
+            break
+    else:
+        raise OSError('no writable directory among ' + ', '.join(map(str, targets)))
+    name = module_name()
+    cc = CC(name)
+    cc.output_dir = str(target)
+    for module, kernel, codes in EXPORTS:
+        full = f'tskf_ros.core.{module}'
+        k = getattr(importlib.import_module(full), kernel)
+        jit._compile_module(full, switch=False)
+        arguments = _types(codes)
+        k.dispatcher.compile(arguments)     # its return type, as numba infers it
+        signature = next(s for s in k.dispatcher.nopython_signatures if s.args == arguments)
+        cc.export(export_name(full, kernel), signature)(k.dispatcher.py_func)
+    cc.compile()
+    built = target / (name + sysconfig.get_config_var('EXT_SUFFIX'))
+    for old in target.glob('tskf_kernels_*'):      # modules of earlier sources
+        if old != built:
+            old.unlink(missing_ok=True)
+    return built
+
+
+def main(args: Optional[list] = None) -> None:
+    """Build the module (the command line)."""
+    import argparse               # noqa: I900 - the command line's alone
+    parser = argparse.ArgumentParser(
+        prog='python -m tskf_ros.core.aot',
+        description="Compile the nodes' kernels ahead of time (numba.pycc) into an "
+                    'extension module, so that the nodes run them without numba.')
+    parser.add_argument('--output', type=Path, default=None,
+                        help='directory to write the module into (default: the first '
+                             'writable of ' + ', '.join(map(str, directories())) + ')')
+    options = parser.parse_args(args)
+    try:
+        path = build(options.output)
+    except OSError as exc:
+        print(f'tskf_ros.core.aot: cannot build: {exc}', file=sys.stderr)
+        sys.exit(1)
+    print(path)
+
+
+if __name__ == '__main__':
+    main()
