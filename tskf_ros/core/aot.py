@@ -210,4 +210,5 @@ def main(args: Optional[list] = None) -> None:
 
 
 if __name__ == '__main__':
-    main()
+    from tskf_ros.tools.console import run_as_main
+    run_as_main(main)
