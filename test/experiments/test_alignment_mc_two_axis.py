@@ -128,3 +128,43 @@ def test_the_numbers_do_not_depend_on_the_workers(tmp_path, capsys):
                                   '--json', str(out)]) == 0
         data.append(json.loads(out.read_text())['results'])
     assert data[0] == data[1]
+
+
+def test_a_dask_scheduler_gives_the_local_results_run_for_run(tmp_path, capsys):
+    # the points on a Dask cluster's workers: per run the numbers of one process, and the
+    # same JSON
+    distributed = pytest.importorskip('dask.distributed')
+    points = [alignment_mc_two_axis.Point(name, 4, PanTiltLinkConfig(steps=40, noise=noise), 3,
+                                          alignment_mc_two_axis.RadialResponse(), False)
+              for noise in (0.5, 1.0) for name in ('conical_ekf_pat', 'four_point')]
+    argv = ['--axes', '2', '--runs', '3', '--steps', '30', '--noise-levels', '0.5,1',
+            '--methods', 'conical_ekf_pat,hill_climbing']
+    local = list(alignment_mc_two_axis.run_points(points, 1))
+    data = []
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        remote = list(alignment_mc_two_axis.run_points(points, 1, cluster.scheduler_address))
+        for extra in (['--workers', '1'], ['--scheduler', cluster.scheduler_address]):
+            out = tmp_path / f'{len(data)}.json'
+            assert alignment_mc.main(argv + extra + ['--json', str(out)]) == 0
+            data.append(json.loads(out.read_text()))
+    assert len(remote) == len(local) == 4
+    for a, b in zip(local, remote):
+        for field in ('angular', 'measure', 'rms'):
+            np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)
+        assert a.metrics['lost_at_end'] == b.metrics['lost_at_end']
+        np.testing.assert_array_equal(a.metrics['acquisition'].times,
+                                      b.metrics['acquisition'].times)
+    for d in data:
+        d.pop('elapsed_s')
+    assert data[0] == data[1]
+
+
+def test_a_scheduler_not_reached_is_one_line_and_exit_1(capsys):
+    assert alignment_mc.main(['--axes', '2', '--runs', '2', '--steps', '3', '--noise-levels',
+                              '1', '--methods', 'hill_climbing',
+                              '--scheduler', 'tcp://127.0.0.1:9']) == 1
+    err = [line for line in capsys.readouterr().err.splitlines()
+           if not line.startswith('[alignment_mc]')]
+    assert len(err) == 1, err
+    assert err[0].startswith('alignment_mc: cannot use the Dask scheduler at tcp://127.0.0.1:9')

@@ -39,7 +39,7 @@ import numpy as np
 
 from tskf_ros import led
 from tskf_ros.bag.progress import bar
-from tskf_ros.experiments import alignment_pat, arguments, output
+from tskf_ros.experiments import alignment_pat, arguments, monte_carlo, output
 from tskf_ros.experiments.alignment_ablation_report import bootstrap_ci, wilson
 from tskf_ros.experiments.alignment_mc_two_axis_figure import plot_two_axis
 from tskf_ros.led.two_axis.aligners import make_two_axis_aligner
@@ -164,8 +164,21 @@ def run_point(p: Point) -> PointResult:
     return PointResult(angular, measure, rms, m)
 
 
-def run_points(points: Sequence[Point], workers: int) -> Iterator[PointResult]:
-    """Yield run_point of each point, in order, computed on `workers` processes."""
+def run_points(points: Sequence[Point], workers: int,
+               scheduler: Optional[str] = None) -> Iterator[PointResult]:
+    """
+    Yield run_point of each point, in order, computed on `workers` processes.
+
+    scheduler: the address of a Dask scheduler (e.g. tcp://host:8786), whose workers run
+    the points instead (they need this package), as one axis's monte_carlo.run_points;
+    raises monte_carlo.SchedulerError if it cannot be used.  Each point draws from its own
+    seed, so the results are the same wherever it runs.
+    """
+    if scheduler is not None:
+        with monte_carlo.dask_client(scheduler) as client:
+            futures = client.map(run_point, list(points), pure=False)
+            yield from (f.result() for f in futures)
+        return
     if workers <= 1 or len(points) <= 1:
         yield from map(run_point, points)
         return
@@ -204,8 +217,9 @@ def record(entry: dict, r: PointResult, index: np.ndarray) -> None:
 
 def sweep(noise_levels: Sequence[float], methods: Sequence[str], *, runs: int,
           link: PanTiltLinkConfig, seed: int, response: RadialResponse, clip: bool,
-          progress: Optional[Progress] = None, workers: int = 1) -> dict:
-    """Run every method at every noise level; return {'results', 'elapsed_s'}."""
+          progress: Optional[Progress] = None, workers: int = 1,
+          scheduler: Optional[str] = None) -> dict:
+    """Run every method at every noise level (run_points); return {'results', 'elapsed_s'}."""
     results = {name: empty_entry() for name in methods}
     index = np.random.default_rng([seed, 1]).integers(0, runs, size=(RESAMPLES, runs))
     start = time.perf_counter()
@@ -213,7 +227,7 @@ def sweep(noise_levels: Sequence[float], methods: Sequence[str], *, runs: int,
                progress is not None)
     points = [Point(name, runs, dataclasses.replace(link, noise=float(noise)), seed, response,
                     clip) for noise in noise_levels for name in methods]
-    done = run_points(points, workers)
+    done = run_points(points, workers, scheduler)
     for i, noise in enumerate(noise_levels):
         tic = time.perf_counter()
         parts = []
@@ -255,6 +269,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--beta', type=arguments.rate_deg_s, default=1.2,
                    help='drift rate per joint axis, deg/s (1.2)')
     arguments.add_run_options(p, dt=led.PAPER_DT)
+    arguments.add_scheduler(p)
     p.add_argument('--dropout', type=arguments.number(0.0, 0.99), default=0.0,
                    help='probability that a sample is missing (0)')
     p.add_argument('--offset0', type=arguments.number(0.0, 90.0), default=5.0, metavar='DEG',
@@ -337,9 +352,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     progress(f'two axes: beta {args.beta:g} deg/s per axis; {args.steps} steps of {args.dt:g} '
              f's; {args.runs} runs per point; methods {", ".join(args.methods)}')
-    out = sweep(args.noise_levels, args.methods, runs=args.runs, link=link, seed=args.seed,
-                response=response, clip=args.clip_four_point, progress=progress,
-                workers=args.workers)
+    try:
+        out = sweep(args.noise_levels, args.methods, runs=args.runs, link=link, seed=args.seed,
+                    response=response, clip=args.clip_four_point, progress=progress,
+                    workers=args.workers, scheduler=args.scheduler)
+    except monte_carlo.SchedulerError as exc:
+        print(f'alignment_mc: {exc}', file=sys.stderr)
+        return 1
     progress(f'comparison done in {out["elapsed_s"]:.1f} s')
     print(table(args.noise_levels, out['results']))
     data = {'noise_levels': list(args.noise_levels), 'results': out['results'],

@@ -35,7 +35,7 @@ import numpy as np
 from tskf_ros import led
 
 __all__ = ['BATCH_RUNS', 'Experiment', 'PART_RUNS', 'Point', 'SchedulerError', 'batches',
-           'parts', 'run_batch', 'run_points']
+           'dask_client', 'parts', 'run_batch', 'run_points']
 
 # runs drawn from one generator: a point of more runs is split into parts, part k > 0
 # drawing from the generator [seed, k] (the numbers of a seed do not depend on anything else)
@@ -175,7 +175,7 @@ def run_points(points: Sequence[Point], workers: int, experiment: Experiment,
     work = [[flat[i] for i in task] for task in tasks]
     task = functools.partial(run_batch, experiment=experiment)
     if scheduler is not None:
-        with _client(scheduler) as client:
+        with dask_client(scheduler) as client:
             futures = client.map(task, work, pure=False)
             yield from _joined(split, tasks, (f.result() for f in futures), experiment)
         return
@@ -186,8 +186,8 @@ def run_points(points: Sequence[Point], workers: int, experiment: Experiment,
         yield from _joined(split, tasks, pool.map(task, work), experiment)
 
 
-def _client(address: str) -> Any:
-    """Return a dask.distributed Client of the scheduler at address."""
+def dask_client(address: str) -> Any:
+    """Return a dask.distributed Client of the scheduler at address (or SchedulerError)."""
     try:
         from dask.distributed import Client
     except ImportError:
