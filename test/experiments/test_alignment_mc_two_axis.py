@@ -103,6 +103,8 @@ def test_one_axis_is_the_default(tmp_path, capsys):
     (['--axes', '2', '--cold-start', '-1'],
      'argument --cold-start: must be a finite number in [0, 60]'),
     (['--axes', '2', '--runs', '0'], 'argument --runs: must be in'),
+    (['--axes', '2', '--dim-radius', '15'],
+     'argument --dim-radius: must be a finite number in [0, 14.9]'),
     (['--axes', '2', '--json', '/'], '--json /: / is a folder'),
     (['--axes', '2', '--png', 'FILE/a.png'], 'is not a folder'),
 ])
@@ -168,3 +170,22 @@ def test_a_scheduler_not_reached_is_one_line_and_exit_1(capsys):
            if not line.startswith('[alignment_mc]')]
     assert len(err) == 1, err
     assert err[0].startswith('alignment_mc: cannot use the Dask scheduler at tcp://127.0.0.1:9')
+
+
+def test_the_dim_radius_reaches_the_ekf_and_the_json(tmp_path, capsys):
+    # --dim-radius 6.5 changes the supervised EKF's runs (the scan widens when dim) and is
+    # recorded; the baselines do not scan a circle and are the same
+    data = []
+    for extra in ([], ['--dim-radius', '6.5', '--dim-peak', '2.5']):
+        out = tmp_path / f'{len(data)}.json'
+        assert alignment_mc.main(['--axes', '2', '--runs', '20', '--steps', '80', '--workers',
+                                  '1', '--noise-levels', '1.5', '--methods',
+                                  'conical_ekf_pat,four_point', '--json', str(out)]
+                                 + extra) == 0
+        data.append(json.loads(out.read_text()))
+    assert data[0]['config']['dim_radius_deg'] == 0.0
+    assert data[1]['config']['dim_radius_deg'] == 6.5
+    assert data[1]['config']['dim_peak_v'] == 2.5
+    a, b = (d['results'] for d in data)
+    assert a['four_point'] == b['four_point']
+    assert a['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']

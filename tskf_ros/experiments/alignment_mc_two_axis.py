@@ -43,6 +43,7 @@ from tskf_ros.experiments import alignment_pat, arguments, monte_carlo, output
 from tskf_ros.experiments.alignment_ablation_report import bootstrap_ci, wilson
 from tskf_ros.experiments.alignment_mc_two_axis_figure import plot_two_axis
 from tskf_ros.led.two_axis.aligners import make_two_axis_aligner
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_baselines import FourPointAveraging, TwoAxisHillClimbing
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_simulation import (PanTiltTrajectory, simulate_pan_tilt,
@@ -67,15 +68,15 @@ Progress = Callable[[str], None]
 
 
 def build(name: str, runs: int, link: PanTiltLinkConfig, response: RadialResponse, *,
-          clip: bool) -> TwoAxisAligner:
-    """Build the method `name` (one of METHODS) for `runs` runs of `link`."""
+          clip: bool, ekf: Optional[ConicalEKFConfig] = None) -> TwoAxisAligner:
+    """Build the method `name` (one of METHODS) for `runs` runs of `link` (ekf: CONICAL's)."""
     if name in CONICAL:
         # R from the link's noise, as ekf_pat's in one axis (at least MIN_NOISE: R > 0); a
         # cold start searches first (the supervised EKF)
         start = 'acquiring' if link.cone > 0.0 and name == 'conical_ekf_pat' else 'tracking'
         return make_two_axis_aligner(name, runs=runs, dt=link.dt, response=response,
                                      noise=max(link.noise, alignment_pat.MIN_NOISE),
-                                     start=start, joints0=(0.0, link.elevation0))
+                                     start=start, joints0=(0.0, link.elevation0), ekf=ekf)
     if name == 'hill_climbing':
         return TwoAxisHillClimbing(runs=runs, dt=link.dt)
     if name == 'four_point':
@@ -131,6 +132,8 @@ class Point:
     seed: int
     response: RadialResponse
     clip: bool
+    # the conical-scan EKF's settings (its noise and dt are the link's); None: the default
+    ekf: Optional[ConicalEKFConfig] = None
 
 
 @dataclasses.dataclass
@@ -145,7 +148,7 @@ class PointResult:
 
 def simulate(p: Point) -> tuple[PanTiltTrajectory, Recording]:
     """Run one point's closed loop from its seed; return the trajectory and the record."""
-    aligner = Recording(build(p.name, p.runs, p.link, p.response, clip=p.clip))
+    aligner = Recording(build(p.name, p.runs, p.link, p.response, clip=p.clip, ekf=p.ekf))
     traj = simulate_pan_tilt(aligner, p.link, np.random.default_rng(p.seed), p.response)
     return traj, aligner
 
@@ -218,7 +221,7 @@ def record(entry: dict, r: PointResult, index: np.ndarray) -> None:
 def sweep(noise_levels: Sequence[float], methods: Sequence[str], *, runs: int,
           link: PanTiltLinkConfig, seed: int, response: RadialResponse, clip: bool,
           progress: Optional[Progress] = None, workers: int = 1,
-          scheduler: Optional[str] = None) -> dict:
+          scheduler: Optional[str] = None, ekf: Optional[ConicalEKFConfig] = None) -> dict:
     """Run every method at every noise level (run_points); return {'results', 'elapsed_s'}."""
     results = {name: empty_entry() for name in methods}
     index = np.random.default_rng([seed, 1]).integers(0, runs, size=(RESAMPLES, runs))
@@ -226,7 +229,7 @@ def sweep(noise_levels: Sequence[float], methods: Sequence[str], *, runs: int,
     tick = bar(len(noise_levels) * len(methods), 'alignment_mc two axes', 'point',
                progress is not None)
     points = [Point(name, runs, dataclasses.replace(link, noise=float(noise)), seed, response,
-                    clip) for noise in noise_levels for name in methods]
+                    clip, ekf) for noise in noise_levels for name in methods]
     done = run_points(points, workers, scheduler)
     for i, noise in enumerate(noise_levels):
         tic = time.perf_counter()
@@ -284,6 +287,13 @@ def parser() -> argparse.ArgumentParser:
                    help='comma list of the methods compared (default: '
                         + ','.join(DEFAULT_METHODS) + '), of: ' + ', '.join(
                        f'{k} ({v})' for k, v in METHODS.items()))
+    p.add_argument('--dim-radius', type=arguments.number(0.0, 14.9), default=0.0,
+                   metavar='DEG',
+                   help='the conical scan widens to DEG as the estimated peak x1hat g_r(0) '
+                        'falls from --dim-peak to half of it (0: off, the default)')
+    p.add_argument('--dim-peak', type=arguments.number(0.0, 100.0, open_low=True),
+                   default=2.0, metavar='V',
+                   help='the estimated peak under which the scan widens, V (2.0)')
     p.add_argument('--clip-four-point', action='store_true',
                    help='clip gamma_p of eq. (26) to [-gamma, gamma] (as --clip-three-point)')
     p.add_argument('--run-noise', type=arguments.noise_volts, default=1.0,
@@ -300,6 +310,7 @@ def config_record(args: argparse.Namespace) -> dict[str, Any]:
             'dt_s': args.dt, 'seed': args.seed, 'dropout': args.dropout,
             'offset0_deg': args.offset0, 'cold_start_deg': args.cold_start,
             'clip_four_point': args.clip_four_point, 'max_intensity_v': led.MAX_INTENSITY,
+            'dim_radius_deg': args.dim_radius, 'dim_peak_v': args.dim_peak,
             'methods': {name: METHODS[name] for name in args.methods},
             'tracking': {'angle_deg': led.TRACKING_ANGLE,
                          'level_v': led.TRACKING_LEVEL * led.MAX_INTENSITY},
@@ -355,7 +366,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         out = sweep(args.noise_levels, args.methods, runs=args.runs, link=link, seed=args.seed,
                     response=response, clip=args.clip_four_point, progress=progress,
-                    workers=args.workers, scheduler=args.scheduler)
+                    workers=args.workers, scheduler=args.scheduler,
+                    ekf=ConicalEKFConfig(dim_radius=args.dim_radius, dim_peak=args.dim_peak))
     except monte_carlo.SchedulerError as exc:
         print(f'alignment_mc: {exc}', file=sys.stderr)
         return 1
@@ -368,8 +380,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         progress(f'wrote {args.json}')
     if args.png:
         run_link = dataclasses.replace(link, noise=args.run_noise)
+        ekf = ConicalEKFConfig(dim_radius=args.dim_radius, dim_peak=args.dim_peak)
         runs = {name: simulate(Point(name, 1, run_link, args.seed, response,
-                                     args.clip_four_point))[0] for name in args.methods}
+                                     args.clip_four_point, ekf))[0] for name in args.methods}
         start = (f'cold start in a {args.cold_start:g} deg cone' if args.cold_start
                  else f'start {args.offset0:g} deg off')
         fig = plot_two_axis(args.noise_levels, out['results'], runs, title=(

@@ -437,8 +437,42 @@ def test_closed_loop_boresight_within_mean_error_plus_radius():
 @pytest.mark.parametrize('bad', [{'controller': 'pid'}, {'gain': 2.0}, {'points': 2},
                                  {'x0': (1.0, 2.0)}, {'Q': (1, 1, 1, 1, -1)},
                                  {'noise': 0.0, 'model_noise': 0.0}, {'radius': math.inf},
-                                 {'order': 3}, {'linearisation': 'ukf'}, {'iterations': 0}])
+                                 {'order': 3}, {'linearisation': 'ukf'}, {'iterations': 0},
+                                 {'dim_radius': -1.0}, {'dim_radius': 15.0},
+                                 {'dim_peak': 0.0}])
 def test_bad_configs_say_why(bad):
     """Each bad setting is one AlignmentError."""
     with pytest.raises(AlignmentError):
         ConicalEKFConfig(**bad)
+
+
+def test_the_scan_widens_per_run_as_the_estimated_peak_falls():
+    """dim_radius: each run's r follows dim_scan_radius of its x1hat g_r(0); off: r fixed."""
+    from tskf_ros.led.two_axis.scan_radius import dim_scan_radius
+    off = ConicalScanEKF(runs=3)
+    assert off.scan_offset.shape == (2,)
+    config = ConicalEKFConfig(dim_radius=6.5, dim_peak=2.0)
+    ekf = ConicalScanEKF(config, runs=3)
+    ekf.x[:, 0] = [3.0, 1.5, 0.5]
+    np.testing.assert_allclose(np.hypot(*ekf.scan_offset.T), 4.0, rtol=1e-12)
+    s_now = ekf.scan_offset.copy()
+    turn = ekf.step(0.0, np.array([np.nan, np.nan, np.nan]))
+    radius = dim_scan_radius(ekf.x[:, 0] * ekf.response.peak, 4.0, 6.5, 2.0)
+    assert radius[0] == 4.0 and 4.0 < radius[1] < 6.5 and radius[2] == 6.5
+    np.testing.assert_allclose(ekf.scan_offset, radius[:, None] * ekf.unit_scan[1], rtol=1e-12)
+    # the mount is sent u + s_{k+1} - s_k, each run with its own radius
+    np.testing.assert_allclose(turn, ekf.u + ekf.scan_offset - s_now, rtol=1e-12)
+
+
+def test_a_dim_scan_keeps_the_boresight_within_the_mean_error_plus_its_radius():
+    """With dim_radius the closed loop (supervised, cold start) still scans around its mean."""
+    from tskf_ros.led.two_axis.aligners import make_two_axis_aligner
+    from tskf_ros.led.two_axis.pan_tilt_simulation import simulate_pan_tilt
+    aligner = make_two_axis_aligner('conical_ekf_pat', runs=40, noise=1.0, start='acquiring',
+                                    ekf=ConicalEKFConfig(dim_radius=6.5))
+    traj = simulate_pan_tilt(aligner, PanTiltLinkConfig(noise=1.0, cone=30.0, steps=200), 4)
+    radius = aligner.tracker.radius
+    assert radius.min() >= 4.0 and radius.max() <= 6.5 and np.ptp(radius) > 0.0
+    inside = traj.theta_mean <= 15.0
+    assert np.all((traj.theta <= traj.theta_mean + 6.5 + 0.2)[inside])
+    assert np.mean(traj.theta[-20:] <= 15.0) > 0.8

@@ -50,7 +50,9 @@ whose NEES is in its band at every noise level from 0 to 2.5 V.
 The scan's own loss: with the mean pointing on the source the boresight is r off it, so
 the scan costs 1 - g_r(r)/g_r(0) of the received intensity (`scan_loss`; 15 % at the
 default r = 4 deg); with a mean error |d| the boresight is at most |d| + r off, so it
-stays in the 15 deg tracking cone while |d| <= 15 - r.
+stays in the 15 deg tracking cone while |d| <= 15 - r.  With dim_radius > 0 (off by
+default) each run's r widens towards dim_radius as its x1hat g_r(0) falls below dim_peak
+(`scan_radius.dim_scan_radius`: more information about d per sample, at a larger loss).
 """
 
 from dataclasses import dataclass
@@ -67,6 +69,7 @@ from tskf_ros.led.lqg_alignment import lqr_turn
 from tskf_ros.led.scanning_ekf import as_measurement, Measurement, PAPER_DT, StampClock
 from tskf_ros.led.two_axis.pointing_geometry import conical_scan
 from tskf_ros.led.two_axis.radial_response import RadialResponse
+from tskf_ros.led.two_axis.scan_radius import dim_scan_radius
 
 CONTROLLERS = ('p', 'lqr')
 LINEARISATIONS = ('taylor', 'cubature', 'gauss_hermite')
@@ -99,6 +102,10 @@ class ConicalEKFConfig:
 
     radius: float = 4.0               # r of the scan circle (deg)
     points: int = 20                  # samples per scan turn (1 s at 50 ms, as Psi)
+    # the radius when the light is dim (deg; 0: off, r stays `radius`): r widens linearly
+    # from `radius` at x1hat g_r(0) = dim_peak to dim_radius at dim_peak / 2 (scan_radius)
+    dim_radius: float = 0.0
+    dim_peak: float = 2.0             # V
     x0: tuple[float, ...] = (2.0, 0.0, 0.0, 0.0, 0.0)
     # P0: x1 as ekf_pat's clipped prior (2 V), d 5 deg, drift 0.063 deg per step (1.26
     # deg/s: the link's 1.2 deg/s per joint axis; a wider prior let the first seconds'
@@ -133,7 +140,8 @@ class ConicalEKFConfig:
         """Check every parameter; raise AlignmentError with the reason."""
         if len(self.x0) != 5 or len(self.P0) != 5 or len(self.Q) != 5:
             raise AlignmentError(f'x0, P0 and Q need 5 entries ({", ".join(STATES)})')
-        values = (self.radius, self.noise, self.gain, self.dt, self.x1_floor,
+        values = (self.radius, self.dim_radius, self.dim_peak, self.noise, self.gain,
+                  self.dt, self.x1_floor,
                   *self.x0, *self.P0, *self.Q)
         if not all(math.isfinite(v) for v in values):
             raise AlignmentError('every conical-scan EKF parameter must be finite')
@@ -151,6 +159,9 @@ class ConicalEKFConfig:
                                  f'got {self.controller!r}')
         if not (self.state_weight > 0.0 and self.input_weight > 0.0):
             raise AlignmentError('the LQR weights must be > 0')
+        if self.dim_radius < 0.0 or self.dim_radius >= 15.0 or not self.dim_peak > 0.0:
+            raise AlignmentError(f'dim_radius must be in [0, 15) deg (0: off) and dim_peak '
+                                 f'> 0 V, got {self.dim_radius}, {self.dim_peak}')
         if self.points < 3:
             raise AlignmentError(f'the scan needs at least 3 points, got {self.points}')
         if self.order not in (1, 2):
@@ -205,6 +216,8 @@ class ConicalScanEKF:
         if self.runs < 1:
             raise AlignmentError(f'runs must be at least 1, got {runs}')
         self.scan = conical_scan(config.radius, config.points)
+        self.unit_scan = conical_scan(1.0, config.points)
+        self.radius = np.full(self.runs, config.radius)   # r per run (dim_radius)
         self.Q = np.diag(np.asarray(config.Q, dtype=float))
         self.R = np.full((self.runs, 1, 1), config.noise ** 2 + config.model_noise ** 2)
         n = self.runs
@@ -222,7 +235,9 @@ class ConicalScanEKF:
 
     @property
     def scan_offset(self) -> FloatArray:
-        """s_k, the tangent-plane offset (2,) at which the next sample is taken."""
+        """s_k, the offset (2,) at which the next sample is taken; (runs, 2) with dim_radius."""
+        if self.config.dim_radius > 0.0:
+            return self.radius[:, None] * self.unit_scan[self.index]
         return self.scan[self.index]
 
     def predict(self, mu: float) -> None:
@@ -284,7 +299,7 @@ class ConicalScanEKF:
             L = np.linalg.cholesky(P[:, :3, :3])
             spread = nodes @ L.transpose(0, 2, 1)                    # L xi_p, (n, p, 3)
             X = x[:, None, :3] + spread
-            e = X[:, :, 1:3] + offset
+            e = X[:, :, 1:3] + np.reshape(offset, (-1, 1, 2))
             Z = X[:, :, 0] * self.response.g(np.hypot(e[..., 0], e[..., 1]))
             hx = Z @ weights
             Pxz = (((Z - hx[:, None]) * weights)[:, None, :] @ spread)[:, 0, :]
@@ -354,6 +369,10 @@ class ConicalScanEKF:
         self.u = u
         s_now = self.scan_offset
         self.index = (self.index + 1) % len(self.scan)
+        if self.config.dim_radius > 0.0:
+            self.radius = dim_scan_radius(self.x[:, 0] * self.response.peak,
+                                          self.config.radius, self.config.dim_radius,
+                                          self.config.dim_peak)
         return u + self.scan_offset - s_now
 
     @property

@@ -110,7 +110,7 @@ class PanTiltSupervisor:
 
     @property
     def scan_offset(self) -> FloatArray:
-        """Return the EKF's scan offset of the next sample (2,)."""
+        """Return the EKF's scan offset of the next sample (2,), or (runs, 2) per run."""
         return self.tracker.scan_offset
 
     @property
@@ -277,11 +277,11 @@ class PanTiltSupervisor:
     def _back_to_hold(self, back: Mask) -> FloatArray:
         """Turn the runs in `back` onto the look's centre and hold again; return the turns."""
         cfg = self.config
-        s_next = self.tracker.scan_offset
+        s_next = self._offset(back)
         center = self.spiral.center[back]
         # the joints whose mean pointing (the joints less the scan offset, at their tilt)
         # is the centre
-        target = center + joint_turn(s_next, center[:, 1] + s_next[1])
+        target = center + joint_turn(s_next, center[:, 1] + s_next[:, 1])
         limit = cfg.max_step if cfg.max_step > 0 else np.inf
         turn = np.clip(turn_between(self.joints[back], target), -limit, limit)
         # the EKF as the look found it, its variances grown by the samples it looked
@@ -294,6 +294,10 @@ class PanTiltSupervisor:
         self.lock.reset(back)
         return turn
 
+    def _offset(self, mask: Mask) -> FloatArray:
+        """Return the EKF's next scan offset of the runs in mask (m, 2)."""
+        return np.broadcast_to(self.tracker.scan_offset, (self.runs, 2))[mask]
+
     def _scatter(self, mask: Mask, rows: FloatArray) -> FloatArray:
         """Return a (runs, 2) array with `rows` at the runs in mask, the joints elsewhere."""
         out = self.joints.copy()
@@ -304,7 +308,7 @@ class PanTiltSupervisor:
         """Start tracking the runs in `found` from the spiral's fit; return their turns."""
         cfg = self.config
         seen = self.finder.sighting(found, cfg.noise)
-        s_next = self.tracker.scan_offset
+        s_next = self._offset(found)
         joints = self.joints[found]
         source = seen.center
         limit = cfg.max_step if cfg.max_step > 0 else np.inf
