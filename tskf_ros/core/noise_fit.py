@@ -33,9 +33,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 import scipy.optimize
 
-from tskf_ros.core.growing_column import Column
 from tskf_ros.core.linear_models import LinearModel
 from tskf_ros.core.pairwise_sum import PairwiseSum
+from tskf_ros.core.spill_rows import SpillRows
+from tskf_ros.core.streamed_median import median
 from tskf_ros.core.timescale_kalman import FilterError
 
 LOG_2PI = float(np.log(2.0 * np.pi))
@@ -327,7 +328,16 @@ def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
     R_ii = v_i dt / 2 (R / mu per sample, twice per difference), or all on the process
     noise, Q_jj = mean(v) / (dt |(C G)_j|^2), with dt the median spacing.
     """
-    dys, dts = Column(np.float64, (model.C.shape[0],)), Column(np.float64)
+    p = model.C.shape[0]
+    with SpillRows(np.dtype((np.float64, (p,)))) as dys, SpillRows(np.float64) as dts:
+        return _data_scale(model, segments, par, theta0, dys, dts)
+
+
+def _data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
+                par: NoiseParameters, theta0: FloatArray, dys: SpillRows, dts: SpillRows
+                ) -> FloatArray:
+    """data_scale with the differences kept in dys and dts (temporary files)."""
+    p = model.C.shape[0]
     for segment in segments:
         t, last = 0.0, None
         for rec in segment:
@@ -342,8 +352,9 @@ def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
     if len(dys) < 2:
         return theta
     with np.errstate(all='ignore'):
-        v = np.median(np.square(dys.view()), axis=0) / 0.455
-        dt = float(np.median(dts.view()))
+        # np.median(np.square(dys), axis=0), np.median(dts): a block of rows at a time
+        v = np.array([median(_column_squared(dys, i)) for i in range(p)]) / 0.455
+        dt = float(median(dts.blocks))
         G = model.G if model.G is not None else np.eye(model.A.shape[0])
         cg = np.sum(np.square(model.C @ G), axis=0)
         k = 0
@@ -356,6 +367,11 @@ def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
             theta[k:k + par.p] = np.where(np.isfinite(r) & (r > 0), np.log(r),
                                           theta[k:k + par.p])
     return theta
+
+
+def _column_squared(rows: SpillRows, i: int) -> Callable[[], Iterator[FloatArray]]:
+    """Return blocks(): the squares of column i of rows, a block at a time."""
+    return lambda: (np.square(block[:, i]) for block in rows.blocks())
 
 
 def _search(f: Objective, start: FloatArray, centre: FloatArray

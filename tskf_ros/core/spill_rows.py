@@ -1,3 +1,18 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Rows of one numpy dtype kept in a temporary file, read back a block at a time.
 
@@ -30,12 +45,17 @@ class SpillRows:
 
     def __init__(self, dtype: DTypeLike, block: int = BLOCK,
                  directory: Optional[str] = None) -> None:
+        # a row: one element of dtype (of dtype.base, shaped dtype.shape, for a sub-array)
         self.dtype = np.dtype(dtype)
+        self._base, self._shape = self.dtype.base, self.dtype.shape
         self.block = int(block)
-        self._buffer = np.zeros(self.block, self.dtype)
+        self._buffer = self._empty(self.block)
         self._fill = 0
         self._written = 0       # rows in the file
         self._file = tempfile.TemporaryFile(dir=directory)
+
+    def _empty(self, rows: int) -> NDArray:
+        return np.zeros((rows, *self._shape), self._base)
 
     def append(self, row: object) -> None:
         """Add a row (anything assignable to one element of the dtype)."""
@@ -46,7 +66,7 @@ class SpillRows:
 
     def extend(self, rows: NDArray) -> None:
         """Add rows (an array of the dtype)."""
-        rows = np.asarray(rows, dtype=self.dtype)
+        rows = np.asarray(rows, dtype=self._base)
         i = 0
         while i < len(rows):
             take = min(self.block - self._fill, len(rows) - i)
@@ -59,7 +79,7 @@ class SpillRows:
     def _flush(self) -> None:
         if not self._fill:
             return
-        data = memoryview(self._buffer[:self._fill].view(np.uint8))
+        data = self._buffer[:self._fill].reshape(-1).view(np.uint8).data
         offset = self._written * self.dtype.itemsize
         while len(data):
             done = os.pwrite(self._file.fileno(), data, offset)
@@ -74,10 +94,10 @@ class SpillRows:
         """Return rows start .. start + count - 1 (a new array)."""
         if start < 0 or count < 0 or start + count > len(self):
             raise IndexError(f'rows {start}..{start + count - 1} of {len(self)}')
-        out = np.empty(count, self.dtype)
+        out = self._empty(count)
         on_disk = max(0, min(count, self._written - start))
         if on_disk:
-            view = memoryview(out[:on_disk].view(np.uint8))
+            view = out[:on_disk].reshape(-1).view(np.uint8).data
             offset = start * self.dtype.itemsize
             while len(view):
                 done = os.preadv(self._file.fileno(), [view], offset)

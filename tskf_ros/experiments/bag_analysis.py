@@ -17,9 +17,10 @@
 Read a bag into a measurement and input stream, and evaluate the estimator on it.
 
 Memory: the events are kept as rows in a temporary file (`owc.stream_events.EventColumns`,
-41 bytes a measurement on disk, a block in memory), the truth topics as columns of (stamp, value) per joint (16 bytes a
-value), the session's final estimates as columns (`owc.trace_columns`) and the smoothed
-ones as the smoother's rows: no object per message is kept.
+41 bytes a measurement on disk, a block in memory), the truth topics as columns of
+(stamp, value) per joint (16 bytes a value), the session's final estimates as columns
+(`owc.trace_columns`) and the smoothed ones as the smoother's rows: no object per
+message is kept.
 """
 
 from collections import defaultdict

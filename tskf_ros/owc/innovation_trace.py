@@ -48,7 +48,8 @@ from tskf_ros.owc.stream_events import Event, EventColumns, Input, Measurement
 from tskf_ros.owc.trace_columns import EstimateColumns, InnovationColumns, TraceColumns
 
 __all__ = ['EstimateColumns', 'Event', 'EventColumns', 'fit_stream', 'Input',
-           'InnovationColumns', 'Measurement', 'run_stream', 'StreamFit', 'StreamRun', 'StreamRunner', 'TraceColumns']
+           'InnovationColumns', 'Measurement', 'run_stream', 'StreamFit', 'StreamRun',
+           'StreamRunner', 'TraceColumns']
 
 FloatArray = NDArray[np.float64]
 # a point of a segment: (segment, stamp ns)

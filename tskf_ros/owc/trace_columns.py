@@ -161,8 +161,9 @@ class TraceColumns(Sequence[Sequence[StepRecord]]):
             steps = self._steps.read(first, count)
             ys, us = self.y.read(first, count), self.u.read(first, count)
             for i, (mu, variance, has_y, has_u) in enumerate(steps.tolist()):
-                yield StepRecord(mu=mu, y=ys[i].copy() if has_y else None,
-                                 u=us[i].copy() if has_u else None, variance=variance)
+                yield StepRecord(mu=mu, y=ys[i].copy() if has_y and ys is not None else None,
+                                 u=us[i].copy() if has_u and us is not None else None,
+                                 variance=variance)
 
     def record(self, k: int) -> StepRecord:
         """Return step k (counted over all segments)."""
