@@ -79,17 +79,22 @@ def test_a_sub_array_dtype_reads_back_as_a_shaped_array():
 
 def test_the_file_has_no_name_and_is_freed_on_close_and_on_error(tmp_path):
     spill = SpillRows(np.float64, block=8, directory=str(tmp_path))
-    spill.extend(np.arange(100.0))
+    spill.extend(np.arange(7.0))
+    assert open_files_in(tmp_path) == []           # no file for what fits in memory
+    spill.extend(np.arange(7.0, 100.0))
     assert list(tmp_path.iterdir()) == []          # never a name a crash could leave
     assert len(open_files_in(tmp_path)) == 1
     spill.close()
     assert spill.closed and open_files_in(tmp_path) == []
+    with pytest.raises(ValueError, match='closed'):
+        spill.read(0, 1)
     with pytest.raises(KeyboardInterrupt):
-        with SpillRows(np.float64, directory=str(tmp_path)) as spill:
+        with SpillRows(np.float64, block=4, directory=str(tmp_path)) as spill:
             spill.extend(np.arange(10.0))
+            assert len(open_files_in(tmp_path)) == 1
             raise KeyboardInterrupt
     assert spill.closed and open_files_in(tmp_path) == []
     # dropped without close (an exception unwinding the frames that held it)
-    SpillRows(np.float64, directory=str(tmp_path)).extend(np.arange(10.0))
+    SpillRows(np.float64, block=4, directory=str(tmp_path)).extend(np.arange(10.0))
     gc.collect()
     assert open_files_in(tmp_path) == [] and list(tmp_path.iterdir()) == []

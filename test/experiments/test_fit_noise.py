@@ -33,7 +33,7 @@ import pytest
 from rclpy.serialization import serialize_message
 from stderr_lines import one_line
 from tskf_ros.bag.writer import BagWriter
-from tskf_ros.core import noise_fit
+from tskf_ros.core import noise_fit, spill_rows
 from tskf_ros.core.noise_fit import run_trace
 from tskf_ros.experiments import fit_noise
 from tskf_ros.experiments.bag_analysis import read_stream
@@ -530,6 +530,7 @@ def test_the_temporary_files_are_freed_on_ctrl_c_and_on_an_error(
     spill = tmp_path / 'spill'
     spill.mkdir()
     monkeypatch.setattr(tempfile, 'tempdir', str(spill))
+    monkeypatch.setattr(spill_rows, 'BLOCK', 64)       # files made for 2000 samples
     seen = []
     likelihood = noise_fit.trace_log_likelihood
 

@@ -29,7 +29,7 @@ No ROS.
 
 import os
 import tempfile
-from typing import Iterator, Optional
+from typing import IO, Iterator, Optional
 
 import numpy as np
 from numpy.typing import DTypeLike, NDArray
@@ -41,18 +41,24 @@ BLOCK = 16384
 
 
 class SpillRows:
-    """Rows of `dtype` appended at the end, read back in order a block at a time."""
+    """
+    Rows of `dtype` appended at the end, read back in order a block at a time.
 
-    def __init__(self, dtype: DTypeLike, block: int = BLOCK,
+    block: rows kept in memory (default BLOCK); the file is made when they are first full.
+    """
+
+    def __init__(self, dtype: DTypeLike, block: Optional[int] = None,
                  directory: Optional[str] = None) -> None:
         # a row: one element of dtype (of dtype.base, shaped dtype.shape, for a sub-array)
         self.dtype = np.dtype(dtype)
         self._base, self._shape = self.dtype.base, self.dtype.shape
-        self.block = int(block)
+        self.block = int(BLOCK if block is None else block)
         self._buffer = self._empty(self.block)
         self._fill = 0
         self._written = 0       # rows in the file
-        self._file = tempfile.TemporaryFile(dir=directory)
+        self._directory = directory
+        self._file: Optional[IO[bytes]] = None      # made when the first block is full
+        self._closed = False
 
     def _empty(self, rows: int) -> NDArray:
         return np.zeros((rows, *self._shape), self._base)
@@ -79,6 +85,10 @@ class SpillRows:
     def _flush(self) -> None:
         if not self._fill:
             return
+        if self._closed:
+            raise ValueError('rows added to a closed SpillRows')
+        if self._file is None:
+            self._file = tempfile.TemporaryFile(dir=self._directory)
         data = self._buffer[:self._fill].reshape(-1).view(np.uint8).data
         offset = self._written * self.dtype.itemsize
         while len(data):
@@ -97,6 +107,8 @@ class SpillRows:
         out = self._empty(count)
         on_disk = max(0, min(count, self._written - start))
         if on_disk:
+            if self._file is None or self._closed:
+                raise ValueError('rows read from a closed SpillRows')
             view = out[:on_disk].reshape(-1).view(np.uint8).data
             offset = start * self.dtype.itemsize
             while len(view):
@@ -117,12 +129,14 @@ class SpillRows:
 
     def close(self) -> None:
         """Free the file (the rows are gone)."""
-        self._file.close()
+        self._closed = True
+        if self._file is not None:
+            self._file.close()
 
     @property
     def closed(self) -> bool:
         """Return whether the file is freed."""
-        return self._file.closed
+        return self._closed
 
     def __enter__(self) -> 'SpillRows':
         return self

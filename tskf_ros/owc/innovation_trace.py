@@ -250,7 +250,8 @@ class StreamRunner:
         """Make every point final; return what the session did."""
         col = self.col
         col.finish()
-        return StreamRun(col.trace or TraceColumns(), col.innovations, col.estimates,
+        return StreamRun(col.trace if col.trace is not None else TraceColumns(),
+                         col.innovations, col.estimates,
                          self.session.stats, self.measurements, self.inputs, self.gated,
                          col.steps)
 
