@@ -17,8 +17,9 @@
 
 import numpy as np
 import pytest
+import scipy.stats
 
-from tskf_ros.core.nis_check import nis_summary
+from tskf_ros.core.nis_check import nis_summary, nis_summary_of
 
 
 def test_nis_band_is_the_chi_square_band_of_the_mean():
@@ -34,3 +35,18 @@ def test_nis_band_is_the_chi_square_band_of_the_mean():
 def test_no_innovations_judge_nothing():
     s = nis_summary([], 1)
     assert s['n'] == 0 and s['consistent'] is None and s['mean'] is None
+
+
+@pytest.mark.parametrize('p', [1, 2, 4])
+def test_the_summary_from_sums_is_the_definition(p):
+    # mean = np.mean, fraction = the share inside the single chi2(p) band, written out here
+    rng = np.random.default_rng(p)
+    nis = rng.chisquare(p, 10_001) * 1.03
+    alpha = 1.0 - 0.95
+    lo, hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], p)
+    inside = int(np.count_nonzero((nis >= lo) & (nis <= hi)))
+    s = nis_summary_of(nis.size, np.sum(nis), inside, p)
+    assert s == nis_summary(nis, p)
+    assert s['mean'] == float(np.mean(nis)) and s['fraction_in_band'] == float(
+        np.mean((nis >= lo) & (nis <= hi)))
+    assert s['single_band'] == [float(lo), float(hi)]

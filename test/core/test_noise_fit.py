@@ -23,8 +23,10 @@ NIS band against the chi-square distribution of the mean.
 import numpy as np
 import pytest
 
+from tskf_ros.core import noise_fit
 from tskf_ros.core.linear_models import LinearModel
-from tskf_ros.core.noise_fit import negative_log_likelihood, run_trace, StepRecord
+from tskf_ros.core.noise_fit import (data_scale, negative_log_likelihood, NoiseParameters,
+                                     run_trace, StepRecord, trace_log_likelihood)
 
 
 def scalar_log_likelihood(mu, y, variance, a, q, r, x0, p0):
@@ -72,3 +74,53 @@ def test_log_likelihood_is_a_scalar_filter_written_out():
     model = LinearModel('sim', A=np.array([[a]]), C=np.array([[1.0]]), Q=np.array([[q]]),
                         R=np.array([[r]]), x0=np.array([0.0]), P0=np.array([[1.0]]))
     assert -negative_log_likelihood(model, 'euler', half) == pytest.approx(want, rel=1e-10)
+
+
+def two_state_trace(n: int, seed: int) -> tuple[LinearModel, list]:
+    """Return a 2-state, 2-output model and a trace of n steps in three segments."""
+    rng = np.random.default_rng(seed)
+    model = LinearModel('two', A=np.array([[-0.2, 1.0], [0.0, -0.5]]), C=np.eye(2),
+                        Q=np.diag([0.03, 0.2]), R=np.diag([0.5, 2.0]), x0=np.zeros(2),
+                        P0=np.eye(2))
+    mu = rng.uniform(0.5, 1.5, n)
+    ys = rng.standard_normal((n, 2)) * np.exp2(rng.uniform(-10, 10, (n, 1)))
+    steps = [StepRecord(m, None if rng.random() < 0.1 else y,
+                        variance=float(rng.uniform(0.1, 1.0)) if rng.random() < 0.2 else 0.0)
+             for m, y in zip(mu, ys)]
+    return model, [steps[:n // 5], steps[n // 5:n // 2], steps[n // 2:]]
+
+
+def test_the_likelihood_in_blocks_is_the_whole_runs_bit_for_bit(monkeypatch):
+    # blocks of 64 innovations (4096 by default): the NIS and log det S summed as np.sum
+    # sums the whole columns, so the value is run_trace's to the last bit
+    monkeypatch.setattr(noise_fit, 'TRACE_BLOCK', 64)
+    model, trace = two_state_trace(3000, 11)
+    whole = run_trace(model, 'euler', trace)
+    assert whole.count == sum(r.y is not None for seg in trace for r in seg) > 2000
+    streamed = trace_log_likelihood(model, 'euler', trace)
+    assert np.float64(streamed).tobytes() == np.float64(whole.log_likelihood()).tobytes()
+    assert negative_log_likelihood(model, 'euler', trace) == -streamed
+    blocks = list(noise_fit.innovation_blocks(model, 'euler', trace, block=64))
+    assert max(len(e) for e, _ in blocks) == 64
+    np.testing.assert_array_equal(np.concatenate([e for e, _ in blocks]), whole.e)
+
+
+def test_the_data_scale_is_the_medians_of_the_differences_in_memory():
+    model, trace = two_state_trace(5000, 4)
+    par = NoiseParameters(2, 2)
+    theta0 = par.start(model.Q, model.R)
+    dys, dts = [], []
+    for seg in trace:
+        t, last = 0.0, None
+        for rec in seg:
+            if rec.y is not None:
+                if last is not None and t > last[0]:
+                    dys.append(rec.y - last[1])
+                    dts.append(t - last[0])
+                last = (t, rec.y)
+            t += rec.mu
+    v = np.median(np.square(dys), axis=0) / 0.455
+    dt = float(np.median(dts))
+    want = np.log(np.concatenate([np.full(2, np.mean(v) / dt), v * dt / 2.0]))
+    # C G = I: |(C G)_j|^2 = 1
+    np.testing.assert_array_equal(data_scale(model, trace, par, theta0), want)

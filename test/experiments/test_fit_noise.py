@@ -22,15 +22,18 @@ mu_k = t_{k+1} - t_k (Bohner & Wintz's white noise over one point of measure mu)
 likelihood is checked against a scalar Kalman filter written out in this file.
 """
 
+import gc
 import json
+import os
 from pathlib import Path
+import tempfile
 
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
 from stderr_lines import one_line
 from tskf_ros.bag.writer import BagWriter
-from tskf_ros.core import noise_fit
+from tskf_ros.core import noise_fit, spill_rows
 from tskf_ros.core.noise_fit import run_trace
 from tskf_ros.experiments import fit_noise
 from tskf_ros.experiments.bag_analysis import read_stream
@@ -500,3 +503,48 @@ def test_the_likelihood_is_shown_as_it_improves(sim, monkeypatch, capsys):
     assert fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
                            '--fix', 'R', '-q']) == 0
     assert ''.join(term.text) == ''
+
+
+def open_files_in(folder: Path) -> list[str]:
+    """Return the targets of this process's descriptors inside folder."""
+    out = []
+    for fd in os.listdir('/proc/self/fd'):
+        try:
+            target = os.readlink(f'/proc/self/fd/{fd}')
+        except OSError:
+            continue
+        if target.startswith(str(folder)):
+            out.append(target)
+    return out
+
+
+@pytest.mark.parametrize('stop, code, text', [
+    (KeyboardInterrupt, 130, 'interrupted'),
+    (lambda: OSError(28, 'No space left on device'), 1, 'No space left on device')])
+def test_the_temporary_files_are_freed_on_ctrl_c_and_on_an_error(
+        sim, tmp_path, capsys, monkeypatch, stop, code, text):
+    # the events, the filter steps and the innovations are in temporary files while the
+    # likelihood is maximised; a Ctrl-C or an error (a full disk) in the middle of it
+    # leaves none open, and none ever had a name in the folder
+    d = sim[0]
+    spill = tmp_path / 'spill'
+    spill.mkdir()
+    monkeypatch.setattr(tempfile, 'tempdir', str(spill))
+    monkeypatch.setattr(spill_rows, 'BLOCK', 64)       # files made for 2000 samples
+    seen = []
+    likelihood = noise_fit.trace_log_likelihood
+
+    def stopped(*args, **kwargs):
+        seen.append(len(open_files_in(spill)))
+        if len(seen) == 3:
+            raise stop()
+        return likelihood(*args, **kwargs)
+    monkeypatch.setattr(noise_fit, 'trace_log_likelihood', stopped)
+    js = tmp_path / 'f.json'
+    rc = fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
+                         '--json', str(js)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == code and len(err) == 1 and text in err[0], err
+    assert seen[-1] >= 3                    # events, steps, innovations were open then
+    gc.collect()
+    assert open_files_in(spill) == [] and list(spill.iterdir()) == [] and not js.exists()

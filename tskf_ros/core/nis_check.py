@@ -41,6 +41,13 @@ class NisSummary(TypedDict):
     level: float
 
 
+def single_band(p: int, level: float = 0.95) -> tuple[float, float]:
+    """Return the two-sided `level` band of one chi2(p) variable."""
+    alpha = 1.0 - level
+    lo, hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], p)
+    return float(lo), float(hi)
+
+
 def nis_summary(nis: ArrayLike, p: int, level: float = 0.95) -> NisSummary:
     """
     Return the NIS consistency check of N innovations of dimension p.
@@ -50,15 +57,26 @@ def nis_summary(nis: ArrayLike, p: int, level: float = 0.95) -> NisSummary:
     values inside the chi2(p) band of the same level (expected: `level`).
     """
     nis = np.asarray(nis, dtype=float)
-    n = int(nis.size)
+    one_lo, one_hi = single_band(p, level)
+    return nis_summary_of(int(nis.size), np.sum(nis),
+                          int(np.count_nonzero((nis >= one_lo) & (nis <= one_hi))), p, level)
+
+
+def nis_summary_of(n: int, total: float, inside: int, p: int,
+                   level: float = 0.95) -> NisSummary:
+    """
+    Return nis_summary of N values from their sum and how many are inside the single band.
+
+    What a stream's NIS are summed into, without keeping them (the same numbers as
+    nis_summary given the values, for the same sum).
+    """
     alpha = 1.0 - level
     if n == 0:
         return {'n': 0, 'mean': None, 'band': [None, None], 'consistent': None,
                 'fraction_in_band': None, 'level': level}
     lo, hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], n * p) / n
-    one_lo, one_hi = scipy.stats.chi2.ppf([alpha / 2, 1 - alpha / 2], p)
-    mean = float(np.mean(nis))
-    inside = float(np.mean((nis >= one_lo) & (nis <= one_hi)))
+    one_lo, one_hi = single_band(p, level)
+    mean = float(np.float64(total) / n)
     return {'n': n, 'mean': mean, 'expected': float(p), 'band': [float(lo), float(hi)],
-            'consistent': bool(lo <= mean <= hi), 'fraction_in_band': inside,
-            'single_band': [float(one_lo), float(one_hi)], 'level': level}
+            'consistent': bool(lo <= mean <= hi), 'fraction_in_band': inside / n,
+            'single_band': [one_lo, one_hi], 'level': level}

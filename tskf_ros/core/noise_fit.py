@@ -27,14 +27,16 @@ doc/design/core.md.
 """
 
 from dataclasses import dataclass, field, replace
-from typing import Callable, Optional, Sequence
+from typing import Callable, Iterator, Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 import scipy.optimize
 
-from tskf_ros.core.growing_column import Column
 from tskf_ros.core.linear_models import LinearModel
+from tskf_ros.core.pairwise_sum import PairwiseSum
+from tskf_ros.core.spill_rows import SpillRows
+from tskf_ros.core.streamed_median import median
 from tskf_ros.core.timescale_kalman import FilterError
 
 LOG_2PI = float(np.log(2.0 * np.pi))
@@ -86,7 +88,12 @@ class Innovations:
     def log_likelihood(self) -> float:
         """Return log L = -1/2 sum [log det S + e^T S^-1 e + p log 2 pi]."""
         p = self.e.shape[1] if self.e.ndim == 2 else 1
-        return -0.5 * float(np.sum(self.log_det_S) + np.sum(self.nis) + self.count * p * LOG_2PI)
+        return log_likelihood_of(np.sum(self.log_det_S), np.sum(self.nis), self.count, p)
+
+
+def log_likelihood_of(sum_log_det: float, sum_nis: float, count: int, p: int) -> float:
+    """Return log L = -1/2 [sum log det S_k + sum NIS_k + N p log 2 pi] from the sums."""
+    return -0.5 * float(sum_log_det + sum_nis + count * p * LOG_2PI)
 
 
 def innovation_terms(e: FloatArray, S: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -102,17 +109,24 @@ def with_noise(model: LinearModel, Q: ArrayLike, R: ArrayLike) -> LinearModel:
     return replace(model, Q=np.asarray(Q, dtype=float), R=np.asarray(R, dtype=float))
 
 
-def run_trace(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRecord]]
-              ) -> Innovations:
+# measurement steps whose innovations are made at a time
+TRACE_BLOCK = 4096
+
+
+def innovation_blocks(model: LinearModel, transition: str,
+                      segments: Sequence[Sequence[StepRecord]], block: int = TRACE_BLOCK
+                      ) -> Iterator[tuple[FloatArray, FloatArray]]:
     """
-    Run the core filter's step over the trace; return the innovations of measurement steps.
+    Run the core filter's step over the trace; yield (e_k, S_k) of measurement steps in blocks.
 
     Each segment starts from a fresh filter (x0, P0).  A step with a sample variance
     (use_message_variance) is run with R = variance * mu, so that R / mu is that variance,
-    as the estimator session does.  Raises FilterError if a step fails.
+    as the estimator session does.  Raises FilterError if a step fails.  At most `block`
+    steps are kept at a time: a trace of any length runs in bounded memory.
     """
     p = model.C.shape[0]
-    es, Ss = Column(np.float64, (p,)), Column(np.float64, (p, p))
+    es, Ss = np.empty((block, p)), np.empty((block, p, p))
+    k = 0
     for segment in segments:
         kf = model.make_filter(transition, allow_nonregressive=True)
         R_model = kf.R
@@ -126,13 +140,53 @@ def run_trace(model: LinearModel, transition: str, segments: Sequence[Sequence[S
             else:
                 res = kf.step(rec.mu, rec.y, rec.u)
             if rec.y is not None:
-                es.append(res.innovation)
-                Ss.append(res.S)
-    if not len(es):
+                es[k] = res.innovation
+                Ss[k] = res.S
+                k += 1
+                if k == block:
+                    yield es.copy(), Ss.copy()
+                    k = 0
+    if k:
+        yield es[:k].copy(), Ss[:k].copy()
+
+
+def run_trace(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRecord]]
+              ) -> Innovations:
+    """Run the core filter's step over the trace (innovation_blocks); return the innovations."""
+    p = model.C.shape[0]
+    blocks = list(innovation_blocks(model, transition, segments))
+    if not blocks:
         return Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0), np.zeros(0))
-    e, S = es.view(), Ss.view()
+    e = np.concatenate([b[0] for b in blocks])
+    S = np.concatenate([b[1] for b in blocks])
     nis, log_det = innovation_terms(e, S)
     return Innovations(e, S, nis, log_det)
+
+
+def measurement_steps(segments: Sequence[Sequence[StepRecord]]) -> int:
+    """Return the number of steps with a measurement (a trace's own count, if it keeps one)."""
+    count = getattr(segments, 'measurement_steps', None)
+    if count is not None:
+        return int(count)
+    return sum(rec.y is not None for segment in segments for rec in segment)
+
+
+def trace_log_likelihood(model: LinearModel, transition: str,
+                         segments: Sequence[Sequence[StepRecord]]) -> float:
+    """
+    Return log L of the trace (run_trace(...).log_likelihood()) in bounded memory.
+
+    The NIS and log det S of each block of innovations are added up as np.sum adds the
+    whole columns (PairwiseSum): the same number, bit for bit, without keeping them.
+    """
+    n = measurement_steps(segments)
+    sum_nis, sum_log_det = PairwiseSum(n), PairwiseSum(n)
+    p = model.C.shape[0]
+    for e, S in innovation_blocks(model, transition, segments):
+        nis, log_det = innovation_terms(e, S)
+        sum_nis.add(nis)
+        sum_log_det.add(log_det)
+    return log_likelihood_of(sum_log_det.total(), sum_nis.total(), n, p)
 
 
 @dataclass(frozen=True)
@@ -190,8 +244,7 @@ def negative_log_likelihood(model: LinearModel, transition: str,
     """Return -log L of the trace under the model's Q and R (inf if a step fails)."""
     try:
         with np.errstate(all='ignore'):
-            inn = run_trace(model, transition, segments)
-            value = -inn.log_likelihood()
+            value = -trace_log_likelihood(model, transition, segments)
     except (FilterError, np.linalg.LinAlgError, ArithmeticError):
         return float('inf')
     return value if np.isfinite(value) else float('inf')
@@ -275,7 +328,16 @@ def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
     R_ii = v_i dt / 2 (R / mu per sample, twice per difference), or all on the process
     noise, Q_jj = mean(v) / (dt |(C G)_j|^2), with dt the median spacing.
     """
-    dys, dts = Column(np.float64, (model.C.shape[0],)), Column(np.float64)
+    p = model.C.shape[0]
+    with SpillRows(np.dtype((np.float64, (p,)))) as dys, SpillRows(np.float64) as dts:
+        return _data_scale(model, segments, par, theta0, dys, dts)
+
+
+def _data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
+                par: NoiseParameters, theta0: FloatArray, dys: SpillRows, dts: SpillRows
+                ) -> FloatArray:
+    """data_scale with the differences kept in dys and dts (temporary files)."""
+    p = model.C.shape[0]
     for segment in segments:
         t, last = 0.0, None
         for rec in segment:
@@ -290,8 +352,9 @@ def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
     if len(dys) < 2:
         return theta
     with np.errstate(all='ignore'):
-        v = np.median(np.square(dys.view()), axis=0) / 0.455
-        dt = float(np.median(dts.view()))
+        # np.median(np.square(dys), axis=0), np.median(dts): a block of rows at a time
+        v = np.array([median(_column_squared(dys, i)) for i in range(p)]) / 0.455
+        dt = float(median(dts.blocks))
         G = model.G if model.G is not None else np.eye(model.A.shape[0])
         cg = np.sum(np.square(model.C @ G), axis=0)
         k = 0
@@ -304,6 +367,11 @@ def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
             theta[k:k + par.p] = np.where(np.isfinite(r) & (r > 0), np.log(r),
                                           theta[k:k + par.p])
     return theta
+
+
+def _column_squared(rows: SpillRows, i: int) -> Callable[[], Iterator[FloatArray]]:
+    """Return blocks(): the squares of column i of rows, a block at a time."""
+    return lambda: (np.square(block[:, i]) for block in rows.blocks())
 
 
 def _search(f: Objective, start: FloatArray, centre: FloatArray

@@ -16,10 +16,11 @@
 """
 Read a bag into a measurement and input stream, and evaluate the estimator on it.
 
-Memory: the events are kept as columns (`owc.stream_events.EventColumns`, about 41 bytes
-a measurement), the truth topics as columns of (stamp, value) per joint (16 bytes a
-value), the session's final estimates as columns (`owc.trace_columns`) and the smoothed
-ones as the smoother's rows: no object per message is kept.
+Memory: the events are kept as rows in a temporary file (`owc.stream_events.EventColumns`,
+41 bytes a measurement on disk, a block in memory), the truth topics as columns of
+(stamp, value) per joint (16 bytes a value), the session's final estimates as columns
+(`owc.trace_columns`) and the smoothed ones as the smoother's rows: no object per
+message is kept.
 """
 
 from collections import defaultdict
@@ -38,7 +39,6 @@ from tskf_ros.bag.replay.model_check import check_model
 from tskf_ros.bag.replay.rts_replay import SmoothedRows, SmoothingRecorder
 from tskf_ros.bag.replay.topic_choice import choose_input_topic, choose_topic
 from tskf_ros.core.growing_column import Column
-from tskf_ros.core.nis_check import nis_summary
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import SLOTS, STATES_TYPE
 from tskf_ros.messages.estimator_interface import extractor, INPUT_TYPE, NodeConfig
@@ -231,8 +231,7 @@ def stream_metrics(run: StreamRun, stream: Stream, config: EstimatorConfig,
                    smoothed: Optional[SmoothedRows] = None) -> dict:
     """Return the metrics of METRICS for a session run over a stream (and its smoothing)."""
     st = run.stats
-    p = config.model.C.shape[0]
-    nis = nis_summary(run.innovations.nis, p)
+    nis = run.innovations.nis_summary()
     truth_topic, names, points, rms_c, rms_p, rms_s = truth_errors(
         run, stream, tuple(config.model.state_names), smoothed)
     out = {'n_messages': run.measurements, 'accepted': st.accepted, 'inputs': run.inputs,

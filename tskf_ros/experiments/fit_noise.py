@@ -37,7 +37,6 @@ from tskf_ros.bag.message_types import BagTypeError
 from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.progress import Interrupts
 from tskf_ros.bag.reader import BagError, error_exit, exit_status
-from tskf_ros.core.nis_check import nis_summary
 from tskf_ros.core.noise_fit import (FitError, FitProgress, FitResult, LOG_SEARCH_RADIUS,
                                      negative_log_likelihood, RECENTRES)
 from tskf_ros.experiments.bag_analysis import read_stream
@@ -90,7 +89,6 @@ def fit_events(config: EstimatorConfig, events: Iterable[Event], *, fit_Q: bool 
     """
     sf = fit_stream(config, events, fit_Q=fit_Q, fit_R=fit_R, progress=progress)
     res, run = sf.result, sf.run
-    p = config.model.C.shape[0]
     # the parameter file's own Q and R on the same steps, for a likelihood-ratio test
     base = replace(config, gate=0.0, use_message_variance=False)
     trace = run_stream(base, without(events, sf.excluded))
@@ -117,7 +115,7 @@ def fit_events(config: EstimatorConfig, events: Iterable[Event], *, fit_Q: bool 
         'log_likelihood_trace': res.log_likelihood,
         'parameters': res.names, 'log_parameters': res.theta,
         'log_stderr': res.theta_stderr, 'covariance_log_parameters': res.covariance_log,
-        'nis': nis_summary(run.innovations.nis, p),
+        'nis': run.innovations.nis_summary(),
         'n': run.innovations.count, 'samples': run.measurements, 'inputs': run.inputs,
         'gaps': st.gaps_total, 'gap_max_s': max(st.gaps.values()) if st.gaps else 0.0,
         'resets': {r: n for r, n in st.resets.items() if n},

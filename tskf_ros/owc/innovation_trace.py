@@ -40,16 +40,16 @@ from typing import Callable, Iterable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from tskf_ros.core.growing_column import Column
-from tskf_ros.core.noise_fit import (fit, FitError, FitProgress, FitResult, innovation_terms,
-                                     Innovations, StepRecord, with_noise)
+from tskf_ros.core.noise_fit import (fit, FitError, FitProgress, FitResult, StepRecord,
+                                     with_noise)
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session import EstimatorConfig, EstimatorSession, Outcome, Stats
 from tskf_ros.owc.stream_events import Event, EventColumns, Input, Measurement
-from tskf_ros.owc.trace_columns import EstimateColumns, TraceColumns
+from tskf_ros.owc.trace_columns import EstimateColumns, InnovationColumns, TraceColumns
 
-__all__ = ['EstimateColumns', 'Event', 'EventColumns', 'fit_stream', 'Input', 'Measurement',
-           'run_stream', 'StreamFit', 'StreamRun', 'StreamRunner', 'TraceColumns']
+__all__ = ['EstimateColumns', 'Event', 'EventColumns', 'fit_stream', 'Input',
+           'InnovationColumns', 'Measurement', 'run_stream', 'StreamFit', 'StreamRun',
+           'StreamRunner', 'TraceColumns']
 
 FloatArray = NDArray[np.float64]
 # a point of a segment: (segment, stamp ns)
@@ -65,8 +65,8 @@ FINAL_AT_ONCE = 4096
 class StreamRun:
     """What a session did over a stream (see the module docstring)."""
 
-    segments: TraceColumns
-    innovations: Innovations
+    segments: TraceColumns                  # (temporary files: close() frees them)
+    innovations: InnovationColumns
     estimates: Optional[EstimateColumns]    # x(t|t) and xhat(t) (if asked for)
     stats: Stats
     measurements: int
@@ -107,7 +107,7 @@ class _Collector:
         self.final: Optional[Key] = None
         self.steps = 0
         self.trace = TraceColumns() if trace else None
-        self.e, self.S = Column(np.float64, (p,)), Column(np.float64, (p, p))
+        self.innovations = InnovationColumns(p)
         self.estimates = EstimateColumns() if estimates else None
 
     def new_segment(self) -> None:
@@ -180,10 +180,10 @@ class _Collector:
                     u=self.u_at(seg, t),
                     variance=(meas[1] if meas is not None
                               and self.config.use_message_variance else 0.0)))
-        for key in sorted(k for k in self.terms if k <= last):
-            e, S = self.terms.pop(key)
-            self.e.append(e)
-            self.S.append(S)
+        final = [self.terms.pop(key) for key in sorted(k for k in self.terms if k <= last)]
+        if final:
+            self.innovations.extend(np.array([e for e, _ in final]),
+                                    np.array([S for _, S in final]))
         points = sorted({k for k in self.corr if k <= last}
                         | {k for k in self.pred if k <= last})
         for key in points:
@@ -250,15 +250,8 @@ class StreamRunner:
         """Make every point final; return what the session did."""
         col = self.col
         col.finish()
-        e, S = col.e.view(), col.S.view()
-        if len(e):
-            nis, log_det = innovation_terms(e, S)
-            innovations = Innovations(e, S, nis, log_det)
-        else:
-            p = self.config.model.C.shape[0]
-            innovations = Innovations(np.zeros((0, p)), np.zeros((0, p, p)), np.zeros(0),
-                                      np.zeros(0))
-        return StreamRun(col.trace or TraceColumns(), innovations, col.estimates,
+        return StreamRun(col.trace if col.trace is not None else TraceColumns(),
+                         col.innovations, col.estimates,
                          self.session.stats, self.measurements, self.inputs, self.gated,
                          col.steps)
 

@@ -14,17 +14,18 @@
 # limitations under the License.
 
 """
-The events of a recorded stream (measurements and inputs), kept as compact columns.
+The events of a recorded stream (measurements and inputs), kept as compact rows.
 
 A bag read for an analysis is fed to the estimator session more than once (fit_noise
 runs it once per round of its gate), so its events are kept; as objects they cost about
-0.3 KB a message, as columns 8 (4 + p) + 1 bytes a measurement (stamp, receiver time,
-variance, value, which kind) and 8 (1 + m) an input.  `EventColumns` is appended to as
-the bag is read and iterated as often as needed; each iteration makes the Measurement and
-Input objects one at a time, in the order they were added, with the values they were
-added with (float64).
+0.3 KB a message, as rows 8 (3 + p + m) + 1 bytes an event (which kind, stamp, receiver
+time, variance, value, input), in a temporary file (`core.spill_rows`: a block in
+memory, whatever the bag's length).  `EventColumns` is appended to as the bag is read
+and iterated as often as needed; each iteration makes the Measurement and Input objects
+one at a time, in the order they were added, with the values they were added with
+(float64).
 
-No ROS, no I/O.
+No ROS.
 """
 
 from dataclasses import dataclass
@@ -33,12 +34,10 @@ from typing import AbstractSet, Iterator, Optional, Union
 import numpy as np
 from numpy.typing import ArrayLike
 
-from tskf_ros.core.growing_column import Column
+from tskf_ros.core.spill_rows import SpillRows
 
-__all__ = ['Column', 'Event', 'EventColumns', 'Input', 'Measurement']
+__all__ = ['Event', 'EventColumns', 'Input', 'Measurement']
 
-# events made into objects at a time
-_BLOCK = 4096
 # kinds of row
 _MEASUREMENT, _INPUT = 0, 1
 # a measurement without a receiver time (log_ns None)
@@ -68,20 +67,19 @@ Event = Union[Measurement, Input]
 
 class EventColumns:
     """
-    Measurements and inputs in arrival order, as columns; iterate for the events.
+    Measurements and inputs in arrival order, as rows; iterate for the events.
 
     p: values per measurement; m: values per input.  A measurement's value is kept with p
-    entries (a scalar when p = 1, as read), an input's u with m.
+    entries (a scalar when p = 1, as read), an input's u with m.  The rows are in a
+    temporary file: close() frees it (so does the end of the process, however it ends).
     """
 
     def __init__(self, p: int = 1, m: int = 1) -> None:
         self.p, self.m = p, m
-        self.kind = Column(np.int8)
-        self.stamp = Column(np.int64)
-        self.log_ns = Column(np.int64)        # measurements only, in their order
-        self.variance = Column(np.float64)
-        self.value = Column(np.float64, (p,))
-        self.u = Column(np.float64, (m,))    # inputs only, in their order
+        self.rows = SpillRows(np.dtype([
+            ('kind', np.int8), ('stamp', np.int64), ('log_ns', np.int64),
+            ('variance', np.float64), ('value', np.float64, (p,)), ('u', np.float64, (m,))]))
+        self._measurements = self._inputs = 0
 
     def append(self, event: Event) -> None:
         """Add an event (a Measurement or an Input) at the end."""
@@ -89,54 +87,51 @@ class EventColumns:
             u = np.asarray(event.u, dtype=float).reshape(-1)
             if u.size != self.m:
                 raise ValueError(f'an input of {u.size} values, expected {self.m}')
-            self.kind.append(_INPUT)
-            self.stamp.append(int(event.stamp_ns))
-            self.u.append(u)
+            self.rows.append((_INPUT, int(event.stamp_ns), _NO_LOG, 0.0, 0.0, u))
+            self._inputs += 1
             return
         value = np.asarray(event.value, dtype=float).reshape(-1)
         if value.size != self.p:
             raise ValueError(f'a measurement of {value.size} values, expected {self.p}')
-        self.kind.append(_MEASUREMENT)
-        self.stamp.append(int(event.stamp_ns))
-        self.log_ns.append(_NO_LOG if event.log_ns is None else int(event.log_ns))
-        self.variance.append(float(event.variance))
-        self.value.append(value)
+        self.rows.append((_MEASUREMENT, int(event.stamp_ns),
+                          _NO_LOG if event.log_ns is None else int(event.log_ns),
+                          float(event.variance), value, 0.0))
+        self._measurements += 1
 
     @property
     def measurements(self) -> int:
         """Return the number of measurements."""
-        return self.log_ns.count
+        return self._measurements
 
     @property
     def inputs(self) -> int:
         """Return the number of inputs."""
-        return self.u.count
+        return self._inputs
 
     def __len__(self) -> int:
-        return self.kind.count
+        return len(self.rows)
 
     def __iter__(self) -> Iterator[Event]:
         return self.events()
 
     def events(self, without: AbstractSet[int] = frozenset()) -> Iterator[Event]:
         """Yield the events in order, leaving out the measurements stamped in `without`."""
-        kinds, stamps = self.kind.view(), self.stamp.view()
-        logs, variances, values, us = (self.log_ns.view(), self.variance.view(),
-                                       self.value.view(), self.u.view())
         scalar = self.p == 1
-        i_m = i_u = 0
-        for start in range(0, len(kinds), _BLOCK):
+        for block in self.rows.blocks():
             # a block at a time as Python numbers: int64 and float64 scalars would leak
             # into the session's arithmetic
-            block = slice(start, start + _BLOCK)
-            for kind, stamp in zip(kinds[block].tolist(), stamps[block].tolist()):
+            values, us = block['value'], block['u']
+            rows = zip(block['kind'].tolist(), block['stamp'].tolist(),
+                       block['log_ns'].tolist(), block['variance'].tolist())
+            for i, (kind, stamp, log, variance) in enumerate(rows):
                 if kind == _INPUT:
-                    yield Input(stamp, us[i_u].copy())
-                    i_u += 1
+                    yield Input(stamp, us[i].copy())
                     continue
-                k, i_m = i_m, i_m + 1
                 if stamp in without:
                     continue
-                log = int(logs[k])
-                yield Measurement(stamp, float(values[k, 0]) if scalar else values[k].copy(),
-                                  float(variances[k]), None if log == _NO_LOG else log)
+                yield Measurement(stamp, float(values[i, 0]) if scalar else values[i].copy(),
+                                  variance, None if log == _NO_LOG else log)
+
+    def close(self) -> None:
+        """Free the temporary file (the events are gone)."""
+        self.rows.close()
