@@ -53,7 +53,7 @@ SWITCH = 'TSKF_AOT'           # 'off': never load the module (numba's dispatcher
 ENVIRONMENT = 'TSKF_AOT_DIR'    # a directory searched first (and built into, if writable)
 # what a node does without the module (the line a package build prints when it builds none)
 WITHOUT = ('the nodes will compile their kernels with numba in the background at start '
-           '(slower to start, with numba and LLVM in memory: about 130 MiB more)')
+           '(a slower start, about 130 MiB more memory), or interpret them without numba')
 # argument codes: a C-contiguous float64 vector 'v', matrix 'm', stack 's'; float64 'f';
 # boolean 'b'
 EXPORTS: tuple[tuple[str, str, str], ...] = (
@@ -216,14 +216,14 @@ def build_if_possible(output: Optional[Path] = None) -> tuple[Optional[Path], st
         from numba.core.errors import NumbaPendingDeprecationWarning  # noqa: I900 - to build
     except ImportError as exc:
         return None, (f'numba is not installed ({exc}): {WITHOUT}; to build them with the '
-                      'package, install numba (rosdep key python3-numba-pip) and build again')
+                      'package: install numba (rosdep key python3-numba-pip), build again')
     done = "the nodes' kernels compiled ahead of time: "
     if output is not None and (output / filename()).is_file():     # a build again
         return output / filename(), done + str(output / filename())
     compiler = (os.environ.get('CC') or sysconfig.get_config_var('CC') or 'cc').split()[0]
     if shutil.which(compiler) is None:
         return None, (f'no C compiler ({compiler}): {WITHOUT}; to build them with the '
-                      'package, install one (apt install gcc python3-dev) and build again')
+                      'package: apt install gcc python3-dev, build again')
     try:
         with warnings.catch_warnings():     # numba.pycc's pending deprecation (doc/)
             warnings.simplefilter('ignore', NumbaPendingDeprecationWarning)
