@@ -54,9 +54,11 @@ def _compile_kernels(root, output, numba_cache=None):
     result = subprocess.run(
         [sys.executable, '-m', 'tskf_ros.core.aot', '--if-possible', '--output', output],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    lines = result.stdout.strip().splitlines() or [f'exit status {result.returncode}']
-    built = result.returncode == 0 and 'compiled ahead of time: ' in lines[-1]
-    print(f'tskf_ros: {lines[-1]}', file=sys.stdout if built else sys.stderr)
+    line = (result.stdout.strip().splitlines() or [f'exit status {result.returncode}'])[-1]
+    if result.returncode:       # it did not even start (numpy missing, say)
+        line = f'the ahead-of-time build failed ({line}): the nodes will compile at start'
+    built = result.returncode == 0 and line.startswith("the nodes' kernels compiled")
+    print(f'tskf_ros: {line}', file=sys.stdout if built else sys.stderr)
 
 
 class BuildWithKernels(build_py):
@@ -64,7 +66,7 @@ class BuildWithKernels(build_py):
 
     def run(self):
         super().run()
-        if not self.editable_mode:      # pip install -e (./run builds them itself)
+        if not self.editable_mode:      # else the sources are used in place: see develop
             _compile_kernels(
                 self.build_lib, os.path.join(self.build_lib, package_name, 'core', '__pycache__'),
                 numba_cache=os.path.join(os.path.dirname(self.build_lib), 'numba_cache'))

@@ -23,13 +23,13 @@ import sys
 REPO = Path(__file__).resolve().parents[2]
 
 
-def test_a_build_without_numba_succeeds_and_says_so_in_one_line(tmp_path):
-    # what `colcon build` runs (setup.py build ... install), its build_py step alone
-    hidden = tmp_path / 'hide' / 'numba'
-    hidden.mkdir(parents=True)
-    (hidden / '__init__.py').write_text("raise ImportError(\"No module named 'numba'\")\n")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(hidden.parent)] + [p for p in [os.environ.get('PYTHONPATH')] if p]))
+def build_py(tmp_path, env: dict) -> tuple[str, Path]:
+    """
+    Run setup.py's build_py step, the first of `colcon build`'s, into tmp_path: it succeeds.
+
+    Return its one line 'tskf_ros: ...' (on stderr, which colcon shows: no module was built)
+    and the built package's core/.
+    """
     result = subprocess.run(
         [sys.executable, 'setup.py', '-q', 'build_py', '--build-lib', str(tmp_path / 'lib')],
         cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
@@ -37,9 +37,24 @@ def test_a_build_without_numba_succeeds_and_says_so_in_one_line(tmp_path):
     ours = [line for line in (result.stdout + result.stderr).splitlines()
             if line.startswith('tskf_ros:')]
     assert len(ours) == 1, result.stdout + result.stderr
-    assert ours[0] in result.stderr     # colcon shows a package's stderr
-    assert ours[0].startswith('tskf_ros: numba is not installed'), ours[0]
-    assert 'in the background' in ours[0]
+    assert ours[0] in result.stderr.splitlines(), result.stdout + result.stderr
     core = tmp_path / 'lib' / 'tskf_ros' / 'core'
     assert (core / 'aot.py').is_file()
     assert not list(core.glob('**/tskf_kernels_*'))
+    return ours[0], core
+
+
+def test_a_build_without_numba_succeeds_and_says_so_in_one_line(tmp_path):
+    hidden = tmp_path / 'hide' / 'numba'
+    hidden.mkdir(parents=True)
+    (hidden / '__init__.py').write_text("raise ImportError(\"No module named 'numba'\")\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(hidden.parent)] + [p for p in [os.environ.get('PYTHONPATH')] if p]))
+    line, _ = build_py(tmp_path, env)
+    assert line.startswith('tskf_ros: numba is not installed'), line
+    assert 'in the background' in line
+
+
+def test_a_build_with_the_switch_off_says_so_in_one_line(tmp_path):
+    line, _ = build_py(tmp_path, dict(os.environ, TSKF_AOT='off'))
+    assert line.startswith('tskf_ros: TSKF_AOT=off: not compiled ahead of time'), line
