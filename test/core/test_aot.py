@@ -16,6 +16,7 @@
 """The kernels compiled ahead of time against numba's dispatchers of the same sources."""
 
 import os
+from pathlib import Path
 import shutil
 import subprocess
 import sys
@@ -168,6 +169,19 @@ def test_a_module_already_built_is_not_built_again(tmp_path):
     path, line = aot.build_if_possible(tmp_path)
     assert path == tmp_path / aot.filename()
     assert line.endswith(str(path))
+
+
+def test_a_build_cut_short_leaves_no_module(tmp_path, monkeypatch):
+    numba_pycc = pytest.importorskip('numba.pycc', reason='numba is not installed')
+
+    def cut_short(self):
+        (Path(self.output_dir) / aot.filename()).write_bytes(b'half')   # what a kill leaves
+        raise KeyboardInterrupt     # raised through the build as a Ctrl-C would be
+
+    monkeypatch.setattr(numba_pycc.CC, 'compile', cut_short)
+    with pytest.raises(KeyboardInterrupt):
+        aot.build(tmp_path)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_numba_pycc_is_pending_deprecation_only():

@@ -185,7 +185,6 @@ def build(output: Optional[Path] = None) -> Path:
         raise OSError('no writable directory among ' + ', '.join(map(str, targets)))
     name = module_name()
     cc = CC(name)
-    cc.output_dir = str(target)
     for module, kernel, codes in EXPORTS:
         full = f'tskf_ros.core.{module}'
         k = getattr(importlib.import_module(full), kernel)
@@ -194,8 +193,13 @@ def build(output: Optional[Path] = None) -> Path:
         k.dispatcher.compile(arguments)     # its return type, as numba infers it
         signature = next(s for s in k.dispatcher.nopython_signatures if s.args == arguments)
         cc.export(export_name(full, kernel), signature)(k.dispatcher.py_func)
-    cc.compile()
     built = target / filename()
+    # compiled beside it, then renamed: a build cut short leaves no module under its name
+    import tempfile               # noqa: I900 - only to build
+    with tempfile.TemporaryDirectory(prefix='.building-', dir=target) as staging:
+        cc.output_dir = staging
+        cc.compile()
+        os.replace(Path(staging) / built.name, built)
     for old in target.glob('tskf_kernels_*'):      # modules of earlier sources
         if old != built:
             old.unlink(missing_ok=True)
