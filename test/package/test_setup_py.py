@@ -53,6 +53,8 @@ def test_a_build_without_numba_succeeds_and_says_so_in_one_line(tmp_path):
     line, _ = build_py(tmp_path, env)
     assert line.startswith('tskf_ros: numba is not installed'), line
     assert 'in the background' in line
+    # the line the installation page shows
+    assert line in (REPO / 'doc' / 'installation.md').read_text().splitlines()
 
 
 def test_a_build_with_the_switch_off_says_so_in_one_line(tmp_path):
