@@ -66,7 +66,7 @@ class BuildWithKernels(build_py):
 
     def run(self):
         super().run()
-        if not self.editable_mode:      # else the sources are used in place: see develop
+        if not getattr(self, 'editable_mode', False):   # else the sources are used in place
             _compile_kernels(
                 self.build_lib, os.path.join(self.build_lib, package_name, 'core', '__pycache__'),
                 numba_cache=os.path.join(os.path.dirname(self.build_lib), 'numba_cache'))
