@@ -15,9 +15,13 @@
 
 from glob import glob
 import os
+import subprocess
+import sys
 
 from setuptools import find_packages
 from setuptools import setup
+from setuptools.command.build_py import build_py
+from setuptools.command.develop import develop
 
 package_name = 'tskf_ros'
 
@@ -36,8 +40,57 @@ def _tree(top):
     return sorted(entries.items())
 
 
+def _compile_kernels(root, output, numba_cache=None):
+    """
+    Compile the nodes' kernels ahead of time into output (python -m tskf_ros.core.aot).
+
+    root holds the tskf_ros being installed; its aot module says in one line what it did,
+    and without numba or a C compiler the package builds all the same (doc/installation.md).
+    """
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [os.path.abspath(root)] + [p for p in [os.environ.get('PYTHONPATH')] if p]))
+    if numba_cache:
+        env.setdefault('NUMBA_CACHE_DIR', os.path.abspath(numba_cache))
+    result = subprocess.run(
+        [sys.executable, '-m', 'tskf_ros.core.aot', '--if-possible', '--output', output],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    line = (result.stdout.strip().splitlines() or [f'exit status {result.returncode}'])[-1]
+    if result.returncode:       # it did not even start (numpy missing, say)
+        line = f'the ahead-of-time build failed ({line}): the nodes will compile at start'
+    built = result.returncode == 0 and line.startswith("the nodes' kernels compiled")
+    print(f'tskf_ros: {line}', file=sys.stdout if built else sys.stderr)
+
+
+class BuildWithKernels(build_py):
+    """build_py, then the nodes' kernels into the built package's core/__pycache__."""
+
+    def run(self):
+        super().run()
+        if not getattr(self, 'editable_mode', False):   # else the sources are used in place
+            _compile_kernels(
+                self.build_lib, os.path.join(self.build_lib, package_name, 'core', '__pycache__'),
+                numba_cache=os.path.join(os.path.dirname(self.build_lib), 'numba_cache'))
+
+    def get_outputs(self, include_bytecode=1):
+        """Return build_py's files and the kernels' module (install --record lists them)."""
+        return super().get_outputs(include_bytecode) + _files(
+            os.path.join(self.build_lib, package_name, 'core', '__pycache__', 'tskf_kernels_*'))
+
+
+class DevelopWithKernels(develop):
+    """develop (colcon build --symlink-install), then the kernels beside the sources."""
+
+    def run(self):
+        super().run()
+        if not self.uninstall:
+            core = os.path.realpath(os.path.join(package_name, 'core'))
+            _compile_kernels(os.path.dirname(os.path.dirname(core)),
+                             os.path.join(core, '__pycache__'))
+
+
 setup(
     name=package_name,
+    cmdclass={'build_py': BuildWithKernels, 'develop': DevelopWithKernels},
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[

@@ -134,6 +134,26 @@ def install(tmp_path_factory):
     return workspace / 'install'
 
 
+def test_the_nodes_kernels_are_compiled_into_the_install(install):
+    """The workspace's build compiled the nodes' kernels ahead of time into its install."""
+    import sysconfig
+
+    pytest.importorskip('numba', reason='numba is not installed: the build compiles nothing')
+    compiler = (os.environ.get('CC') or sysconfig.get_config_var('CC') or 'cc').split()[0]
+    if shutil.which(compiler) is None:
+        pytest.skip(f'no C compiler ({compiler}): the build compiles nothing')
+    code = ('import sys; from tskf_ros.core import aot; module = aot.load(); '
+            'print(module.__file__ if module else None); print("numba" in sys.modules)')
+    # -P: not the working directory's tskf_ros (a checkout's) but the workspace's
+    result = in_sourced_workspace(install, sys.executable, '-P', '-c', code)
+    assert result.returncode == 0, result.stdout + result.stderr
+    path, numba_loaded = result.stdout.split()
+    # <install>/tskf_ros/lib/pythonX.Y/site-packages/tskf_ros/core/__pycache__/<module>
+    assert Path(path).is_relative_to(install / PACKAGE), path
+    assert Path(path).parts[-4:-1] == (PACKAGE, 'core', '__pycache__'), path
+    assert numba_loaded == 'False'
+
+
 def test_setup_declares_executables():
     assert console_scripts(), 'setup.py declares no console_scripts'
 

@@ -25,20 +25,25 @@ them from the same Python sources as numba's just-in-time dispatchers.
 
     python -m tskf_ros.core.aot [--output DIR]
 
-builds the module (about 1 to 3 minutes; a C compiler is needed) into DIR, else the first
-writable of the package's `core/__pycache__` and the per-user cache (`$XDG_CACHE_HOME`, or
-`~/.cache`, `/tskf_ros`).  Its file name carries a digest of the kernels' sources: a module
-built from other sources is never loaded.  Without the module a node compiles its kernels
-in the background as before; so does a process with $TSKF_AOT=off.
+builds the module (about 1 to 3 minutes; a C compiler and Python's headers are needed) into
+DIR, else the first writable of the package's `core/__pycache__` and the per-user cache
+(`$XDG_CACHE_HOME`, or `~/.cache`, `/tskf_ros`).  Its file name carries a digest of the
+kernels' sources: a module built from other sources is never loaded.  Without the module a
+node compiles its kernels in the background as before; so does a process with $TSKF_AOT=off.
+With --if-possible (what setup.py's build runs, so `colcon build` installs the module
+inside the package) a missing numba or compiler, or a failed build, is one line and exit
+status 0: the package builds without it.
 """
 
 import hashlib
 import os
 from pathlib import Path
+import shutil
 import sys
 import sysconfig
 import types
 from typing import Any, Callable, Optional
+import warnings
 
 import numpy as np
 
@@ -46,6 +51,9 @@ CORE = Path(__file__).resolve().parent
 SOURCES = ('kalman.py', 'transitions.py', 'jit.py', 'aot.py')  # what the module is built from
 SWITCH = 'TSKF_AOT'           # 'off': never load the module (numba's dispatchers only)
 ENVIRONMENT = 'TSKF_AOT_DIR'    # a directory searched first (and built into, if writable)
+# what a node does without the module (the line a package build prints when it builds none)
+WITHOUT = ('the nodes will compile their kernels with numba in the background at start '
+           '(a slower start, about 130 MiB more memory), or interpret them without numba')
 # argument codes: a C-contiguous float64 vector 'v', matrix 'm', stack 's'; float64 'f';
 # boolean 'b'
 EXPORTS: tuple[tuple[str, str, str], ...] = (
@@ -77,6 +85,11 @@ def module_name() -> str:
     return f'tskf_kernels_{digest()}'
 
 
+def filename() -> str:
+    """Return the extension module's file name: its name, then this interpreter's suffix."""
+    return module_name() + sysconfig.get_config_var('EXT_SUFFIX')
+
+
 def directories() -> list[Path]:
     """Return where the module is looked for, in order (and built into: the first writable)."""
     found = [Path(os.environ[ENVIRONMENT])] if os.environ.get(ENVIRONMENT) else []
@@ -98,12 +111,11 @@ def load() -> Optional[types.ModuleType]:
     if os.environ.get(SWITCH) == 'off':
         return None
     try:
-        name = module_name()
+        name, file = module_name(), filename()
     except OSError:         # a source file not readable: no module can be trusted
         return None
-    filename = name + sysconfig.get_config_var('EXT_SUFFIX')
     for directory in directories():
-        path = directory / filename
+        path = directory / file
         if path.is_file():
             import importlib.util      # noqa: I900 - only where a module is there to load
             spec = importlib.util.spec_from_file_location(name, path)
@@ -173,7 +185,6 @@ def build(output: Optional[Path] = None) -> Path:
         raise OSError('no writable directory among ' + ', '.join(map(str, targets)))
     name = module_name()
     cc = CC(name)
-    cc.output_dir = str(target)
     for module, kernel, codes in EXPORTS:
         full = f'tskf_ros.core.{module}'
         k = getattr(importlib.import_module(full), kernel)
@@ -182,12 +193,50 @@ def build(output: Optional[Path] = None) -> Path:
         k.dispatcher.compile(arguments)     # its return type, as numba infers it
         signature = next(s for s in k.dispatcher.nopython_signatures if s.args == arguments)
         cc.export(export_name(full, kernel), signature)(k.dispatcher.py_func)
-    cc.compile()
-    built = target / (name + sysconfig.get_config_var('EXT_SUFFIX'))
+    built = target / filename()
+    # compiled beside it, then renamed: a build cut short leaves no module under its name
+    import tempfile               # noqa: I900 - only to build
+    with tempfile.TemporaryDirectory(prefix='.building-', dir=target) as staging:
+        cc.output_dir = staging
+        cc.compile()
+        os.replace(Path(staging) / built.name, built)
     for old in target.glob('tskf_kernels_*'):      # modules of earlier sources
         if old != built:
             old.unlink(missing_ok=True)
     return built
+
+
+def build_if_possible(output: Optional[Path] = None) -> tuple[Optional[Path], str]:
+    """
+    Build the module unless numba or a C compiler is missing; never raise.
+
+    Return the module's path (None when none was built) and one line saying what happened:
+    a package build (setup.py) goes on without the module, whose nodes then compile their
+    kernels in the background.  $TSKF_AOT=off skips the build.
+    """
+    if os.environ.get(SWITCH) == 'off':
+        return None, f'{SWITCH}=off: not compiled ahead of time: {WITHOUT}'
+    try:
+        from numba.core.errors import NumbaPendingDeprecationWarning  # noqa: I900 - to build
+    except ImportError as exc:
+        return None, (f'numba is not installed ({exc}): {WITHOUT}; to build them with the '
+                      'package: install numba (rosdep key python3-numba-pip), build again')
+    done = "the nodes' kernels compiled ahead of time: "
+    if output is not None and (output / filename()).is_file():     # a build again
+        return output / filename(), done + str(output / filename())
+    compiler = (os.environ.get('CC') or sysconfig.get_config_var('CC') or 'cc').split()[0]
+    if shutil.which(compiler) is None:
+        return None, (f'no C compiler ({compiler}): {WITHOUT}; to build them with the '
+                      'package: apt install gcc python3-dev, build again')
+    try:
+        with warnings.catch_warnings():     # numba.pycc's pending deprecation (doc/)
+            warnings.simplefilter('ignore', NumbaPendingDeprecationWarning)
+            path = build(output)
+    except Exception as exc:  # noqa: B902 - a failed compile must not fail the package
+        reason = (str(exc).strip().splitlines() or [''])[-1][:200]
+        return None, (f'the ahead-of-time build failed ({type(exc).__name__}: {reason}): '
+                      f'{WITHOUT}')
+    return path, done + str(path)
 
 
 def main(args: Optional[list] = None) -> None:
@@ -200,7 +249,13 @@ def main(args: Optional[list] = None) -> None:
     parser.add_argument('--output', type=Path, default=None,
                         help='directory to write the module into (default: the first '
                              'writable of ' + ', '.join(map(str, directories())) + ')')
+    parser.add_argument('--if-possible', action='store_true',
+                        help='without numba or a C compiler, or when the build fails, say so '
+                             'in one line and exit 0 (a package build goes on without it)')
     options = parser.parse_args(args)
+    if options.if_possible:
+        print(build_if_possible(options.output)[1])
+        return
     try:
         path = build(options.output)
     except OSError as exc:
