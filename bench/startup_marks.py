@@ -1,8 +1,25 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Run a console script or a Python file with start-up marks: bench/bench_startup.py's (b).
 
-    BENCH_STARTUP_MARKS=FILE BENCH_STARTUP_INPUT=TOPIC BENCH_STARTUP_OUTPUT=TOPIC \\
+    BENCH_STARTUP_MARKS=FILE BENCH_STARTUP_INPUT=TOPIC BENCH_STARTUP_OUTPUT=TOPIC
         python bench/startup_marks.py SCRIPT [ARGS...]
+
+(the three variables in the environment of the second line).
 
 Runs SCRIPT as __main__ (what its shebang's interpreter would run), after wrapping three
 public rclpy calls, each only until its first call: `SingleThreadedExecutor.spin_once`
