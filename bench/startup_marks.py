@@ -16,10 +16,10 @@
 """
 Run a console script or a Python file with start-up marks: bench/bench_startup.py's (b).
 
-    BENCH_STARTUP_MARKS=FILE BENCH_STARTUP_INPUT=TOPIC BENCH_STARTUP_OUTPUT=TOPIC
-        python bench/startup_marks.py SCRIPT [ARGS...]
+    python bench/startup_marks.py SCRIPT [ARGS...]
 
-(the three variables in the environment of the second line).
+with BENCH_STARTUP_MARKS=FILE, BENCH_STARTUP_INPUT=TOPIC and BENCH_STARTUP_OUTPUT=TOPIC
+in its environment (bench/bench_startup.py sets them).
 
 Runs SCRIPT as __main__ (what its shebang's interpreter would run), after wrapping three
 public rclpy calls, each only until its first call: `SingleThreadedExecutor.spin_once`
