@@ -93,7 +93,7 @@ NODES = {'relay': 'measurement', 'estimator': 'measurement', 'alignment': 'inten
 # alignment node publishes its estimates once tracking, its base command from the first
 # sample (while acquiring) on
 FIRST_OUTPUT = {'estimator': OUTPUT, 'alignment': 'base_position_controller/commands'}
-DEADLINE = 180.0        # s: the longest wait for a first estimate (a cold compile included)
+DEADLINE = 60.0         # s: the longest wait for a first estimate (the kernels compile after it)
 
 
 def command(node: str, output: str, marks: bool = False) -> list[str]:
