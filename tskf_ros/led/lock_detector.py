@@ -52,7 +52,7 @@ def truncated_chi2_moments(gate: float, dof: int = 1) -> TruncatedMoments:
     if not gate > 0.0 or math.isinf(gate):
         return TruncatedMoments(float(dof), 2.0 * dof)
     G = gate * gate
-    # the chi^2(k) CDF at G (scipy.special.chdtr(k, G), equal to 1e-13: the test)
+    # the chi^2(k) CDF at G (scipy.special.chdtr(k, G), equal to 1e-12: the test)
     F = chi_square.cdf
     p = F(dof, G)
     mean = dof * F(dof + 2, G) / p
