@@ -17,6 +17,7 @@ Benchmark: start-up and peak memory of the nodes against a minimal rclpy relay.
 
     python bench/bench_startup.py [--repeats 3] [--rss-seconds 60] [--rate 1000]
                                   [--jitter 0.01] [--plot docs/startup_rss.png]
+                                  [--discovery fast|default]
 
 A driver in this process publishes sensor_msgs/msg/Illuminance at `--rate` Hz (stamps on a
 grid of 1 / rate, each moved by up to +-`--jitter` of the period with `--jitter`, or
@@ -35,6 +36,20 @@ The nodes' kernels compiled ahead of time (tskf_ros.core.aot, built by ./run) ar
 the install: present in every set-up ($TSKF_AOT=off in this script's environment leaves
 them out, the nodes then compile with numba in the background).
 
+Two figures per start, from the same spawn: (a) spawn to the first estimate received
+here, as above; (b) the process's own start, from marks it writes (bench/startup_marks.py
+runs each command, the relay's too, with three public rclpy calls wrapped until their
+first call): its time from spawn to its executor's first turn, plus its time from its
+first input to its first publish() on the output, i.e. (a) without the wait for the
+middleware's discovery in between; with its CPU time (all threads) up to that publish().
+
+Discovery: with `--discovery fast` (the default) this process and every process it
+starts read bench/fastdds_discovery.xml (FASTRTPS_DEFAULT_PROFILES_FILE), which makes
+each participant announce itself every 0.1 s instead of every 3 s.  With Fast DDS's
+default (`--discovery default`) a start next to this process's participant is found in
+about 0.3 s or only at that participant's next periodic announcement, 2 to 3 s later,
+for the relay as for the nodes (doc/benchmarks.md), and (a) is bimodal.
+
 The cases alternate (relay, estimator, alignment, relay, ...) over `--repeats` rounds, on
 the jittered stamps; medians are printed with their ratio to the relay's median in the
 same set-up.  Then each process
@@ -43,6 +58,7 @@ resident size (VmHWM) is printed against the relay's.  `--plot` writes both as a
 """
 
 import argparse
+from dataclasses import dataclass
 import json
 import os
 from pathlib import Path
@@ -67,6 +83,9 @@ from std_msgs.msg import Float64MultiArray
 
 REPO = Path(__file__).resolve().parent.parent
 RELAY = Path(__file__).resolve().parent / 'minimal_relay.py'
+MARKS = Path(__file__).resolve().parent / 'startup_marks.py'
+DISCOVERY_PROFILE = Path(__file__).resolve().parent / 'fastdds_discovery.xml'
+PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
 PACKAGE = REPO / 'tskf_ros'
 OUTPUT = 'estimate/predicted'
 NODES = {'relay': 'measurement', 'estimator': 'measurement', 'alignment': 'intensity'}
@@ -74,17 +93,27 @@ NODES = {'relay': 'measurement', 'estimator': 'measurement', 'alignment': 'inten
 # alignment node publishes its estimates once tracking, its base command from the first
 # sample (while acquiring) on
 FIRST_OUTPUT = {'estimator': OUTPUT, 'alignment': 'base_position_controller/commands'}
-DEADLINE = 180.0        # s: the longest wait for a first estimate (a cold compile included)
+DEADLINE = 60.0         # s: the longest wait for a first estimate (the kernels compile after it)
 
 
-def command(node: str, output: str) -> list[str]:
-    """Return the command line of a node (its console script) or the relay, output remapped."""
+def command(node: str, output: str, marks: bool = False) -> list[str]:
+    """
+    Return the command line of a node (its console script) or the relay, output remapped.
+
+    With marks, the same script runs under bench/startup_marks.py (the interpreter of
+    the console script's shebang: this one).
+    """
     if node == 'relay':
-        return [sys.executable, str(RELAY), NODES[node], output]
-    name = {'estimator': 'timescale_estimator', 'alignment': 'alignment'}[node]
-    script = shutil.which(f'tskf_{name}') or str(Path(sys.prefix) / 'lib' / 'tskf_ros' / name)
-    return [script, '--ros-args', '-r', f'__node:=bench_{node}', '-r',
-            f'{FIRST_OUTPUT[node]}:={output}']
+        cmd = [str(RELAY), NODES[node], output]
+    else:
+        name = {'estimator': 'timescale_estimator', 'alignment': 'alignment'}[node]
+        script = shutil.which(f'tskf_{name}') or str(Path(sys.prefix) / 'lib' / 'tskf_ros'
+                                                     / name)
+        cmd = [script, '--ros-args', '-r', f'__node:=bench_{node}', '-r',
+               f'{FIRST_OUTPUT[node]}:={output}']
+    if marks:
+        return [sys.executable, str(MARKS)] + cmd
+    return [sys.executable] + cmd if node == 'relay' else cmd
 
 
 def read_only(cmd: list[str]) -> list[str]:
@@ -112,7 +141,7 @@ class Driver(Node):
 
     def _on_output(self, msg: Float64MultiArray) -> None:
         if self.first is None:
-            self.first = time.perf_counter()
+            self.first = time.monotonic()
         self.received += 1
 
     def _publish(self) -> None:
@@ -151,14 +180,29 @@ def vm_hwm_kib(pid: int) -> int:
     raise RuntimeError(f'no VmHWM for {pid}')
 
 
+@dataclass
+class Start:
+    """One start: (a) spawn to the first estimate here, (b) the process's own start, s."""
+
+    first_estimate: float
+    own: float = float('nan')       # (ready - spawn) + (output - input), startup_marks.py
+    cpu: float = float('nan')       # the process's CPU time up to its first output
+    peak_kib: int = 0               # VmHWM after the hold
+
+
 def run_one(driver: Driver, executor: SingleThreadedExecutor, node: str, env: dict, *,
-            ro: bool = False, hold: float = 0.0) -> tuple[float, int]:
-    """Start a node; return (s to its first estimate, its peak RSS KiB after hold s more)."""
-    cmd = command(node, driver.listen())
+            ro: bool = False, hold: float = 0.0, marks: bool = False) -> Start:
+    """Start a node; return its Start (peak RSS after hold s more)."""
+    output = driver.listen()
+    cmd = command(node, output, marks)
     if ro:
         cmd = read_only(cmd)
+    marks_file = tempfile.NamedTemporaryFile(prefix='tskf_bench_marks_', delete=False)
+    marks_file.close()
+    env = dict(env, BENCH_STARTUP_MARKS=marks_file.name, BENCH_STARTUP_INPUT=NODES[node],
+               BENCH_STARTUP_OUTPUT=output)
     log = tempfile.TemporaryFile()
-    t0 = time.perf_counter()
+    t0 = time.monotonic()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=log,
                             start_new_session=True)
     try:
@@ -168,13 +212,13 @@ def run_one(driver: Driver, executor: SingleThreadedExecutor, node: str, env: di
                 log.seek(0)
                 raise RuntimeError(f'{node} ended ({proc.returncode}): '
                                    f'{log.read().decode()[-2000:]}')
-            if time.perf_counter() - t0 > DEADLINE:
+            if time.monotonic() - t0 > DEADLINE:
                 raise RuntimeError(f'{cmd[0]}: no estimate in {DEADLINE} s')
-        startup = driver.first - t0
-        end = time.perf_counter() + hold
-        while time.perf_counter() < end:
+        start = Start(driver.first - t0)
+        end = time.monotonic() + hold
+        while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
-        hwm = vm_hwm_kib(proc.pid)
+        start.peak_kib = vm_hwm_kib(proc.pid)
     finally:
         proc.send_signal(signal.SIGINT)
         try:
@@ -186,7 +230,15 @@ def run_one(driver: Driver, executor: SingleThreadedExecutor, node: str, env: di
             log.seek(0)
             print(log.read().decode()[-3000:])
         log.close()
-    return startup, hwm
+        text = Path(marks_file.name).read_text()
+        os.unlink(marks_file.name)
+    if marks:
+        if not text:
+            raise RuntimeError(f'{node}: no start-up marks written')
+        m = json.loads(text)
+        start.own = (m['ready'] - t0) + (m['output'] - m['input'])
+        start.cpu = m['cpu']
+    return start
 
 
 def warm_cache(cache: str, env: dict) -> None:
@@ -197,12 +249,14 @@ def warm_cache(cache: str, env: dict) -> None:
 
 
 def startup_table(driver: Driver, executor: SingleThreadedExecutor, repeats: int,
-                  ro_cache: str) -> dict:
-    """Measure the start-up of every node in every cache case; return the times."""
+                  ro_cache: str) -> tuple[dict, dict, dict]:
+    """Measure the start-up of every node in every cache case: (a), (b) and CPU times."""
     env = dict(os.environ)
     env.pop('TSKF_JIT', None)
     cases = ['warm', 'empty', 'read-only warm', 'read-only empty']
     times: dict = {case: {node: [] for node in NODES} for case in cases}
+    own: dict = {case: {node: [] for node in NODES} for case in cases}
+    cpu: dict = {case: {node: [] for node in NODES} for case in cases}
     for r in range(repeats):
         for case in cases:
             for node in NODES:
@@ -214,15 +268,21 @@ def startup_table(driver: Driver, executor: SingleThreadedExecutor, repeats: int
                 elif case.startswith('read-only'):
                     case_env['NUMBA_CACHE_DIR'] = ro_cache
                 try:
-                    t, _ = run_one(driver, executor, node, case_env,
-                                   ro=case.startswith('read-only'))
+                    s = run_one(driver, executor, node, case_env,
+                                ro=case.startswith('read-only'), marks=True)
+                except RuntimeError as exc:     # a start that hung or failed: left out
+                    print(f'  round {r + 1} {case:16s} {node:10s} left out: {exc}', flush=True)
+                    continue
                 finally:
                     if empty:
                         shutil.rmtree(empty, ignore_errors=True)
-                times[case][node].append(t)
-                print(f'  round {r + 1} {case:16s} {node:10s} {t:6.2f} s  '
+                times[case][node].append(s.first_estimate)
+                own[case][node].append(s.own)
+                cpu[case][node].append(s.cpu)
+                print(f'  round {r + 1} {case:16s} {node:10s} {s.first_estimate:6.2f} s, '
+                      f'own {s.own:5.2f} s, CPU {s.cpu:5.2f} s '
                       f'(load {os.getloadavg()[0]:.2f})', flush=True)
-    return times
+    return times, own, cpu
 
 
 def rss_table(driver: Driver, executor: SingleThreadedExecutor, seconds: float,
@@ -233,7 +293,7 @@ def rss_table(driver: Driver, executor: SingleThreadedExecutor, seconds: float,
     for stamps, j in (('exact', 0.0), ('jittered', jitter)):
         driver.jitter = j
         for node in NODES:
-            _, hwm = run_one(driver, executor, node, env, hold=seconds)
+            hwm = run_one(driver, executor, node, env, hold=seconds).peak_kib
             peaks.setdefault(stamps, {})[node] = hwm / 1024
             print(f'  {stamps:8s} {node:10s} peak RSS {hwm / 1024:6.1f} MiB, '
                   f'{driver.received} estimates back (load {os.getloadavg()[0]:.2f})',
@@ -297,6 +357,10 @@ def main() -> None:
     parser.add_argument('--jit', default='background', choices=['background', 'off', 'wait'],
                         help="the nodes' $TSKF_JIT in the RSS runs (default: the nodes' own)")
     parser.add_argument('--nodes', nargs='+', default=list(NODES), choices=list(NODES))
+    parser.add_argument('--discovery', default='fast', choices=['fast', 'default'],
+                        help='fast: every participant (this one, the relay, the nodes) '
+                        f'reads {DISCOVERY_PROFILE.name} (announcements every 0.1 s); '
+                        "default: Fast DDS's own (every 3 s)")
     parser.add_argument('--replot', type=Path, default=None,
                         help='only redraw --plot from a --json file of an earlier run')
     args = parser.parse_args()
@@ -308,8 +372,14 @@ def main() -> None:
         del NODES[node]
     if os.geteuid() != 0 or not shutil.which('unshare'):
         sys.exit('bench_startup: the read-only cases need root and unshare')
+    for variable in PROFILE_VARIABLES:
+        if args.discovery == 'fast':
+            os.environ[variable] = str(DISCOVERY_PROFILE)   # here and in every child
+        else:
+            os.environ.pop(variable, None)
     print(f'{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; '
-          f'{args.rate:g} Hz, stamp jitter +-{args.jitter:.0%} of the period')
+          f'{args.rate:g} Hz, stamp jitter +-{args.jitter:.0%} of the period; '
+          f'discovery {args.discovery}')
     rclpy.init()
     driver = Driver(args.rate, args.jitter)
     executor = SingleThreadedExecutor()
@@ -317,8 +387,8 @@ def main() -> None:
     ro_cache = tempfile.mkdtemp(prefix='tskf_bench_numba_ro_')
     try:
         warm_cache(ro_cache, dict(os.environ))
-        times = startup_table(driver, executor, args.repeats, ro_cache) \
-            if args.repeats > 0 else {}
+        times, own, cpu = startup_table(driver, executor, args.repeats, ro_cache) \
+            if args.repeats > 0 else ({}, {}, {})
         peaks = rss_table(driver, executor, args.rss_seconds, args.jitter, args.jit) \
             if args.rss_seconds > 0 else {}
     finally:
@@ -327,15 +397,20 @@ def main() -> None:
         executor.shutdown()
         driver.destroy_node()
         rclpy.try_shutdown()
-    if times:
-        print(f'\nspawn to first estimate, median of {args.repeats} (ratio to the relay of '
-              'the same case; goal <= 1.5)')
+    for title, table in (('(a) spawn to first estimate', times),
+                         ("(b) the process's own start", own),
+                         ('CPU time to the first output', cpu)):
+        if not table:
+            continue
+        print(f'\n{title}, median of {args.repeats} (ratio to the relay of the same case; '
+              'goal <= 1.5)')
         print(f'{"case":18s}' + ''.join(f'{n:>22s}' for n in NODES))
-    for case, row in times.items():
-        relay = statistics.median(row['relay'])
-        cells = [f'{statistics.median(row[n]):6.2f} s '
-                 f'({statistics.median(row[n]) / relay:4.2f}x)' for n in NODES]
-        print(f'{case:18s}' + ''.join(f'{c:>22s}' for c in cells))
+        pooled = {n: [t for row in table.values() for t in row[n]] for n in NODES}
+        for case, row in list(table.items()) + [('all starts', pooled)]:
+            relay = statistics.median(row['relay'])
+            cells = [f'{statistics.median(row[n]):6.2f} s '
+                     f'({statistics.median(row[n]) / relay:4.2f}x)' for n in NODES]
+            print(f'{case:18s}' + ''.join(f'{c:>22s}' for c in cells))
     if peaks:
         print(f'\npeak RSS over {args.rss_seconds:g} s at {args.rate:g} Hz, TSKF_JIT={args.jit} '
               '(ratio to the relay; goal <= 2)')
@@ -345,8 +420,10 @@ def main() -> None:
     print(f'load average at the end {os.getloadavg()[0]:.2f}')
     note = f'{args.rate:g} Hz, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}'
     if args.json:
-        args.json.write_text(json.dumps({'startup': times, 'peak_rss_mib': peaks,
-                                         'note': note}, indent=1))
+        args.json.write_text(json.dumps({'startup': times, 'own_startup': own,
+                                         'cpu_to_first_output': cpu, 'peak_rss_mib': peaks,
+                                         'discovery': args.discovery, 'note': note},
+                                        indent=1))
     if args.plot and peaks and times:
         plot(args.plot, times, peaks, note)
 

@@ -24,7 +24,7 @@ import pytest
 # background, once the first kernel has run)
 NEVER = ('scipy.stats', 'scipy.integrate', 'scipy.optimize', 'matplotlib', 'dask', 'numba',
          'mcap', 'rosbags', 'tskf_ros.experiments', 'tskf_ros.bag.reader',
-         'tskf_ros.tools.plot_bag')
+         'tskf_ros.tools.plot_bag', 'numpy.random')
 # the estimator's path has no LED code, and no scipy beyond its package (numpy's linalg)
 ESTIMATOR_NEVER = NEVER + ('tskf_ros.led', 'scipy.linalg', 'scipy.special', 'scipy.sparse')
 
@@ -55,6 +55,42 @@ def test_the_alignment_configuration_needs_no_scipy_optimize():
     # the default configuration (the intensity fit's peak and zone width) at start
     then = 'from tskf_ros.led.alignment_config import AlignmentConfig; AlignmentConfig()'
     assert _offending(_imported('tskf_ros.nodes.alignment', then), NEVER) == []
+
+
+# a node built as its console script builds it, then handed inputs through its subscription's
+# callback: stamps every `period` s (the node's default nominal period), one gap of two
+# periods (the estimator's sampling-interval check runs on each new interval)
+RUN_NODE = """
+import rclpy
+from sensor_msgs.msg import Illuminance
+from tskf_ros.core import jit
+from {module} import {cls}
+jit.set_mode('background')
+rclpy.init()
+node = {cls}()
+msg = Illuminance()
+t = 1000.0
+for k in range(40):
+    t += {period} * (2 if k == 20 else 1)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(t), int((t - int(t)) * 1e9)
+    msg.illuminance = 1.0 + 0.01 * k
+    node.sub.callback(msg)
+node.destroy_node()
+rclpy.try_shutdown()
+"""
+
+
+@pytest.mark.parametrize('module, cls, period', [
+    ('tskf_ros.nodes.timescale_estimator', 'TimescaleEstimator', 1.0),
+    ('tskf_ros.nodes.alignment', 'Alignment', 0.05),
+])
+def test_a_node_built_and_fed_imports_no_scipy(module, cls, period):
+    # neither node's start nor its first inputs import scipy (the lock detector's NIS band
+    # is tskf_ros.core.chi_square's, the interval check's eigenvalues numpy's), numba or
+    # anything in NEVER
+    then = RUN_NODE.format(module=module, cls=cls, period=period)
+    modules = _imported(module, then=f'exec({then!r})')
+    assert _offending(modules, NEVER + ('scipy',)) == []
 
 
 def test_the_check_sees_a_forbidden_module():

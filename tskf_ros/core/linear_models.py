@@ -85,7 +85,7 @@ def owc(a: float = 1.0, theta0: float = 0.5435, p0: float = 0.01) -> LinearModel
                        P0=np.array([[p0]]), state_names=('theta',))
 
 
-def simulate_truth(model: LinearModel, ts: TimeScale, rng: np.random.Generator, *,
+def simulate_truth(model: LinearModel, ts: TimeScale, rng: 'np.random.Generator', *,
                    noise_scaling: str = 'theory', x_true0: Optional[ArrayLike] = None
                    ) -> tuple[FloatArray, FloatArray]:
     """
@@ -122,7 +122,7 @@ def simulate_truth(model: LinearModel, ts: TimeScale, rng: np.random.Generator, 
     return x, y
 
 
-def ou_angle(points: ArrayLike, rng: np.random.Generator, *, mean: float = 0.5435,
+def ou_angle(points: ArrayLike, rng: 'np.random.Generator', *, mean: float = 0.5435,
              std: float = 0.04, tau: float = 2.0) -> FloatArray:
     """
     Simulate a bounded vibration angle: an Ornstein-Uhlenbeck process sampled exactly at points.

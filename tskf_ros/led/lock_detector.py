@@ -35,6 +35,7 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
+from tskf_ros.core import chi_square
 from tskf_ros.led.acquisition_scan import Mask
 from tskf_ros.led.intensity_model import AlignmentError, FloatArray
 
@@ -51,9 +52,8 @@ def truncated_chi2_moments(gate: float, dof: int = 1) -> TruncatedMoments:
     if not gate > 0.0 or math.isinf(gate):
         return TruncatedMoments(float(dof), 2.0 * dof)
     G = gate * gate
-    # the chi^2(k) CDF at G: scipy.special.chdtr(k, G), what scipy.stats.chi2.cdf evaluates
-    import scipy.special    # noqa: I900 - here: 0.3 s to import, for a threshold
-    F = scipy.special.chdtr
+    # the chi^2(k) CDF at G (scipy.special.chdtr(k, G), equal to 1e-12: the test)
+    F = chi_square.cdf
     p = F(dof, G)
     mean = dof * F(dof + 2, G) / p
     second = dof * (dof + 2) * F(dof + 4, G) / p
@@ -66,9 +66,8 @@ def nis_band(n: int, alpha: float, gate: float = 0.0) -> float:
         return 0.0
     m, v = truncated_chi2_moments(gate)
     a, nu = v / (2.0 * m), 2.0 * n * m * m / v
-    # chi2.isf(alpha, nu) is scipy.special.chdtri(nu, alpha) (scipy.stats' own evaluation)
-    import scipy.special    # noqa: I900 - here: 0.3 s to import, for a threshold
-    return float(a * scipy.special.chdtri(nu, alpha))
+    # chi2.isf(alpha, nu) (scipy.special.chdtri(nu, alpha), equal to 1e-12: the test)
+    return float(a * chi_square.isf(alpha, nu))
 
 
 @dataclass(frozen=True)

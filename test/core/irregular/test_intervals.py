@@ -83,3 +83,21 @@ def test_checks_agree_with_brute_force_on_random_similarity_transforms():
                 assert (k in D) == (not pbh_detectable(Ak, C, 1e-7)), (i, j, k)
                 checked += 1
     assert checked >= 10
+
+
+def test_distinct_eigenvalues_equal_scipy_linalg_eigvals():
+    # numpy's eigvals (the node's path, no scipy import) against scipy.linalg.eigvals:
+    # the same clusters, values equal to 1e-12 relative to ||A||
+    import scipy.linalg
+    rng = np.random.default_rng(7)
+    cases = [ROT3, np.diag([2.0, -2.0]), np.array([[1.0, 1.0], [0.0, 1.0]]),
+             rotation(0.7, 1.2)] + [rng.standard_normal((n, n)) for n in (1, 2, 3, 6, 12)]
+    for A in cases:
+        got = ir.distinct_eigenvalues(A)
+        lam = scipy.linalg.eigvals(A)
+        scale = max(1.0, float(np.linalg.norm(A, 2)))
+        assert sum(e.multiplicity for e in got) == lam.size
+        for e in got:
+            # a Jordan block's computed members spread by ||A|| eps^(1/2): its mean vs those
+            tol = 1e-12 if e.multiplicity == 1 else 1e-7
+            assert np.min(np.abs(lam - e.value)) <= tol * scale, (A, e)

@@ -43,7 +43,8 @@ from tskf_ros.led.two_axis.pointing_geometry import (displaced, joint_turn, MAX_
                                                      uniform_in_cone)
 from tskf_ros.led.two_axis.radial_response import RadialResponse
 
-Seed = Union[None, int, np.random.SeedSequence, np.random.Generator]
+# quoted: numpy.random loads when a seed is drawn, not when a node's modules import
+Seed = Union[None, int, 'np.random.SeedSequence', 'np.random.Generator']
 
 
 @dataclass(frozen=True)

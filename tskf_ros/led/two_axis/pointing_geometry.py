@@ -93,7 +93,7 @@ def conical_scan(radius: float, points: int) -> FloatArray:
     return radius * np.stack([np.cos(phase), np.sin(phase)], axis=-1)
 
 
-def uniform_in_cone(half_angle: float, runs: int, rng: np.random.Generator) -> FloatArray:
+def uniform_in_cone(half_angle: float, runs: int, rng: 'np.random.Generator') -> FloatArray:
     """
     Return offsets d (runs, 2), degrees, whose directions are uniform in solid angle in a cone.
 
