@@ -119,13 +119,18 @@ def load() -> Optional[types.ModuleType]:
     return None
 
 
-def function(module: str, kernel: str) -> Optional[Callable[..., Any]]:
+def function(module: str, kernel: str,
+             otherwise: Callable[[tuple, Exception], Any]) -> Optional[Callable[..., Any]]:
     """
-    Return the ahead-of-time compiled form of a kernel, or None if there is none.
+    Return a call of the ahead-of-time compiled form of a kernel, or None if there is none.
 
-    It raises TypeError for arguments of other types than it was built for (numba.pycc's
-    own functions do not check an array's dtype, dimensions or layout: they would read it
-    as the type built).
+    The call runs the compiled form for arguments of the types it was built for, and
+    `otherwise(args, error)` for any other: a TypeError for other types (numba.pycc's own
+    functions do not check an array's dtype, dimensions or layout: they would read it as
+    the type built), or the ZeroDivisionError or TypeError the compiled form raised.  The
+    types are checked at each call (an array's dtype, shape and flags can change in
+    place), the check inlined in the one call: a loop over the array arguments, the dtype
+    compared by identity first (float64 arrays share numpy's one descriptor).
     """
     built = load()
     compiled = None if built is None else getattr(built, export_name(module, kernel), None)
@@ -133,20 +138,30 @@ def function(module: str, kernel: str) -> Optional[Callable[..., Any]]:
                  None)
     if compiled is None or codes is None:
         return None
-    dims = tuple((i, 'vms'.index(c) + 1) for i, c in enumerate(codes) if c in 'vms')
+    count = len(codes)
+    last = max((i for i, c in enumerate(codes) if c in 'vms'), default=-1)
+    # each argument's dimensions up to the last array (0: a scalar, converted by the call)
+    ndims = tuple('_vms'.find(c) if c in 'vms' else 0 for c in codes[:last + 1])
+    ndarray, float64 = np.ndarray, _FLOAT64
 
-    def checked(*args: Any) -> Any:
-        if len(args) != len(codes):
-            raise TypeError(f'{kernel} takes {len(codes)} arguments, got {len(args)}')
-        for i, ndim in dims:
-            a = args[i]
-            if not (type(a) is np.ndarray and a.dtype == _FLOAT64 and a.ndim == ndim
-                    and a.flags.c_contiguous and a.flags.writeable):
-                raise TypeError(f'{kernel}: argument {i} is not a writeable C-contiguous '
-                                f'{ndim}-d float64 array')
-        return compiled(*args)
-    checked.__name__ = kernel
-    return checked
+    def call(*args: Any) -> Any:
+        if len(args) == count:
+            for a, ndim in zip(args, ndims):
+                if ndim and not (a.__class__ is ndarray
+                                 and ((d := a.dtype) is float64 or d == float64)
+                                 and a.ndim == ndim
+                                 and (f := a.flags).c_contiguous and f.writeable):
+                    break
+            else:
+                try:
+                    return compiled(*args)
+                except (TypeError, ZeroDivisionError) as exc:
+                    return otherwise(args, exc)
+        return otherwise(args, TypeError(
+            f'{kernel} takes {count} arguments, float64 arrays C-contiguous and writeable '
+            f'of {codes} dimensions (v 1, m 2, s 3)'))
+    call.__name__ = kernel
+    return call
 
 
 def _types(codes: str) -> tuple:
