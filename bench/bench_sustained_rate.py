@@ -136,6 +136,7 @@ def run_once(case: str, rate: float, seconds: float, executor: str,
              warmup: float = 0.0) -> dict:
     """Stream rate Hz for seconds into a fresh case (after a warm-up); return the counts."""
     namespace = f'/sustained{os.getpid()}_{case}_{int(rate)}'
+    case = case.rstrip('0123456789')        # relay2: a second run of the relay
     log = tempfile.TemporaryFile('w+')
     env = dict(os.environ, TSKF_JIT=kernel_mode())
     node = subprocess.Popen(case_command(case, rate, executor, namespace), cwd=REPO,
@@ -214,8 +215,12 @@ def main() -> None:
     parser.add_argument('--executors', nargs='+', default=None, choices=['single', 'events'],
                         help="the executors of both cases (default: the node's default)")
     parser.add_argument('--cases', nargs='+', default=['node', 'relay'],
-                        choices=['node', 'relay'])
+                        choices=['node', 'relay'],
+                        help='a case given twice runs twice, as relay and relay2 (a '
+                             'control: how far two runs of one case differ)')
     args = parser.parse_args()
+    args.cases = [c + (str(args.cases[:i + 1].count(c)) if args.cases[:i].count(c) else '')
+                  for i, c in enumerate(args.cases)]
     rates = sorted(float(r) for r in args.rates.split(','))
     if os.cpu_count() < 2:
         sys.exit('bench_sustained_rate: needs two CPUs (the case on one, the rest on the '
