@@ -31,6 +31,10 @@ Each case runs in a process of its own (this script with `worker`), spinning as
 - stub: the node with a session that filters nothing (StubSession: a fixed steady-state
   outcome at each stamp), so that node - stub is the session's cost in place.
 
+The node and the stub run the kernels as the node's console script does ($TSKF_JIT, else
+'background': the kernels built ahead of time, tskf_ros.core.aot, where they are), and
+so does the in-process part; the first line says which form ran.
+
 A driver in this process publishes Illuminance samples 1 ms apart (the stamp is the
 sequence number), keeping at most `--window` without their predicted estimate, and
 subscribes to the two outputs with the same types in both cases.  The worker measures,
@@ -76,6 +80,7 @@ from sensor_msgs.msg import Illuminance  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+from tskf_ros.core import jit, kalman  # noqa: E402
 from tskf_ros.messages import conversions  # noqa: E402
 from tskf_ros.messages.estimator_interface import (load_config, outcome_messages,  # noqa: E402
                                                    OutcomeMessages, output_qos,
@@ -94,6 +99,21 @@ NODE_PARAMETERS = {'period': PERIOD_NS / NS}
 OUTPUTS = [(OUTPUT_TOPICS[kind], Float64MultiArray) for kind in ('corrected', 'predicted')]
 # node CPU per input <= GOAL x the relay's, per executor
 GOAL = {'single': 1.3, 'events': 1.5}
+
+
+def use_the_nodes_kernels() -> str:
+    """
+    Run the kernels as the node's console script does; return which form runs them.
+
+    The jit mode $TSKF_JIT, else 'background' (node_runner.run_node's default): the kernels
+    built ahead of time (tskf_ros.core.aot) where they are, else numba's dispatchers.
+    """
+    jit.set_mode(os.environ.get(jit.MODE_VARIABLE) or 'background')
+    x, P = np.zeros(1), np.eye(1)
+    kalman.mahalanobis2(x, P, x, P, P, x)
+    jit.ready(timeout=600.0)     # numba's, where nothing was built ahead of time
+    state = repr(kalman.mahalanobis2)
+    return state[state.rindex('(') + 1:-2]
 
 
 def power(k: int) -> float:
@@ -216,6 +236,7 @@ def metered(cls: type, meter: Meter) -> type:
 
 def worker(kind: str, executor_kind: str, warmup: int, messages: int, ros_args: list) -> None:
     """Run the node or the relay until it has taken warmup + messages inputs; print JSON."""
+    kernels = use_the_nodes_kernels() if kind != 'relay' else ''
     context = Context()
     rclpy.init(args=['worker', '--ros-args', *ros_args], context=context)
     meter = Meter(warmup, messages, context)
@@ -233,7 +254,7 @@ def worker(kind: str, executor_kind: str, warmup: int, messages: int, ros_args: 
         executor.shutdown()
         node.destroy_node()
         context.try_shutdown()
-    print(json.dumps(meter.result), flush=True)
+    print(json.dumps(dict(meter.result, kernels=kernels)), flush=True)
 
 
 class Driver:
@@ -379,6 +400,8 @@ def main() -> None:
     parser.add_argument('--executors', nargs='+', default=['single', 'events'],
                         choices=['single', 'events'])
     args = parser.parse_args()
+    kernels = use_the_nodes_kernels()
+    print(f'kernels: {kernels} ({jit.MODE_VARIABLE}={jit.mode()}, as the node runs them)')
     print(f'machine: {platform.machine()}, {os.cpu_count()} CPUs, load average '
           f'{os.getloadavg()[0]:.2f}, Python {platform.python_version()}, numpy '
           f'{np.__version__}; {args.messages} inputs per case after {args.warmup} warm-up, '
@@ -399,7 +422,9 @@ def main() -> None:
                           f'{r["thread_cpu"] / r["messages"] * 1e6:7.1f} us, process '
                           f'{r["process_cpu"] / r["messages"] * 1e6:7.1f} us per input, '
                           f'{r["messages"] / r["wall"]:6.0f} inputs/s; outputs '
-                          f'{r["outputs"]} for {r["sent"]} sent, {r["stalls"]} stalls',
+                          f'{r["outputs"]} for {r["sent"]} sent, {r["stalls"]} stalls'
+                          + (f', kernels {r["kernels"]}' if r['kernels'] not in ('', kernels)
+                             else ''),
                           flush=True)
     finally:
         executor.shutdown()

@@ -31,10 +31,11 @@ once it has settled.  The cases:
 
 The rate sustained is measured after the start-up work (bench_startup.py's subject):
 each stream is preceded by `--warmup` s (default 1) of the same stamps at 200 Hz and a
-0.5 s pause, and the node runs with TSKF_JIT=wait (unless $TSKF_JIT is set), so that it
-loads its compiled kernels (numba's cache) at its first input rather than in a
-background thread while the stream comes; `sent` and `received` count the warm-up as
-well, and the CPU is the stream's.
+0.5 s pause; the node runs its kernels as its console script does where they are built
+ahead of time (tskf_ros.core.aot), else with TSKF_JIT=wait, so that it loads its
+compiled kernels (numba's cache) at its first input rather than in a background thread
+while the stream comes ($TSKF_JIT, if set, is used as it is); `sent` and `received`
+count the warm-up as well, and the CPU is the stream's.
 `busy` adds a busy loop pinned to CPU 1: the other core is taken.  Drops by cause, from
 the case's own counters (task 'filter health'):
 
@@ -71,6 +72,7 @@ from rclpy.context import Context  # noqa: E402
 from rclpy.executors import ExternalShutdownException  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
 
+from tskf_ros.core import aot  # noqa: E402
 from tskf_ros.messages import conversions  # noqa: E402
 from tskf_ros.nodes.node_runner import executor_kind, make_executor, spin  # noqa: E402
 
@@ -119,14 +121,24 @@ def relay(kind: str, args: list) -> None:
         context.try_shutdown()
 
 
+def kernel_mode() -> str:
+    """
+    Return the node's jit mode: $TSKF_JIT, else its own where the kernels are built.
+
+    The node's own mode ('background') runs the kernels built ahead of time
+    (tskf_ros.core.aot: no compiling at all); without them 'wait' loads numba's cache at
+    the first input rather than compiling in a thread while the stream runs.
+    """
+    return os.environ.get('TSKF_JIT') or ('background' if aot.load() is not None else 'wait')
+
+
 def run_once(case: str, rate: float, seconds: float, executor: str,
              warmup: float = 0.0) -> dict:
     """Stream rate Hz for seconds into a fresh case (after a warm-up); return the counts."""
     namespace = f'/sustained{os.getpid()}_{case}_{int(rate)}'
+    case = case.rstrip('0123456789')        # relay2: a second run of the relay
     log = tempfile.TemporaryFile('w+')
-    # the kernels compiled (from numba's cache) at the first input, not in the background
-    # while the stream runs, unless $TSKF_JIT says otherwise (see the docstring)
-    env = dict(os.environ, TSKF_JIT=os.environ.get('TSKF_JIT') or 'wait')
+    env = dict(os.environ, TSKF_JIT=kernel_mode())
     node = subprocess.Popen(case_command(case, rate, executor, namespace), cwd=REPO,
                             stdout=log, stderr=subprocess.STDOUT, text=True, env=env,
                             preexec_fn=pinned(NODE_CPU))
@@ -203,8 +215,12 @@ def main() -> None:
     parser.add_argument('--executors', nargs='+', default=None, choices=['single', 'events'],
                         help="the executors of both cases (default: the node's default)")
     parser.add_argument('--cases', nargs='+', default=['node', 'relay'],
-                        choices=['node', 'relay'])
+                        choices=['node', 'relay'],
+                        help='a case given twice runs twice, as relay and relay2 (a '
+                             'control: how far two runs of one case differ)')
     args = parser.parse_args()
+    args.cases = [c + (str(args.cases[:i + 1].count(c)) if args.cases[:i].count(c) else '')
+                  for i, c in enumerate(args.cases)]
     rates = sorted(float(r) for r in args.rates.split(','))
     if os.cpu_count() < 2:
         sys.exit('bench_sustained_rate: needs two CPUs (the case on one, the rest on the '
@@ -213,7 +229,8 @@ def main() -> None:
     executors = args.executors or [executor_kind()]
     print(f'{args.seconds:g} s per rate, the case on CPU {NODE_CPU} ({", ".join(executors)}'
           f' executor), publisher and monitor on CPU {OTHER_CPU}; load average '
-          f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs', flush=True)
+          f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs; the node with '
+          f'TSKF_JIT={kernel_mode()}', flush=True)
     print('load  executor case   rate Hz     sent  received  transport  overflow  CPU  '
           'load avg', flush=True)
     for load in args.load.split(','):

@@ -216,3 +216,99 @@ def test_the_package_build_step_makes_a_loadable_module(tmp_path):
         print(module.__file__ == {str(built)!r}, 'numba' in sys.modules)
         """)
     assert out.split() == ['True', 'False']
+
+
+def test_the_call_takes_only_the_types_built_and_hands_any_other_on(built):
+    # in a process of its own: an argument the compiled form would misread crashes it
+    out = _run("""
+        import numpy as np
+        from tskf_ros.core import aot
+        handed = []
+        call = aot.function('tskf_ros.core.kalman', 'mahalanobis2',
+                            lambda args, error: handed.append(type(error).__name__))
+        x, P, z, H, R, d = np.zeros(2), np.eye(2), np.ones(1), np.ones((1, 2)), np.eye(1), \\
+            np.zeros(1)
+        readonly = np.eye(1)
+        readonly.flags.writeable = False
+        tagged = np.dtype(np.float64, metadata={'unit': 'mW'})  # equal, not numpy's own
+        cases = {
+            'float32 x': (x.astype(np.float32), P, z, H, R, d),
+            'int64 P': (x, np.eye(2, dtype=np.int64), z, H, R, d),
+            'big-endian P': (x, np.eye(2).astype('>f8'), z, H, R, d),
+            'P as a vector': (x, np.ones(4), z, H, R, d),
+            'P as a stack': (x, np.eye(2)[None], z, H, R, d),
+            'strided H': (x, P, z, np.ones((1, 4))[:, ::2], R, d),
+            'reversed x': (x[::-1], P, z, H, R, d),
+            'read-only R': (x, P, z, H, readonly, d),
+            'a matrix H': (x, P, z, np.asmatrix(H), R, d),
+            'a list z': (x, P, [1.0], H, R, d),
+            'five arguments': (x, P, z, H, R),
+            'seven arguments': (x, P, z, H, R, d, d),
+        }
+        for name, args in cases.items():
+            handed.clear()
+            result = call(*args)
+            print(name.replace(' ', '_'), result is None and handed == ['TypeError'])
+        d2, y = call(x, P, z, H.astype(tagged), R, d)
+        print('equal_dtype', handed == ['TypeError'] and d2 == 1 / 3)
+        """)
+    # every other type handed on, none run compiled; an equal dtype runs compiled:
+    # y = 1, S = H P H^T + R = 3, d^2 = 1 / 3
+    assert [line.split()[1] for line in out.splitlines()] == ['True'] * 13
+
+
+def test_a_scalar_of_another_type_is_handed_on(built):
+    out = _run("""
+        import numpy as np
+        from tskf_ros.core import aot
+        handed = []
+        call = aot.function('tskf_ros.core.transitions', 'euler',
+                            lambda args, error: handed.append(type(error).__name__))
+        A = -np.eye(2)
+        print(call(A, A, A[:, :1], 'a millisecond'), handed)
+        """)
+    assert out.split() == ['None', "['TypeError']"]
+
+
+def test_a_wrong_dtype_through_the_kernel_gets_numbas_result(built):
+    out = _run("""
+        import numpy as np
+        from tskf_ros.core import jit, kalman
+        jit.set_mode('background')
+        x, P, z, H = np.zeros(2), np.eye(2), np.ones(1), np.ones((1, 2))
+        first = kalman.mahalanobis2(x.astype(np.float32), P, z, H, np.eye(1), np.zeros(1))
+        print(repr(kalman.mahalanobis2).endswith('(compiled ahead of time)>'), first[0])
+        """)
+    # the float32 call ran numba's way (its source until compiled): d^2 = 1 / 3
+    assert out.split() == ['False', repr(1 / 3)]
+
+
+def test_the_module_unpickles_the_array_class_once(built):
+    out = _run("""
+        import pickle
+        import numpy as np
+        from tskf_ros.core import aot, jit, kalman
+        jit.set_mode('background')
+        real = pickle.loads
+        x, P = np.zeros(1), np.eye(1)
+        for _ in range(3):
+            kalman.mahalanobis2(x, P, x, P, P, x)
+        print(pickle.loads is real, list(aot._CLASSES.values()) == [np.ndarray])
+        """)
+    assert out.split() == ['True', 'True']
+
+
+def test_the_loading_unpickler_passes_anything_else_on(monkeypatch):
+    import pickle
+    seen = []
+    monkeypatch.setattr(aot, '_CLASSES', {})
+    with aot._classes_unpickled_once():
+        loads = pickle.loads
+        for data in (pickle.dumps([1.5, 'a']), bytearray(pickle.dumps(np.ndarray)),
+                     pickle.dumps(np.ndarray)):
+            seen.append(loads(data))
+        seen.append(loads(pickle.dumps(np.float64), encoding='latin1'))
+    assert pickle.loads is not loads
+    # a list unpickled anew each time; a class kept only from bytes, no options given
+    assert seen == [[1.5, 'a'], np.ndarray, np.ndarray, np.float64]
+    assert aot._CLASSES == {pickle.dumps(np.ndarray): np.ndarray}

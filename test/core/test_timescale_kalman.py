@@ -463,6 +463,29 @@ def test_a_per_step_r_is_the_model_with_that_r(n):
             kf.step(0.5, 1.0, R=bad)
 
 
+@pytest.mark.parametrize('n', [1, 2])
+def test_the_noise_of_a_repeated_mu_follows_r_assigned_or_given(n):
+    # R_d = R / mu is kept from one step to the next of the same mu: never a stale one
+    rng = np.random.default_rng(7)
+    m, other = random_model(rng, n, 1, 0), random_model(rng, n, 1, 0)
+    kf = TimeScaleKalmanFilter(**m)
+    for _ in range(3):          # the mu met once, then cached, then its R_d kept
+        kf.step(1e-3, 1.0)
+    for R, step_R in ((m['R'], 0.04), (other['R'], None), (other['R'], 0.5)):
+        if step_R is None:
+            kf.R = R
+        x, P = kf.x.copy(), kf.P.copy()
+        given = R if step_R is None else [[step_R]]
+        fresh = TimeScaleKalmanFilter(**{**m, 'R': given, 'x0': x, 'P0': P})
+        a, b = kf.step(1e-3, 1.0, R=step_R), fresh.step(1e-3, 1.0)
+        np.testing.assert_array_equal(a.P_predicted, b.P_predicted)
+        # and the next step with the filter's own R uses that R again
+        x, P = kf.x.copy(), kf.P.copy()
+        fresh = TimeScaleKalmanFilter(**{**m, 'R': kf.R, 'x0': x, 'P0': P})
+        np.testing.assert_array_equal(kf.step(1e-3, 2.0).P_predicted,
+                                      fresh.step(1e-3, 2.0).P_predicted)
+
+
 def test_a_transition_switched_later_is_used():
     m = random_model(np.random.default_rng(7), 3, 1, 1)
     kf = TimeScaleKalmanFilter(**m)

@@ -35,6 +35,7 @@ inside the package) a missing numba or compiler, or a failed build, is one line 
 status 0: the package builds without it.
 """
 
+from contextlib import contextmanager
 import hashlib
 import os
 from pathlib import Path
@@ -42,7 +43,7 @@ import shutil
 import sys
 import sysconfig
 import types
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Iterator, Optional
 import warnings
 
 import numpy as np
@@ -121,9 +122,10 @@ def load() -> Optional[types.ModuleType]:
             spec = importlib.util.spec_from_file_location(name, path)
             if spec is None or spec.loader is None:
                 continue
-            module = importlib.util.module_from_spec(spec)
             try:
-                spec.loader.exec_module(module)
+                with _classes_unpickled_once():     # an extension module starts here
+                    module = importlib.util.module_from_spec(spec)
+                    spec.loader.exec_module(module)
             except ImportError:     # built for another interpreter or a damaged file
                 continue
             _loaded = module
@@ -131,13 +133,54 @@ def load() -> Optional[types.ModuleType]:
     return None
 
 
-def function(module: str, kernel: str) -> Optional[Callable[..., Any]]:
-    """
-    Return the ahead-of-time compiled form of a kernel, or None if there is none.
+# the classes the module has unpickled, by their pickle (see _classes_unpickled_once)
+_CLASSES: dict[bytes, type] = {}
 
-    It raises TypeError for arguments of other types than it was built for (numba.pycc's
-    own functions do not check an array's dtype, dimensions or layout: they would read it
-    as the type built).
+
+@contextmanager
+def _classes_unpickled_once() -> Iterator[None]:
+    """
+    Load the module with a `pickle.loads` that unpickles each class once.
+
+    A numba.pycc module boxes each array it returns with the array's class, unpickled from
+    its pickle at every call by the `pickle.loads` it found at its start (about 0.3 us an
+    array: half of a step's call).  Found at the start here, this one keeps the classes it
+    unpickled (a class unpickles to the same object by its name) and passes anything else,
+    and any other call, to pickle.loads.  The module's start is the only time it looks.
+    """
+    import pickle                 # noqa: I900 - the module imports it to start anyway
+    real = pickle.loads
+
+    def loads(data: Any, /, *args: Any, **options: Any) -> Any:
+        if not (args or options):
+            try:
+                return _CLASSES[data]
+            except (KeyError, TypeError):   # not seen, or not hashable (a bytearray)
+                pass
+        found = real(data, *args, **options)
+        if isinstance(found, type) and data.__class__ is bytes and not (args or options):
+            _CLASSES[data] = found
+        return found
+    pickle.loads = loads
+    try:
+        yield
+    finally:
+        if pickle.loads is loads:
+            pickle.loads = real
+
+
+def function(module: str, kernel: str,
+             otherwise: Callable[[tuple, Exception], Any]) -> Optional[Callable[..., Any]]:
+    """
+    Return a call of the ahead-of-time compiled form of a kernel, or None if there is none.
+
+    The call runs the compiled form for arguments of the types it was built for, and
+    `otherwise(args, error)` for any other: a TypeError for other types (numba.pycc's own
+    functions do not check an array's dtype, dimensions or layout: they would read it as
+    the type built), or the ZeroDivisionError or TypeError the compiled form raised.  The
+    types are checked at each call (an array's dtype, shape and flags can change in
+    place), the check inlined in the one call: a loop over the array arguments, the dtype
+    compared by identity first (float64 arrays share numpy's one descriptor).
     """
     built = load()
     compiled = None if built is None else getattr(built, export_name(module, kernel), None)
@@ -145,20 +188,30 @@ def function(module: str, kernel: str) -> Optional[Callable[..., Any]]:
                  None)
     if compiled is None or codes is None:
         return None
-    dims = tuple((i, 'vms'.index(c) + 1) for i, c in enumerate(codes) if c in 'vms')
+    count = len(codes)
+    last = max((i for i, c in enumerate(codes) if c in 'vms'), default=-1)
+    # each argument's dimensions up to the last array (0: a scalar, converted by the call)
+    ndims = tuple('_vms'.find(c) if c in 'vms' else 0 for c in codes[:last + 1])
+    ndarray, float64 = np.ndarray, _FLOAT64
 
-    def checked(*args: Any) -> Any:
-        if len(args) != len(codes):
-            raise TypeError(f'{kernel} takes {len(codes)} arguments, got {len(args)}')
-        for i, ndim in dims:
-            a = args[i]
-            if not (type(a) is np.ndarray and a.dtype == _FLOAT64 and a.ndim == ndim
-                    and a.flags.c_contiguous and a.flags.writeable):
-                raise TypeError(f'{kernel}: argument {i} is not a writeable C-contiguous '
-                                f'{ndim}-d float64 array')
-        return compiled(*args)
-    checked.__name__ = kernel
-    return checked
+    def call(*args: Any) -> Any:
+        if len(args) == count:
+            for a, ndim in zip(args, ndims):
+                if ndim and not (a.__class__ is ndarray
+                                 and ((d := a.dtype) is float64 or d == float64)
+                                 and a.ndim == ndim
+                                 and (f := a.flags).c_contiguous and f.writeable):
+                    break
+            else:
+                try:
+                    return compiled(*args)
+                except (TypeError, ZeroDivisionError) as exc:
+                    return otherwise(args, exc)
+        return otherwise(args, TypeError(
+            f'{kernel} takes {count} arguments, float64 arrays C-contiguous and writeable '
+            f'of {codes} dimensions (v 1, m 2, s 3)'))
+    call.__name__ = kernel
+    return call
 
 
 def _types(codes: str) -> tuple:

@@ -118,9 +118,9 @@ class Kernel:
             return self._call(*args)
         if now == 'background' and not getattr(_inside, 'depth', 0):
             ahead = None if self._no_ahead else aot.function(self.py_func.__module__,
-                                                             self.name)
+                                                             self.name, self._not_ahead)
             if ahead is not None:
-                self._call = self._ahead_of_time(ahead)
+                self._call = ahead
                 return self._call(*args)
             self._enqueue(args)
         return self._interpret(args)
@@ -134,20 +134,16 @@ class Kernel:
         finally:
             _inside.depth = nested
 
-    def _ahead_of_time(self, compiled: Callable) -> Callable:
-        """Return a call of the kernel's ahead-of-time compiled form (tskf_ros.core.aot)."""
-        def call(*args: Any) -> Any:
-            try:
-                return compiled(*args)
-            except TypeError:       # not the argument types it was built for: numba's way
-                self._no_ahead = True
-                self._call = self._first
-                return self._first(*args)
-            except ZeroDivisionError:
-                # numba.pycc compiles with Python's error model, the dispatchers with
-                # numpy's (a division by zero is inf or nan): this call interpreted
-                return self._interpret(args)
-        return call
+    def _not_ahead(self, args: tuple, error: Exception) -> Any:
+        """Run a call the ahead-of-time form did not take (see tskf_ros.core.aot.function)."""
+        if isinstance(error, ZeroDivisionError):
+            # numba.pycc compiles with Python's error model, the dispatchers with numpy's
+            # (a division by zero is inf or nan): this call interpreted
+            return self._interpret(args)
+        # not the argument types it was built for: numba's way from now on
+        self._no_ahead = True
+        self._call = self._first
+        return self._first(*args)
 
     def _enqueue(self, args: tuple) -> None:
         global _worker

@@ -225,6 +225,8 @@ class TimeScaleKalmanFilter:
         self._uses_B = bool(np.any(self._B))
         self._jumps = TransitionCache(self._transition, self._A, self.GQGt, self._B,
                                       input_matrix=self._uses_B)
+        # R_d of the last mu stepped with the model's R (exact stamps: the same every step)
+        self._Rd_mu, self._Rd = 0.0, self._R
 
     @property
     def transition(self) -> str:
@@ -307,6 +309,12 @@ class TimeScaleKalmanFilter:
         """R_d = R / mu (transitions.noise_over's source, numpy broadcasting a stack of mu)."""
         return noise_over.py_func(R, mu)
 
+    def _model_noise_over(self, mu: float) -> Matrix:
+        """Return R_d = R / mu of the model's R (kept for the next step with the same mu)."""
+        if mu != self._Rd_mu:
+            self._Rd_mu, self._Rd = mu, self._noise_over(mu, self._R)
+        return self._Rd
+
     def step(self, mu: float, y: Optional[ArrayLike], u: Optional[ArrayLike] = None, *,
              R: Optional[ArrayLike] = None) -> StepResult:
         """
@@ -345,8 +353,9 @@ class TimeScaleKalmanFilter:
             nan = np.full(self.p, np.nan)
             res = StepResult(mu, self.x, self.P, x_p, P_p, nan, np.full((self.p,) * 2, np.nan))
         else:
-            z = as_vector(y, self.p, 'y')
-            Rd = self._noise_over(mu, self._R if R is None else self._measurement_noise(R))
+            z = as_vector(y, self._C.shape[0], 'y')
+            Rd = (self._model_noise_over(mu) if R is None
+                  else self._noise_over(mu, self._measurement_noise(R)))
             return self._keep(mu, kalman.update_predict(self.x, self.P, z, self._C, Rd,
                                                         self._D, jump.F, jump.Qd, Bu))
         self.x, self.P = res.x_predicted, res.P_predicted

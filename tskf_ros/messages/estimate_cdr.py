@@ -31,6 +31,7 @@ from tskf_ros.core.units import NS
 from tskf_ros.messages.conversions import ESTIMATE_OFFSET
 
 CDR_HEADER = b'\x00\x01\x00\x00'    # XCDR1, little endian, no options
+_FLOAT64 = np.dtype(np.float64)
 
 
 class _Layout:
@@ -93,6 +94,9 @@ class EstimateEncoder:
         """Return conversions.state_estimate_to_msg(kind, ...) serialized."""
         n = self.n
         sec, nsec = divmod(int(stamp_ns), NS)
-        return self._prefix[kind] + self._data.pack(
-            sec, nsec, mu, *np.asarray(x, dtype=float).reshape(n).tolist(),
-            *np.asarray(P, dtype=float).reshape(n * n).tolist())
+        # the filter's own arrays as they are (numpy's float64 descriptor), else converted
+        if x.__class__ is not np.ndarray or x.dtype is not _FLOAT64 or x.shape != (n,):
+            x = np.asarray(x, dtype=float).reshape(n)
+        P = (P.ravel() if P.__class__ is np.ndarray and P.dtype is _FLOAT64 and P.size == n * n
+             else np.asarray(P, dtype=float).reshape(n * n))
+        return self._prefix[kind] + self._data.pack(sec, nsec, mu, *x.tolist(), *P.tolist())

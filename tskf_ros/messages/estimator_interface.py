@@ -148,8 +148,10 @@ def output_qos(config: NodeConfig) -> QoSProfile:
 
 def step_mus(out: Outcome) -> tuple[dict[int, float], dict[int, float]]:
     """Return mu (s) of the outcome's steps by their start point and by their end point."""
-    start = {j.stamp_ns: j.mu for j in out.jumps}
-    end = {j.sigma_ns: j.mu for j in out.jumps}
+    start: dict[int, float] = {}
+    end: dict[int, float] = {}
+    for j in out.jumps:
+        start[j.stamp_ns] = end[j.sigma_ns] = j.mu
     return start, end
 
 
@@ -216,11 +218,12 @@ class OutcomeMessages:
         """Return the (output, serialized message) pairs of messages(out, wanted), in order."""
         encode, mus, pairs = self.encoder.estimate, None, []
         for e in out.estimates:
-            key = output_key(e.kind, e.revised)
+            kind = e.kind
+            key = 'revised' if e.revised else kind      # output_key(kind, revised)
             if wanted is None or wanted(key):
                 mus = mus or step_mus(out)
-                pairs.append((key, encode(e.kind, e.stamp_ns,
-                                          estimate_mu(e.kind, e.stamp_ns, mus), e.x, e.P)))
+                pairs.append((key, encode(kind, e.stamp_ns,
+                                          estimate_mu(kind, e.stamp_ns, mus), e.x, e.P)))
         return pairs
 
     def smoothed(self, stamp_ns: int, mu: float, x: np.ndarray,
