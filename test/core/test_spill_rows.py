@@ -16,29 +16,15 @@
 """SpillRows: the rows given back as written, and the temporary file never named nor left."""
 
 import gc
-import os
-from pathlib import Path
 
 from hypothesis import given, settings, strategies as st
 import numpy as np
+from open_files import open_files_in
 import pytest
 
 from tskf_ros.core.spill_rows import SpillRows
 
 RECORD = np.dtype([('kind', np.int8), ('stamp', np.int64), ('value', np.float64, (2,))])
-
-
-def open_files_in(folder: Path) -> list[str]:
-    """Return the targets of this process's descriptors that are in folder."""
-    out = []
-    for fd in os.listdir('/proc/self/fd'):
-        try:
-            target = os.readlink(f'/proc/self/fd/{fd}')
-        except OSError:
-            continue
-        if target.startswith(str(folder)):
-            out.append(target)
-    return out
 
 
 @settings(max_examples=40, deadline=None)

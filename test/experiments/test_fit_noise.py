@@ -24,11 +24,11 @@ likelihood is checked against a scalar Kalman filter written out in this file.
 
 import gc
 import json
-import os
 from pathlib import Path
 import tempfile
 
 import numpy as np
+from open_files import open_files_in
 import pytest
 from rclpy.serialization import serialize_message
 from stderr_lines import one_line
@@ -503,19 +503,6 @@ def test_the_likelihood_is_shown_as_it_improves(sim, monkeypatch, capsys):
     assert fit_noise.main([str(d / 'bag'), '--params-file', str(d / 'params.yaml'),
                            '--fix', 'R', '-q']) == 0
     assert ''.join(term.text) == ''
-
-
-def open_files_in(folder: Path) -> list[str]:
-    """Return the targets of this process's descriptors inside folder."""
-    out = []
-    for fd in os.listdir('/proc/self/fd'):
-        try:
-            target = os.readlink(f'/proc/self/fd/{fd}')
-        except OSError:
-            continue
-        if target.startswith(str(folder)):
-            out.append(target)
-    return out
 
 
 @pytest.mark.parametrize('stop, code, text', [
