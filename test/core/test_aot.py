@@ -281,34 +281,3 @@ def test_a_wrong_dtype_through_the_kernel_gets_numbas_result(built):
         """)
     # the float32 call ran numba's way (its source until compiled): d^2 = 1 / 3
     assert out.split() == ['False', repr(1 / 3)]
-
-
-def test_the_module_unpickles_the_array_class_once(built):
-    out = _run("""
-        import pickle
-        import numpy as np
-        from tskf_ros.core import aot, jit, kalman
-        jit.set_mode('background')
-        real = pickle.loads
-        x, P = np.zeros(1), np.eye(1)
-        for _ in range(3):
-            kalman.mahalanobis2(x, P, x, P, P, x)
-        print(pickle.loads is real, list(aot._CLASSES.values()) == [np.ndarray])
-        """)
-    assert out.split() == ['True', 'True']
-
-
-def test_the_loading_unpickler_passes_anything_else_on(monkeypatch):
-    import pickle
-    seen = []
-    monkeypatch.setattr(aot, '_CLASSES', {})
-    with aot._classes_unpickled_once():
-        loads = pickle.loads
-        for data in (pickle.dumps([1.5, 'a']), bytearray(pickle.dumps(np.ndarray)),
-                     pickle.dumps(np.ndarray)):
-            seen.append(loads(data))
-        seen.append(loads(pickle.dumps(np.float64), encoding='latin1'))
-    assert pickle.loads is not loads
-    # a list unpickled anew each time; a class kept only from bytes, no options given
-    assert seen == [[1.5, 'a'], np.ndarray, np.ndarray, np.float64]
-    assert aot._CLASSES == {pickle.dumps(np.ndarray): np.ndarray}

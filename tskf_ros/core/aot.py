@@ -35,7 +35,6 @@ inside the package) a missing numba or compiler, or a failed build, is one line 
 status 0: the package builds without it.
 """
 
-from contextlib import contextmanager
 import hashlib
 import os
 from pathlib import Path
@@ -43,7 +42,7 @@ import shutil
 import sys
 import sysconfig
 import types
-from typing import Any, Callable, Iterator, Optional
+from typing import Any, Callable, Optional
 import warnings
 
 import numpy as np
@@ -123,50 +122,13 @@ def load() -> Optional[types.ModuleType]:
             if spec is None or spec.loader is None:
                 continue
             try:
-                with _classes_unpickled_once():     # an extension module starts here
-                    module = importlib.util.module_from_spec(spec)
-                    spec.loader.exec_module(module)
+                module = importlib.util.module_from_spec(spec)
+                spec.loader.exec_module(module)
             except ImportError:     # built for another interpreter or a damaged file
                 continue
             _loaded = module
             return module
     return None
-
-
-# the classes the module has unpickled, by their pickle (see _classes_unpickled_once)
-_CLASSES: dict[bytes, type] = {}
-
-
-@contextmanager
-def _classes_unpickled_once() -> Iterator[None]:
-    """
-    Load the module with a `pickle.loads` that unpickles each class once.
-
-    A numba.pycc module boxes each array it returns with the array's class, unpickled from
-    its pickle at every call by the `pickle.loads` it found at its start (about 0.3 us an
-    array: half of a step's call).  Found at the start here, this one keeps the classes it
-    unpickled (a class unpickles to the same object by its name) and passes anything else,
-    and any other call, to pickle.loads.  The module's start is the only time it looks.
-    """
-    import pickle                 # noqa: I900 - the module imports it to start anyway
-    real = pickle.loads
-
-    def loads(data: Any, /, *args: Any, **options: Any) -> Any:
-        if not (args or options):
-            try:
-                return _CLASSES[data]
-            except (KeyError, TypeError):   # not seen, or not hashable (a bytearray)
-                pass
-        found = real(data, *args, **options)
-        if isinstance(found, type) and data.__class__ is bytes and not (args or options):
-            _CLASSES[data] = found
-        return found
-    pickle.loads = loads
-    try:
-        yield
-    finally:
-        if pickle.loads is loads:
-            pickle.loads = real
 
 
 def function(module: str, kernel: str,
