@@ -219,7 +219,7 @@ class OutcomeMessages:
         encode, mus, pairs = self.encoder.estimate, None, []
         for e in out.estimates:
             kind = e.kind
-            key = 'revised' if e.revised else kind      # output_key(kind, revised)
+            key = output_key(kind, e.revised)
             if wanted is None or wanted(key):
                 mus = mus or step_mus(out)
                 pairs.append((key, encode(kind, e.stamp_ns,
