@@ -193,11 +193,11 @@ def test_ctrl_c_keeps_the_finished_rows_in_one_line_and_resumes(
             '--set', 'R=1,100', '--workers', '0', '--out', str(out), '--no-progress']
     real, calls = sweep.run_task, []
 
-    def interrupted_third(task):
+    def interrupted_third(task, progress=None):
         calls.append(task.key)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        return real(task)
+        return real(task, progress)
 
     monkeypatch.setattr(sweep, 'run_task', interrupted_third)
     assert sweep.main(argv) == 130

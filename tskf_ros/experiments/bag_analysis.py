@@ -24,7 +24,7 @@ message is kept.
 """
 
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import os
 from pathlib import Path
 from typing import Callable, Optional, Protocol
@@ -53,6 +53,51 @@ METRICS = (['n_messages', 'accepted', 'inputs', 'steps', 'gaps', 'resets',
             'truth_points', 'rms_corrected', 'rms_predicted', 'rms_smoothed']
            + [f'rejected_{r}' for r in REJECT_REASONS] + [f'resets_{r}' for r in RESET_REASONS]
            + ['damage'])
+
+
+TICK = 4096     # read_stream's tick: messages between two calls
+
+
+@dataclass(frozen=True)
+class TopicChoice:
+    """The topics read_stream reads from a bag, and how many messages that is."""
+
+    topic: str
+    msgtype: str
+    input_topic: Optional[str]
+    truth_topics: list
+    notes: list                 # the assumptions the choice made (one line each)
+    size: Optional[int]         # the messages on those topics (None: the index does not say)
+
+    @property
+    def wanted(self) -> list:
+        """Return the topics in the order read_stream asks for them."""
+        return [self.topic] + ([self.input_topic] if self.input_topic else []) \
+            + self.truth_topics
+
+
+def choose_topics(reader: BagReader, topic: Optional[str] = None,
+                  input_topic: Optional[str] = None, truth: bool = True) -> TopicChoice:
+    """
+    Choose the measurement, input and (with truth) JointState topics of an open bag.
+
+    The size is the count of the bag's index (the summary of an MCAP file, the rows of a
+    SQLite3 bag).  Raises what the topic choice raises for a bag that cannot be used.
+    """
+    topic, msgtype, notes = choose_topic(reader, topic)
+    in_topic, more = choose_input_topic(reader, input_topic)
+    truth_topics = sorted(t for t, i in reader.topics.items()
+                          if truth and i.msgtype == STATES_TYPE)
+    choice = TopicChoice(topic, msgtype, in_topic, truth_topics, notes + more, None)
+    counts = [reader.topics[t].count for t in choice.wanted]
+    size = None if any(c is None for c in counts) else sum(counts)
+    return replace(choice, size=size)
+
+
+def stream_size(bag: os.PathLike, *, topic: Optional[str] = None,
+                input_topic: Optional[str] = None, truth: bool = True) -> Optional[int]:
+    """Return how many messages read_stream reads from a bag (None if its index does not say)."""
+    return choose_topics(BagReader(bag), topic, input_topic, truth).size
 
 
 class EventSink(Protocol):
@@ -130,7 +175,8 @@ class Stream:
 def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[str] = None,
                 input_topic: Optional[str] = None, truth: bool = True,
                 progress: bool = False,
-                sink: Optional[Callable[[bool], EventSink]] = None) -> Stream:
+                sink: Optional[Callable[[bool], EventSink]] = None,
+                tick: Optional[Callable[[int], None]] = None) -> Stream:
     """
     Read a bag's measurements, inputs and (with truth) JointState topics in storage order.
 
@@ -142,27 +188,26 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
     messages read (on a terminal).  sink: called with whether the bag has truth topics
     (with truth), it returns what the events are appended to as they are read (e.g. an
     innovation_trace.StreamRunner: the bag is run as it is read, no event kept); by
-    default an EventColumns (`Stream.events`).
+    default an EventColumns (`Stream.events`).  tick: called with the number of messages
+    read since its last call, every TICK messages and at the end (a sweep's progress).
     """
     reader = BagReader(bag)
-    topic, msgtype, notes = choose_topic(reader, topic)
-    in_topic, more = choose_input_topic(reader, input_topic)
+    choice = choose_topics(reader, topic, input_topic, truth)
+    topic, msgtype, in_topic = choice.topic, choice.msgtype, choice.input_topic
     check_model(reader, in_topic, config.model)
     m = config.model.B.shape[1] if config.model.B is not None else 1
-    truth_topics = {t for t, i in reader.topics.items()
-                    if truth and i.msgtype == STATES_TYPE}
     events = (EventColumns(1, min(m, SLOTS)) if sink is None
-              else sink(bool(truth_topics)))
-    stream = Stream(str(bag), topic, msgtype, in_topic, events, assumptions=notes + more)
+              else sink(bool(choice.truth_topics)))
+    stream = Stream(str(bag), topic, msgtype, in_topic, events, assumptions=choice.notes)
     cls, extract = message_class(msgtype), extractor(msgtype)
     in_cls = message_class(INPUT_TYPE) if in_topic else None
-    js_cls = message_class(STATES_TYPE) if truth_topics else None
+    js_cls = message_class(STATES_TYPE) if choice.truth_topics else None
     values: dict = defaultdict(lambda: defaultdict(TruthSeries))
-    wanted = [topic] + ([in_topic] if in_topic else []) + sorted(truth_topics)
-    counts = [reader.topics[t].count for t in wanted]
-    total = sum(c for c in counts if c) if all(c is not None for c in counts) else None
-    messages = wrap(reader.messages(wanted), total, 'reading', 'msg', progress)
+    messages = wrap(reader.messages(choice.wanted), choice.size, 'reading', 'msg', progress)
+    count = -1
     for count, raw in enumerate(messages):
+        if tick is not None and count % TICK == TICK - 1:
+            tick(TICK)
         try:
             if raw.topic == topic:
                 stamp, value, variance = extract(deserialize_message(raw.data, cls),
@@ -182,6 +227,8 @@ def read_stream(bag: os.PathLike, config: EstimatorConfig, *, topic: Optional[st
                                    f'does not deserialize as {raw.msgtype} ({exc})', count)
             break
     messages.close()
+    if tick is not None and (count + 1) % TICK:
+        tick((count + 1) % TICK)
     stream.truth = {t: dict(v) for t, v in values.items()}
     stream.damage = stream.damage or reader.damage
     return stream
@@ -252,13 +299,15 @@ def stream_metrics(run: StreamRun, stream: Stream, config: EstimatorConfig,
 
 
 def evaluate_bag(bag: os.PathLike, config: NodeConfig, *, topic: Optional[str] = None,
-                 input_topic: Optional[str] = None) -> dict:
+                 input_topic: Optional[str] = None,
+                 tick: Optional[Callable[[int], None]] = None) -> dict:
     """
     Run the estimator over one bag, in memory; return {metric: value} (see METRICS).
 
     The session sees the measurements and inputs in storage order with the log time as
     the receiver clock, as the offline replay feeds them.  Raises BagError, BagTypeError
     or ValueError (one line) if the bag cannot be used; damage is reported in 'damage'.
+    tick: read_stream's (the messages read, as they are read).
     """
     session_config = config.session
     smoother: Optional[SmoothingRecorder] = None
@@ -273,7 +322,7 @@ def evaluate_bag(bag: os.PathLike, config: NodeConfig, *, topic: Optional[str] =
                               observe=smoother.outcome if smoother is not None else None)
         return runner
     stream = read_stream(Path(bag), session_config, topic=topic, input_topic=input_topic,
-                         sink=make_runner)
+                         sink=make_runner, tick=tick)
     if stream.measurements == 0 and stream.damage is None:
         raise ValueError(f'{bag}: no messages on {stream.topic}')
     if runner is None:      # pragma: no cover - read_stream makes it before reading

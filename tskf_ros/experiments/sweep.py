@@ -35,6 +35,8 @@ from tskf_ros.core.optional_dependencies import (EXIT_MISSING_DEPENDENCY, Missin
 from tskf_ros.experiments.bag_analysis import METRICS
 from tskf_ros.experiments.fit_noise import EXIT_INTERRUPTED
 from tskf_ros.experiments.output import save_figure
+from tskf_ros.experiments.sweep_progress import (run_task_reporting, SweepBar, TaskProgress,
+                                                 terminal, TOPIC)
 from tskf_ros.experiments.sweep_table import Table
 from tskf_ros.experiments.sweep_tasks import (build_tasks, find_bags, FIT_COLUMNS, one_line,
                                               parse_setting, run_task, setting_text,
@@ -58,33 +60,30 @@ class SweepResult:
     rows: list = field(default_factory=list)
 
 
-def progress_bar(total: int, enabled: bool):
-    """Return a tqdm bar on stderr, off when not a terminal or not wanted."""
-    from tqdm import tqdm
-    return tqdm(total=total, unit='task', disable=not (enabled and sys.stderr.isatty()),
-                file=sys.stderr)
-
-
 def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str],
             progress: bool) -> SweepResult:
-    """Run the tasks not yet in the table; append each row as it finishes."""
+    """
+    Run the tasks not yet in the table; append each row as it finishes.
+
+    progress: a bar of the messages read (sweep_progress), on a terminal.
+    """
     result = SweepResult()
     todo = [t for t in tasks if t.key not in table.done]
     result.skipped = [t.key for t in tasks if t.key in table.done]
-    bar = progress_bar(len(todo), progress)
+    bar = SweepBar(todo, progress and terminal())
 
     def record(row: dict) -> None:
         table.append(row)
         result.evaluated.append(row['key'])
         result.errors += bool(row['error'])
-        bar.update(1)
+        bar.done(row['key'])
 
     try:
         if not todo:
             return result
         if workers == 0 and scheduler is None:
             for t in todo:
-                record(run_task(t))
+                record(run_task(t, TaskProgress(t.key, bar.receive) if bar.enabled else None))
             return result
         from dask.distributed import as_completed, Client
         cluster = None
@@ -100,7 +99,11 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
         # (a NameError of distributed's own) before this thread gets to the except below
         interrupted = SigintFlag(first=quiet_dask)
         try:
-            futures = {client.submit(run_task, t, key=f'sweep-{t.key}', pure=False): t
+            if bar.enabled:
+                # the workers' reports come on the client's event loop, as (time, report)
+                client.subscribe_topic(TOPIC, lambda event: bar.receive(event[1]))
+            task_function = run_task_reporting if bar.enabled else run_task
+            futures = {client.submit(task_function, t, key=f'sweep-{t.key}', pure=False): t
                        for t in todo}
             for fut in as_completed(futures):
                 if interrupted.is_set():

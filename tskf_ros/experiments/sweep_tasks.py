@@ -22,7 +22,7 @@ import itertools
 import json
 from pathlib import Path
 import time
-from typing import Iterable, Optional, Union
+from typing import Iterable, Optional, Protocol, Union
 
 import numpy as np
 
@@ -186,30 +186,54 @@ def one_line(exc: BaseException) -> str:
     return f'{type(exc).__name__}: {text}'
 
 
-def run_task(task: Task) -> dict:
-    """Evaluate one bag x setting (on a worker); never raises: errors go into the row."""
+class Progress(Protocol):
+    """What a task tells while it runs (sweep_progress.TaskProgress)."""
+
+    def messages(self, n: int) -> None: ...
+
+    def phase(self, text: str) -> None: ...
+
+    def fit_progress(self, evaluations: int, log_likelihood: float) -> None: ...
+
+    def flush(self) -> None: ...
+
+
+def run_task(task: Task, progress: Optional[Progress] = None) -> dict:
+    """
+    Evaluate one bag x setting (on a worker); never raises: errors go into the row.
+
+    progress: told the messages read as they are read, and the fit's phase.
+    """
     t0 = time.perf_counter()
     row = {'key': task.key, 'bag': task.bag, 'error': ''}
     row.update({name: setting_text(v) for name, v in task.setting.items()})
+    tick = progress.messages if progress is not None else None
     try:
-        row.update(evaluate_bag(task.bag, task.config, topic=task.topic))
+        row.update(evaluate_bag(task.bag, task.config, topic=task.topic, tick=tick))
         if row.get('damage'):
             row['error'] = f'damaged: {row["damage"]}'
     except Exception as exc:  # noqa: B902 - a bad bag must not stop the sweep
         row['error'] = one_line(exc)
     if task.fit and not row['error']:
-        row.update(fit_columns(task))
+        row.update(fit_columns(task, progress))
     row['seconds'] = time.perf_counter() - t0
+    if progress is not None:
+        progress.flush()
     return row
 
 
-def fit_columns(task: Task) -> dict:
+def fit_columns(task: Task, progress: Optional[Progress] = None) -> dict:
     """Run fit_noise's fit on the bag with the task's config; return the fit_* columns."""
     out = {c: '' for c in FIT_COLUMNS}
     try:
         cfg = task.config.session
-        stream = read_stream(task.bag, cfg, topic=task.topic, truth=False)
-        sf, report = fit_events(cfg, stream.events)
+        if progress is not None:
+            progress.phase('reading for the fit')
+        stream = read_stream(task.bag, cfg, topic=task.topic, truth=False,
+                             tick=progress.messages if progress is not None else None)
+        sf, report = fit_events(cfg, stream.events,
+                                progress=progress.fit_progress if progress is not None
+                                else None)
         for name in ('Q', 'R', 'Q_stderr', 'R_stderr'):
             out[f'fit_{name}'] = json.dumps(np.asarray(report[name]).tolist())
         out['fit_log_likelihood'] = report['log_likelihood']
