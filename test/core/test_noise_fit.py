@@ -20,6 +20,8 @@ The likelihood of a trace is checked against a scalar Kalman filter written out 
 NIS band against the chi-square distribution of the mean.
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -27,6 +29,7 @@ from tskf_ros.core import noise_fit
 from tskf_ros.core.linear_models import LinearModel
 from tskf_ros.core.noise_fit import (data_scale, negative_log_likelihood, NoiseParameters,
                                      run_trace, StepRecord, trace_log_likelihood)
+from tskf_ros.core.timescale_kalman import FilterError
 
 
 def scalar_log_likelihood(mu, y, variance, a, q, r, x0, p0):
@@ -103,6 +106,51 @@ def test_the_likelihood_in_blocks_is_the_whole_runs_bit_for_bit(monkeypatch):
     blocks = list(noise_fit.innovation_blocks(model, 'euler', trace, block=64))
     assert max(len(e) for e, _ in blocks) == 64
     np.testing.assert_array_equal(np.concatenate([e for e, _ in blocks]), whole.e)
+
+
+def step_loop(model, trace):
+    """(e_k, S_k) of every measurement step, one `step` at a time (the runs' reference)."""
+    es, Ss = [], []
+    for segment in trace:
+        kf = model.make_filter('euler', allow_nonregressive=True)
+        for rec in segment:
+            R = None if not rec.variance > 0 else rec.variance * rec.mu
+            res = kf.step(rec.mu, rec.y, rec.u, R=R)
+            if rec.y is not None:
+                es.append(res.innovation)
+                Ss.append(res.S)
+    return np.array(es), np.array(Ss)
+
+
+@pytest.mark.parametrize('block', [7, 64, 4096])
+def test_the_blocks_made_in_runs_are_the_step_loops(block):
+    # runs of measurement steps go through the filter's compiled run, the others (gaps,
+    # sample variances, inputs) one step at a time: the same e_k and S_k as a loop of steps
+    model, trace = two_state_trace(3000, 12)
+    with_input = replace(model, B=np.array([[1.0], [0.5]]))
+    rng = np.random.default_rng(3)
+    inputs = [[replace(r, u=rng.normal(size=1)) if rng.random() < 0.1 else r for r in seg]
+              for seg in trace]
+    for m, t in ((model, trace), (with_input, inputs)):
+        e, S = step_loop(m, t)
+        blocks = list(noise_fit.innovation_blocks(m, 'euler', t, block=block))
+        assert max(len(b) for b, _ in blocks) <= block
+        np.testing.assert_allclose(np.concatenate([b for b, _ in blocks]), e, rtol=1e-13,
+                                   atol=0.0)
+        np.testing.assert_allclose(np.concatenate([b for _, b in blocks]), S, rtol=1e-13,
+                                   atol=0.0)
+
+
+def test_a_step_the_run_refuses_raises_as_the_step_does():
+    model = LinearModel('one', A=-np.eye(1), C=np.eye(1), Q=np.eye(1), R=np.eye(1),
+                        x0=np.zeros(1), P0=np.eye(1))
+    # a graininess that is not > 0: the filter refuses that step, in a run as in a loop
+    trace = [[StepRecord(0.1, np.ones(1)), StepRecord(-1.0, np.ones(1))]]
+    with pytest.raises(FilterError) as in_run:
+        list(noise_fit.innovation_blocks(model, 'euler', trace))
+    with pytest.raises(FilterError) as in_loop:
+        model.make_filter('euler').step(-1.0, np.ones(1))
+    assert str(in_run.value) == str(in_loop.value)
 
 
 def test_the_data_scale_is_the_medians_of_the_differences_in_memory():

@@ -571,6 +571,28 @@ def test_a_run_on_jittered_mu_is_the_step_loop_bit_for_bit(transition):
         np.testing.assert_array_equal(res.P_predicted[k], step.P_predicted)
 
 
+@pytest.mark.parametrize('n, p', [(1, 1), (3, 2)])
+def test_a_runs_innovations_are_those_of_the_steps(n, p):
+    # e_k = y_k - C x_k - D and S_k = C P_k C^T + R / mu_k at each step's prior, written out
+    rng = np.random.default_rng(60 + n)
+    m = random_model(rng, n, p, 0)
+    mus = 0.01 * (1 + rng.uniform(-0.05, 0.05, 30))
+    ys = rng.normal(size=(30, p))
+    kf, twin = TimeScaleKalmanFilter(**m), TimeScaleKalmanFilter(**m)
+    res = kf.run(mus, ys, innovations=True)
+    assert res.innovation.shape == (30, p) and res.S.shape == (30, p, p)
+    for k in range(30):
+        x, P = twin.x, twin.P
+        e = ys[k] - m['C'] @ x - m['D']
+        S = m['C'] @ P @ m['C'].T + m['R'] / mus[k]
+        np.testing.assert_allclose(res.innovation[k], e, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(res.S[k], S, rtol=1e-12, atol=0.0)
+        step = twin.step(float(mus[k]), ys[k])
+        np.testing.assert_allclose(res.innovation[k], step.innovation, rtol=1e-14, atol=0.0)
+    empty = TimeScaleKalmanFilter(**m).run(np.array([-1.0]), ys[:1], innovations=True)
+    assert empty.steps == 0 and empty.innovation.shape == (0, p) and empty.S.shape == (0, p, p)
+
+
 @pytest.mark.parametrize('transition', ['euler', 'exact'])
 def test_a_new_mu_built_with_its_step_is_the_cached_jump_bit_for_bit(transition):
     # without an input, a step over a mu met for the first time builds the jump in the

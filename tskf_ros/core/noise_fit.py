@@ -37,7 +37,7 @@ from tskf_ros.core.linear_models import LinearModel
 from tskf_ros.core.pairwise_sum import PairwiseSum
 from tskf_ros.core.spill_rows import SpillRows
 from tskf_ros.core.streamed_median import median
-from tskf_ros.core.timescale_kalman import FilterError
+from tskf_ros.core.timescale_kalman import FilterError, TimeScaleKalmanFilter
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 # how far (in natural-log units) the optimiser may move a parameter from its start
@@ -113,24 +113,75 @@ def with_noise(model: LinearModel, Q: ArrayLike, R: ArrayLike) -> LinearModel:
 TRACE_BLOCK = 4096
 
 
+class _Rows:
+    """Innovation rows gathered into blocks of a fixed size (innovation_blocks' buffer)."""
+
+    def __init__(self, block: int, p: int) -> None:
+        self.e, self.S, self.k = np.empty((block, p)), np.empty((block, p, p)), 0
+
+    def add(self, e: FloatArray, S: FloatArray) -> Iterator[tuple[FloatArray, FloatArray]]:
+        """Append rows; yield (copies of) each block they fill."""
+        block, i = len(self.e), 0
+        while i < len(e):
+            take = min(len(e) - i, block - self.k)
+            self.e[self.k:self.k + take], self.S[self.k:self.k + take] = \
+                e[i:i + take], S[i:i + take]
+            self.k, i = self.k + take, i + take
+            if self.k == block:
+                yield self.e.copy(), self.S.copy()
+                self.k = 0
+
+    def rest(self) -> Iterator[tuple[FloatArray, FloatArray]]:
+        """Yield the last rows, a block not full."""
+        if self.k:
+            yield self.e[:self.k].copy(), self.S[:self.k].copy()
+
+
+def _run(kf: TimeScaleKalmanFilter, mus: list, ys: list) -> tuple[FloatArray, FloatArray]:
+    """Make the steps in one compiled run; return their (e_k, S_k) (those of `step`)."""
+    res = kf.run(mus, np.array(ys), innovations=True)
+    e, S = res.innovation, res.S
+    assert e is not None and S is not None     # asked for
+    if res.steps == len(mus):
+        return e, S
+    # the run stopped before a step `step` refuses: made by `step`, which raises saying why
+    rest = [kf.step(mu, y) for mu, y in zip(mus[res.steps:], ys[res.steps:])]
+    return (np.concatenate([e, [r.innovation for r in rest]]),
+            np.concatenate([S, [r.S for r in rest]]))
+
+
 def innovation_blocks(model: LinearModel, transition: str,
                       segments: Sequence[Sequence[StepRecord]], block: int = TRACE_BLOCK
                       ) -> Iterator[tuple[FloatArray, FloatArray]]:
     """
-    Run the core filter's step over the trace; yield (e_k, S_k) of measurement steps in blocks.
+    Run the core filter over the trace; yield (e_k, S_k) of measurement steps in blocks.
 
     Each segment starts from a fresh filter (x0, P0).  A step with a sample variance
     (use_message_variance) is run with R = variance * mu, so that R / mu is that variance,
-    as the estimator session does.  Raises FilterError if a step fails.  At most `block`
-    steps are kept at a time: a trace of any length runs in bounded memory.
+    as the estimator session does.  Runs of measurement steps with the model's R and no
+    input are made in one compiled call each (`TimeScaleKalmanFilter.run`, the same
+    steps as `step`'s), the other steps one at a time.  Raises FilterError if a step
+    fails.  At most `block` steps are kept at a time: a trace of any length runs in
+    bounded memory.
     """
-    p = model.C.shape[0]
-    es, Ss = np.empty((block, p)), np.empty((block, p, p))
-    k = 0
+    rows = _Rows(block, model.C.shape[0])
     for segment in segments:
         kf = model.make_filter(transition, allow_nonregressive=True)
         R_model = kf.R
+        mus: list = []
+        ys: list = []
         for rec in segment:
+            plain = rec.u is None or model.B is None     # no input the model takes
+            if rec.y is not None and not rec.variance > 0 and plain:
+                mus.append(rec.mu)
+                ys.append(rec.y)
+                if len(mus) == block:
+                    yield from rows.add(*_run(kf, mus, ys))
+                    mus, ys = [], []
+                continue
+            if mus:
+                yield from rows.add(*_run(kf, mus, ys))
+                mus, ys = [], []
             if rec.y is not None and rec.variance > 0:
                 kf.R = np.eye(kf.p) * rec.variance * rec.mu
                 try:
@@ -140,14 +191,10 @@ def innovation_blocks(model: LinearModel, transition: str,
             else:
                 res = kf.step(rec.mu, rec.y, rec.u)
             if rec.y is not None:
-                es[k] = res.innovation
-                Ss[k] = res.S
-                k += 1
-                if k == block:
-                    yield es.copy(), Ss.copy()
-                    k = 0
-    if k:
-        yield es[:k].copy(), Ss[:k].copy()
+                yield from rows.add(res.innovation[None], res.S[None])
+        if mus:
+            yield from rows.add(*_run(kf, mus, ys))
+    yield from rows.rest()
 
 
 def run_trace(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRecord]]

@@ -108,6 +108,8 @@ class RunResult(NamedTuple):
     x_predicted: Matrix
     P_predicted: NDArray[np.float64]
     stopped: str            # '' all made, 'refused' (step would raise), 'test' (failed it)
+    innovation: Optional[Matrix] = None     # steps x p, with run(innovations=True)
+    S: Optional[NDArray[np.float64]] = None     # steps x p x p, the same
 
 
 class _ModelMatrix:
@@ -376,14 +378,16 @@ class TimeScaleKalmanFilter:
         return StepResult(mu, x_c, P_c, x_p, P_p, e, S)
 
     def run(self, mu: ArrayLike, y: ArrayLike, u: Optional[ArrayLike] = None, *,
-            test: Optional[InnovationTest] = None) -> RunResult:
+            test: Optional[InnovationTest] = None, innovations: bool = False) -> RunResult:
         """
         Make step(mu[k], y[k], u) for k = 0, 1, ... in one compiled call (kalman's run).
 
         The steps and their results are those of the loop over `step`; it stops before a
         step that `step` would refuse (that step raises there, saying why), or, with a
         test, before keeping a step whose prediction fails it.  x, P are left at the
-        prediction of the last step kept.
+        prediction of the last step kept.  innovations: also give each step's innovation
+        e and its covariance S (`step`'s), from the steps' priors in one call of
+        kalman.innovation_runs.
         """
         mus = np.asarray(mu, dtype=float).reshape(-1)
         K, p = mus.size, self.p
@@ -405,16 +409,26 @@ class TimeScaleKalmanFilter:
             z_test, R_test, limit2 = z, self._R, -1.0
         else:
             z_test, R_test, limit2 = test.z, test.R, float(test.limit2)
+        x0, P0 = self.x, self.P
+        Rd = self._noise_over(mus[:limit, None, None], self._R)
         x_c, P_c, x_p, P_p, count, status = kalman.update_predict_run(
-            self.x, self.P, z[:limit], self._C,
-            self._noise_over(mus[:limit, None, None], self._R),
+            x0, P0, z[:limit], self._C, Rd,
             self._D, jumps.F, jumps.Qd, Bu, jump[:limit].astype(np.intp),
             np.asarray(z_test, dtype=float), R_test, limit2)
         if count:
             self.x, self.P = x_p[count - 1], P_p[count - 1]
             self.x_corrected, self.P_corrected = x_c[count - 1], P_c[count - 1]
         stopped = '' if count == K else 'test' if status == kalman.STOPPED else 'refused'
-        return RunResult(count, x_c, P_c, x_p, P_p, stopped)
+        if not innovations:
+            return RunResult(count, x_c, P_c, x_p, P_p, stopped)
+        if not count:
+            return RunResult(count, x_c, P_c, x_p, P_p, stopped, np.empty((0, self.p)),
+                             np.empty((0, self.p, self.p)))
+        # step k's prior is step k-1's prediction (the run's first: the filter's state)
+        e, S, _ = kalman.innovation_runs(np.concatenate([x0[None], x_p[:count - 1]]),
+                                         np.concatenate([P0[None], P_p[:count - 1]]),
+                                         z[:count], self._C[None], Rd[:count], self._D[None])
+        return RunResult(count, x_c, P_c, x_p, P_p, stopped, e, S)
 
     def integrate(self, duration: float, y: Callable[[float], ArrayLike],
                   u: Optional[Callable[[float], ArrayLike]] = None, *,
