@@ -351,7 +351,7 @@ def test_var_h_over_a_wide_pointing_prior_against_samples(sd, three, five):
 
     The predicted sample's variance H P H^T + R_h, S less R.  A pointing prior sd = 6 deg
     wide (2 to 2.5 V in closed loop) puts the 3-point rule's nodes at +-10.4 deg: it
-    overstates Var h by 20 % (measured), the cause of the mean NIS 0.93 at 2.5 V; the
+    overstates Var h by 20 % (measured), most of why the mean NIS was 0.93 at 2.5 V; the
     5-point rule is within 3 %.  At 3 deg both are within 1 %.
     """
     rng = np.random.default_rng(7)

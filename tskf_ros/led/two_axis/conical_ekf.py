@@ -188,7 +188,7 @@ class ConicalEKFConfig:
 # The consistent filter: h linearised by the Gauss-Hermite regression, twice (the update
 # relinearised at its first posterior), and R and Q from what the plant does.  The rule
 # has 5 points per axis: over the priors of 2 to 2.5 V (the pointing 5 to 7 deg wide) the
-# 3-point rule, its nodes at +-sqrt(3) sd, overstates Var h by 10 to 30 % and so S (at
+# 3-point rule, its nodes at +-sqrt(3) sd, overstates Var h by 8 and 33 % and so S (at
 # 2.5 V, seed 0: Var h 0.95 V^2 against 0.72 by an 11-point rule, the mean NIS 0.930; with
 # 5 points 0.967; doc/design/two_axis.md, "Consistency").
 # model_noise: h at the true state differs from the noiseless sample by 0.0033 V at 0 V
