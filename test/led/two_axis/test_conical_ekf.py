@@ -168,10 +168,10 @@ def test_nees_is_in_its_band(noise, seed):
     """
     The ANEES of [x1, d] (200 runs) is in its 95 % band at every noise level, seeds 0 and 5.
 
-    CONSISTENT (the Gauss-Hermite regression, two passes, the link's noise and walks);
-    seed 0 chose it, seed 5 was held out.  The runs' interval (from the runs' spread, not
-    the chi^2 assumption) holds 3 too, from 0.5 V: at 0 V it is 3.02-3.26 and 3.04-3.28,
-    a little overconfident (doc/design/two_axis.md).
+    CONSISTENT (the Gauss-Hermite regression, 5 points per axis, two passes, the link's
+    noise and walks); seed 0 chose it, seed 5 was held out.  The runs' interval (from the
+    runs' spread, not the chi^2 assumption) holds 3 too, from 0.5 V: at 0 V it is
+    3.03-3.26 and 3.06-3.29, a little overconfident (doc/design/two_axis.md).
     """
     c = _nees_nis(noise, seed=seed)
     assert c.band[0] < c.anees < c.band[1], c
@@ -202,20 +202,31 @@ def test_nees_with_jittered_stamps_and_dropouts_at_1_volt():
     assert c.band[0] < c.anees < c.band[1], c
 
 
-@pytest.mark.parametrize('noise', [
-    0.5,
-    *(pytest.param(v, marks=pytest.mark.xfail(strict=True, reason=reason)) for v, reason in (
-        (0.0, 'measured 0.966 under [0.988, 1.012]'), (1.0, 'measured 0.985 under [0.988, 1.012]'),
-        (1.5, 'measured 0.980 under [0.988, 1.012]'), (2.0, 'measured 0.962 under [0.987, 1.013]'),
-        (2.5, 'measured 0.930 under [0.986, 1.014]')))])
-def test_nis_in_band(noise):
-    """
-    The mean NIS of CONSISTENT in the 95 % band of its chi^2 (seed 0).
+_NIS_OUT = {     # (seed, noise): the mean NIS measured out of its band
+    (0, 0.0): 'measured 0.966 under [0.988, 1.012]',
+    (0, 1.0): 'measured 0.986 under [0.988, 1.012]',
+    (0, 1.5): 'measured 0.982 under [0.988, 1.012]',
+    (0, 2.0): 'measured 0.977 under [0.987, 1.013]',
+    (0, 2.5): 'measured 0.967 under [0.986, 1.014]',
+    (5, 0.0): 'measured 0.968 under [0.988, 1.012]',
+    (5, 2.5): 'measured 0.985 under [0.986, 1.014]'}
 
-    Met at 0.5 V only (and at 0.5 to 1.5 V on the held-out seed 5): S is 1 to 7 % above
-    the mean y^2, most at 2.5 V where the regression's R_h is largest.
+
+@pytest.mark.parametrize('seed, noise', [
+    pytest.param(seed, v, marks=[pytest.mark.xfail(strict=True, reason=_NIS_OUT[seed, v])]
+                 if (seed, v) in _NIS_OUT else [])
+    for seed in (0, 5) for v in NOISE_LEVELS])
+def test_nis_in_band(seed, noise):
     """
-    c = _nees_nis(noise, seed=0)
+    The mean NIS of CONSISTENT in the 95 % band of its chi^2, seeds 0 and 5.
+
+    Met from 0.5 to 2 V on seed 5 (and on seed 9, not tuned on), at 0.5 V on seed 0,
+    whose noise draws are 1.2 % under their variance at every level (the levels share
+    them).  At 0 and 2.5 V the prior's errors are skewed along H, and with the curvature
+    of h this third moment (0 for the Gaussian the filter assumes) makes S 3.3 and 1.1 %
+    too large (doc/design/two_axis.md, "Consistency").
+    """
+    c = _nees_nis(noise, seed=seed)
     assert c.nis_band[0] < c.nis < c.nis_band[1], c
 
 
@@ -260,11 +271,12 @@ def test_gauss_hermite_points_integrate_the_gaussian_moments():
     """
     The sigma-point rules against the moments of N(0, I_3) in closed form.
 
-    Gauss-Hermite: E x_i^2 = 1, E x_i^4 = 3, E x_i^2 x_j^2 = 1, odd moments 0.  The
+    Gauss-Hermite: E x_i^2 = 1, E x_i^4 = 3, E x_i^2 x_j^2 = 1, odd moments 0 (and with 5
+    points E x_i^6 = 15, E x_i^8 = 105, E x_i^4 x_j^2 = 3).  The
     cubature rule gets E x_i^4 = 3 but E x_i^2 x_j^2 = 0: the variance of a product term
     such as x1 d of h, which is why it is not CONSISTENT's.
     """
-    for rule, cross in (('gauss_hermite', 1.0), ('cubature', 0.0)):
+    for rule, cross in (('gauss_hermite', 1.0), ('gauss_hermite_5', 1.0), ('cubature', 0.0)):
         X, w = SIGMA_POINTS[rule]
         assert w.sum() == pytest.approx(1.0, abs=1e-15)
         np.testing.assert_allclose(w @ X, 0.0, atol=1e-15)
@@ -272,6 +284,10 @@ def test_gauss_hermite_points_integrate_the_gaussian_moments():
         np.testing.assert_allclose(w @ X ** 4, 3.0, rtol=1e-14)
         assert float(w @ (X[:, 0] ** 2 * X[:, 1] ** 2)) == pytest.approx(cross, abs=1e-14)
         np.testing.assert_allclose(w @ (X[:, 0] * X[:, 1] ** 2), 0.0, atol=1e-14)
+    X, w = SIGMA_POINTS['gauss_hermite_5']     # 5 points: exact to degree 9 per axis
+    np.testing.assert_allclose(w @ X ** 6, 15.0, rtol=1e-13)
+    np.testing.assert_allclose(w @ X ** 8, 105.0, rtol=1e-13)
+    assert float(w @ (X[:, 0] ** 4 * X[:, 1] ** 2)) == pytest.approx(3.0, rel=1e-13)
 
 
 def test_cubature_update_is_filterpys_unscented_update():
@@ -310,7 +326,7 @@ def test_gauss_hermite_regression_against_samples():
     'gauss_hermite': hx, H and R_h against the regression of h over 400 000 draws of N(x, P).
 
     The mean of h, Cov(x, h) P^-1 and Var h - H P H^T by Monte Carlo (independent of the
-    rule); 3 Gauss-Hermite points per axis integrate the smooth g_r to 1 % here.
+    rule); CONSISTENT's 5 Gauss-Hermite points per axis integrate the smooth g_r to 1 % here.
     """
     rng = np.random.default_rng(6)
     ekf = ConicalScanEKF(replace(CONSISTENT, noise=0.5), runs=1)
@@ -326,6 +342,32 @@ def test_gauss_hermite_regression_against_samples():
     np.testing.assert_allclose(H[0, 0, :3], H_mc, rtol=2e-2, atol=2e-3)
     assert R_h[0] == pytest.approx(cov[3, 3] - H_mc @ cov[:3, 3], rel=0.1)
     np.testing.assert_allclose(H[0, 0, 3:], 0.0)
+
+
+@pytest.mark.parametrize('sd, three, five', [(3.0, 0.02, 0.01), (6.0, (0.15, 0.25), 0.04)])
+def test_var_h_over_a_wide_pointing_prior_against_samples(sd, three, five):
+    """
+    Var h over N(x, P) by each Gauss-Hermite rule against 400 000 draws (x1 3.5, d 0).
+
+    The predicted sample's variance H P H^T + R_h, S less R.  A pointing prior sd = 6 deg
+    wide (2 to 2.5 V in closed loop) puts the 3-point rule's nodes at +-10.4 deg: it
+    overstates Var h by 20 % (measured), most of why the mean NIS was 0.93 at 2.5 V; the
+    5-point rule is within 3 %.  At 3 deg both are within 1 %.
+    """
+    rng = np.random.default_rng(7)
+    x = np.array([[3.5, 0.0, 0.0, 0.0, 0.0]])
+    P = np.diag([0.25, sd * sd, sd * sd, 1e-3, 1e-3])[None]
+    draws = rng.multivariate_normal(x[0], P[0], 400_000)
+    var = {}
+    for rule in ('gauss_hermite', 'gauss_hermite_5'):
+        ekf = ConicalScanEKF(replace(CONSISTENT, linearisation=rule, noise=2.5), runs=1)
+        H, _, R_h = ekf.linearise(x, P, ekf.scan_offset)
+        var[rule] = float(H[0, 0] @ P[0] @ H[0, 0] + R_h[0]) / ekf.h(draws, ekf.scan_offset).var()
+    if isinstance(three, tuple):
+        assert three[0] < var['gauss_hermite'] - 1.0 < three[1], var
+    else:
+        assert var['gauss_hermite'] == pytest.approx(1.0, abs=three), var
+    assert var['gauss_hermite_5'] == pytest.approx(1.0, abs=five), var
 
 
 def test_iterated_ekf_converges_to_the_map_estimate():
