@@ -15,6 +15,8 @@
 """The modules a node's start imports: only what its path runs (start-up time, memory)."""
 
 import os
+from pathlib import Path
+import shutil
 import subprocess
 import sys
 
@@ -25,8 +27,15 @@ import pytest
 NEVER = ('scipy.stats', 'scipy.integrate', 'scipy.optimize', 'matplotlib', 'dask', 'numba',
          'mcap', 'rosbags', 'tskf_ros.experiments', 'tskf_ros.bag.reader',
          'tskf_ros.tools.plot_bag', 'numpy.random')
-# the estimator's path has no LED code, and no scipy beyond its package (numpy's linalg)
-ESTIMATOR_NEVER = NEVER + ('tskf_ros.led', 'scipy.linalg', 'scipy.special', 'scipy.sparse')
+# imported only when a start needs them: argparse for a non-ROS argument (--help,
+# --executor), difflib for a parameter the node does not have, rclpy.experimental for
+# --executor events
+ON_DEMAND = ('argparse', 'difflib', 'rclpy.experimental')
+# the estimator's path has no LED code, and no scipy beyond its package (numpy's linalg);
+# the fixed-lag smoother only with smoothing_lag > 0
+ESTIMATOR_NEVER = NEVER + ON_DEMAND + ('tskf_ros.led', 'scipy.linalg', 'scipy.special',
+                                       'scipy.sparse', 'tskf_ros.owc.lagged_estimates',
+                                       'tskf_ros.core.fixed_lag', 'tskf_ros.core.smoother')
 
 
 def _imported(module: str, then: str = 'pass') -> set[str]:
@@ -45,7 +54,7 @@ def _offending(modules: set[str], never: tuple) -> list[str]:
     ('tskf_ros.nodes.timescale_estimator', ESTIMATOR_NEVER),
     # what the console script `timescale_estimator` imports before main()
     ('tskf_ros.tools.console, tskf_ros.nodes.timescale_estimator', ESTIMATOR_NEVER),
-    ('tskf_ros.nodes.alignment', NEVER),
+    ('tskf_ros.nodes.alignment', NEVER + ON_DEMAND),
 ])
 def test_a_node_module_imports_only_its_path(module, never):
     assert _offending(_imported(module), never) == []
@@ -94,7 +103,46 @@ def test_a_node_built_and_fed_imports_no_scipy(module, cls, period):
                     'runs numba in the background (python -m tskf_ros.core.aot builds them)')
     then = RUN_NODE.format(module=module, cls=cls, period=period)
     modules = _imported(module, then=f'exec({then!r})')
-    assert _offending(modules, NEVER + ('scipy',)) == []
+    assert _offending(modules, NEVER + ON_DEMAND + ('scipy',)) == []
+
+
+def _console_script(name: str):
+    """Return the installed console script `name` (./run's link, else <prefix>/lib/tskf_ros)."""
+    script = shutil.which(f'tskf_{name}') or Path(sys.prefix) / 'lib' / 'tskf_ros' / name
+    return script if Path(script).is_file() else None
+
+
+# runs a script as its shebang's interpreter would, with --help, and writes the modules
+# it imported into a file at the exit (importlib.import_module's imports, the console
+# runner's, are not in `python -X importtime`)
+RUN_SCRIPT = """
+import atexit, runpy, sys
+script, out = sys.argv[1:3]
+def written():
+    with open(out, 'w') as f:
+        f.write('\\n'.join(sys.modules))
+atexit.register(written)
+sys.argv = [script, '--help']
+runpy.run_path(script, run_name='__main__')
+"""
+
+
+@pytest.mark.parametrize('name', ['timescale_estimator', 'alignment'])
+def test_the_console_script_imports_its_node_directly(name, tmp_path):
+    # setuptools' own scripts look the function up through importlib.metadata at every
+    # start (setup.py rewrites them): the script as installed, run to its --help, which
+    # comes after the node's module is imported
+    script = _console_script(name)
+    if script is None:
+        pytest.skip(f'no console script {name} installed for this interpreter')
+    out = tmp_path / 'modules.txt'
+    result = subprocess.run([sys.executable, '-c', RUN_SCRIPT, str(script), str(out)],
+                            capture_output=True, text=True, env=dict(os.environ), timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert 'usage:' in result.stdout
+    imported = set(out.read_text().split())
+    assert f'tskf_ros.nodes.{name}' in imported
+    assert _offending(imported, ('importlib.metadata', 'pkg_resources')) == []
 
 
 def test_the_check_sees_a_forbidden_module():
