@@ -36,6 +36,10 @@ ON_DEMAND = ('argparse', 'difflib', 'rclpy.experimental')
 ESTIMATOR_NEVER = NEVER + ON_DEMAND + ('tskf_ros.led', 'scipy.linalg', 'scipy.special',
                                        'scipy.sparse', 'tskf_ros.owc.lagged_estimates',
                                        'tskf_ros.core.fixed_lag', 'tskf_ros.core.smoother')
+# the alignment node's one-axis start (axes 1, the default): no two-axis module, and no
+# geometry_msgs (the estimator's input type)
+ALIGNMENT_NEVER = NEVER + ON_DEMAND + ('tskf_ros.led.two_axis', 'tskf_ros.led.pan_tilt_stream',
+                                       'tskf_ros.messages.pan_tilt_interface', 'geometry_msgs')
 
 
 def _imported(module: str, then: str = 'pass') -> set[str]:
@@ -54,7 +58,7 @@ def _offending(modules: set[str], never: tuple) -> list[str]:
     ('tskf_ros.nodes.timescale_estimator', ESTIMATOR_NEVER),
     # what the console script `timescale_estimator` imports before main()
     ('tskf_ros.tools.console, tskf_ros.nodes.timescale_estimator', ESTIMATOR_NEVER),
-    ('tskf_ros.nodes.alignment', NEVER + ON_DEMAND),
+    ('tskf_ros.nodes.alignment', ALIGNMENT_NEVER),
 ])
 def test_a_node_module_imports_only_its_path(module, never):
     assert _offending(_imported(module), never) == []
@@ -63,7 +67,7 @@ def test_a_node_module_imports_only_its_path(module, never):
 def test_the_alignment_configuration_needs_no_scipy_optimize():
     # the default configuration (the intensity fit's peak and zone width) at start
     then = 'from tskf_ros.led.alignment_config import AlignmentConfig; AlignmentConfig()'
-    assert _offending(_imported('tskf_ros.nodes.alignment', then), NEVER) == []
+    assert _offending(_imported('tskf_ros.nodes.alignment', then), ALIGNMENT_NEVER) == []
 
 
 # a node built as its console script builds it, then handed inputs through its subscription's
@@ -89,11 +93,11 @@ rclpy.try_shutdown()
 """
 
 
-@pytest.mark.parametrize('module, cls, period', [
-    ('tskf_ros.nodes.timescale_estimator', 'TimescaleEstimator', 1.0),
-    ('tskf_ros.nodes.alignment', 'Alignment', 0.05),
+@pytest.mark.parametrize('module, cls, period, never', [
+    ('tskf_ros.nodes.timescale_estimator', 'TimescaleEstimator', 1.0, ESTIMATOR_NEVER),
+    ('tskf_ros.nodes.alignment', 'Alignment', 0.05, ALIGNMENT_NEVER),
 ])
-def test_a_node_built_and_fed_imports_no_scipy(module, cls, period):
+def test_a_node_built_and_fed_imports_no_scipy(module, cls, period, never):
     # neither node's start nor its first inputs import scipy (the lock detector's NIS band
     # is tskf_ros.core.chi_square's, the interval check's eigenvalues numpy's), numba or
     # anything in NEVER
@@ -103,7 +107,7 @@ def test_a_node_built_and_fed_imports_no_scipy(module, cls, period):
                     'runs numba in the background (python -m tskf_ros.core.aot builds them)')
     then = RUN_NODE.format(module=module, cls=cls, period=period)
     modules = _imported(module, then=f'exec({then!r})')
-    assert _offending(modules, NEVER + ON_DEMAND + ('scipy',)) == []
+    assert _offending(modules, never + ('scipy',)) == []
 
 
 def _console_script(name: str):
