@@ -13,6 +13,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
+import compileall
 from glob import glob
 import os
 import subprocess
@@ -22,6 +23,7 @@ from setuptools import find_packages
 from setuptools import setup
 from setuptools.command.build_py import build_py
 from setuptools.command.develop import develop
+from setuptools.command.install_scripts import install_scripts
 
 package_name = 'tskf_ros'
 
@@ -61,6 +63,42 @@ def _compile_kernels(root, output, numba_cache=None):
     print(f'tskf_ros: {line}', file=sys.stdout if built else sys.stderr)
 
 
+def _byte_compile(package_dir):
+    """
+    Write the bytecode (__pycache__/*.pyc) of every module below package_dir.
+
+    Python writes it on a module's first import, unless the tree is read-only or
+    PYTHONDONTWRITEBYTECODE is set (distutils' install_lib skips it then too): a node would
+    compile its about 120 modules from source at every start (doc/benchmarks.md).
+    """
+    compileall.compile_dir(package_dir, quiet=1)
+
+
+def _direct_scripts(directory, entry_points):
+    """
+    Rewrite the console scripts in directory to import their function directly.
+
+    setuptools' scripts (`setup.py install`, `develop`: colcon's build, ./run's editable
+    install) look their function up through importlib.metadata at every start, about
+    0.1 s of a loaded machine; these import it as pip's scripts do.  A file that is not
+    there or has no Python shebang is left as it is.
+    """
+    for spec in entry_points.get('console_scripts', []):
+        name, target = (part.strip() for part in spec.split('='))
+        module, function = target.split(':')
+        path = os.path.join(directory, name)
+        if not os.path.isfile(path):
+            continue
+        with open(path) as f:
+            shebang = f.readline().rstrip('\n')
+        if not (shebang.startswith('#!') and 'python' in shebang):
+            continue
+        with open(path, 'w') as f:
+            f.write(f'{shebang}\n# {name}: runs {target} (setup.py writes it)\nimport sys\n\n'
+                    f'from {module} import {function}\n\n'
+                    f"if __name__ == '__main__':\n    sys.exit({function}())\n")
+
+
 class BuildWithKernels(build_py):
     """build_py, then the nodes' kernels into the built package's core/__pycache__."""
 
@@ -70,11 +108,20 @@ class BuildWithKernels(build_py):
             _compile_kernels(
                 self.build_lib, os.path.join(self.build_lib, package_name, 'core', '__pycache__'),
                 numba_cache=os.path.join(os.path.dirname(self.build_lib), 'numba_cache'))
+            _byte_compile(os.path.join(self.build_lib, package_name))
 
     def get_outputs(self, include_bytecode=1):
         """Return build_py's files and the kernels' module (install --record lists them)."""
         return super().get_outputs(include_bytecode) + _files(
             os.path.join(self.build_lib, package_name, 'core', '__pycache__', 'tskf_kernels_*'))
+
+
+class InstallScripts(install_scripts):
+    """install_scripts (colcon build, setup.py install), the console scripts importing directly."""
+
+    def run(self):
+        super().run()
+        _direct_scripts(self.install_dir, self.distribution.entry_points)
 
 
 class DevelopWithKernels(develop):
@@ -86,11 +133,14 @@ class DevelopWithKernels(develop):
             core = os.path.realpath(os.path.join(package_name, 'core'))
             _compile_kernels(os.path.dirname(os.path.dirname(core)),
                              os.path.join(core, '__pycache__'))
+            _byte_compile(os.path.dirname(core))
+            _direct_scripts(self.script_dir, self.distribution.entry_points)
 
 
 setup(
     name=package_name,
-    cmdclass={'build_py': BuildWithKernels, 'develop': DevelopWithKernels},
+    cmdclass={'build_py': BuildWithKernels, 'develop': DevelopWithKernels,
+              'install_scripts': InstallScripts},
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[

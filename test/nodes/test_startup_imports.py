@@ -15,6 +15,8 @@
 """The modules a node's start imports: only what its path runs (start-up time, memory)."""
 
 import os
+from pathlib import Path
+import shutil
 import subprocess
 import sys
 
@@ -25,8 +27,19 @@ import pytest
 NEVER = ('scipy.stats', 'scipy.integrate', 'scipy.optimize', 'matplotlib', 'dask', 'numba',
          'mcap', 'rosbags', 'tskf_ros.experiments', 'tskf_ros.bag.reader',
          'tskf_ros.tools.plot_bag', 'numpy.random')
-# the estimator's path has no LED code, and no scipy beyond its package (numpy's linalg)
-ESTIMATOR_NEVER = NEVER + ('tskf_ros.led', 'scipy.linalg', 'scipy.special', 'scipy.sparse')
+# imported only when a start needs them: argparse for a non-ROS argument (--help,
+# --executor), difflib for a parameter the node does not have, rclpy.experimental for
+# --executor events
+ON_DEMAND = ('argparse', 'difflib', 'rclpy.experimental')
+# the estimator's path has no LED code, and no scipy beyond its package (numpy's linalg);
+# the fixed-lag smoother only with smoothing_lag > 0
+ESTIMATOR_NEVER = NEVER + ON_DEMAND + ('tskf_ros.led', 'scipy.linalg', 'scipy.special',
+                                       'scipy.sparse', 'tskf_ros.owc.lagged_estimates',
+                                       'tskf_ros.core.fixed_lag', 'tskf_ros.core.smoother')
+# the alignment node's one-axis start (axes 1, the default): no two-axis module, and no
+# geometry_msgs (the estimator's input type)
+ALIGNMENT_NEVER = NEVER + ON_DEMAND + ('tskf_ros.led.two_axis', 'tskf_ros.led.pan_tilt_stream',
+                                       'tskf_ros.messages.pan_tilt_interface', 'geometry_msgs')
 
 
 def _imported(module: str, then: str = 'pass') -> set[str]:
@@ -45,7 +58,7 @@ def _offending(modules: set[str], never: tuple) -> list[str]:
     ('tskf_ros.nodes.timescale_estimator', ESTIMATOR_NEVER),
     # what the console script `timescale_estimator` imports before main()
     ('tskf_ros.tools.console, tskf_ros.nodes.timescale_estimator', ESTIMATOR_NEVER),
-    ('tskf_ros.nodes.alignment', NEVER),
+    ('tskf_ros.nodes.alignment', ALIGNMENT_NEVER),
 ])
 def test_a_node_module_imports_only_its_path(module, never):
     assert _offending(_imported(module), never) == []
@@ -54,7 +67,7 @@ def test_a_node_module_imports_only_its_path(module, never):
 def test_the_alignment_configuration_needs_no_scipy_optimize():
     # the default configuration (the intensity fit's peak and zone width) at start
     then = 'from tskf_ros.led.alignment_config import AlignmentConfig; AlignmentConfig()'
-    assert _offending(_imported('tskf_ros.nodes.alignment', then), NEVER) == []
+    assert _offending(_imported('tskf_ros.nodes.alignment', then), ALIGNMENT_NEVER) == []
 
 
 # a node built as its console script builds it, then handed inputs through its subscription's
@@ -80,11 +93,11 @@ rclpy.try_shutdown()
 """
 
 
-@pytest.mark.parametrize('module, cls, period', [
-    ('tskf_ros.nodes.timescale_estimator', 'TimescaleEstimator', 1.0),
-    ('tskf_ros.nodes.alignment', 'Alignment', 0.05),
+@pytest.mark.parametrize('module, cls, period, never', [
+    ('tskf_ros.nodes.timescale_estimator', 'TimescaleEstimator', 1.0, ESTIMATOR_NEVER),
+    ('tskf_ros.nodes.alignment', 'Alignment', 0.05, ALIGNMENT_NEVER),
 ])
-def test_a_node_built_and_fed_imports_no_scipy(module, cls, period):
+def test_a_node_built_and_fed_imports_no_scipy(module, cls, period, never):
     # neither node's start nor its first inputs import scipy (the lock detector's NIS band
     # is tskf_ros.core.chi_square's, the interval check's eigenvalues numpy's), numba or
     # anything in NEVER
@@ -94,7 +107,46 @@ def test_a_node_built_and_fed_imports_no_scipy(module, cls, period):
                     'runs numba in the background (python -m tskf_ros.core.aot builds them)')
     then = RUN_NODE.format(module=module, cls=cls, period=period)
     modules = _imported(module, then=f'exec({then!r})')
-    assert _offending(modules, NEVER + ('scipy',)) == []
+    assert _offending(modules, never + ('scipy',)) == []
+
+
+def _console_script(name: str):
+    """Return the installed console script `name` (./run's link, else <prefix>/lib/tskf_ros)."""
+    script = shutil.which(f'tskf_{name}') or Path(sys.prefix) / 'lib' / 'tskf_ros' / name
+    return script if Path(script).is_file() else None
+
+
+# runs a script as its shebang's interpreter would, with --help, and writes the modules
+# it imported into a file at the exit (importlib.import_module's imports, the console
+# runner's, are not in `python -X importtime`)
+RUN_SCRIPT = """
+import atexit, runpy, sys
+script, out = sys.argv[1:3]
+def written():
+    with open(out, 'w') as f:
+        f.write('\\n'.join(sys.modules))
+atexit.register(written)
+sys.argv = [script, '--help']
+runpy.run_path(script, run_name='__main__')
+"""
+
+
+@pytest.mark.parametrize('name', ['timescale_estimator', 'alignment'])
+def test_the_console_script_imports_its_node_directly(name, tmp_path):
+    # setuptools' own scripts look the function up through importlib.metadata at every
+    # start (setup.py rewrites them): the script as installed, run to its --help, which
+    # comes after the node's module is imported
+    script = _console_script(name)
+    if script is None:
+        pytest.skip(f'no console script {name} installed for this interpreter')
+    out = tmp_path / 'modules.txt'
+    result = subprocess.run([sys.executable, '-c', RUN_SCRIPT, str(script), str(out)],
+                            capture_output=True, text=True, env=dict(os.environ), timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert 'usage:' in result.stdout
+    imported = set(out.read_text().split())
+    assert f'tskf_ros.nodes.{name}' in imported
+    assert _offending(imported, ('importlib.metadata', 'pkg_resources')) == []
 
 
 def test_the_check_sees_a_forbidden_module():

@@ -22,7 +22,7 @@ import shutil
 import subprocess
 import sys
 
-from entry_points import console_scripts
+from entry_points import console_script_targets, console_scripts
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -152,6 +152,19 @@ def test_the_nodes_kernels_are_compiled_into_the_install(install):
     assert Path(path).is_relative_to(install / PACKAGE), path
     assert Path(path).parts[-4:-1] == (PACKAGE, 'core', '__pycache__'), path
     assert numba_loaded == 'False'
+
+
+def test_the_install_has_bytecode_and_scripts_that_import_directly(install):
+    """setup.py writes the modules' bytecode and console scripts without a metadata lookup."""
+    nodes = next((install / PACKAGE / 'lib').glob(f'python3*/site-packages/{PACKAGE}/nodes'))
+    pyc = sorted(p.name for p in (nodes / '__pycache__').glob('*.pyc'))
+    assert {f'{p.stem}.{sys.implementation.cache_tag}.pyc' for p in nodes.glob('*.py')} \
+        <= set(pyc), pyc
+    for name, target in console_script_targets().items():
+        module, function = target.split(':')
+        text = (install / PACKAGE / 'lib' / PACKAGE / name).read_text()
+        assert f'from {module} import {function}' in text, text
+        assert 'importlib' not in text and 'pkg_resources' not in text, text
 
 
 def test_setup_declares_executables():

@@ -17,7 +17,7 @@
 
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, Optional, Sequence, Union
+from typing import Any, Optional, Sequence, TYPE_CHECKING, Union
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -26,15 +26,17 @@ from std_msgs.msg import String
 from tskf_ros import led
 from tskf_ros.led.alignment_config import AlignmentConfig
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
-from tskf_ros.led.pan_tilt_stream import PanTiltStream
 from tskf_ros.led.pat_config import PatConfig
 from tskf_ros.led.pointing_stats import Transition
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATE_ESTIMATE_TYPE
-from tskf_ros.messages.pan_tilt_interface import check_joints, pan_tilt_config
+from tskf_ros.messages.pan_tilt_messages import check_joints
 from tskf_ros.messages.parameter_schema import load_schema, ParameterError
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
 from tskf_ros.messages.qos import DEFAULT_DEPTH, reliable_qos
+
+if TYPE_CHECKING:       # (the two-axis modules: imported for axes 2 only)
+    from tskf_ros.led.pan_tilt_stream import PanTiltStream
 
 NODE_NAME = 'alignment'
 INPUT_TOPIC = 'intensity'
@@ -80,7 +82,8 @@ def parameters_to_config(values: dict) -> NodeConfig:
         check_joints(values)
     except ParameterError as exc:
         raise led.AlignmentError(str(exc)) from None
-    if values['axes'] == 2:
+    if values['axes'] == 2:     # (the two-axis modules only then)
+        from tskf_ros.messages.pan_tilt_interface import pan_tilt_config
         return pan_tilt_config(values)
     session = {f.name: values[f.name] for f in fields(AlignmentConfig) if f.name != 'pat'}
     arrays = {k: tuple(v) for k, v in session.items() if isinstance(v, list)}
@@ -162,7 +165,7 @@ def bag_outcome_messages(out: AlignOutcome, config: NodeConfig) -> list[tuple[st
     return [(BAG_OUTPUT_TOPICS[key], msg) for key, msg in outcome_messages(out, config)]
 
 
-def diagnostics_message(session: Union[AlignmentSession, PanTiltStream], config: NodeConfig,
+def diagnostics_message(session: Union[AlignmentSession, 'PanTiltStream'], config: NodeConfig,
                         stamp_ns: int, *,
                         node_name: str = NODE_NAME) -> DiagnosticArray:
     """Return the /diagnostics message of the session's counters at stamp_ns."""

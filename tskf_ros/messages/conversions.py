@@ -15,17 +15,19 @@
 
 """Messages to and from the core: the only place where ROS messages meet numpy arrays."""
 
-from typing import NamedTuple, Sequence
+from typing import NamedTuple, Sequence, TYPE_CHECKING
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import AccelStamped
 import numpy as np
 from sensor_msgs.msg import Illuminance, JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
 from tskf_ros.core.diagnostic_status import Status
 from tskf_ros.core.units import NS
+
+if TYPE_CHECKING:   # imported where it is built: geometry_msgs.msg loads its 35 types
+    from geometry_msgs.msg import AccelStamped
 
 SLOTS = 6
 # the simulators' truth: joints (angles) by name
@@ -268,13 +270,15 @@ def msg_to_alignment_state(msg: Float64MultiArray) -> StateEstimate:
 # A model with more than six input columns does not fit: the node passes all six slots
 # and the session rejects the size ('input_size').
 
-def input_to_msg(stamp_ns: int, u: Sequence[float], *, frame_id: str = '') -> AccelStamped:
+def input_to_msg(stamp_ns: int, u: Sequence[float], *,
+                 frame_id: str = '') -> 'AccelStamped':
     """Convert (stamp, u of <= 6 entries) -> AccelStamped (slot i = u[i], the rest 0)."""
     u = np.asarray(u, dtype=float).reshape(-1)
     if u.size > SLOTS:
         raise ValueError(f'an input of {u.size} > {SLOTS} entries does not fit the message')
     v = np.zeros(SLOTS)
     v[:u.size] = u
+    from geometry_msgs.msg import AccelStamped
     msg = AccelStamped()
     msg.header.stamp = ns_to_stamp(stamp_ns)
     msg.header.frame_id = frame_id
@@ -284,7 +288,7 @@ def input_to_msg(stamp_ns: int, u: Sequence[float], *, frame_id: str = '') -> Ac
     return msg
 
 
-def msg_to_input(msg: AccelStamped, m: int) -> tuple[int, np.ndarray]:
+def msg_to_input(msg: 'AccelStamped', m: int) -> tuple[int, np.ndarray]:
     """Convert AccelStamped -> (stamp ns, u): the first m slots (all six if m > 6)."""
     a = msg.accel
     v = np.array([a.linear.x, a.linear.y, a.linear.z, a.angular.x, a.angular.y, a.angular.z],

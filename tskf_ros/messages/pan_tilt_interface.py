@@ -37,22 +37,12 @@ from tskf_ros.led.pan_tilt_stream import PanTiltStep, PanTiltStreamConfig
 from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_session import PanTiltSessionConfig
 from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
-from tskf_ros.messages.pan_tilt_messages import pan_tilt_command_to_msg, pan_tilt_state_to_msg
-from tskf_ros.messages.parameter_schema import ParameterError
+from tskf_ros.messages.pan_tilt_messages import (check_joints, JOINTS, pan_tilt_command_to_msg,
+                                                 pan_tilt_state_to_msg)
 from tskf_ros.messages.parameters import NodeConfig
 
 __all__ = ['check_joints', 'JOINTS', 'pan_tilt_config', 'pan_tilt_outcome_messages',
            'supervisor_config']
-
-JOINTS = 'pan_tilt.joints'
-
-
-def check_joints(values: dict) -> tuple[str, str]:
-    """Return the two joint names; raise ParameterError (one line) if one is empty."""
-    joints = tuple(values[JOINTS])
-    if len(joints) != 2 or not all(isinstance(j, str) and j.strip() for j in joints):
-        raise ParameterError(f'{JOINTS} must be two non-empty joint names, got {list(joints)}')
-    return joints[0], joints[1]
 
 
 def method(values: dict) -> str:

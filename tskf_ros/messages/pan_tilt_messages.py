@@ -39,6 +39,10 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayou
 
 from tskf_ros.messages.conversions import (angle_to_msg, msg_to_angle, msg_to_state_estimate,
                                            state_estimate_to_msg, StateEstimate)
+from tskf_ros.messages.parameter_schema import ParameterError
+
+# the parameter naming the two joints (the alignment node checks it for one axis too)
+JOINTS = 'pan_tilt.joints'
 
 # the two-axis truth's entries after the two joints
 SOURCE_JOINTS = ('source_azimuth', 'source_elevation')
@@ -51,6 +55,14 @@ STATE_LABELS = {
     'b_c': 'b_cross_elevation_rad_per_step',
     'b_e': 'b_elevation_rad_per_step',
 }
+
+
+def check_joints(values: dict) -> tuple[str, str]:
+    """Return the two joint names; raise ParameterError (one line) if one is empty."""
+    joints = tuple(values[JOINTS])
+    if len(joints) != 2 or not all(isinstance(j, str) and j.strip() for j in joints):
+        raise ParameterError(f'{JOINTS} must be two non-empty joint names, got {list(joints)}')
+    return joints[0], joints[1]
 
 
 def truth_joints(joints: Sequence[str]) -> tuple[str, ...]:

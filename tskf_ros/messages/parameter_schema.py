@@ -260,20 +260,23 @@ class ParameterSchema:
         """
         Declare every parameter on node with its descriptor; return the names given at start.
 
-        Public rclpy calls only.  A parameter is first declared without a value and with
+        Public rclpy calls only.  Every parameter is first declared without a value and with
         dynamic typing, so that rclpy hands it the value given at start (a parameter file,
         `-p`, a launch file, the node's parameter_overrides) if there is one: that is how
         the node learns which parameters were given.  That value, coerced to the schema's
         type (an integer for a double), or else the default, is checked against the
-        schema; then the parameter is declared again with its static type and set to it,
-        and a read-only one gets its read-only descriptor last.  Raises ParameterError
-        naming the first bad value.  Later changes of a double to an integer are taken as
-        doubles too (a pre-set callback).
+        schema; then the parameters are declared again with their static types, values
+        and descriptors (read-only ones read-only), all in one `declare_parameters` call
+        each time.  Raises ParameterError naming the first bad value.  Later changes of a
+        double to an integer are taken as doubles too (a pre-set callback).
         """
-        given = []
+        names = self.names
+        starts = node.declare_parameters(
+            '', [(name, None, ParameterDescriptor(dynamic_typing=True)) for name in names])
+        given, values = [], []
         defaults = self.defaults()
-        for name, spec in self.parameters.items():
-            start = node.declare_parameter(name, None, ParameterDescriptor(dynamic_typing=True))
+        for name, start in zip(names, starts):
+            spec = self.parameters[name]
             if start.type_ != Parameter.Type.NOT_SET:
                 given.append(name)
                 value = start.value
@@ -284,17 +287,31 @@ class ParameterSchema:
             why = spec.problem(value)
             if why:
                 raise ParameterError(why)
+            values.append(spec.coerce(value))
+        for name in names:
             node.undeclare_parameter(name)
-            writable = spec.descriptor()
-            writable.read_only = False
-            node.declare_parameter(name, spec.ros_type, writable, ignore_override=True)
-            result = node.set_parameters([Parameter(name, spec.ros_type, spec.coerce(value))])[0]
+        # rclpy takes a parameter's static type from its value, and an empty list has none:
+        # such a parameter is declared by its type, then set
+        empty = {name for name, value in zip(names, values) if value == []}
+        node.declare_parameters('', [
+            (name, value, self.parameters[name].descriptor()) if name not in empty else
+            (name, self.parameters[name].ros_type, self._writable(name))
+            for name, value in zip(names, values)], ignore_override=True)
+        for name in empty:
+            spec = self.parameters[name]
+            result = node.set_parameters([Parameter(name, spec.ros_type, [])])[0]
             if not result.successful:
                 raise ParameterError(f'{name}: {result.reason}')
             if spec.read_only:
                 node.set_descriptor(name, spec.descriptor())
         node.add_pre_set_parameters_callback(self.coerce_changes)
         return frozenset(given)
+
+    def _writable(self, name: str) -> ParameterDescriptor:
+        """Return a parameter's descriptor, not read-only (to set it once declared)."""
+        descriptor = self.parameters[name].descriptor()
+        descriptor.read_only = False
+        return descriptor
 
 
 def _leaves(tree: dict, prefix: str, where: str) -> list:

@@ -15,7 +15,7 @@
 
 """The alignment node: LED active alignment (Solanki et al. 2018) on stamped intensities."""
 
-from typing import Any, Optional, Union
+from typing import Any, Callable, Optional, TYPE_CHECKING, Union
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
@@ -24,26 +24,30 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
 from tskf_ros import led
+from tskf_ros.led.alignment_config import AlignmentConfig
 from tskf_ros.led.alignment_diagnostics import status_line
 from tskf_ros.led.alignment_session import AlignmentSession, AlignOutcome
-from tskf_ros.led.pan_tilt_stream import PanTiltStep, PanTiltStream, PanTiltStreamConfig
 from tskf_ros.messages import conversions
 from tskf_ros.messages.alignment_interface import (diagnostics_message, INPUT_TOPIC,
                                                    NODE_NAME, NodeConfig, outcome_messages,
                                                    output_qos, OUTPUT_TOPICS,
                                                    parameters_to_config, pat_state_message,
                                                    pat_state_qos, PAT_STATE_TOPIC)
-from tskf_ros.messages.pan_tilt_interface import check_joints, pan_tilt_outcome_messages
+from tskf_ros.messages.pan_tilt_messages import check_joints
 from tskf_ros.messages.qos import sensor_input_qos
 from tskf_ros.nodes.node_base import diagnostic_name, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
 
+if TYPE_CHECKING:       # the two-axis modules: imported for axes 2 only
+    from tskf_ros.led.pan_tilt_stream import PanTiltStep, PanTiltStream
 
-def new_session(config: Any) -> Union[AlignmentSession, PanTiltStream]:
-    """Return the session of a config: the two-axis stream (axes 2) or the one-axis session."""
-    if isinstance(config, PanTiltStreamConfig):
-        return PanTiltStream(config)
-    return AlignmentSession(config)
+
+def new_session(config: Any) -> Union[AlignmentSession, 'PanTiltStream']:
+    """Return the session of a config: the one-axis session or the two-axis stream (axes 2)."""
+    if isinstance(config, AlignmentConfig):
+        return AlignmentSession(config)
+    from tskf_ros.led.pan_tilt_stream import PanTiltStream
+    return PanTiltStream(config)
 
 
 class Alignment(ReconfigurableNode):
@@ -82,10 +86,14 @@ class Alignment(ReconfigurableNode):
         self.enable_service = self.create_service(SetBool, '~/enable', self._on_enable)
         # ~/acquire (std_srvs/srv/Trigger): force a new cold search (pat.enabled)
         self.acquire_service = self.create_service(Trigger, '~/acquire', self._on_acquire)
-        self.two_axes = isinstance(self.session, PanTiltStream)
+        self.two_axes = not isinstance(self.session, AlignmentSession)
         self.joints = check_joints(self.parameter_values())
+        # the two-axis outcome's messages (axes is read-only: the session's kind stays)
+        self.pan_tilt_messages: Optional[Callable[..., list]] = None
         cfg = self.config.session
-        if isinstance(cfg, PanTiltStreamConfig):
+        if self.two_axes:
+            from tskf_ros.messages.pan_tilt_interface import pan_tilt_outcome_messages
+            self.pan_tilt_messages = pan_tilt_outcome_messages
             s = cfg.session
             self._log_start(
                 f'aligning a pan-tilt mount ({self.joints[0]}, {self.joints[1]}) with '
@@ -131,7 +139,7 @@ class Alignment(ReconfigurableNode):
             self.session.skip(stamp_ns, now_ns)      # counted in diagnostics, not used
             return
         out = self.session.add(stamp_ns, volts, now_ns=now_ns)
-        self._report(out.outcome if isinstance(out, PanTiltStep) else out)
+        self._report(out.outcome if self.two_axes else out)
         self._publish(out)
         if self.session.pointing.pending:
             self._report_transitions()
@@ -164,8 +172,8 @@ class Alignment(ReconfigurableNode):
         elif out.status == 'reset':
             log.warning(f'aligner restarted ({out.reason}): {out.message}')
 
-    def _publish(self, out: Union[AlignOutcome, PanTiltStep]) -> None:
-        msgs = (pan_tilt_outcome_messages(out, self.joints) if isinstance(out, PanTiltStep)
+    def _publish(self, out: Union[AlignOutcome, 'PanTiltStep']) -> None:
+        msgs = (self.pan_tilt_messages(out, self.joints) if self.pan_tilt_messages is not None
                 else outcome_messages(out, self.config))
         for key, msg in msgs:
             self.pubs[key].publish(msg)
@@ -206,7 +214,7 @@ class Alignment(ReconfigurableNode):
     def status_line(self, rate: float) -> str:
         """Return the INFO status line: rate, gaps, last command and estimate, restarts."""
         s = self.session
-        if isinstance(s, PanTiltStream):
+        if self.two_axes:
             e = s.session.estimate()
             pan, tilt = s.joints
             return status_line(s.stats, rate, pan, s.paused, None if e is None else e.x[:3],

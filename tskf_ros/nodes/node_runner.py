@@ -15,19 +15,17 @@
 
 """How a node runs: its executor, `--help` without ROS, the Jazzy main loop, one-line errors."""
 
-import argparse
-import difflib
 import os
 import re
 import signal
 import sys
 import threading
-from typing import Callable, NoReturn, Optional, Sequence
+from types import SimpleNamespace
+from typing import Callable, NoReturn, Optional, Sequence, TYPE_CHECKING, Union
 
 import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
-from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 
@@ -38,11 +36,24 @@ from tskf_ros.messages.parameters import given_parameters, parameters_for_node
 
 import yaml
 
+if TYPE_CHECKING:
+    import argparse
+
+    from rclpy.experimental import EventsExecutor
+
+
+def _events_executor(context=None) -> 'EventsExecutor':
+    """Return an rclpy.experimental.EventsExecutor (its module imported only for it)."""
+    from rclpy.experimental import EventsExecutor
+    return EventsExecutor(context=context)
+
+
 # The executors a node can run on (`--executor`, or TSKF_EXECUTOR in the environment).
 # 'single' is rclpy's SingleThreadedExecutor, Jazzy's stable executor, which rebuilds its
 # wait set on every spin; 'events' is rclpy.experimental.EventsExecutor, which dispatches
 # from callbacks of the middleware (doc/benchmarks.md has both, measured).
-EXECUTORS = {'single': SingleThreadedExecutor, 'events': EventsExecutor}
+EXECUTORS: dict[str, Callable[..., Union[Executor, 'EventsExecutor']]] = {
+    'single': SingleThreadedExecutor, 'events': _events_executor}
 DEFAULT_EXECUTOR = 'single'
 EXECUTOR_VARIABLE = 'TSKF_EXECUTOR'
 # s: the longest EventsExecutor.spin_once between two checks of the context.  rclpy 7.1's
@@ -72,7 +83,8 @@ def executor_kind(kind: Optional[str] = None) -> str:
     return kind
 
 
-def make_executor(kind: Optional[str] = None, *, context=None) -> Executor:
+def make_executor(kind: Optional[str] = None, *,
+                  context=None) -> Union[Executor, 'EventsExecutor']:
     """Return a new executor of the kind (see executor_kind) in context."""
     return EXECUTORS[executor_kind(kind)](context=context)
 
@@ -106,24 +118,28 @@ def ros_arguments_error(exc: RuntimeError) -> str:
 
 
 def parse_args(prog: str, description: str,
-               argv: Optional[list] = None) -> argparse.Namespace:
+               argv: Optional[list] = None) -> Union['argparse.Namespace', SimpleNamespace]:
     """
     Parse the non-ROS arguments (`--help` prints usage and exits without starting ROS).
 
     ROS arguments rcl cannot parse (a malformed `-p`, `-r` or `--params-file`, an unknown
-    `--ros-args` flag) end the process with one line and exit status EXIT_USAGE.
+    `--ros-args` flag) end the process with one line and exit status EXIT_USAGE.  Without
+    any non-ROS argument (a node's usual start) argparse is not even imported.
     """
-    parser = argparse.ArgumentParser(prog=prog, description=description)
-    parser.add_argument('--executor', choices=sorted(EXECUTORS), default=None,
-                        help=f'the rclpy executor to spin on (default: ${EXECUTOR_VARIABLE} '
-                        f'if set, else {DEFAULT_EXECUTOR}): single = SingleThreadedExecutor, '
-                        'events = rclpy.experimental.EventsExecutor')
     try:
         # rcl's RCLInvalidROSArgsError and UnknownROSArgsError are RuntimeErrors
         args = remove_ros_args(sys.argv if argv is None else argv)[1:]
     except RuntimeError as exc:
         print(f'{prog}: cannot start: {ros_arguments_error(exc)}', file=sys.stderr)
         sys.exit(EXIT_USAGE)
+    if not args:
+        return SimpleNamespace(executor=None)
+    import argparse
+    parser = argparse.ArgumentParser(prog=prog, description=description)
+    parser.add_argument('--executor', choices=sorted(EXECUTORS), default=None,
+                        help=f'the rclpy executor to spin on (default: ${EXECUTOR_VARIABLE} '
+                        f'if set, else {DEFAULT_EXECUTOR}): single = SingleThreadedExecutor, '
+                        'events = rclpy.experimental.EventsExecutor')
     return parser.parse_known_args(args)[0]
 
 
@@ -279,6 +295,7 @@ def unknown_parameters(node: Node, argv: Sequence[str]) -> list:
                                         node.get_fully_qualified_name()).items():
         if name in declared:
             continue
+        import difflib      # only for a name the node does not have
         close = difflib.get_close_matches(name, declared, n=1)
         warnings.append(f'parameter {name!r} ({where}) is not a parameter of '
                         f'{node.get_fully_qualified_name()} and is ignored'

@@ -15,7 +15,7 @@
 
 """The timescale_estimator node: the time-scale Kalman filter of Cai et al. on a stream."""
 
-from typing import Any, Optional
+from typing import Any, Optional, TYPE_CHECKING
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
@@ -33,9 +33,11 @@ from tskf_ros.messages.estimator_interface import (ConfigError, diagnostics_mess
 from tskf_ros.messages.qos import overridable, sensor_input_qos
 from tskf_ros.nodes.node_base import diagnostic_name, InputWatch, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
-from tskf_ros.owc.lagged_estimates import LaggedEstimate, LaggedEstimates
 from tskf_ros.owc.session import EstimatorSession, Outcome
 from tskf_ros.owc.session.diagnostics import status_line
+
+if TYPE_CHECKING:
+    from tskf_ros.owc.lagged_estimates import LaggedEstimate, LaggedEstimates
 
 
 class TimescaleEstimator(ReconfigurableNode):
@@ -44,6 +46,8 @@ class TimescaleEstimator(ReconfigurableNode):
     SCHEMA = NODE_NAME
     SESSION = EstimatorSession
     CONFIG_ERRORS = (ConfigError, FilterError, KeyError, TypeError, ValueError)
+    # x(t_j|t_j+L) of the smoothing_lag parameter, if one is given
+    lagged: 'Optional[LaggedEstimates]'
 
     def __init__(self, *, context=None, parameter_overrides: Optional[list] = None,
                  node_name: str = NODE_NAME, namespace: Optional[str] = None,
@@ -64,8 +68,11 @@ class TimescaleEstimator(ReconfigurableNode):
         # parameters (history, depth, reliability, durability)
         # (rclpy applies an override to the profile given: one profile per publisher)
         self.smoothing_lag = self.get_parameter('smoothing_lag').value
-        self.lagged = (LaggedEstimates(self.smoothing_lag, self.config.session)
-                       if self.smoothing_lag else None)
+        self.lagged = None
+        if self.smoothing_lag:      # (the smoother's modules only then)
+            from tskf_ros.owc import lagged_estimates
+            self.lagged = lagged_estimates.LaggedEstimates(self.smoothing_lag,
+                                                           self.config.session)
         self.pubs = {key: self.create_publisher(
             Float64MultiArray, topic, output_qos(self.config),
             qos_overriding_options=overridable())
@@ -147,7 +154,7 @@ class TimescaleEstimator(ReconfigurableNode):
         if self.lagged is not None:
             self._publish_smoothed(self.lagged.outcome(out))
 
-    def _publish_smoothed(self, estimates: list[LaggedEstimate]) -> None:
+    def _publish_smoothed(self, estimates: 'list[LaggedEstimate]') -> None:
         pub, outputs = self.pubs['smoothed'], self.outputs
         for e in estimates:
             pub.publish(outputs.smoothed_serialized(e.stamp_ns, e.mu, e.x, e.P))
