@@ -76,7 +76,6 @@ def test_the_other_node_kernels_are_numbas_to_the_bit(built, n):
             np.testing.assert_array_equal(a, b)
 
 
-
 @pytest.mark.parametrize('n', [1, 2, 3, 6])
 def test_the_kernels_writing_into_arrays_are_numbas_to_the_bit(built, n):
     rng = np.random.default_rng(20 + n)
@@ -97,16 +96,7 @@ def test_the_kernels_writing_into_arrays_are_numbas_to_the_bit(built, n):
 
 def test_an_array_to_write_that_is_read_only_or_of_another_shape_is_refused(built):
     # in a process of its own: a write out of bounds would crash it
-    out = _run("""
-        import numpy as np
-        from tskf_ros.core import aot
-        handed = []
-        call = aot.function('tskf_ros.core.kalman', 'mahalanobis2_into',
-                            lambda args, error: handed.append(type(error).__name__))
-        x, P, z, H, R, d = np.zeros(2), np.eye(2), np.ones(1), np.ones((1, 2)), np.eye(1), \\
-            np.zeros(1)
-        readonly = np.zeros(1)
-        readonly.flags.writeable = False
+    out = _run(_handed_on('mahalanobis2_into', 'np.zeros(1)') + """
         print('read-only', call(x, P, z, H, R, d, readonly), handed, readonly[0])
         for y in (np.zeros(2), np.zeros(0)):
             try:
@@ -119,6 +109,7 @@ def test_an_array_to_write_that_is_read_only_or_of_another_shape_is_refused(buil
     # y = 1, S = H P H^T + R = 3: d^2 = 1 / 3
     assert out.splitlines() == ["read-only None ['TypeError'] 0.0", 'shape 2 ValueError 0.0',
                                 'shape 0 ValueError 0.0', f'written {1 / 3!r} 1.0']
+
 
 def test_a_module_of_other_sources_is_not_loaded(tmp_path, monkeypatch):
     for name in aot.SOURCES:
@@ -134,6 +125,26 @@ def _run(code: str) -> str:
                             capture_output=True, text=True, env=dict(os.environ), timeout=600)
     assert result.returncode == 0, result.stderr
     return result.stdout
+
+
+def _handed_on(kernel: str, readonly: str) -> str:
+    """
+    Return code that makes `call`, aot's call of a gate kernel, and its arguments.
+
+    `call` records in `handed` what it hands on; x, P, z, H, R, d are the gate's arguments,
+    `readonly` a read-only array.
+    """
+    return f"""
+        import numpy as np
+        from tskf_ros.core import aot
+        handed = []
+        call = aot.function('tskf_ros.core.kalman', {kernel!r},
+                            lambda args, error: handed.append(type(error).__name__))
+        x, P, z, H, R, d = np.zeros(2), np.eye(2), np.ones(1), np.ones((1, 2)), np.eye(1), \\
+            np.zeros(1)
+        readonly = {readonly}
+        readonly.flags.writeable = False
+        """
 
 
 def test_a_node_step_runs_ahead_of_time_without_numba(built):
@@ -264,16 +275,7 @@ def test_the_package_build_step_makes_a_loadable_module(tmp_path):
 
 def test_the_call_takes_only_the_types_built_and_hands_any_other_on(built):
     # in a process of its own: an argument the compiled form would misread crashes it
-    out = _run("""
-        import numpy as np
-        from tskf_ros.core import aot
-        handed = []
-        call = aot.function('tskf_ros.core.kalman', 'mahalanobis2',
-                            lambda args, error: handed.append(type(error).__name__))
-        x, P, z, H, R, d = np.zeros(2), np.eye(2), np.ones(1), np.ones((1, 2)), np.eye(1), \\
-            np.zeros(1)
-        readonly = np.eye(1)
-        readonly.flags.writeable = False
+    out = _run(_handed_on('mahalanobis2', 'np.eye(1)') + """
         tagged = np.dtype(np.float64, metadata={'unit': 'mW'})  # equal, not numpy's own
         cases = {
             'float32 x': (x.astype(np.float32), P, z, H, R, d),
