@@ -110,9 +110,9 @@ def use_the_nodes_kernels() -> str:
     """
     jit.set_mode(os.environ.get(jit.MODE_VARIABLE) or 'background')
     x, P = np.zeros(1), np.eye(1)
-    kalman.mahalanobis2(x, P, x, P, P, x)
+    kalman.mahalanobis2_into(x, P, x, P, P, x, np.empty(1))     # the node's gate
     jit.ready(timeout=600.0)     # numba's, where nothing was built ahead of time
-    state = repr(kalman.mahalanobis2)
+    state = repr(kalman.mahalanobis2_into)
     return state[state.rindex('(') + 1:-2]
 
 

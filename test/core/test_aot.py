@@ -76,6 +76,41 @@ def test_the_other_node_kernels_are_numbas_to_the_bit(built, n):
             np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize('n', [1, 2, 3, 6])
+def test_the_kernels_writing_into_arrays_are_numbas_to_the_bit(built, n):
+    rng = np.random.default_rng(20 + n)
+    x, P, z, H, R, d, A, GQGt, B = _step_args(n, rng)[:9]
+    F, Q, _, _ = transitions.euler(A, GQGt, B, 1e-3)
+    shapes = ((n,), (n, n), (n,), (n, n), (1,), (1, 1))
+    ahead, jitted = (tuple(np.full(s, np.nan) for s in shapes) for _ in range(2))
+    args = (x, P, z, H, R, d, F, Q, np.zeros(n))
+    assert built.kalman__update_predict_into(*args, *ahead) == \
+        kalman.update_predict_into.dispatcher(*args, *jitted) == kalman.OK
+    for a, b in zip(ahead, jitted):
+        np.testing.assert_array_equal(a, b)
+    y_ahead, y_jitted = np.full(1, np.nan), np.full(1, np.nan)
+    assert built.kalman__mahalanobis2_into(*args[:6], y_ahead) == \
+        kalman.mahalanobis2_into.dispatcher(*args[:6], y_jitted)
+    np.testing.assert_array_equal(y_ahead, y_jitted)
+
+
+def test_an_array_to_write_that_is_read_only_or_of_another_shape_is_refused(built):
+    # in a process of its own: a write out of bounds would crash it
+    out = _run(_handed_on('mahalanobis2_into', 'np.zeros(1)') + """
+        print('read-only', call(x, P, z, H, R, d, readonly), handed, readonly[0])
+        for y in (np.zeros(2), np.zeros(0)):
+            try:
+                call(x, P, z, H, R, d, y)
+            except ValueError as exc:
+                print('shape', y.size, 'ValueError' if 'shape' in str(exc) else exc, y.sum())
+        y = np.zeros(1)
+        print('written', call(x, P, z, H, R, d, y), y[0])
+        """)
+    # y = 1, S = H P H^T + R = 3: d^2 = 1 / 3
+    assert out.splitlines() == ["read-only None ['TypeError'] 0.0", 'shape 2 ValueError 0.0',
+                                'shape 0 ValueError 0.0', f'written {1 / 3!r} 1.0']
+
+
 def test_a_module_of_other_sources_is_not_loaded(tmp_path, monkeypatch):
     for name in aot.SOURCES:
         (tmp_path / name).write_bytes((aot.CORE / name).read_bytes())
@@ -90,6 +125,26 @@ def _run(code: str) -> str:
                             capture_output=True, text=True, env=dict(os.environ), timeout=600)
     assert result.returncode == 0, result.stderr
     return result.stdout
+
+
+def _handed_on(kernel: str, readonly: str) -> str:
+    """
+    Return code that makes `call`, aot's call of a gate kernel, and its arguments.
+
+    `call` records in `handed` what it hands on; x, P, z, H, R, d are the gate's arguments,
+    `readonly` a read-only array.
+    """
+    return f"""
+        import numpy as np
+        from tskf_ros.core import aot
+        handed = []
+        call = aot.function('tskf_ros.core.kalman', {kernel!r},
+                            lambda args, error: handed.append(type(error).__name__))
+        x, P, z, H, R, d = np.zeros(2), np.eye(2), np.ones(1), np.ones((1, 2)), np.eye(1), \\
+            np.zeros(1)
+        readonly = {readonly}
+        readonly.flags.writeable = False
+        """
 
 
 def test_a_node_step_runs_ahead_of_time_without_numba(built):
@@ -220,16 +275,7 @@ def test_the_package_build_step_makes_a_loadable_module(tmp_path):
 
 def test_the_call_takes_only_the_types_built_and_hands_any_other_on(built):
     # in a process of its own: an argument the compiled form would misread crashes it
-    out = _run("""
-        import numpy as np
-        from tskf_ros.core import aot
-        handed = []
-        call = aot.function('tskf_ros.core.kalman', 'mahalanobis2',
-                            lambda args, error: handed.append(type(error).__name__))
-        x, P, z, H, R, d = np.zeros(2), np.eye(2), np.ones(1), np.ones((1, 2)), np.eye(1), \\
-            np.zeros(1)
-        readonly = np.eye(1)
-        readonly.flags.writeable = False
+    out = _run(_handed_on('mahalanobis2', 'np.eye(1)') + """
         tagged = np.dtype(np.float64, metadata={'unit': 'mW'})  # equal, not numpy's own
         cases = {
             'float32 x': (x.astype(np.float32), P, z, H, R, d),

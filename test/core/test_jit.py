@@ -60,6 +60,17 @@ def test_the_interpreted_source_gives_the_compiled_kernels_results(n):
     d2_i, y_i = _interpreted(kalman.mahalanobis2, x, P, z, H, R, d)
     assert d2_i == pytest.approx(d2_c, rel=1e-12)
     np.testing.assert_allclose(y_i, y_c, rtol=1e-12)
+    # the forms writing into arrays passed in: the same numbers on both paths
+    for run in (kalman.update_predict_into, lambda *a: _interpreted(kalman.update_predict_into,
+                                                                    *a)):
+        out = tuple(np.empty_like(a) for a in compiled[:-1])
+        assert run(*args, *out) == kalman.OK
+        for a, b in zip(out, compiled[:-1]):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    y_out = np.empty(1)
+    assert _interpreted(kalman.mahalanobis2_into, x, P, z, H, R, d, y_out) == \
+        pytest.approx(d2_c, rel=1e-12)
+    np.testing.assert_allclose(y_out, y_c, rtol=1e-12)
     # the same against FilterPy's equations in numpy: the predicted covariance
     S = H @ P @ H.T + R
     K = P @ H.T @ np.linalg.inv(S)

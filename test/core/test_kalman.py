@@ -209,3 +209,49 @@ def test_update_is_more_robust_than_the_expanded_joseph_form():
         expanded += lowest_eigenvalue(expanded_joseph(P, H, R), P) < -1e-15
     assert kernel == 0
     assert expanded >= 5
+
+
+def _outputs(n, p):
+    """Return arrays for update_predict_into to write: x_c, P_c, x_p, P_p, y, S (NaN)."""
+    return tuple(np.full(shape, np.nan) for shape in ((n,), (n, n), (n,), (n, n), (p,), (p, p)))
+
+
+@pytest.mark.parametrize('n, p', SIZES)
+def test_update_predict_into_writes_filterpys_update_then_predict(n, p):
+    rng = np.random.default_rng(400 + 10 * n + p)
+    for _ in range(3):
+        m = random_model(rng, n, p)
+        ref = filterpy_filter(m)
+        ref.update(m['z'] - m['d'])
+        x_c, P_c, y, S = ref.x.copy(), ref.P.copy(), ref.y.copy(), ref.S.copy()
+        ref.predict(u=m['u'])
+        out = _outputs(n, p)
+        status = kalman.update_predict_into(m['x'], m['P'], m['z'], m['H'], m['R'], m['d'],
+                                            m['F'], m['Q'], m['B'] @ m['u'], *out)
+        assert status == kalman.OK
+        for got, want in zip(out, (x_c, P_c, ref.x, ref.P, y, S)):
+            assert_close(got, want)
+        # and what update_predict returns, to the bit
+        step = kalman.update_predict(m['x'], m['P'], m['z'], m['H'], m['R'], m['d'],
+                                     m['F'], m['Q'], m['B'] @ m['u'])
+        for got, want in zip(out, step[:6]):
+            np.testing.assert_array_equal(got, want)
+        y_gate = np.full(p, np.nan)
+        d2 = kalman.mahalanobis2_into(m['x'], m['P'], m['z'], m['H'], m['R'], m['d'], y_gate)
+        # d^2 = y^T S^-1 y
+        assert d2 == pytest.approx(float(y @ np.linalg.solve(S, y)), rel=RTOL)
+        assert_close(y_gate, y)
+
+
+@pytest.mark.parametrize('wrong', range(6))
+def test_update_predict_into_refuses_an_array_of_the_wrong_shape(wrong):
+    n, p = 2, 1
+    m = random_model(np.random.default_rng(wrong), n, p)
+    out = list(_outputs(n, p))
+    out[wrong] = np.full(out[wrong].shape[:-1] + (out[wrong].shape[-1] + 1,), np.nan)
+    with pytest.raises(ValueError, match='shapes'):
+        kalman.update_predict_into(m['x'], m['P'], m['z'], m['H'], m['R'], m['d'], m['F'],
+                                   m['Q'], np.zeros(n), *out)
+    assert all(np.isnan(a).all() for a in out)      # nothing written
+    with pytest.raises(ValueError, match='shape'):
+        kalman.mahalanobis2_into(m['x'], m['P'], m['z'], m['H'], m['R'], m['d'], np.zeros(2))

@@ -62,6 +62,10 @@ EXPORTS: tuple[tuple[str, str, str], ...] = (
     ('transitions', 'jump_update_predict', 'vmvmmvmmmssffb'),
     ('kalman', 'update_predict', 'vmvmmvmmv'),
     ('kalman', 'mahalanobis2', 'vmvmmv'),
+    # the same two writing their arrays into the caller's (what the filter's step and the
+    # gate call: a returned array costs numba.pycc an unpickling per call)
+    ('kalman', 'update_predict_into', 'vmvmmvmmvvmvmvm'),
+    ('kalman', 'mahalanobis2_into', 'vmvmmvv'),
     ('transitions', 'euler', 'mmmf'),
     # the alignment node: the EKF's update over a stack of one
     ('kalman', 'update_batch', 'msmssm'),

@@ -317,6 +317,47 @@ def update_predict(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vec
     return x_c, P_c, x_p, P_p, y, S, status
 
 
+# The node's per-input calls write their arrays into arrays the caller allocates and return
+# a scalar: numba.pycc's functions (tskf_ros.core.aot) box each array they return with an
+# unpickling of numpy's array class, about 0.5 us an array, where an array passed in costs
+# its argument check only.  Both compose the kernels above (no equation written again).
+
+
+@_jit
+def update_predict_into(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector,
+                        F: Matrix, Q: Matrix, Bu: Vector, x_c: Vector, P_c: Matrix,
+                        x_p: Vector, P_p: Matrix, y: Vector, S: Matrix) -> int:
+    """
+    Run `update_predict`, writing x(t|t), P(t|t), x(sigma), P(sigma), y, S into the last six.
+
+    Return its status.  An array of the wrong shape (n = len(x), p = len(z)) raises
+    ValueError, nothing written.
+    """
+    n, p = x.shape[0], z.shape[0]
+    if not (x_c.shape == x_p.shape == (n,) and P_c.shape == P_p.shape == (n, n)
+            and y.shape == (p,) and S.shape == (p, p)):
+        raise ValueError('update_predict_into: the arrays written must be of shapes '
+                         '(n,), (n, n), (n,), (n, n), (p,), (p, p)')
+    xc, Pc, xp, Pp, y_, S_, status = update_predict(x, P, z, H, R, d, F, Q, Bu)
+    x_c[:], P_c[:], x_p[:], P_p[:], y[:], S[:] = xc, Pc, xp, Pp, y_, S_
+    return status
+
+
+@_jit
+def mahalanobis2_into(x: Vector, P: Matrix, z: Vector, H: Matrix, R: Matrix, d: Vector,
+                      y: Vector) -> float:
+    """
+    Return `mahalanobis2`'s y^T S^-1 y, writing its innovation into y.
+
+    A y of the wrong shape (len(z)) raises ValueError, nothing written.
+    """
+    if y.shape[0] != z.shape[0]:
+        raise ValueError('mahalanobis2_into: y must be of shape (p,), p = len(z)')
+    d2, y_ = mahalanobis2(x, P, z, H, R, d)
+    y[:] = y_
+    return d2
+
+
 STOPPED = 3     # what update_predict_run reports when the innovation test stops it
 
 
@@ -375,6 +416,9 @@ def warm_up() -> None:
     x, P, F, z = np.zeros(2), np.eye(2), np.eye(2), np.zeros(1)
     H, R = np.ones((1, 2)), np.eye(1)
     update_predict(x, P, z, H, R, z, F, P, x)
+    update_predict_into(x, P, z, H, R, z, F, P, x, x.copy(), P.copy(), x.copy(), P.copy(),
+                        z.copy(), R.copy())
+    mahalanobis2_into(x, P, z, H, R, z, z.copy())
     predict(x, P, F, P, x)
     update(x, P, z, H, R, z)
     mahalanobis2(x, P, z, H, R, z)

@@ -224,6 +224,9 @@ class TimeScaleKalmanFilter:
         """Derive what every step reuses from the (checked) model matrices."""
         self.GQGt = self._G @ self._Q @ self._G.T
         self._zero = np.zeros(self.n)
+        # the shapes of a step's x(t|t), P(t|t), x(sigma), P(sigma), e, S (new arrays each step)
+        n, p = self.n, self.p
+        self._shapes = ((n,), (n, n), (p,), (p, p))
         self._uses_B = bool(np.any(self._B))
         self._jumps = TransitionCache(self._transition, self._A, self.GQGt, self._B,
                                       input_matrix=self._uses_B)
@@ -358,8 +361,12 @@ class TimeScaleKalmanFilter:
             z = as_vector(y, self._C.shape[0], 'y')
             Rd = (self._model_noise_over(mu) if R is None
                   else self._noise_over(mu, self._measurement_noise(R)))
-            return self._keep(mu, kalman.update_predict(self.x, self.P, z, self._C, Rd,
-                                                        self._D, jump.F, jump.Qd, Bu))
+            # written into new arrays (a step's arrays are kept: the session's history)
+            n1, nn, p1, pp = self._shapes
+            new = np.empty
+            out = (new(n1), new(nn), new(n1), new(nn), new(p1), new(pp))
+            return self._keep(mu, out + (kalman.update_predict_into(
+                self.x, self.P, z, self._C, Rd, self._D, jump.F, jump.Qd, Bu, *out),))
         self.x, self.P = res.x_predicted, res.P_predicted
         self.x_corrected, self.P_corrected = res.x_corrected, res.P_corrected
         return res

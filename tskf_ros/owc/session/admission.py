@@ -124,6 +124,7 @@ class Gate:
         self.C, self.D = kf.C, kf.D
         self.R_period = kf.R / config.period
         self.p = kf.p
+        self._innovation = np.empty(kf.p)      # written by each test (read in its message)
 
     def why(self, y: Reading, x: FloatArray, P: FloatArray, variance: float) -> str:
         """Return why y fails the gate at the predictor (x, P), or ''."""
@@ -131,7 +132,8 @@ class Gate:
             return ''
         z = np.array((y,)) if isinstance(y, float) else y
         Rd = np.eye(self.p) * variance if variance > 0 else self.R_period
-        d2, innovation = kalman.mahalanobis2(x, P, z, self.C, Rd, self.D)
+        innovation = self._innovation
+        d2 = kalman.mahalanobis2_into(x, P, z, self.C, Rd, self.D, innovation)
         gate = self.gate
         if d2 < 0.0 or d2 <= gate * gate:      # d2 < 0: S is singular, no distance
             return ''
