@@ -53,14 +53,15 @@ can discretise a jump as a continuous plant sampled at irregular instants
 (`transition='exact'`: F = expm(A mu), Q_d by Van Loan's method, B_d = int e^{A s} ds B).
 """
 
-from dataclasses import dataclass
 import math
-from typing import Callable, NamedTuple, Optional, overload, Union
+from typing import Callable, Optional, overload, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tskf_ros.core import kalman
+from tskf_ros.core import kalman, kalman_bucy
+from tskf_ros.core.filter_results import InnovationTest, RunResult, StepResult
+from tskf_ros.core.kalman_bucy import KalmanBucyModel
 from tskf_ros.core.matrices import as_matrix, as_vector, check_covariance, FilterError
 from tskf_ros.core.transitions import (noise_over, Transition, TransitionCache,
                                        TRANSITIONS, Transitions)
@@ -76,40 +77,6 @@ _INF = math.inf
 
 class NonRegressiveError(FilterError):
     """A step whose I + mu A is singular (Definition 2.12): refused, the state is sound."""
-
-
-@dataclass(slots=True)
-class StepResult:
-    """What one step produced: the corrected estimate at t and the prediction at sigma(t)."""
-
-    mu: float
-    x_corrected: Vector
-    P_corrected: Matrix
-    x_predicted: Vector
-    P_predicted: Matrix
-    innovation: Vector
-    S: Matrix
-
-
-class InnovationTest(NamedTuple):
-    """Keep step k of a run only if y^T S^-1 y <= limit2 for z[k] at its prediction, R."""
-
-    z: Matrix           # K x p
-    R: Matrix           # p x p
-    limit2: float
-
-
-class RunResult(NamedTuple):
-    """What `run` kept: one row per step made, oldest first, and why it stopped ('' if not)."""
-
-    steps: int
-    x_corrected: Matrix     # steps x n
-    P_corrected: NDArray[np.float64]    # steps x n x n
-    x_predicted: Matrix
-    P_predicted: NDArray[np.float64]
-    stopped: str            # '' all made, 'refused' (step would raise), 'test' (failed it)
-    innovation: Optional[Matrix] = None     # steps x p, with run(innovations=True)
-    S: Optional[NDArray[np.float64]] = None     # steps x p x p, the same
 
 
 class _ModelMatrix:
@@ -444,39 +411,18 @@ class TimeScaleKalmanFilter:
         Run the Kalman-Bucy filter (Table 2) over a right-dense stretch [t, t + duration].
 
         y(s) and u(s) give the continuous measurement and input at s in [0, duration]
-        (time from the start of the stretch).  The ODEs for xhat and P are solved
-        together by scipy's RK45 with the given tolerances; the tests show the
-        covariance matches the closed-form scalar Riccati solution to ~1e-9.
+        (time from the start of the stretch); `kalman_bucy.integrate` solves the ODEs
+        of xhat and P together (scipy's RK45, rtol and atol).
         """
         duration = float(duration)
         if not np.isfinite(duration) or duration < 0:
             raise FilterError(f'duration must be finite and >= 0, got {duration}')
         if duration == 0:
             return
-        n, A, C, D = self.n, self.A, self.C, self.D
-        Rinv = np.linalg.inv(self.R)
-        B, GQGt = self.B, self.GQGt
-
-        def rhs(s: float, z: Vector) -> Vector:
-            xh = z[:n]
-            P = z[n:].reshape(n, n)
-            # K = P C^T R^-1
-            K = P @ C.T @ Rinv
-            ys = np.asarray(y(s), dtype=float).reshape(-1)
-            us = self._input(None if u is None else u(s))
-            dx = A @ xh + B @ us + K @ (ys - C @ xh - D)
-            dP = A @ P + P @ A.T + GQGt - K @ C @ P
-            return np.concatenate([dx, ((dP + dP.T) / 2).reshape(-1)])
-
-        z0 = np.concatenate([self.x, self.P.reshape(-1)])
-        import scipy.integrate    # noqa: I900 - here: 0.3 s that a node never needs
-        sol = scipy.integrate.solve_ivp(rhs, (0.0, duration), z0, method='RK45',
-                                        rtol=rtol, atol=atol)
-        if not sol.success:
-            raise FilterError(f'Kalman-Bucy integration failed: {sol.message}')
-        zf = sol.y[:, -1]
-        P = zf[n:].reshape(n, n)
-        self.x, self.P = zf[:n], (P + P.T) / 2
+        model = KalmanBucyModel(self.A, self.B, self.C, self.D, self.GQGt, self.R)
+        self.x, self.P = kalman_bucy.integrate(
+            model, self.x, self.P, duration, y,
+            lambda s: self._input(None if u is None else u(s)), rtol=rtol, atol=atol)
 
     def state(self) -> tuple[Vector, Matrix]:
         """Return a copy of (x, P), for history and rewinding."""
