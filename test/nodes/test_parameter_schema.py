@@ -163,6 +163,20 @@ def test_parameters_given_at_start_are_known_and_integers_are_doubles(ros_contex
         node.destroy_node()
 
 
+def test_integers_for_a_double_array_from_the_set_parameters_service(ros_context):
+    # the service's request carries an integer array as array.array('q'), not a list
+    node = TimescaleEstimator(context=ros_context)
+    try:
+        def as_sent(name, value):
+            return Parameter.from_parameter_msg(Parameter(name, value=value).to_parameter_msg())
+        assert node.set_parameters([as_sent('x0', [2])])[0].successful
+        assert node.get_parameter('x0').value == [2.0]
+        result = node.set_parameters([as_sent('queue_depth', [1.0, 2.0])])[0]
+        assert not result.successful and 'array(' not in result.reason
+    finally:
+        node.destroy_node()
+
+
 @pytest.mark.parametrize('override, why', [
     (Parameter('transition', value='rk4'), "transition must be one of euler, exact, got 'rk4'"),
     (Parameter('period', value=-1.0), 'period = -1 is out of range: it must be within '

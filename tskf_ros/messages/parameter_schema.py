@@ -15,6 +15,7 @@
 
 """A node's parameters from its generate_parameter_library YAML schema: declare, check, list."""
 
+import array
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 import math
@@ -117,8 +118,11 @@ class ParameterSpec:
         Return value as this parameter's type, or raise ParameterError.
 
         An integer is taken for a double (`-p rate:=5`), integers for a double array, and an
-        empty list for any array; nothing else changes type (a bool is no integer).
+        empty list for any array; nothing else changes type (a bool is no integer).  An
+        array.array (what a SetParameters request's array values arrive as) is a list.
         """
+        if isinstance(value, array.array):
+            value = value.tolist()
         t = self.type_name
         if t == 'double' and type(value) is int:
             return float(value)
