@@ -95,9 +95,15 @@ def choose_topics(reader: BagReader, topic: Optional[str] = None,
 
 
 def stream_size(bag: os.PathLike, *, topic: Optional[str] = None,
-                input_topic: Optional[str] = None, truth: bool = True) -> Optional[int]:
-    """Return how many messages read_stream reads from a bag (None if its index does not say)."""
-    return choose_topics(BagReader(bag), topic, input_topic, truth).size
+                input_topic: Optional[str] = None, truth: bool = True,
+                reader: Optional[BagReader] = None) -> Optional[int]:
+    """
+    Return how many messages read_stream reads from a bag (None if its index does not say).
+
+    reader: the bag already open (its index read once for several questions).
+    """
+    reader = reader if reader is not None else BagReader(bag)
+    return choose_topics(reader, topic, input_topic, truth).size
 
 
 class EventSink(Protocol):

@@ -29,6 +29,7 @@ import time
 from typing import Callable, Iterable, Optional
 
 from tskf_ros.bag.progress import bar
+from tskf_ros.bag.reader import BagReader
 from tskf_ros.experiments.bag_analysis import stream_size
 from tskf_ros.experiments.sweep_tasks import run_task, Task
 
@@ -148,8 +149,10 @@ class SweepBar:
 def task_size(task: Task) -> Optional[int]:
     """Return the messages a task reads (None if a bag's index does not say or it fails)."""
     try:
-        size = stream_size(task.bag, topic=task.topic)
-        fit = stream_size(task.bag, topic=task.topic, truth=False) if task.fit else 0
+        reader = BagReader(task.bag)         # its index read once for both passes
+        size = stream_size(task.bag, topic=task.topic, reader=reader)
+        fit = (stream_size(task.bag, topic=task.topic, truth=False, reader=reader)
+               if task.fit else 0)
     except Exception:  # noqa: B902 - the task itself reports a bag it cannot use
         return None
     return None if size is None or fit is None else size + fit
