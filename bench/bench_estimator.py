@@ -244,6 +244,8 @@ def worker(kind: str, executor_kind: str, warmup: int, messages: int, ros_args: 
                   meter)
     node = cls(context=context, parameter_overrides=[
         Parameter(k, value=v) for k, v in NODE_PARAMETERS.items()])
+    if kind != 'relay':
+        node.own_process()      # as node_runner.run_node does in the node's own process
     executor = make_executor(executor_kind, context=context)
     executor.add_node(node)
     try:

@@ -22,6 +22,7 @@ test_alignment, ~/reset and ~/enable in test_timescale_estimator_parameters and
 test_alignment.  Here: what only a running process or a service client shows.
 """
 
+import gc
 import os
 from pathlib import Path
 import signal
@@ -319,6 +320,26 @@ def test_the_node_reads_the_clock_of_the_source_in_force(ros_context):
         node.set_parameters([Parameter('use_sim_time', value=False)])
         assert node.now_ns is time.time_ns
     finally:
+        node.destroy_node()
+
+
+def test_own_process_freezes_the_heap_now_and_after_the_first_sample(ros_context):
+    """gc.freeze() at the call and again at the first /diagnostics after a sample."""
+    node = TimescaleEstimator(context=ros_context)
+    try:
+        gc.unfreeze()
+        node.publish_diagnostics()
+        assert gc.get_freeze_count() == 0 and not node.freeze_heap    # not the node's own
+        node.own_process()
+        assert node.freeze_heap and gc.get_freeze_count() > 0
+        gc.unfreeze()
+        node.publish_diagnostics()          # no sample yet: the flag stays
+        assert node.freeze_heap and gc.get_freeze_count() == 0
+        node.session.add(1_000_000_000, 165.0)
+        node.publish_diagnostics()
+        assert not node.freeze_heap and gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()                       # the test process's collector as it was
         node.destroy_node()
 
 

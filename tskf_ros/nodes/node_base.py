@@ -102,7 +102,7 @@ class ReconfigurableNode(Node):
     CONFIG_ERRORS: tuple = (KeyError, TypeError, ValueError)
     # the session class of the core, built from config.session
     SESSION: Callable[[Any], Any]
-    # gc.freeze() at the first /diagnostics after a sample (node_runner sets it in a
+    # gc.freeze() at the first /diagnostics after a sample (own_process() sets it: a
     # process of the node's own)
     freeze_heap = False
 
@@ -118,6 +118,22 @@ class ReconfigurableNode(Node):
         self.session = self.SESSION(self.config.session)
         # the node clock's time in ns (see watch_clock_jumps)
         self.now_ns: Callable[[], int] = self.clock_ns
+
+    def own_process(self) -> None:
+        """
+        Take the process as the node's own: freeze its heap now and after the first sample.
+
+        gc.freeze() moves every object made so far (the modules of numpy, rclpy, the
+        core, the node's set-up) out of the cyclic collector's reach, and again at the
+        first /diagnostics after a sample (what the first sample loaded).  Without it a
+        full collection walks them all: tens of ms of the executor's thread (55 ms at load
+        average 5, 4 December 2026), in which the input queue fills; the node's history
+        of points is what makes full collections come, every few 10 000 inputs.  Only for
+        a process that runs this node alone (node_runner.run_node): the objects of other
+        code in the process would be frozen too.
+        """
+        self.freeze_heap = True
+        gc.freeze()
 
     def when_spinning(self, action: Callable[[], None]) -> None:
         """
@@ -194,10 +210,9 @@ class ReconfigurableNode(Node):
     def publish_diagnostics(self) -> DiagnosticArray:
         """Publish (and return) the session's counters on /diagnostics."""
         if self.freeze_heap and self.status_count():
-            # the process's start-up objects (modules, numba's and LLVM's once the first
-            # sample compiled the kernels) are moved out of the collector's reach: a full
-            # collection walks only what came after (tens of ms of a node's executor
-            # otherwise, in which its input queue fills)
+            # what the first sample loaded (numba's and LLVM's objects where it compiled
+            # the kernels, modules imported on demand) joins the start's (own_process)
+            # out of the collector's reach
             gc.freeze()
             self.freeze_heap = False
         msg = self.diagnostics_message(self.get_clock().now().nanoseconds)

@@ -195,8 +195,8 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
     status = 0
     try:
         node = factory()
-        if args is None and hasattr(node, 'freeze_heap'):
-            node.freeze_heap = True     # the process is the node's: see ReconfigurableNode
+        if args is None and hasattr(node, 'own_process'):
+            node.own_process()      # the process is the node's: see ReconfigurableNode
         warning = limit_blas_threads()
         if warning:
             node.get_logger().warning(warning)
