@@ -18,19 +18,22 @@
 from pathlib import Path
 import time
 
-from bag.test_cdr import library_bytes
+from bag.test_cdr import library_bytes, store_messages
 from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from tskf_ros.bag.cdr import serialize
+from tskf_ros.bag.message_types import message_class, typestore
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
-from tskf_ros.messages.estimator_interface import (load_config, outcome_messages,
-                                                   OutcomeMessages, output_qos, OUTPUT_TOPICS)
+from tskf_ros.messages.estimator_interface import (extractor, INPUT_TYPES, load_config,
+                                                   outcome_messages, OutcomeMessages,
+                                                   output_qos, OUTPUT_TOPICS, raw_reader)
 from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 from tskf_ros.owc.session import Estimate, EstimatorSession, Jump, Outcome
@@ -233,3 +236,27 @@ def test_load_config_has_the_new_defaults():
     cfg = load_config()
     assert cfg.session.gate == 10.0 and cfg.session.state_limit == 1e9
     assert cfg.session.measurement_range == ()
+
+
+@pytest.mark.parametrize('msgtype', list(INPUT_TYPES))
+@settings(max_examples=60, deadline=None)
+@given(data=st.data(), log_ns=st.integers(0, 2 ** 63 - 1))
+def test_the_nodes_raw_reader_gives_what_rclpy_deserializes(msgtype, data, log_ns):
+    """
+    The node's raw measurement: extractor of rclpy's deserialize_message, bit for bit.
+
+    rclpy's own bytes (Fast-CDR) and rosbags' canonical little endian, read from the fixed
+    layout, and big endian, which the layout leaves to deserialize_message.
+    """
+    store, cls = typestore(), message_class(msgtype)
+    msg = data.draw(store_messages(msgtype))
+    little = bytes(store.serialize_cdr(msg, msgtype))
+    forms = {'little': little,
+             'big': bytes(store.serialize_cdr(msg, msgtype, little_endian=False)),
+             'rclpy': serialize_message(deserialize_message(little, cls))}
+    read, extract = raw_reader(msgtype), extractor(msgtype)
+    for form, raw in forms.items():
+        want = extract(deserialize_message(raw, cls), log_ns)
+        got = read(raw, log_ns)
+        assert type(got[0]) is int and got[0] == want[0], form
+        assert np.array(got[1:]).tobytes() == np.array(want[1:]).tobytes(), form

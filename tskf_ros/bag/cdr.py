@@ -16,7 +16,6 @@
 """Canonical CDR (XCDR1, rosbags' encoding) of what the package writes; fixed-layout codecs."""
 
 import array
-import operator
 import struct
 from typing import Any, Callable, Optional, Sequence
 
@@ -28,6 +27,8 @@ from tskf_ros.bag.message_types import typestore
 from tskf_ros.core.units import NS
 # the estimates' fixed-layout encoder is the live node's as well (messages layer)
 from tskf_ros.messages.estimate_cdr import EstimateEncoder
+from tskf_ros.messages.fixed_cdr import (HEADER_TYPE, layout_decoder, offsets as _offsets,
+                                         tail as _tail, TRAILING as _TRAILING)
 
 __all__ = ['EstimateEncoder', 'fixed_block_decoder', 'fixed_decoder', 'fixed_fields',
            'serialize', 'to_store', 'type_name']
@@ -85,10 +86,6 @@ def serialize(msg: Any) -> bytes:
 _BASE_CODES = {'float64': 'd', 'float32': 'f', 'int8': 'b', 'uint8': 'B', 'byte': 'B',
                'char': 'B', 'int16': 'h', 'uint16': 'H', 'int32': 'i', 'uint32': 'I',
                'int64': 'q', 'uint64': 'Q'}
-_HEADER_TYPE = 'std_msgs/msg/Header'
-_STAMP_HEAD = struct.Struct('<iII')     # header.stamp sec, nanosec, frame_id length
-# bytes after the last field that rosbags' deserializer lets pass (alignment padding)
-_TRAILING = 3
 
 
 def fixed_fields(msgtype: str) -> tuple[bool, list]:
@@ -100,12 +97,12 @@ def fixed_fields(msgtype: str) -> tuple[bool, list]:
     for a type with another string, a sequence, an array or a bool.
     """
     fields = typestore().fielddefs[msgtype][1]
-    stamped = bool(fields) and fields[0][1] == (Nodetype.NAME, _HEADER_TYPE)
+    stamped = bool(fields) and fields[0][1] == (Nodetype.NAME, HEADER_TYPE)
     out: list = []
 
     def walk(prefix: str, defs: list) -> None:
         for name, (node, spec) in defs:
-            if node == Nodetype.NAME and spec != _HEADER_TYPE:
+            if node == Nodetype.NAME and spec != HEADER_TYPE:
                 walk(f'{prefix}{name}.', typestore().fielddefs[spec][1])
             elif node == Nodetype.BASE and spec[0] in _BASE_CODES:
                 out.append((prefix + name, _BASE_CODES[spec[0]]))
@@ -115,76 +112,15 @@ def fixed_fields(msgtype: str) -> tuple[bool, list]:
     return stamped, out
 
 
-def _offsets(codes: str, start: int) -> list[int]:
-    """Return where each of `codes` lies, laid out from body offset `start` (CDR alignment)."""
-    out, pos = [], start
-    for code in codes:
-        size = struct.calcsize(code)
-        pos += -pos % size
-        out.append(pos - start)
-        pos += size
-    return out
-
-
-def _tail(codes: str, start: int) -> struct.Struct:
-    """Return the Struct of `codes` laid out from body offset `start` (CDR alignment)."""
-    fmt, pos = '<', 0
-    for code, at in zip(codes, _offsets(codes, start)):
-        fmt += 'x' * (at - pos) + code
-        pos = at + struct.calcsize(code)
-    return struct.Struct(fmt)
-
-
 def fixed_decoder(msgtype: str, fields: Sequence[str]) -> Callable[[Any], Optional[tuple]]:
     """
     Return decode(data) -> (stamp ns or None, *the values of `fields`), or None.
 
-    The values rosbags' deserialize_cdr gives for the same bytes, read from the little-endian
-    layout directly.  None where rosbags is left to decide (its values or its error): another
-    encapsulation (big endian), bytes too short for the layout or with more than the 3
-    trailing bytes rosbags allows, a frame_id without its NUL or not UTF-8.  stamp:
-    header.stamp as sec * 1e9 + nanosec (None for a type without a header).
+    fixed_cdr.layout_decoder of the type's layout in rosbags' definitions (fixed_fields):
+    the values rosbags' deserialize_cdr gives for the same bytes, or None where rosbags is
+    left to decide.
     """
-    stamped, layout = fixed_fields(msgtype)
-    names = [name for name, _ in layout]
-    picks = [names.index(f) for f in fields]
-    codes = ''.join(code for _, code in layout)
-    if len(picks) == 1:
-        first = picks[0]
-
-        def pick(values: tuple) -> tuple:
-            return (values[first],)
-    else:
-        pick = operator.itemgetter(*picks)
-    if not stamped:
-        body = _tail(codes, 0)
-        need = 4 + body.size
-
-        def decode_plain(data: Any) -> Optional[tuple]:
-            if not need <= len(data) <= need + _TRAILING or data[0] != 0 or data[1] != 1:
-                return None
-            return (None, *pick(body.unpack_from(data, 4)))
-        return decode_plain
-    # after the frame_id's bytes (body offset 12 + length): one Struct per offset mod 8
-    tails = [_tail(codes, k) for k in range(8)]
-    head = _STAMP_HEAD.unpack_from
-
-    def decode(data: Any) -> Optional[tuple]:
-        size = len(data)
-        if size < 16 or data[0] != 0 or data[1] != 1:
-            return None
-        sec, nanosec, length = head(data, 4)
-        end = 16 + length
-        tail = tails[(end - 4) & 7]
-        if not length or not end + tail.size <= size <= end + tail.size + _TRAILING \
-                or data[end - 1]:
-            return None
-        try:
-            bytes(data[16:end - 1]).decode()
-        except UnicodeDecodeError:
-            return None
-        return (sec * NS + nanosec, *pick(tail.unpack_from(data, end)))
-    return decode
+    return layout_decoder(*fixed_fields(msgtype), fields)
 
 
 def _column(rows: NDArray[np.uint8], at: int, code: str) -> NDArray[Any]:

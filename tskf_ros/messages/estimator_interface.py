@@ -24,12 +24,14 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 import numpy as np
 from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import FluidPressure, Illuminance, Range, RelativeHumidity, Temperature
 from std_msgs.msg import Float32, Float64, Float64MultiArray
 
 from tskf_ros.messages import conversions
 from tskf_ros.messages.conversions import STATE_ESTIMATE_TYPE
 from tskf_ros.messages.estimate_cdr import EstimateEncoder
+from tskf_ros.messages.fixed_cdr import layout_decoder, rclpy_layout
 from tskf_ros.messages.parameter_schema import load_schema, ParameterError
 from tskf_ros.messages.parameters import NodeConfig, parameter_values, ParamsError
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, reliable_qos
@@ -313,3 +315,56 @@ def extractor(msgtype: str) -> Callable[[Any, int], tuple[int, float, float]]:
         sec, nanosec, y, var = fields(msg)
         return to_ns(sec, nanosec), float(y), float(var)
     return with_variance
+
+
+# (stamp ns, value, variance) of a measurement
+Sample = tuple[int, float, float]
+
+
+def sample_fields(msgtype: str) -> list[str]:
+    """Return the fields of a type of INPUT_TYPES that a sample reads: value[, variance]."""
+    kind = INPUT_TYPES[msgtype]
+    return [kind.value] + ([kind.variance] if kind.variance else [])
+
+
+def sample_reader(msgtype: str, decode: Callable[[Any], Optional[tuple]],
+                  slow: Callable[[Any, int], Sample]) -> Callable[[Any, int], Sample]:
+    """
+    Return read(cdr bytes, log ns) -> (stamp ns, value, variance) for a type of INPUT_TYPES.
+
+    decode(bytes) -> (stamp ns or None, *the values of sample_fields(msgtype)) reads the
+    fixed layout (tskf_ros.messages.fixed_cdr), None where it leaves the bytes to
+    slow(bytes, log ns): a deserializer and extractor(msgtype), whose values it gives.
+    """
+    kind = INPUT_TYPES[msgtype]
+    if not kind.stamped:
+        def read_plain(data: Any, log_ns: int) -> Sample:
+            got = decode(data)
+            return slow(data, log_ns) if got is None else (int(log_ns), got[1], 0.0)
+        return read_plain
+    if kind.variance is None:
+        def read_no_variance(data: Any, log_ns: int) -> Sample:
+            got = decode(data)
+            return slow(data, log_ns) if got is None else (got[0], got[1], 0.0)
+        return read_no_variance
+
+    def read(data: Any, log_ns: int) -> Sample:
+        return decode(data) or slow(data, log_ns)
+    return read
+
+
+def raw_reader(msgtype: str) -> Callable[[bytes, int], Sample]:
+    """
+    Return read(cdr bytes, log ns): extractor(msgtype) of rclpy's deserialize_message.
+
+    The live node's measurement subscription takes the serialized message (raw=True):
+    the fixed layout read from rclpy's message class (fixed_cdr.rclpy_layout), without
+    building the message; bytes it does not take (big endian, XCDR2) go through
+    deserialize_message.
+    """
+    cls, extract = INPUT_CLASSES[msgtype], extractor(msgtype)
+
+    def slow(data: bytes, log_ns: int) -> Sample:
+        return extract(deserialize_message(data, cls), log_ns)
+    return sample_reader(msgtype, layout_decoder(*rclpy_layout(cls), sample_fields(msgtype)),
+                         slow)

@@ -29,7 +29,7 @@ from tskf_ros.messages.estimator_interface import (ConfigError, diagnostics_mess
                                                    MATRICES, measurement_class,
                                                    MEASUREMENT_TOPIC, NODE_NAME, NodeConfig,
                                                    OutcomeMessages, output_qos, OUTPUT_TOPICS,
-                                                   parameters_to_config)
+                                                   parameters_to_config, raw_reader)
 from tskf_ros.messages.qos import overridable, sensor_input_qos
 from tskf_ros.nodes.node_base import diagnostic_name, InputWatch, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
@@ -57,9 +57,12 @@ class TimescaleEstimator(ReconfigurableNode):
         qos_in = sensor_input_qos(self.config.queue_depth)
         msgtype = self.get_parameter('measurement_type').value
         self.extract = extractor(msgtype)
+        # the measurements come serialized (raw): read from their fixed layout, no message
+        # built (raw_reader); a message handed in directly is read by extract
+        self.read = raw_reader(msgtype)
         self.sub = self.create_subscription(
             measurement_class(msgtype), MEASUREMENT_TOPIC, self._on_measurement, qos_in,
-            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost), raw=True)
         self.input_sub = self.create_subscription(AccelStamped, INPUT_TOPIC, self._on_input,
                                                   qos_in)
         # the measurements (the inputs u are optional): named if nobody publishes them
@@ -117,7 +120,8 @@ class TimescaleEstimator(ReconfigurableNode):
     def _on_measurement(self, msg: Any) -> None:
         now_ns = self.now_ns()
         # an unstamped type (std_msgs Float64, Float32) is stamped with its time of arrival
-        stamp_ns, value, variance = self.extract(msg, now_ns)
+        stamp_ns, value, variance = (self.read if type(msg) is bytes else self.extract)(
+            msg, now_ns)
         out = self.session.add(stamp_ns, value, variance, now_ns=now_ns)
         self._report(out)
         self._publish(out)

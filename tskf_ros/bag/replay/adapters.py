@@ -31,7 +31,8 @@ from tskf_ros.messages import estimator_interface as estimator
 from tskf_ros.messages.estimator_interface import (bag_outcome_messages, BAG_OUTPUT_TOPICS,
                                                    estimate_mu, extractor, input_from_msg,
                                                    INPUT_TYPE, INPUT_TYPES, NodeConfig,
-                                                   output_key, output_qos, step_mus)
+                                                   output_key, output_qos, Sample,
+                                                   sample_fields, step_mus)
 from tskf_ros.owc.session import EstimatorSession, Outcome
 
 __all__ = ['block_reader', 'ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimator',
@@ -42,8 +43,6 @@ __all__ = ['block_reader', 'ESTIMATE_TOPICS', 'OfflineAligner', 'OfflineEstimato
 UNDECODABLE = (SerdeError,)
 # output (predicted, corrected, revised, smoothed) -> bag topic of the estimates
 ESTIMATE_TOPICS = BAG_OUTPUT_TOPICS
-# (stamp ns, value, variance) of a measurement
-Sample = tuple[int, float, float]
 AnyOutcome = Union[Outcome, AlignOutcome]
 AnyConfig = Union[NodeConfig, aligner.NodeConfig]
 
@@ -56,26 +55,12 @@ def sample_reader(msgtype: str,
     What extract(rosbags' deserialize_cdr(data), log_ns) returns (or the SerdeError it
     raises), read from the bytes by cdr.fixed_decoder, or by rosbags where that leaves it.
     """
-    kind = INPUT_TYPES[msgtype]
-    decode = fixed_decoder(msgtype, [kind.value] + ([kind.variance] if kind.variance else []))
     deserialize = typestore().deserialize_cdr
 
     def slow(data: bytes, log_ns: int) -> Sample:
         return extract(deserialize(data, msgtype), log_ns)
-    if not kind.stamped:
-        def read_plain(data: bytes, log_ns: int) -> Sample:
-            got = decode(data)
-            return slow(data, log_ns) if got is None else (int(log_ns), got[1], 0.0)
-        return read_plain
-    if kind.variance is None:
-        def read_no_variance(data: bytes, log_ns: int) -> Sample:
-            got = decode(data)
-            return slow(data, log_ns) if got is None else (got[0], got[1], 0.0)
-        return read_no_variance
-
-    def read(data: bytes, log_ns: int) -> Sample:
-        return decode(data) or slow(data, log_ns)
-    return read
+    return estimator.sample_reader(msgtype, fixed_decoder(msgtype, sample_fields(msgtype)),
+                                   slow)
 
 
 Columns = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
