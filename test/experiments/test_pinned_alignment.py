@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from tskf_ros import led
-from tskf_ros.experiments import alignment_mc
+from tskf_ros.experiments import alignment_mc, alignment_mc_arguments
 
 RUNS = 1000
 HALF = 0.05 * 1.001        # half a printed unit (0.1 %), with a hair of slack
@@ -96,8 +96,8 @@ def test_clipped_three_point_beats_the_ekf():
 @pytest.mark.slow
 def test_dropout_table():
     link = dataclasses.replace(led.TrackingLinkConfig(beta=1.2), noise=1.0,
-                               beta=alignment_mc.DROPOUT_BETA)
-    assert alignment_mc.DROPOUT_BETA == 2.8
+                               beta=alignment_mc_arguments.DROPOUT_BETA)
+    assert alignment_mc_arguments.DROPOUT_BETA == 2.8
     names = ALGORITHMS + ('ekf_hold',)
     got = run_sweep('dropout', sorted(DROPOUT), link=link, algorithms=names)
     for i, p in enumerate(sorted(DROPOUT)):
@@ -121,7 +121,7 @@ def test_literal_unit_tracks_39_to_65_percent_by_angle_and_100_by_measurement():
 def test_eight_degrees_per_second_still_tracks():
     # README: 'the paper's 8 deg/s still tracks 97% at 50 ms steps' (300 runs, noise 0.2);
     # 16 deg/s (FAIL_BETA) loses the transmitter: 12.3%
-    got = run_sweep('beta', [8.0, alignment_mc.FAIL_BETA], algorithms=('ekf',), runs=300)
+    got = run_sweep('beta', [8.0, alignment_mc_arguments.FAIL_BETA], algorithms=('ekf',), runs=300)
     eight, sixteen = got['ekf']['angular']['mean']
     assert 97.0 <= eight < 98.0
     assert sixteen == pytest.approx(12.3, abs=HALF)

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from tskf_ros import led
-from tskf_ros.experiments import alignment_mc
+from tskf_ros.experiments import alignment_mc_arguments
 
 
 def tracking_mean(name, noise, *, runs=200, beta=1.2, seed=0):
@@ -52,7 +52,7 @@ LARGE_BETA_50_RUNS = 11.9
 
 def test_large_beta_fails():
     # 50 runs at 16 deg/s (seed 0): 11.9% (300 runs: 12.3%; the README's Fig. 9 loses it)
-    angular, _ = tracking_mean('ekf', 0.2, runs=50, beta=alignment_mc.FAIL_BETA)
+    angular, _ = tracking_mean('ekf', 0.2, runs=50, beta=alignment_mc_arguments.FAIL_BETA)
     assert angular == pytest.approx(LARGE_BETA_50_RUNS, abs=0.05)
 
 

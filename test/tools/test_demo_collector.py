@@ -20,7 +20,7 @@ import numpy as np
 from tskf_ros.core.linear_models import owc, run_filter
 from tskf_ros.core.time_scales import discrete
 from tskf_ros.core.units import NS
-from tskf_ros.experiments.demo import summarise
+from tskf_ros.experiments.demo_summary import summarise
 from tskf_ros.tools.demo_collector import arrays, run_in_process
 
 # s: a bound on waiting for DDS, never an assertion about timing

@@ -38,7 +38,7 @@ import numpy as np
 from tskf_ros import led
 from tskf_ros.experiments import alignment_ablation_report as report
 from tskf_ros.experiments import alignment_pat, arguments
-from tskf_ros.experiments.alignment_mc import DEFAULT_NOISE_LEVELS
+from tskf_ros.experiments.alignment_mc_arguments import DEFAULT_NOISE_LEVELS
 from tskf_ros.led.supervisor import Supervisor, SupervisorConfig
 
 CLIPPED_P0 = ((4.0, 0.0), (0.0, 25.0))        # Table I's P0 clipped as the supervisor does

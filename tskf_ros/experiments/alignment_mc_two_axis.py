@@ -41,6 +41,7 @@ from tskf_ros import led
 from tskf_ros.bag.progress import bar
 from tskf_ros.experiments import alignment_pat, arguments, monte_carlo, output
 from tskf_ros.experiments.alignment_ablation_report import bootstrap_ci, wilson
+from tskf_ros.experiments.alignment_mc_arguments import DEFAULT_NOISE_LEVELS
 from tskf_ros.experiments.alignment_mc_two_axis_figure import plot_two_axis
 from tskf_ros.led.two_axis.aligners import make_two_axis_aligner
 from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
@@ -50,7 +51,6 @@ from tskf_ros.led.two_axis.pan_tilt_simulation import (PanTiltTrajectory, simula
                                                        TwoAxisAligner)
 from tskf_ros.led.two_axis.radial_response import RadialResponse
 
-DEFAULT_NOISE_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
 # name -> what it is, for --help and the JSON
 METHODS = {
     'conical_ekf_pat': 'conical-scan EKF, P controller per axis, with the supervisor',

@@ -35,12 +35,13 @@ if TYPE_CHECKING:
                                               PAPER_G_COEFFICIENTS, TRACKING_ANGLE, TRACKING_LEVEL,
                                               wrap_degrees, zone_units_per_degree)
     from tskf_ros.led.lqg_alignment import (LQGAligner, LQGConfig, triangle_scan)
-    from tskf_ros.led.scanning_ekf import (Aligner, as_measurement, check_observability, EKFConfig,
-                                           max_gain, Measurement, Observability, observability,
-                                           ObservabilityError, ObservabilityWarning, PAPER_DT,
-                                           PAPER_GAIN, PAPER_P0, PAPER_Q, PAPER_Q_SYS, PAPER_R,
-                                           PAPER_R_SYS, PAPER_X0, SCAN_ANGLES, ScanningEKF,
-                                           StampClock)
+    from tskf_ros.led.scan_observability import (check_observability, max_gain,
+                                                 Observability, observability,
+                                                 ObservabilityError, ObservabilityWarning,
+                                                 SCAN_ANGLES)
+    from tskf_ros.led.scanning_ekf import (Aligner, as_measurement, EKFConfig, Measurement,
+                                           PAPER_DT, PAPER_GAIN, PAPER_P0, PAPER_Q, PAPER_Q_SYS,
+                                           PAPER_R, PAPER_R_SYS, PAPER_X0, ScanningEKF, StampClock)
     from tskf_ros.led.tracking_simulation import (Block, Disturbances, draw_disturbances,
                                                   simulate_blocks, simulate_tracking, tracking,
                                                   TrackingLinkConfig, Trajectory)
@@ -57,14 +58,16 @@ _SOURCES = {
     'wrap_degrees': 'intensity_model', 'zone_units_per_degree': 'intensity_model',
     'LQGAligner': 'lqg_alignment', 'LQGConfig': 'lqg_alignment',
     'triangle_scan': 'lqg_alignment', 'Aligner': 'scanning_ekf',
-    'as_measurement': 'scanning_ekf', 'check_observability': 'scanning_ekf',
-    'EKFConfig': 'scanning_ekf', 'Measurement': 'scanning_ekf', 'max_gain': 'scanning_ekf',
-    'Observability': 'scanning_ekf', 'observability': 'scanning_ekf',
-    'ObservabilityWarning': 'scanning_ekf',
-    'ObservabilityError': 'scanning_ekf', 'PAPER_DT': 'scanning_ekf',
+    'as_measurement': 'scanning_ekf', 'check_observability': 'scan_observability',
+    'EKFConfig': 'scanning_ekf', 'Measurement': 'scanning_ekf',
+    'max_gain': 'scan_observability', 'Observability': 'scan_observability',
+    'observability': 'scan_observability',
+    'ObservabilityWarning': 'scan_observability',
+    'ObservabilityError': 'scan_observability', 'PAPER_DT': 'scanning_ekf',
     'PAPER_GAIN': 'scanning_ekf', 'PAPER_P0': 'scanning_ekf', 'PAPER_Q': 'scanning_ekf',
     'PAPER_Q_SYS': 'scanning_ekf', 'PAPER_R': 'scanning_ekf', 'PAPER_R_SYS': 'scanning_ekf',
-    'PAPER_X0': 'scanning_ekf', 'SCAN_ANGLES': 'scanning_ekf', 'ScanningEKF': 'scanning_ekf',
+    'PAPER_X0': 'scanning_ekf', 'SCAN_ANGLES': 'scan_observability',
+    'ScanningEKF': 'scanning_ekf',
     'StampClock': 'scanning_ekf', 'simulate_tracking': 'tracking_simulation',
     'tracking': 'tracking_simulation', 'TrackingLinkConfig': 'tracking_simulation',
     'Trajectory': 'tracking_simulation', 'Block': 'tracking_simulation',
