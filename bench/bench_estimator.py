@@ -20,7 +20,8 @@ Benchmark: the estimator node against a relay that publishes the same messages.
                                     [--cases relay node stub]
 
 Each case runs in a process of its own (this script with `worker`), spinning as
-`python -m tskf_ros.nodes.timescale_estimator --executor ...` does (node_runner.spin):
+`python -m tskf_ros.nodes.timescale_estimator --executor ...` does (node_runner.spin; the
+node and the stub with their heap frozen, own_process(), as run_node does):
 
 - node: TimescaleEstimator on the OWC model (3), period 1 ms;
 - relay: a node with the same entities (measurement and input subscriptions, the first
