@@ -207,7 +207,8 @@ def given_parameters(argv: Sequence[str], node_name: str, node_fqn: str) -> dict
     Read as rcl reads them: in each `--ros-args ... [--]` section, `--params-file FILE`
     (the sections of FILE that apply to node_fqn) and `-p`/`--param NAME:=VALUE` (or
     `NODE:NAME:=VALUE`, for the node named NODE only).  A file that cannot be read is
-    left out (rcl refuses it before the node starts).
+    left out (rcl refuses it before the node starts).  Where a parameter is given twice,
+    the place rcl takes it from: the last `-p` for it, else the last file that has it.
     """
     given: dict = {}
     ros = False
@@ -221,10 +222,11 @@ def given_parameters(argv: Sequence[str], node_name: str, node_fqn: str) -> dict
                 names = parameters_for_node(argv[i + 1], node_fqn)
             except (OSError, yaml.YAMLError):
                 continue
-            given.update({name: argv[i + 1] for name in names if name not in given})
+            given.update({name: argv[i + 1] for name in names
+                          if not given.get(name, '').startswith('-')})
         elif ros and i + 1 < len(argv) and arg in ('-p', '--param') and ':=' in argv[i + 1]:
             name = argv[i + 1].split(':=', 1)[0]
             node, _, name = name.rpartition(':')
             if node in ('', node_name, node_fqn):
-                given.setdefault(name, f'{arg} {argv[i + 1]}')
+                given[name] = f'{arg} {argv[i + 1]}'
     return given

@@ -31,8 +31,11 @@ from rclpy.utilities import remove_ros_args
 
 from tskf_ros.core import jit
 from tskf_ros.messages.context import end_context
-from tskf_ros.messages.parameter_schema import ParameterError, SchemaFormatError
-from tskf_ros.messages.parameters import given_parameters, parameters_for_node
+from tskf_ros.messages.parameter_schema import (ParameterError, ParameterSchema,
+                                                SchemaFormatError)
+from tskf_ros.messages.parameter_validation import format_number
+from tskf_ros.messages.parameters import (given_parameters, parameters_for_node,
+                                          read_params_yaml)
 
 import yaml
 
@@ -205,6 +208,9 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
             node.get_logger().error(warning)
         for warning in unknown_parameters(node, sys.argv if args is None else args):
             node.get_logger().warning(warning)
+        why = dropped_parameters(node, sys.argv if args is None else args)
+        if why:
+            raise ParameterError(why)
         executor = make_executor(kind)
         executor.add_node(node)
         if _interrupted_before():
@@ -301,6 +307,41 @@ def unknown_parameters(node: Node, argv: Sequence[str]) -> list:
                         f'{node.get_fully_qualified_name()} and is ignored'
                         + (f': did you mean {close[0]!r}?' if close else ''))
     return warnings
+
+
+def dropped_parameters(node: Node, argv: Sequence[str]) -> str:
+    """
+    Return why node cannot start on a parameter value the command line gives but rcl dropped.
+
+    rcl reads the values of `-p NAME:=VALUE` and of a parameter file as YAML, and drops an
+    empty list (`-p Q:=[]`, `Q: []`) without a word: it has no parameter type.  The node
+    would run on the value it has without it (its default, or a file's), unless that is
+    an empty list too.  A parameter of the node's schema given by an empty `-p` list, or
+    given but not received (ReconfigurableNode.parameters_given), is refused; '' if none.
+    """
+    schema = getattr(node, 'schema', None)
+    received = getattr(node, 'parameters_given', None)
+    if not isinstance(schema, ParameterSchema) or received is None:
+        return ''
+    for name, where in given_parameters(argv, node.get_name(),
+                                        node.get_fully_qualified_name()).items():
+        value = list(node.get_parameter(name).value or []) if name in schema.names else []
+        if value and (name not in received or _empty_list(where)):
+            shown = '[' + ', '.join(map(format_number, value)) + ']'
+            return (f'{name} ({where}) did not reach the node: rcl drops an empty list (it has '
+                    f'no parameter type), so it would run with {name} = {shown}; give {name} '
+                    'its entries, or leave it out')
+    return ''
+
+
+def _empty_list(where: str) -> bool:
+    """Tell whether a `-p NAME:=VALUE` of given_parameters gives an empty list."""
+    if not where.startswith('-'):
+        return False                    # a parameter file: its value is not at hand
+    try:
+        return read_params_yaml(where.partition(':=')[2]) == []
+    except yaml.YAMLError:
+        return False
 
 
 def limit_blas_threads() -> str:
