@@ -92,7 +92,14 @@ def test_declared_parameters_and_other_nodes_parameters_are_not_warned(node_with
      'Q (-p timescale_estimator:Q:=[ ]) did not reach the node: rcl drops an empty list (it '
      'has no parameter type), so it would run with Q = [1]; give Q its entries, or leave '
      'it out'),
-    # an empty list where the value is an empty list anyway, or another node's: started
+    # a scalar given for it: as for any list
+    (['-p', 'period:=[]'], None, 'period (-p period:=[]) did not reach the node: rcl drops '
+     'an empty list (it has no parameter type), so it would run with period = 1; give '
+     'period its entries, or leave it out'),
+    # an empty list where the value is an empty list anyway, another node's, or values that
+    # arrive (a file and -p, scalars and lists): started
+    (['--params-file', '{file}', '-p', 'period:=2.0', '-p', 'x0:=[3.0]',
+      '-p', 'frame_id:=f'], 'gate: 5.0', ''),
     (['-p', 'B:=[]'], None, ''),
     (['--params-file', '{file}', '-p', 'timescale_estimator:B:=[ ]'], 'B: [2.0]', ''),
     (['-p', 'other:Q:=[]'], None, ''),

@@ -27,9 +27,9 @@ import yaml
 if TYPE_CHECKING:
     from tskf_ros.messages.parameter_schema import ParameterSchema
 
-__all__ = ['descriptor', 'float_range', 'given_parameters', 'IGNORED', 'IGNORED_PREFIX',
-           'NodeConfig', 'parameters_for_node', 'ParamsError', 'parameter_values',
-           'read_params_yaml', 'section_applies']
+__all__ = ['descriptor', 'file_values', 'float_range', 'given_parameters', 'IGNORED',
+           'IGNORED_PREFIX', 'NodeConfig', 'parameters_for_node', 'ParamsError',
+           'parameter_values', 'read_params_yaml', 'section_applies']
 
 
 class _RclLoader(getattr(yaml, 'CSafeLoader', yaml.SafeLoader)):  # type: ignore[misc]
@@ -198,6 +198,20 @@ def parameters_for_node(params_file: Union[str, Path], node_fqn: str) -> set:
         return set()
     return set().union(*(_names(params) for key, params in _sections(doc)
                          if section_applies(key, node_fqn)))
+
+
+def file_values(params_file: Union[str, Path], node_fqn: str) -> dict:
+    """
+    Return {dotted name: value} of what params_file sets for the node node_fqn (rcl's rules).
+
+    Later sections win.  Raises OSError or yaml.YAMLError if the file cannot be read.
+    """
+    doc = read_params_yaml(Path(params_file).read_text())
+    values: dict = {}
+    for key, params in _sections(doc) if isinstance(doc, dict) else ():
+        if section_applies(key, node_fqn) and isinstance(params, dict):
+            values.update(flat_parameters(params))
+    return values
 
 
 def given_parameters(argv: Sequence[str], node_name: str, node_fqn: str) -> dict:
