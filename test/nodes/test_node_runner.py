@@ -12,10 +12,11 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""How a node runs: unknown parameter names said once each, BLAS threads without threadpoolctl."""
+"""How a node runs: unknown parameter names said once each, a value rcl drops, BLAS threads."""
 
 import sys
 
+from node_helpers import run_node
 import pytest
 import rclpy
 
@@ -72,6 +73,53 @@ def test_declared_parameters_and_other_nodes_parameters_are_not_warned(node_with
             '-p', 'not_a_ros_argument:=1']
     node = node_with_args(argv)
     assert node_runner.unknown_parameters(node, argv) == []
+
+
+@pytest.mark.parametrize('args, file, why', [
+    # rcl drops an empty list (it has no parameter type): the node ran on its default Q
+    (['-p', 'Q:=[]'], None, 'Q (-p Q:=[]) did not reach the node: rcl drops an empty list '
+     '(it has no parameter type), so it would run with Q = [1]; give Q its entries, or '
+     'leave it out'),
+    (['--params-file', '{file}'], 'Q: []', 'Q ({file}) did not reach the node: rcl drops an '
+     'empty list (it has no parameter type), so it would run with Q = [1]; give Q its '
+     'entries, or leave it out'),
+    # the file's value arrives, not the -p that was to replace it
+    (['--params-file', '{file}', '-p', 'B:=[]'], 'B: [2.0]',
+     'B (-p B:=[]) did not reach the node: rcl drops an empty list (it has no parameter '
+     'type), so it would run with B = [2]; give B its entries, or leave it out'),
+    # a -p for the node by name drops the file's value too: the default is left
+    (['--params-file', '{file}', '-p', 'timescale_estimator:Q:=[ ]'], 'Q: [3.0]',
+     'Q (-p timescale_estimator:Q:=[ ]) did not reach the node: rcl drops an empty list (it '
+     'has no parameter type), so it would run with Q = [1]; give Q its entries, or leave '
+     'it out'),
+    # a scalar given for it: as for any list
+    (['-p', 'period:=[]'], None, 'period (-p period:=[]) did not reach the node: rcl drops '
+     'an empty list (it has no parameter type), so it would run with period = 1; give '
+     'period its entries, or leave it out'),
+    # an empty list where the value is an empty list anyway, another node's, or values that
+    # arrive (a file and -p, scalars and lists): started
+    (['--params-file', '{file}', '-p', 'period:=2.0', '-p', 'x0:=[3.0]',
+      '-p', 'frame_id:=f'], 'gate: 5.0', ''),
+    (['-p', 'B:=[]'], None, ''),
+    (['--params-file', '{file}', '-p', 'timescale_estimator:B:=[ ]'], 'B: [2.0]', ''),
+    (['-p', 'other:Q:=[]'], None, ''),
+    (['-p', 'Q:=[2.0]'], 'Q: []', '')])
+def test_a_parameter_rcl_drops_is_refused_at_start(node_with_args, tmp_path, args, file, why):
+    params = tmp_path / 'p.yaml'
+    if file is not None:
+        params.write_text(f'/**:\n  ros__parameters:\n    {file}\n')
+    argv = ['timescale_estimator', '--ros-args',
+            *(a.replace('{file}', str(params)) for a in args)]
+    node = node_with_args(argv)
+    assert node_runner.dropped_parameters(node, argv) == why.replace('{file}', str(params))
+
+
+def test_a_dropped_parameter_ends_the_node_with_one_line():
+    code, out = run_node('timescale_estimator', '--ros-args', '-p', 'Q:=[]')
+    assert code == 1 and out.splitlines() == [
+        'timescale_estimator: cannot start: Q (-p Q:=[]) did not reach the node: rcl drops '
+        'an empty list (it has no parameter type), so it would run with Q = [1]; give Q its '
+        'entries, or leave it out'], out
 
 
 def test_without_threadpoolctl_the_node_warns_unless_blas_is_told(monkeypatch):

@@ -196,13 +196,70 @@ def test_a_bad_value_at_start_is_one_parameter_error(ros_context, override, why)
      'pat.hold_samples must be an integer, got True'),
     # the number printed with every digit: 1e8 would hide why it is out of range
     (Alignment, Parameter('pat.hold_samples', value=100000001),
-     'pat.hold_samples = 100000001 is out of range: it must be within [0, 1e8]')])
-def test_a_bool_for_an_integer_and_a_number_just_out_of_range_are_refused_at_start(
+     'pat.hold_samples = 100000001 is out of range: it must be within [0, 1e8]'),
+    # rclpy publishes a parameter given at start before any check of the node: an integer
+    # beyond int64 ended in "SystemError: <function ParameterValue.double_value ...>"
+    (TimescaleEstimator, Parameter('queue_depth', value=2 ** 63),
+     'queue_depth = 9223372036854775808 is out of range: it must be within [1, 100000]'),
+    (PowerMeterSimulator, Parameter('seed', value=2 ** 63),
+     'seed = 9223372036854775808 is out of range: it must be within '
+     '[0, 9223372036854775807]'),
+    (LedLinkSimulator, Parameter('seed', value=-2 ** 63 - 1),
+     'seed = -9223372036854775809 is out of range: it must be within '
+     '[0, 9223372036854775807]'),
+    # an integer for a double, beyond int64 (rclpy sends it as one) or beyond any double
+    (TimescaleEstimator, Parameter('period', value=2 ** 63),
+     'period = 9223372036854775808 is out of range: it must be within [1e-6, 3600]'),
+    (TimescaleEstimator, Parameter('period', value=2 ** 1100),
+     f'period = {2 ** 1100} is out of range: it must be within [1e-6, 3600]'),
+    (Alignment, Parameter('gain', value=2 ** 63),
+     'gain = 9223372036854775808 is out of range: it must be within '
+     '[-9223372036854775808, 9223372036854775807] (a 64-bit integer)'),
+    (TimescaleEstimator, Parameter('x0', value=[1, 2 ** 63]),
+     'x0 has an entry out of range (9223372036854775808): each must be within '
+     '[-9223372036854775808, 9223372036854775807] (a 64-bit integer)'),
+    (TimescaleEstimator, Parameter('frame_id', value=2 ** 64),
+     'frame_id must be a string, got 18446744073709551616'),
+    # doubles: the largest, nan and inf are refused by the range, or the node's own check
+    (TimescaleEstimator, Parameter('period', value=1e308),
+     'period = 1e308 is out of range: it must be within [1e-6, 3600]'),
+    (TimescaleEstimator, Parameter('gate', value=math.nan), 'gate must be finite, got nan'),
+    (TimescaleEstimator, Parameter('gate', value=math.inf), 'gate must be finite, got inf')])
+def test_a_bool_for_an_integer_and_numbers_out_of_range_are_refused_at_start(
         ros_context, node, override, why):
     # before: `-p pat.hold_samples:=true` and `-p smoothing_lag:=true` started (exit 0)
     with pytest.raises(ParameterError) as info:
         node(context=ros_context, parameter_overrides=[override])
     assert str(info.value) == why
+
+
+@pytest.mark.parametrize('override, why', [
+    # an integer no double holds stays an integer (the pre-set callback cannot refuse):
+    # rclpy's type check refuses it
+    (Parameter('gate', value=2 ** 1100),
+     "Wrong parameter type, expected 'Type.DOUBLE' got 'Type.INTEGER'"),
+    (Parameter('x0', value=[2 ** 1100]),
+     "Wrong parameter type, expected 'Type.DOUBLE_ARRAY' got 'Type.INTEGER_ARRAY'"),
+    # one a double holds is made one, and refused by the descriptor's range (rclpy's text)
+    (Parameter('status_period', value=2 ** 63), 'Parameter status_period out of range '
+     'Min: 0.0, Max: 1000000.0, value: 9.223372036854776e+18'),
+    (Parameter('measurement_range', value=[0.0, math.nan]),
+     'measurement_range must be empty or [lo, hi] with finite lo < hi, got [0.0, nan]'),
+    (Parameter('Q', value=[math.inf]), 'Q has non-finite entries'),
+    (Parameter('smoothing_lag', value=2 ** 63), 'Trying to set a read-only parameter: '
+     'smoothing_lag.')])
+def test_a_number_out_of_reach_set_at_run_time_is_refused_with_the_reason(
+        ros_context, override, why):
+    # before: the integers too big for a double ended in an OverflowError traceback from
+    # the pre-set callback; the node keeps its values
+    node = TimescaleEstimator(context=ros_context)
+    try:
+        before = node.get_parameter(override.name).value
+        result = node.set_parameters([override])[0]
+        assert not result.successful and result.reason == why
+        assert node.get_parameter(override.name).value == before
+    finally:
+        node.destroy_node()
 
 
 @pytest.mark.parametrize('name', sorted(NODES))
@@ -309,3 +366,24 @@ def test_every_shipped_schema_is_a_node_of_this_package():
     assert shipped == sorted(NODES)
     for name in shipped:
         assert load_schema(name).node == name
+
+
+def test_a_number_beyond_what_a_parameter_carries_is_refused_by_the_schema():
+    # what an offline tool checks (schema.check: a parameter file, --set) says the same
+    import yaml
+    schema = parse_schema(yaml.safe_load(SMALL + '  count:\n    type: int\n    '
+                                         'default_value: 1\n  ids:\n    type: int_array\n'
+                                         '    default_value: [1]\n'))
+    for values, why in (
+            ({'count': 2 ** 63}, 'count = 9223372036854775808 is out of range: it must be '
+             'within [-9223372036854775808, 9223372036854775807] (a 64-bit integer)'),
+            ({'ids': [1, -2 ** 63 - 1]}, 'ids has an entry out of range '
+             '(-9223372036854775809): each must be within [-9223372036854775808, '
+             '9223372036854775807] (a 64-bit integer)'),
+            ({'gain': 2 ** 1024}, f'gain = {2 ** 1024} is out of range: it must be within '
+             '[-1.7976931348623157e308, 1.7976931348623157e308] (a double)')):
+        with pytest.raises(ParameterError) as info:
+            schema.check(values)
+        assert str(info.value) == why
+    assert schema.check({'count': 2 ** 63 - 1, 'gain': 2 ** 63}) == {
+        'count': 2 ** 63 - 1, 'gain': 9.223372036854775808e18}

@@ -28,6 +28,13 @@ __all__ = ['bar', 'DeferredInterrupt', 'Interrupts', 'wrap']
 T = TypeVar('T')
 S = TypeVar('S', bound='_SigintContext')
 
+# tqdm's default lock holds a multiprocessing RLock, a named semaphore made at the first
+# bar (a disabled one too), for bars of forked processes; these bars are each process's
+# own (a sweep's workers are spawned).  A process stopped without its clean-up (a Dask
+# worker its nanny kills after a Ctrl-C) left that semaphore to the resource tracker's
+# "leaked semaphore objects" warning: a thread lock instead (tqdm.set_lock)
+tqdm.set_lock(threading.RLock())
+
 
 def bar(total: Optional[int], desc: str, unit: str, enabled: bool = True) -> tqdm:
     """Return a tqdm bar on stderr; off when not wanted or stderr is not a terminal."""

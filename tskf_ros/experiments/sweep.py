@@ -18,12 +18,9 @@
 import argparse
 import csv
 from dataclasses import dataclass, field
-import logging
 import os
 from pathlib import Path
-import signal
 import sys
-import threading
 from typing import Optional
 
 import numpy as np
@@ -35,6 +32,7 @@ from tskf_ros.core.optional_dependencies import (EXIT_MISSING_DEPENDENCY, Missin
 from tskf_ros.experiments.bag_analysis import METRICS
 from tskf_ros.experiments.fit_noise import EXIT_INTERRUPTED
 from tskf_ros.experiments.output import save_figure
+from tskf_ros.experiments.sweep_cluster import close, local_cluster, quiet_dask
 from tskf_ros.experiments.sweep_progress import (run_task_reporting, SweepBar, TaskProgress,
                                                  terminal, TOPIC)
 from tskf_ros.experiments.sweep_table import Table
@@ -42,7 +40,7 @@ from tskf_ros.experiments.sweep_tasks import (build_tasks, find_bags, FIT_COLUMN
                                               parse_setting, run_task, setting_text,
                                               settings_product)
 from tskf_ros.messages.estimator_interface import default_parameters, ParamsError
-from tskf_ros.tools.console import SigintFlag
+from tskf_ros.tools.console import SigintFlag, SigintHeld
 
 PROG = 'sweep'
 EXIT_ROW_ERRORS = 5
@@ -86,19 +84,24 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
                 record(run_task(t, TaskProgress(t.key, bar.receive) if bar.enabled else None))
             return result
         from dask.distributed import as_completed, Client
-        cluster = None
-        if scheduler is None:
-            cluster = local_cluster(workers)
-            client = Client(cluster)
-        else:
-            client = Client(scheduler)
         # a Ctrl-C raised where it is swallowed (a finaliser, a callback of distributed's)
         # would let the loop finish: remember it, and stop at the next row.  Dask is
         # silenced in the handler itself: the interrupt reaches distributed's sync(), whose
         # cancel callback runs at once on the event loop's thread and can log an error
         # (a NameError of distributed's own) before this thread gets to the except below
         interrupted = SigintFlag(first=quiet_dask)
+        cluster = client = None
+        futures: dict = {}
         try:
+            if scheduler is None:
+                cluster = local_cluster(workers)
+                # a client cut short while it connects would be left half made
+                with SigintHeld() as held:
+                    client = Client(cluster)
+                if held.came:
+                    raise KeyboardInterrupt
+            else:
+                client = Client(scheduler)
             if bar.enabled:
                 # the workers' reports come on the client's event loop, as (time, report)
                 client.subscribe_topic(TOPIC, lambda event: bar.receive(event[1]))
@@ -122,52 +125,11 @@ def execute(tasks: list, table: Table, *, workers: int, scheduler: Optional[str]
             raise
         finally:
             interrupted.restore()
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            if close(client, cluster, futures=list(futures)):
+                raise KeyboardInterrupt     # a Ctrl-C while they closed: said as one
     finally:
         bar.close()
     return result
-
-
-def local_cluster(workers: int):
-    """
-    Start a LocalCluster of `workers` processes that do not take SIGINT themselves.
-
-    Ctrl-C in a terminal goes to every process of the foreground group: each worker would
-    print its own KeyboardInterrupt traceback.  The workers start with SIGINT ignored (a
-    disposition a new process keeps); this process takes Ctrl-C and stops them.
-    """
-    from dask.distributed import LocalCluster
-    main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
-    try:
-        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                            host='127.0.0.1', dashboard_address=None,
-                            # with no dashboard the scheduler still serves HTTP (health
-                            # routes), on 8787 unless told: a port of its own on loopback,
-                            # so that two sweeps do not warn "Port 8787 is already in use"
-                            scheduler_kwargs={'dashboard_address': '127.0.0.1:0'},
-                            silence_logs=logging.ERROR)
-    finally:
-        if main:
-            signal.signal(signal.SIGINT, previous)
-
-
-def quiet_dask() -> None:
-    """
-    Silence distributed's loggers (a shutdown after Ctrl-C logs lost connections).
-
-    Every logger under distributed, tornado and asyncio: distributed's logging config
-    gives some of them a level of their own (tornado.application: ERROR), which a level
-    on the parent does not override.
-    """
-    families = ('distributed', 'tornado', 'asyncio')
-    names = [*families, *(name for name, logger in list(logging.root.manager.loggerDict.items())
-                          if isinstance(logger, logging.Logger))]
-    for name in names:
-        if name.split('.')[0] in families:
-            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
 def sweep(bags: list, *, out: Path, params_file: Optional[Path] = None, sets: list = (),
@@ -345,14 +307,7 @@ def main(argv: Optional[list] = None) -> int:
     except OSError as exc:
         return error_exit(PROG, exc, args.out)
     except KeyboardInterrupt:
-        try:
-            with open(args.out, newline='') as f:
-                kept = max(sum(1 for _ in csv.reader(f)) - 1, 0)
-        except OSError:
-            kept = 0
-        print(f'{PROG}: interrupted: {kept} rows in {args.out} kept; the same command '
-              'resumes', file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return interrupted(args.out)
     print(f'{PROG}: {len(bags)} bags x {len(settings_product(sets))} settings: '
           f'{len(res.evaluated)} evaluated, {len(res.skipped)} already in {args.out}, '
           f'{res.errors} with errors')
@@ -362,7 +317,24 @@ def main(argv: Optional[list] = None) -> int:
         except OSError as exc:
             print(f'{PROG}: error: {exc}', file=sys.stderr)
             return 1
+        except KeyboardInterrupt:       # the figure goes through a temporary file
+            return interrupted(args.out)
     return EXIT_ROW_ERRORS if any(r['error'] for r in res.rows) else 0
+
+
+def interrupted(out: Path) -> int:
+    """Say in one line what a Ctrl-C left: the whole rows of the table, if it exists."""
+    try:
+        with open(out, newline='') as f:
+            kept = max(sum(1 for _ in csv.reader(f)) - 1, 0)
+    except FileNotFoundError:
+        print(f'{PROG}: interrupted: nothing written', file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except OSError:
+        kept = 0
+    print(f'{PROG}: interrupted: {kept} rows in {out} kept; the same command resumes',
+          file=sys.stderr)
+    return EXIT_INTERRUPTED
 
 
 def console_main() -> None:

@@ -20,7 +20,6 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 import math
 from pathlib import Path
-import sys
 from typing import Any, NamedTuple, Optional, Sequence
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -28,7 +27,8 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from tskf_ros.messages.parameter_validation import format_number, RANGES, VALIDATORS
+from tskf_ros.messages.parameter_validation import (DOUBLE, format_number, INT64, out_of_reach,
+                                                    RANGES, VALIDATORS)
 from tskf_ros.messages.parameters import read_params_yaml
 
 import yaml
@@ -49,8 +49,9 @@ TYPES = {
 LEAF_KEYS = frozenset({'type', 'default_value', 'description', 'read_only', 'validation',
                        'additional_constraints'})
 # the largest finite double: the open end of a one-sided range in a descriptor
-BIG = sys.float_info.max
-INT64 = (-2 ** 63, 2 ** 63 - 1)
+BIG = DOUBLE[1]
+# the types whose values are numbers
+NUMBERS = frozenset({'int', 'double', 'int_array', 'double_array'})
 
 
 class SchemaFormatError(ValueError):
@@ -119,11 +120,16 @@ class ParameterSpec:
 
         An integer is taken for a double (`-p rate:=5`), integers for a double array, and an
         empty list for any array; nothing else changes type (a bool is no integer).  An
-        array.array (what a SetParameters request's array values arrive as) is a list.
+        array.array (what a SetParameters request's array values arrive as) is a list.  An
+        integer beyond an int64, or for a double beyond a double, is out of range.
         """
         if isinstance(value, array.array):
             value = value.tolist()
         t = self.type_name
+        if t in NUMBERS:
+            why = self.out_of_reach(value, DOUBLE if t.startswith('double') else INT64)
+            if why:
+                raise ParameterError(why)
         if t == 'double' and type(value) is int:
             return float(value)
         # Python's bool is an int, and rclpy's type check takes True for an integer: refused
@@ -140,6 +146,10 @@ class ParameterSpec:
         if not self.ros_type.check(value):
             raise ParameterError(f'{self.name} must be {_article(t)}, got {value!r}')
         return value
+
+    def out_of_reach(self, value: Any, ends: tuple) -> str:
+        """Return why value holds an integer outside ends (INT64, DOUBLE); '' if none."""
+        return out_of_reach(self.name, value, ends, self.closed_range())
 
     def problem(self, value: Any) -> str:
         """Return why value breaks this parameter's type or validation; '' if it does not."""
@@ -272,11 +282,17 @@ class ParameterSchema:
         schema; then the parameters are declared again with their static types, values
         and descriptors (read-only ones read-only), all in one `declare_parameters` call
         each time.  Raises ParameterError naming the first bad value.  Later changes of a
-        double to an integer are taken as doubles too (a pre-set callback).
+        double to an integer are taken as doubles too (a pre-set callback).  rclpy publishes
+        the value given before the node sees it, and fails on an integer beyond an int64
+        (a SystemError): an on-set callback refuses such a value first, as out of range.
         """
         names = self.names
-        starts = node.declare_parameters(
-            '', [(name, None, ParameterDescriptor(dynamic_typing=True)) for name in names])
+        node.add_on_set_parameters_callback(self._carried)
+        try:
+            starts = node.declare_parameters(
+                '', [(name, None, ParameterDescriptor(dynamic_typing=True)) for name in names])
+        finally:
+            node.remove_on_set_parameters_callback(self._carried)
         given, values = [], []
         defaults = self.defaults()
         for name, start in zip(names, starts):
@@ -310,6 +326,15 @@ class ParameterSchema:
                 node.set_descriptor(name, spec.descriptor())
         node.add_pre_set_parameters_callback(self.coerce_changes)
         return frozenset(given)
+
+    def _carried(self, changes: Sequence[Parameter]) -> SetParametersResult:
+        """Raise ParameterError for a value given with an integer an int64 cannot hold."""
+        for p in changes:
+            spec = self.parameters.get(p.name)
+            if spec is not None and out_of_reach(p.name, p.value, INT64):
+                raise ParameterError(spec.out_of_reach(p.value, INT64)
+                                     if spec.type_name in NUMBERS else spec.problem(p.value))
+        return SetParametersResult(successful=True)
 
     def _writable(self, name: str) -> ParameterDescriptor:
         """Return a parameter's descriptor, not read-only (to set it once declared)."""

@@ -17,9 +17,15 @@
 
 from dataclasses import dataclass
 import math
-from typing import Any, Callable, Sequence
+import sys
+from typing import Any, Callable, Optional, Sequence
 
-__all__ = ['format_number', 'RANGES', 'Validator', 'VALIDATORS']
+__all__ = ['DOUBLE', 'format_number', 'INT64', 'out_of_reach', 'RANGES', 'Validator',
+           'VALIDATORS']
+
+# the numbers a ROS parameter carries: an integer is an int64, a number a double
+INT64 = (-2 ** 63, 2 ** 63 - 1)
+DOUBLE = (-sys.float_info.max, sys.float_info.max)
 
 
 def format_number(value: Any) -> str:
@@ -107,3 +113,24 @@ VALIDATORS = {
 
 # the validations of a number's range (their refusals say 'out of range', as rclpy's do)
 RANGES = frozenset({'bounds', 'gt', 'gt_eq', 'lt', 'lt_eq'})
+
+
+def out_of_reach(name: str, value: Any, ends: tuple, closed: Optional[tuple] = None) -> str:
+    """
+    Return why value (a number or a list) holds an integer outside ends; '' if it does not.
+
+    ends is what the parameter carries (INT64, or DOUBLE: an integer given for a double
+    becomes one); the refusal names the parameter's own range, closed, if it has one.
+    A bool is no integer here.
+    """
+    items = value if isinstance(value, (list, tuple)) else [value]
+    bad = next((e for e in items if type(e) is int and not ends[0] <= e <= ends[1]), None)
+    if bad is None:
+        return ''
+    note = '' if closed else ' (a double)' if ends == DOUBLE else ' (a 64-bit integer)'
+    lo, hi = closed or ends
+    within = f'within [{format_number(lo)}, {format_number(hi)}]{note}'
+    if items is value:
+        return (f'{name} has an entry out of range ({format_number(bad)}): each must be '
+                f'{within}')
+    return f'{name} = {format_number(bad)} is out of range: it must be {within}'

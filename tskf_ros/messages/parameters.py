@@ -27,9 +27,9 @@ import yaml
 if TYPE_CHECKING:
     from tskf_ros.messages.parameter_schema import ParameterSchema
 
-__all__ = ['descriptor', 'float_range', 'given_parameters', 'IGNORED', 'IGNORED_PREFIX',
-           'NodeConfig', 'parameters_for_node', 'ParamsError', 'parameter_values',
-           'read_params_yaml', 'section_applies']
+__all__ = ['descriptor', 'file_values', 'float_range', 'given_parameters', 'IGNORED',
+           'IGNORED_PREFIX', 'NodeConfig', 'parameters_for_node', 'ParamsError',
+           'parameter_values', 'read_params_yaml', 'section_applies']
 
 
 class _RclLoader(getattr(yaml, 'CSafeLoader', yaml.SafeLoader)):  # type: ignore[misc]
@@ -200,6 +200,20 @@ def parameters_for_node(params_file: Union[str, Path], node_fqn: str) -> set:
                          if section_applies(key, node_fqn)))
 
 
+def file_values(params_file: Union[str, Path], node_fqn: str) -> dict:
+    """
+    Return {dotted name: value} of what params_file sets for the node node_fqn (rcl's rules).
+
+    Later sections win.  Raises OSError or yaml.YAMLError if the file cannot be read.
+    """
+    doc = read_params_yaml(Path(params_file).read_text())
+    values: dict = {}
+    for key, params in _sections(doc) if isinstance(doc, dict) else ():
+        if section_applies(key, node_fqn) and isinstance(params, dict):
+            values.update(flat_parameters(params))
+    return values
+
+
 def given_parameters(argv: Sequence[str], node_name: str, node_fqn: str) -> dict:
     """
     Return {name: where it was given} of the parameters a command line sets for a node.
@@ -207,7 +221,8 @@ def given_parameters(argv: Sequence[str], node_name: str, node_fqn: str) -> dict
     Read as rcl reads them: in each `--ros-args ... [--]` section, `--params-file FILE`
     (the sections of FILE that apply to node_fqn) and `-p`/`--param NAME:=VALUE` (or
     `NODE:NAME:=VALUE`, for the node named NODE only).  A file that cannot be read is
-    left out (rcl refuses it before the node starts).
+    left out (rcl refuses it before the node starts).  Where a parameter is given twice,
+    the place rcl takes it from: the last `-p` for it, else the last file that has it.
     """
     given: dict = {}
     ros = False
@@ -221,10 +236,11 @@ def given_parameters(argv: Sequence[str], node_name: str, node_fqn: str) -> dict
                 names = parameters_for_node(argv[i + 1], node_fqn)
             except (OSError, yaml.YAMLError):
                 continue
-            given.update({name: argv[i + 1] for name in names if name not in given})
+            given.update({name: argv[i + 1] for name in names
+                          if not given.get(name, '').startswith('-')})
         elif ros and i + 1 < len(argv) and arg in ('-p', '--param') and ':=' in argv[i + 1]:
             name = argv[i + 1].split(':=', 1)[0]
             node, _, name = name.rpartition(':')
             if node in ('', node_name, node_fqn):
-                given.setdefault(name, f'{arg} {argv[i + 1]}')
+                given[name] = f'{arg} {argv[i + 1]}'
     return given

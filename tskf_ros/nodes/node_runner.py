@@ -15,6 +15,7 @@
 
 """How a node runs: its executor, `--help` without ROS, the Jazzy main loop, one-line errors."""
 
+import array
 import os
 import re
 import signal
@@ -31,8 +32,11 @@ from rclpy.utilities import remove_ros_args
 
 from tskf_ros.core import jit
 from tskf_ros.messages.context import end_context
-from tskf_ros.messages.parameter_schema import ParameterError, SchemaFormatError
-from tskf_ros.messages.parameters import given_parameters, parameters_for_node
+from tskf_ros.messages.parameter_schema import (ParameterError, ParameterSchema,
+                                                SchemaFormatError)
+from tskf_ros.messages.parameter_validation import format_number
+from tskf_ros.messages.parameters import (file_values, given_parameters, parameters_for_node,
+                                          read_params_yaml)
 
 import yaml
 
@@ -205,6 +209,9 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
             node.get_logger().error(warning)
         for warning in unknown_parameters(node, sys.argv if args is None else args):
             node.get_logger().warning(warning)
+        why = dropped_parameters(node, sys.argv if args is None else args)
+        if why:
+            raise ParameterError(why)
         executor = make_executor(kind)
         executor.add_node(node)
         if _interrupted_before():
@@ -301,6 +308,46 @@ def unknown_parameters(node: Node, argv: Sequence[str]) -> list:
                         f'{node.get_fully_qualified_name()} and is ignored'
                         + (f': did you mean {close[0]!r}?' if close else ''))
     return warnings
+
+
+def dropped_parameters(node: Node, argv: Sequence[str]) -> str:
+    """
+    Return why node cannot start on a parameter value the command line gives but rcl dropped.
+
+    rcl reads the values of `-p NAME:=VALUE` and of a parameter file as YAML, and drops an
+    empty list (`-p Q:=[]`, `Q: []`) without a word: it has no parameter type.  The node
+    would run on the value it has without it (its default, or a file's), unless that is
+    an empty list too.  A parameter of the node's schema whose value on the command line
+    (where rcl takes it from: given_parameters) is an empty list is refused; '' if none.
+    """
+    schema = getattr(node, 'schema', None)
+    if not isinstance(schema, ParameterSchema):
+        return ''
+    fqn = node.get_fully_qualified_name()
+    for name, where in given_parameters(argv, node.get_name(), fqn).items():
+        if name not in schema.names or not _empty_list(where, name, fqn):
+            continue
+        value = node.get_parameter(name).value
+        if isinstance(value, (list, array.array)):
+            if not len(value):
+                continue                # an empty list asked, an empty list it is
+            shown = '[' + ', '.join(map(format_number, value)) + ']'
+        else:
+            shown = format_number(value)
+        return (f'{name} ({where}) did not reach the node: rcl drops an empty list (it has '
+                f'no parameter type), so it would run with {name} = {shown}; give {name} '
+                'its entries, or leave it out')
+    return ''
+
+
+def _empty_list(where: str, name: str, node_fqn: str) -> bool:
+    """Tell whether given_parameters' `-p NAME:=VALUE` or file gives name an empty list."""
+    try:
+        if where.startswith('-'):
+            return read_params_yaml(where.partition(':=')[2]) == []
+        return file_values(where, node_fqn).get(name) == []
+    except (OSError, yaml.YAMLError):
+        return False                    # rcl refused such an argument before the node
 
 
 def limit_blas_threads() -> str:

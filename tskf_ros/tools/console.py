@@ -113,6 +113,43 @@ class SigintFlag:
             signal.signal(signal.SIGINT, self.previous)
 
 
+class SigintHeld:
+    """
+    Hold SIGINT over a block (`with SigintHeld() as held:`); `held.came` says if one came.
+
+    For a block a KeyboardInterrupt must not cut short (a Dask cluster starting or
+    closing: its processes and semaphores would be left behind).  The calling thread
+    blocks SIGINT, and what it starts meanwhile inherits that mask: the threads, and
+    the processes those threads start, which then never take a terminal's Ctrl-C (a
+    LocalCluster's workers: the sweep stops them).  A SIGINT that reaches another thread
+    meanwhile (a BLAS library's own) is noted by a handler that does not raise, and one
+    held for this thread is taken at the end; neither raises: the caller acts on `came`.
+    Outside the main thread it does nothing.
+    """
+
+    def __init__(self) -> None:
+        self.came = False
+        self.main = threading.current_thread() is threading.main_thread()
+        self.mask: set = set()
+        self.previous: Any = None
+
+    def __enter__(self) -> 'SigintHeld':
+        if self.main:
+            self.mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            self.previous = signal.signal(signal.SIGINT, self._note)
+        return self
+
+    def _note(self, signum: int, frame: Optional[FrameType]) -> None:
+        self.came = True
+
+    def __exit__(self, *exc: object) -> None:
+        if self.main:
+            if signal.sigtimedwait({signal.SIGINT}, 0) is not None:
+                self.came = True
+            signal.signal(signal.SIGINT, self.previous)
+            signal.pthread_sigmask(signal.SIG_SETMASK, self.mask)
+
+
 class _SigintSeen:
     """
     Notice every SIGINT of the process, whichever Python handler takes it.
