@@ -27,8 +27,8 @@ import pytest
 
 from tskf_ros.core import noise_fit
 from tskf_ros.core.linear_models import LinearModel
-from tskf_ros.core.noise_fit import (data_scale, negative_log_likelihood, NoiseParameters,
-                                     run_trace, StepRecord, trace_log_likelihood)
+from tskf_ros.core.noise_fit import (negative_log_likelihood, run_trace, StepRecord,
+                                     trace_log_likelihood)
 from tskf_ros.core.timescale_kalman import FilterError
 
 
@@ -153,22 +153,27 @@ def test_a_step_the_run_refuses_raises_as_the_step_does():
     assert str(in_run.value) == str(in_loop.value)
 
 
-def test_the_data_scale_is_the_medians_of_the_differences_in_memory():
-    model, trace = two_state_trace(5000, 4)
-    par = NoiseParameters(2, 2)
-    theta0 = par.start(model.Q, model.R)
-    dys, dts = [], []
-    for seg in trace:
-        t, last = 0.0, None
-        for rec in seg:
-            if rec.y is not None:
-                if last is not None and t > last[0]:
-                    dys.append(rec.y - last[1])
-                    dts.append(t - last[0])
-                last = (t, rec.y)
-            t += rec.mu
-    v = np.median(np.square(dys), axis=0) / 0.455
-    dt = float(np.median(dts))
-    want = np.log(np.concatenate([np.full(2, np.mean(v) / dt), v * dt / 2.0]))
-    # C G = I: |(C G)_j|^2 = 1
-    np.testing.assert_array_equal(data_scale(model, trace, par, theta0), want)
+def test_the_likelihood_of_the_first_steps_is_that_of_the_trace_cut_there(monkeypatch):
+    # steps=K: log L of the first K measurement steps (the coarse search's), bit for bit
+    # that of the trace cut after its K-th measurement, across segments and blocks
+    monkeypatch.setattr(noise_fit, 'TRACE_BLOCK', 64)
+    model, trace = two_state_trace(3000, 13)
+    for k in (1, 63, 64, 65, 500, 2000):
+        cut, seen = [], 0
+        for segment in trace:
+            if seen == k:
+                break
+            kept = []
+            for rec in segment:
+                if rec.y is not None:
+                    if seen == k:
+                        break
+                    seen += 1
+                kept.append(rec)
+            cut.append(kept)
+        want = trace_log_likelihood(model, 'euler', cut)
+        got = trace_log_likelihood(model, 'euler', trace, steps=k)
+        assert np.float64(got).tobytes() == np.float64(want).tobytes(), k
+        assert negative_log_likelihood(model, 'euler', trace, k) == -got
+    whole = trace_log_likelihood(model, 'euler', trace)
+    assert trace_log_likelihood(model, 'euler', trace, steps=10 ** 9) == whole

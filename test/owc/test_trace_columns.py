@@ -15,9 +15,13 @@
 
 """The run's columns in temporary files: what was appended, and sums as np.sum's over arrays."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from tskf_ros.core import noise_fit, spill_rows
+from tskf_ros.core.linear_models import LinearModel
 from tskf_ros.core.nis_check import nis_summary
 from tskf_ros.core.noise_fit import innovation_terms, Innovations, StepRecord
 from tskf_ros.owc.trace_columns import InnovationColumns, TraceColumns
@@ -86,4 +90,35 @@ def test_steps_come_back_as_appended_across_blocks():
                     np.testing.assert_array_equal(x, y)
     rec = trace[1][-1]
     assert rec.mu == segments[1][-1].mu and trace[2][3].mu == segments[2][3].mu
+    trace.close()
+
+
+def test_the_likelihood_reads_the_columns_as_it_reads_the_records(monkeypatch):
+    # innovation_blocks takes the TraceColumns a block of columns at a time (blocks of 64
+    # rows here, the runs cut at their edges): the same e_k, S_k, bit for bit, as over
+    # the same steps given as a list of StepRecords (gaps, sample variances, inputs)
+    monkeypatch.setattr(spill_rows, 'BLOCK', 64)
+    rng = np.random.default_rng(21)
+    model = LinearModel('two', A=np.array([[0.0, 1.0], [-0.5, -0.2]]), C=np.eye(2),
+                        Q=np.eye(2) * 0.1, R=np.eye(2) * 0.2, x0=np.zeros(2), P0=np.eye(2),
+                        B=np.array([[1.0], [0.5]]))
+    segments = []
+    for n in (3, 700, 450):
+        seg = []
+        for _ in range(n):
+            y = None if rng.random() < 0.1 else rng.standard_normal(2)
+            u = rng.standard_normal(1) if rng.random() < 0.05 else None
+            variance = float(rng.uniform(0.1, 1.0)) if rng.random() < 0.05 else 0.0
+            seg.append(StepRecord(float(rng.uniform(0.009, 0.011)), y, u, variance))
+        segments.append(seg)
+    trace = TraceColumns()
+    for i, seg in enumerate(segments):
+        for rec in seg:
+            trace.append(i, rec)
+    for m in (model, replace(model, B=None)):
+        listed = list(noise_fit.innovation_blocks(m, 'euler', segments, block=64))
+        columns = list(noise_fit.innovation_blocks(m, 'euler', trace, block=64))
+        for k in (0, 1):
+            np.testing.assert_array_equal(np.concatenate([b[k] for b in columns]),
+                                          np.concatenate([b[k] for b in listed]))
     trace.close()

@@ -27,48 +27,22 @@ doc/design/core.md.
 """
 
 from dataclasses import dataclass, field, replace
-from typing import Callable, Iterator, Optional, Sequence
+from typing import Iterator, Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-import scipy.optimize
 
 from tskf_ros.core.linear_models import LinearModel
+from tskf_ros.core.noise_search import (AT_BOUND, coarse_start, COARSE_STEPS, DATA_OFFSETS,
+                                        data_scale, FitProgress, LOG_L_TOLERANCE,
+                                        newton_gap, NoiseParameters, numerical_hessian,
+                                        Objective, RECENTRES, search)
 from tskf_ros.core.pairwise_sum import PairwiseSum
-from tskf_ros.core.spill_rows import SpillRows
-from tskf_ros.core.streamed_median import median
+from tskf_ros.core.step_columns import column_blocks, StepRecord
 from tskf_ros.core.timescale_kalman import FilterError, TimeScaleKalmanFilter
 
 LOG_2PI = float(np.log(2.0 * np.pi))
-# how far (in natural-log units) the optimiser may move a parameter from its start
-LOG_SEARCH_RADIUS = 25.0
-# central-difference step of the Hessian, in log-parameters (a 1% change of q or r)
-HESSIAN_STEP = 1e-2
-# a parameter within this of its search bound has run to the bound
-AT_BOUND = 1e-3
-# a parameter that ends at its bound is searched again around there, at most this often
-# (so up to e^(+-25 x 4) from the start: a start far from the data's scale is found)
-RECENTRES = 3
-# the coarse search before the optimiser: these offsets of each log-parameter (e^-12..e^6)
-COARSE_OFFSETS = (-12.0, -9.0, -6.0, -3.0, 0.0, 3.0, 6.0)
-# and these around the data's own scale (data_scale: all the spread on Q, or all on R)
-DATA_OFFSETS = (-9.0, -6.0, -3.0, 0.0, 3.0)
-
 FloatArray = NDArray[np.float64]
-# the log-likelihood as a function of the log-parameters theta
-Objective = Callable[[FloatArray], float]
-# told (evaluations so far, the best log-likelihood so far) after each evaluation
-FitProgress = Callable[[int, float], None]
-
-
-@dataclass(frozen=True)
-class StepRecord:
-    """One step of the filter: mu (s), y (None: an input-only point) and the input u."""
-
-    mu: float
-    y: Optional[FloatArray]
-    u: Optional[FloatArray] = None
-    variance: float = 0.0       # the sample's own R_d (use_message_variance), 0: R / mu
 
 
 @dataclass
@@ -137,9 +111,10 @@ class _Rows:
             yield self.e[:self.k].copy(), self.S[:self.k].copy()
 
 
-def _run(kf: TimeScaleKalmanFilter, mus: list, ys: list) -> tuple[FloatArray, FloatArray]:
+def _run(kf: TimeScaleKalmanFilter, mus: FloatArray, ys: FloatArray
+         ) -> tuple[FloatArray, FloatArray]:
     """Make the steps in one compiled run; return their (e_k, S_k) (those of `step`)."""
-    res = kf.run(mus, np.array(ys), innovations=True)
+    res = kf.run(mus, ys, innovations=True)
     e, S = res.innovation, res.S
     assert e is not None and S is not None     # asked for
     if res.steps == len(mus):
@@ -150,6 +125,15 @@ def _run(kf: TimeScaleKalmanFilter, mus: list, ys: list) -> tuple[FloatArray, Fl
             np.concatenate([S, [r.S for r in rest]]))
 
 
+def _plain_runs(plain: NDArray[np.bool_]) -> Iterator[tuple[int, int, bool]]:
+    """Yield (start, end, plain) of the runs of equal values of plain, in order."""
+    edges = np.flatnonzero(plain[1:] != plain[:-1]) + 1
+    starts = np.concatenate([[0], edges]).tolist()
+    ends = np.concatenate([edges, [plain.size]]).tolist()
+    for a, b in zip(starts, ends):
+        yield a, b, bool(plain[a])
+
+
 def innovation_blocks(model: LinearModel, transition: str,
                       segments: Sequence[Sequence[StepRecord]], block: int = TRACE_BLOCK
                       ) -> Iterator[tuple[FloatArray, FloatArray]]:
@@ -158,42 +142,39 @@ def innovation_blocks(model: LinearModel, transition: str,
 
     Each segment starts from a fresh filter (x0, P0).  A step with a sample variance
     (use_message_variance) is run with R = variance * mu, so that R / mu is that variance,
-    as the estimator session does.  Runs of measurement steps with the model's R and no
-    input are made in one compiled call each (`TimeScaleKalmanFilter.run`, the same
-    steps as `step`'s), the other steps one at a time.  Raises FilterError if a step
-    fails.  At most `block` steps are kept at a time: a trace of any length runs in
-    bounded memory.
+    as the estimator session does.  The steps are read a block at a time as columns
+    (`step_columns.column_blocks`); each run of measurement steps with the model's R and
+    no input is made in one compiled call (`TimeScaleKalmanFilter.run`, the same steps
+    as `step`'s) on the columns' slices, the other steps one at a time.  Raises
+    FilterError if a step fails.  At most `block` steps are kept at a time: a trace of
+    any length runs in bounded memory.
     """
     rows = _Rows(block, model.C.shape[0])
     for segment in segments:
         kf = model.make_filter(transition, allow_nonregressive=True)
         R_model = kf.R
-        mus: list = []
-        ys: list = []
-        for rec in segment:
-            plain = rec.u is None or model.B is None     # no input the model takes
-            if rec.y is not None and not rec.variance > 0 and plain:
-                mus.append(rec.mu)
-                ys.append(rec.y)
-                if len(mus) == block:
-                    yield from rows.add(*_run(kf, mus, ys))
-                    mus, ys = [], []
-                continue
-            if mus:
-                yield from rows.add(*_run(kf, mus, ys))
-                mus, ys = [], []
-            if rec.y is not None and rec.variance > 0:
-                kf.R = np.eye(kf.p) * rec.variance * rec.mu
-                try:
-                    res = kf.step(rec.mu, rec.y, rec.u)
-                finally:
-                    kf.R = R_model
-            else:
-                res = kf.step(rec.mu, rec.y, rec.u)
-            if rec.y is not None:
-                yield from rows.add(res.innovation[None], res.S[None])
-        if mus:
-            yield from rows.add(*_run(kf, mus, ys))
+        for cols in column_blocks(segment, block):
+            # a measurement with the model's R and no input the model takes
+            plain = cols.has_y & ~(cols.variance > 0)
+            if model.B is not None:
+                plain &= ~cols.has_u
+            for a, b, run in _plain_runs(plain):
+                if run:
+                    assert cols.y is not None       # has_y somewhere
+                    yield from rows.add(*_run(kf, cols.mu[a:b], cols.y[a:b]))
+                    continue
+                for i in range(a, b):
+                    rec = cols.record(i)
+                    if rec.y is not None and rec.variance > 0:
+                        kf.R = np.eye(kf.p) * rec.variance * rec.mu
+                        try:
+                            res = kf.step(rec.mu, rec.y, rec.u)
+                        finally:
+                            kf.R = R_model
+                    else:
+                        res = kf.step(rec.mu, rec.y, rec.u)
+                    if rec.y is not None:
+                        yield from rows.add(res.innovation[None], res.S[None])
     yield from rows.rest()
 
 
@@ -219,98 +200,42 @@ def measurement_steps(segments: Sequence[Sequence[StepRecord]]) -> int:
 
 
 def trace_log_likelihood(model: LinearModel, transition: str,
-                         segments: Sequence[Sequence[StepRecord]]) -> float:
+                         segments: Sequence[Sequence[StepRecord]],
+                         steps: Optional[int] = None) -> float:
     """
     Return log L of the trace (run_trace(...).log_likelihood()) in bounded memory.
 
     The NIS and log det S of each block of innovations are added up as np.sum adds the
     whole columns (PairwiseSum): the same number, bit for bit, without keeping them.
+    steps: only the first this many measurement steps (all if None or more).
     """
     n = measurement_steps(segments)
+    if steps is not None:
+        n = min(n, int(steps))
     sum_nis, sum_log_det = PairwiseSum(n), PairwiseSum(n)
     p = model.C.shape[0]
+    done = 0
     for e, S in innovation_blocks(model, transition, segments):
+        if done == n:
+            break
+        e, S = e[:n - done], S[:n - done]
         nis, log_det = innovation_terms(e, S)
         sum_nis.add(nis)
         sum_log_det.add(log_det)
+        done += len(S)
     return log_likelihood_of(sum_log_det.total(), sum_nis.total(), n, p)
 
 
-@dataclass(frozen=True)
-class NoiseParameters:
-    """Which entries are fitted: the diagonals of Q (r x r) and R (p x p), as logs."""
-
-    r: int
-    p: int
-    fit_Q: bool = True
-    fit_R: bool = True
-
-    @property
-    def names(self) -> list[str]:
-        """Return the parameter names, e.g. ['Q[0,0]', 'R[0,0]']."""
-        out = [f'Q[{i},{i}]' for i in range(self.r)] if self.fit_Q else []
-        return out + ([f'R[{i},{i}]' for i in range(self.p)] if self.fit_R else [])
-
-    def start(self, Q: FloatArray, R: FloatArray) -> FloatArray:
-        """Return the log-parameters of Q and R (a non-positive diagonal entry starts at 1)."""
-        diag: list[float] = []
-        if self.fit_Q:
-            diag += list(np.diag(Q))
-        if self.fit_R:
-            diag += list(np.diag(R))
-        return np.log(np.where(np.asarray(diag) > 0, diag, 1.0))
-
-    def matrices(self, theta: ArrayLike, Q: ArrayLike, R: ArrayLike
-                 ) -> tuple[FloatArray, FloatArray]:
-        """Return (Q, R) for the log-parameters theta (entries not fitted: from Q, R)."""
-        theta = np.asarray(theta, dtype=float)
-        k = 0
-        if self.fit_Q:
-            Q = np.diag(np.exp(theta[:self.r]))
-            k = self.r
-        if self.fit_R:
-            R = np.diag(np.exp(theta[k:k + self.p]))
-        return np.asarray(Q, dtype=float), np.asarray(R, dtype=float)
-
-    def stderr_matrices(self, theta: ArrayLike, se_log: ArrayLike
-                        ) -> tuple[FloatArray, FloatArray]:
-        """Delta method: se(q) = q se(log q) on the fitted diagonals, 0 elsewhere."""
-        se = np.exp(np.asarray(theta, dtype=float)) * np.asarray(se_log, dtype=float)
-        Qs, Rs = np.zeros((self.r, self.r)), np.zeros((self.p, self.p))
-        k = 0
-        if self.fit_Q:
-            Qs[np.diag_indices(self.r)] = se[:self.r]
-            k = self.r
-        if self.fit_R:
-            Rs[np.diag_indices(self.p)] = se[k:k + self.p]
-        return Qs, Rs
-
-
 def negative_log_likelihood(model: LinearModel, transition: str,
-                            segments: Sequence[Sequence[StepRecord]]) -> float:
-    """Return -log L of the trace under the model's Q and R (inf if a step fails)."""
+                            segments: Sequence[Sequence[StepRecord]],
+                            steps: Optional[int] = None) -> float:
+    """Return -log L of the trace (its first `steps` measurements; inf if a step fails)."""
     try:
         with np.errstate(all='ignore'):
-            value = -trace_log_likelihood(model, transition, segments)
+            value = -trace_log_likelihood(model, transition, segments, steps)
     except (FilterError, np.linalg.LinAlgError, ArithmeticError):
         return float('inf')
     return value if np.isfinite(value) else float('inf')
-
-
-def numerical_hessian(f: Objective, x: ArrayLike, h: float = HESSIAN_STEP) -> FloatArray:
-    """Central-difference Hessian of f at x with step h in every coordinate."""
-    x = np.asarray(x, dtype=float)
-    n = x.size
-    H = np.zeros((n, n))
-    f0 = f(x)
-    step = np.eye(n) * h
-    for i in range(n):
-        H[i, i] = (f(x + step[i]) - 2.0 * f0 + f(x - step[i])) / (h * h)
-        for j in range(i):
-            H[i, j] = H[j, i] = (f(x + step[i] + step[j]) - f(x + step[i] - step[j])
-                                 - f(x - step[i] + step[j]) + f(x - step[i] - step[j])
-                                 ) / (4.0 * h * h)
-    return H
 
 
 @dataclass
@@ -337,118 +262,6 @@ class FitError(ValueError):
     """The likelihood could not be maximised (the message says why)."""
 
 
-def coarse_start(f: Objective, theta0: ArrayLike,
-                 offsets: Sequence[float] = COARSE_OFFSETS) -> tuple[FloatArray, float]:
-    """
-    Return the best point of a coarse search around theta0 and its value.
-
-    The likelihood can have a valley that runs to a bound (at 1 kHz, model (3) with Q near
-    the paper's 1 improves as R -> 0), where a gradient method started at the file's
-    values ends.  So each log-parameter is first tried at theta0 + offsets: the full
-    grid for up to two parameters, one coordinate at a time (keeping the best) for more.
-    """
-    theta0 = np.asarray(theta0, dtype=float)
-    steps = np.asarray(offsets, dtype=float)
-    if theta0.size <= 2:
-        grid = [theta0 + np.array(c) for c in _product(steps, theta0.size)]
-        values = [f(t) for t in grid]
-        i = int(np.argmin(values))
-        return grid[i], float(values[i])
-    best, best_value = theta0.copy(), f(theta0)
-    for i in range(theta0.size):
-        for d in steps:
-            t = best.copy()
-            t[i] = theta0[i] + d
-            v = f(t)
-            if v < best_value:
-                best, best_value = t, v
-    return best, float(best_value)
-
-
-def data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
-               par: NoiseParameters, theta0: FloatArray) -> FloatArray:
-    """
-    Return log-parameters at the data's own scale (theta0 where the data say nothing).
-
-    From the differences of successive measurements, dy over dt: their robust variance
-    v_i = median(dy_i^2) / 0.455 (the median of chi2(1)) put all on the measurement noise,
-    R_ii = v_i dt / 2 (R / mu per sample, twice per difference), or all on the process
-    noise, Q_jj = mean(v) / (dt |(C G)_j|^2), with dt the median spacing.
-    """
-    p = model.C.shape[0]
-    with SpillRows(np.dtype((np.float64, (p,)))) as dys, SpillRows(np.float64) as dts:
-        return _data_scale(model, segments, par, theta0, dys, dts)
-
-
-def _data_scale(model: LinearModel, segments: Sequence[Sequence[StepRecord]],
-                par: NoiseParameters, theta0: FloatArray, dys: SpillRows, dts: SpillRows
-                ) -> FloatArray:
-    """data_scale with the differences kept in dys and dts (temporary files)."""
-    p = model.C.shape[0]
-    for segment in segments:
-        t, last = 0.0, None
-        for rec in segment:
-            if rec.y is not None:
-                y = np.asarray(rec.y, dtype=float).reshape(-1)
-                if last is not None and t > last[0]:
-                    dys.append(y - last[1])
-                    dts.append(t - last[0])
-                last = (t, y)
-            t += rec.mu
-    theta = np.array(theta0, dtype=float)
-    if len(dys) < 2:
-        return theta
-    with np.errstate(all='ignore'):
-        # np.median(np.square(dys), axis=0), np.median(dts): a block of rows at a time
-        v = np.array([median(_column_squared(dys, i)) for i in range(p)]) / 0.455
-        dt = float(median(dts.blocks))
-        G = model.G if model.G is not None else np.eye(model.A.shape[0])
-        cg = np.sum(np.square(model.C @ G), axis=0)
-        k = 0
-        if par.fit_Q:
-            q = np.mean(v) / (dt * cg)
-            theta[:par.r] = np.where(np.isfinite(q) & (q > 0), np.log(q), theta[:par.r])
-            k = par.r
-        if par.fit_R:
-            r = v * dt / 2.0
-            theta[k:k + par.p] = np.where(np.isfinite(r) & (r > 0), np.log(r),
-                                          theta[k:k + par.p])
-    return theta
-
-
-def _column_squared(rows: SpillRows, i: int) -> Callable[[], Iterator[FloatArray]]:
-    """Return blocks(): the squares of column i of rows, a block at a time."""
-    return lambda: (np.square(block[:, i]) for block in rows.blocks())
-
-
-def _search(f: Objective, start: FloatArray, centre: FloatArray
-            ) -> tuple[FloatArray, FloatArray, FloatArray, str, bool]:
-    """
-    Minimise f from start within centre +- LOG_SEARCH_RADIUS (L-BFGS-B, then Nelder-Mead).
-
-    Return (theta, lower bounds, upper bounds, the optimiser's message, success).
-    """
-    lo, hi = centre - LOG_SEARCH_RADIUS, centre + LOG_SEARCH_RADIUS
-    bounds = list(zip(lo, hi))
-    start = np.clip(start, lo, hi)
-    res = scipy.optimize.minimize(f, start, method='L-BFGS-B', bounds=bounds,
-                                  options={'maxiter': 500, 'ftol': 1e-13, 'gtol': 1e-7})
-    theta, message, success = res.x, str(res.message), bool(res.success)
-    if not success:
-        nm = scipy.optimize.minimize(f, theta, method='Nelder-Mead', bounds=bounds,
-                                     options={'xatol': 1e-6, 'fatol': 1e-9, 'maxiter': 2000})
-        if nm.fun <= res.fun:
-            theta, success = nm.x, bool(nm.success)
-            message = f'L-BFGS-B: {res.message}; Nelder-Mead: {nm.message}'
-    return np.asarray(theta, dtype=float), lo, hi, message, success
-
-
-def _product(offsets: FloatArray, k: int) -> list[list[float]]:
-    """Return every k-tuple of offsets."""
-    grids = np.meshgrid(*([offsets] * k), indexing='ij')
-    return np.stack([g.ravel() for g in grids], axis=1).tolist()
-
-
 def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRecord]], *,
         fit_Q: bool = True, fit_R: bool = True,
         progress: Optional[FitProgress] = None) -> FitResult:
@@ -457,7 +270,11 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
 
     Raises FitError when the likelihood is not finite at the start or the optimiser does
     not converge.  The search starts from the best point of a coarse grid around the
-    model's values and around the data's own scale (data_scale).  A parameter that runs to
+    model's values and around the data's own scale (data_scale), its points compared over
+    the first COARSE_STEPS measurements.  It stops when an iteration gains less than
+    LOG_L_TOLERANCE in log L, if the quadratic model at the Hessian of the standard errors
+    then puts the maximum less than LOG_L_TOLERANCE above (newton_gap); else it goes on
+    to strict tolerances (noise_search.search).  A parameter that runs to
     its search bound (e^{+-25} around that start) is searched again around that bound, up
     to RECENTRES times; one still at its bound then (the likelihood rises without a
     maximum towards 0 or infinity) is listed in `at_bound` and its standard error is NaN.
@@ -471,12 +288,22 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
     theta0 = par.start(model.Q, model.R)
     calls = [0]
     best_seen = [float('inf')]
+    known: dict[tuple[bytes, Optional[int]], float] = {}
+    # the coarse search's steps (None: all of them, the trace is not longer)
+    head = COARSE_STEPS if measurement_steps(segments) > COARSE_STEPS else None
 
-    def nll(theta: FloatArray) -> float:
+    def nll(theta: FloatArray, steps: Optional[int] = None) -> float:
+        # a point met again (the Hessian's centre, the search's start) is not re-run
+        key = (np.asarray(theta, dtype=float).tobytes(), steps)
+        if key in known:
+            return known[key]
         calls[0] += 1
         Q, R = par.matrices(theta, model.Q, model.R)
-        value = negative_log_likelihood(with_noise(model, Q, R), transition, segments)
-        best_seen[0] = min(best_seen[0], value)
+        value = negative_log_likelihood(with_noise(model, Q, R), transition, segments,
+                                        steps)
+        known[key] = value
+        if steps is None:
+            best_seen[0] = min(best_seen[0], value)
         if progress is not None:
             progress(calls[0], -best_seen[0])
         return value
@@ -489,25 +316,31 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
         value = nll(theta)
         return value if np.isfinite(value) else big
 
+    def coarse(theta: FloatArray) -> float:
+        value = nll(theta, head)
+        return value if np.isfinite(value) else big
+
     # the coarse search around the file's values and around the data's own scale: a
-    # start far from the data (e^30) can sit on a plateau where no gradient leads back
-    theta, value = coarse_start(bounded, theta0)
-    scaled, scaled_value = coarse_start(bounded, data_scale(model, segments, par, theta0),
+    # start far from the data (e^30) can sit on a plateau where no gradient leads back.
+    # Its points are e^3 apart: over COARSE_STEPS measurements they differ by far more
+    # than the search's tolerance, so they are compared over those only
+    theta, value = coarse_start(coarse, theta0)
+    scaled, scaled_value = coarse_start(coarse, data_scale(model, segments, par, theta0),
                                         DATA_OFFSETS)
     if scaled_value < value:
         theta = scaled
-    centre = np.array(theta, dtype=float)
-    for _ in range(RECENTRES + 1):
-        theta, lo, hi, message, success = _search(bounded, theta, centre)
-        edge = (theta - lo < AT_BOUND) | (hi - theta < AT_BOUND)
-        if not (success and np.any(edge)):
-            break
-        centre = np.where(edge, theta, centre)      # search again around the bound
+    search_at = _Search(np.array(theta, dtype=float))
+    theta, edge, message, success = search_at.run(bounded, theta)
+    H = numerical_hessian(nll, theta) if success else np.full((theta.size,) * 2, np.nan)
+    if not (success and newton_gap(nll, theta, H) <= LOG_L_TOLERANCE):
+        # a plateau or a bound, where an iteration gains little though the maximum is far
+        # (or the Hessian is not positive definite): on to strict tolerances from there
+        theta, edge, message, success = search_at.run(bounded, theta, strict=True)
+        H = numerical_hessian(nll, theta)
     best = nll(theta)
     if not success or not np.isfinite(best):
         raise FitError(f'the optimiser did not converge ({message})')
     at_bound = [name for name, e in zip(par.names, edge) if e]
-    H = numerical_hessian(nll, theta)
     hessian_ok = bool(np.all(np.isfinite(H)))
     cov = np.full_like(H, np.nan)
     if hessian_ok:
@@ -527,3 +360,27 @@ def fit(model: LinearModel, transition: str, segments: Sequence[Sequence[StepRec
                      theta_stderr=se_log, covariance_log=cov, names=par.names,
                      success=success, message=message, evaluations=calls[0],
                      at_bound=at_bound, hessian_ok=hessian_ok)
+
+
+@dataclass
+class _Search:
+    """The search's box (its centre) and the recentres left (RECENTRES in all)."""
+
+    centre: FloatArray
+    recentres: int = RECENTRES
+
+    def run(self, f: Objective, theta: FloatArray, strict: bool = False
+            ) -> tuple[FloatArray, NDArray[np.bool_], str, bool]:
+        """
+        Return (theta, at its bound, message, success) of `search` from theta.
+
+        A parameter that runs to its search bound is searched again around that bound
+        while recentres are left.
+        """
+        while True:
+            theta, lo, hi, message, success = search(f, theta, self.centre, strict)
+            edge = (theta - lo < AT_BOUND) | (hi - theta < AT_BOUND)
+            if not (success and np.any(edge)) or self.recentres == 0:
+                return theta, edge, message, success
+            self.recentres -= 1
+            self.centre = np.where(edge, theta, self.centre)    # again around the bound

@@ -37,8 +37,8 @@ from tskf_ros.bag.message_types import BagTypeError
 from tskf_ros.bag.outputs import check_outputs
 from tskf_ros.bag.progress import Interrupts
 from tskf_ros.bag.reader import BagError, error_exit, exit_status
-from tskf_ros.core.noise_fit import (FitError, FitProgress, FitResult, LOG_SEARCH_RADIUS,
-                                     negative_log_likelihood, RECENTRES)
+from tskf_ros.core.noise_fit import FitError, FitResult, negative_log_likelihood
+from tskf_ros.core.noise_search import FitProgress, LOG_SEARCH_RADIUS, RECENTRES
 from tskf_ros.experiments.bag_analysis import read_stream
 from tskf_ros.experiments.output import json_bytes, write_all
 from tskf_ros.messages.estimator_interface import load_config, NODE_NAME, ParamsError
@@ -90,9 +90,12 @@ def fit_events(config: EstimatorConfig, events: Iterable[Event], *, fit_Q: bool 
     sf = fit_stream(config, events, fit_Q=fit_Q, fit_R=fit_R, progress=progress)
     res, run = sf.result, sf.run
     # the parameter file's own Q and R on the same steps, for a likelihood-ratio test
-    base = replace(config, gate=0.0, use_message_variance=False)
-    trace = run_stream(base, without(events, sf.excluded))
-    ll0 = -negative_log_likelihood(config.model, config.transition, trace.segments)
+    # (the fit's last round's steps, unless the gated set changed after it)
+    ll0 = sf.file_log_likelihood
+    if not sf.gate_stable:
+        base = replace(config, gate=0.0, use_message_variance=False)
+        trace = run_stream(base, without(events, sf.excluded))
+        ll0 = -negative_log_likelihood(config.model, config.transition, trace.segments)
     lr = 2.0 * (res.log_likelihood - ll0)
     k = len(res.names)
     st = run.stats

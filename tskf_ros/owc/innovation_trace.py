@@ -40,8 +40,9 @@ from typing import Callable, Iterable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from tskf_ros.core.noise_fit import (fit, FitError, FitProgress, FitResult, StepRecord,
-                                     with_noise)
+from tskf_ros.core.noise_fit import (fit, FitError, FitResult, negative_log_likelihood,
+                                     StepRecord, with_noise)
+from tskf_ros.core.noise_search import FitProgress
 from tskf_ros.core.units import NS
 from tskf_ros.owc.session import EstimatorConfig, EstimatorSession, Outcome, Stats
 from tskf_ros.owc.stream_events import Event, EventColumns, Input, Measurement
@@ -293,6 +294,9 @@ class StreamFit:
     rounds: int
     gate_stable: bool
     notes: list[str] = field(default_factory=list)
+    # log L of the input config's own Q and R over the last round's steps (the
+    # likelihood's, gate off): the steps of `excluded` only if gate_stable
+    file_log_likelihood: float = float('nan')
 
 
 def without(events: Iterable[Event], stamps: set[int]) -> Iterable[Event]:
@@ -338,6 +342,7 @@ def fit_stream(config: EstimatorConfig, events: Iterable[Event], *,
                            f'(at least {MIN_STEPS_PER_PARAMETER * max(k, 1)} needed)')
         result = fit(base.model, base.transition, trace.segments, fit_Q=fit_Q, fit_R=fit_R,
                      progress=progress)
+        file_ll = -negative_log_likelihood(base.model, base.transition, trace.segments)
         del trace           # the next round's is made before this one would be let go
         fitted = replace(config, model=with_noise(config.model, result.Q, result.R))
         run = run_stream(fitted, events, trace=False)
@@ -347,4 +352,4 @@ def fit_stream(config: EstimatorConfig, events: Iterable[Event], *,
         excluded = set(run.gated_stamps)
     else:
         notes.append(f'the gated set still changed after {GATE_ROUNDS} rounds')
-    return StreamFit(result, fitted, run, excluded, rounds, stable, notes)
+    return StreamFit(result, fitted, run, excluded, rounds, stable, notes, file_ll)

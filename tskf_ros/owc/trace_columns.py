@@ -41,10 +41,10 @@ from numpy.typing import NDArray
 
 from tskf_ros.core.growing_column import Column
 from tskf_ros.core.nis_check import nis_summary_of, NisSummary, single_band
-from tskf_ros.core.noise_fit import (innovation_terms, Innovations, log_likelihood_of,
-                                     StepRecord)
+from tskf_ros.core.noise_fit import innovation_terms, Innovations, log_likelihood_of
 from tskf_ros.core.pairwise_sum import PairwiseSum
 from tskf_ros.core.spill_rows import SpillRows
+from tskf_ros.core.step_columns import StepColumns, StepRecord
 
 __all__ = ['EstimateColumns', 'InnovationColumns', 'TraceColumns']
 
@@ -131,6 +131,10 @@ class _SegmentView(Sequence[StepRecord]):
     def __iter__(self) -> Iterator[StepRecord]:
         return self.trace.records(self.start, self.end)
 
+    def column_blocks(self) -> Iterator[StepColumns]:
+        """Yield the segment's steps as columns, a block at a time (step_columns)."""
+        return self.trace.column_blocks(self.start, self.end)
+
 
 class TraceColumns(Sequence[Sequence[StepRecord]]):
     """The filter steps of a run, segment by segment, in a temporary file (close() frees it)."""
@@ -153,17 +157,22 @@ class TraceColumns(Sequence[Sequence[StepRecord]]):
         self.y.append(None if rec.y is None else np.asarray(rec.y, dtype=float))
         self.u.append(None if rec.u is None else np.asarray(rec.u, dtype=float))
 
-    def records(self, start: int, end: int) -> Iterator[StepRecord]:
-        """Yield steps start .. end - 1 (counted over all segments), a block read at a time."""
+    def column_blocks(self, start: int, end: int) -> Iterator[StepColumns]:
+        """Yield steps start .. end - 1 (over all segments) as columns, a block at a time."""
         block = self._steps.block
         for first in range(start, end, block):
             count = min(block, end - first)
             steps = self._steps.read(first, count)
-            ys, us = self.y.read(first, count), self.u.read(first, count)
-            for i, (mu, variance, has_y, has_u) in enumerate(steps.tolist()):
-                yield StepRecord(mu=mu, y=ys[i].copy() if has_y and ys is not None else None,
-                                 u=us[i].copy() if has_u and us is not None else None,
-                                 variance=variance)
+            yield StepColumns(mu=steps['mu'], variance=steps['variance'],
+                              has_y=steps['has_y'].astype(bool),
+                              has_u=steps['has_u'].astype(bool),
+                              y=self.y.read(first, count), u=self.u.read(first, count))
+
+    def records(self, start: int, end: int) -> Iterator[StepRecord]:
+        """Yield steps start .. end - 1 (counted over all segments), a block read at a time."""
+        for cols in self.column_blocks(start, end):
+            for i in range(len(cols)):
+                yield cols.record(i)
 
     def record(self, k: int) -> StepRecord:
         """Return step k (counted over all segments)."""
