@@ -15,13 +15,15 @@
 
 """The alignment node's two-axis parameters: which core aligner the shared choices name."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from tskf_ros import led
 from tskf_ros.core.units import NS
 from tskf_ros.led.pan_tilt_stream import PanTiltStream, PanTiltStreamConfig
-from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig, CONSISTENT
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_session import pan_tilt_closed_loop, PanTiltSession
 from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
@@ -60,6 +62,8 @@ def test_the_shared_limits_reach_the_session():
     ({'controller': 'lqg', 'pat.enabled': True}, 'pat.enabled needs controller p'),
     ({'pan_tilt.joints': ['pan', '']}, 'pan_tilt.joints must be two non-empty joint names'),
     ({'axes': 3}, 'axes must be one of 1, 2, got 3'),
+    ({'pan_tilt.filter': 'unscented'},
+     "pan_tilt.filter must be one of first_order, consistent, got 'unscented'"),
 ])
 def test_a_config_that_cannot_run_is_one_line(extra, why):
     with pytest.raises(led.AlignmentError) as info:
@@ -79,6 +83,18 @@ def test_the_outcome_messages_are_predicted_corrected_command_in_order():
 def test_at_the_defaults_the_two_axis_filter_and_supervisor_are_the_core_defaults():
     s = two_axis().session.session
     assert s.ekf == ConicalEKFConfig() and s.supervisor == PanTiltSupervisorConfig()
+
+
+@pytest.mark.parametrize('pat', [False, True])
+def test_pan_tilt_filter_consistent_is_the_consistent_filter_with_the_node_noise(pat):
+    """pan_tilt.filter: consistent runs CONSISTENT, with pan_tilt.noise and gain as given."""
+    s = two_axis(**{'pan_tilt.filter': 'consistent', 'pan_tilt.noise': 0.7, 'gain': 0.4,
+                    'pat.enabled': pat}).session.session
+    assert s.ekf == replace(CONSISTENT, gain=0.4)
+    tracker = PanTiltSession(s).tracker
+    assert tracker.config == replace(CONSISTENT, gain=0.4, noise=0.7)
+    np.testing.assert_allclose(tracker.R[0, 0, 0], 0.7 ** 2 + CONSISTENT.model_noise ** 2,
+                               rtol=1e-12)
 
 
 def test_gain_and_the_shared_pat_parameters_reach_the_two_axis_configs():

@@ -73,15 +73,17 @@ def loop_parameters(node, **extra):
 
 
 # (simulator overrides, alignment overrides, samples after which the light is tracked):
-# the P law from a known prior, with dropouts and noise 1 V, the LQR per axis, and the
-# supervisor's cold search from 20 deg off the boresight
+# the P law from a known prior, with dropouts and noise 1 V, the LQR per axis, the consistent
+# filter (pan_tilt.filter), and the supervisor's cold search from 20 deg off the boresight
 @pytest.mark.parametrize('link, aligner, converged', [
     ({'seed': 3, 'blockage': 'none'}, {}, CONVERGED),
     ({'seed': 5, 'blockage': 'bernoulli', 'drop_probability': 0.3, 'noise': 1.0}, {},
      CONVERGED),
     ({'seed': 4}, {'controller': 'lqg'}, CONVERGED),
+    ({'seed': 5, 'blockage': 'bernoulli', 'drop_probability': 0.3, 'noise': 1.0},
+     {'pan_tilt.filter': 'consistent'}, CONVERGED),
     ({'seed': 3, 'phi0': 20.0}, {'pat.enabled': True}, 100),
-], ids=['p', 'p_dropouts_noise_1V', 'lqg', 'supervisor_cold_start'])
+], ids=['p', 'p_dropouts_noise_1V', 'lqg', 'consistent_filter', 'supervisor_cold_start'])
 def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_kind, link,
                                                          aligner, converged):
     steps = 300

@@ -34,7 +34,7 @@ from typing import Any
 from tskf_ros import led
 from tskf_ros.led.lock_detector import LockConfig
 from tskf_ros.led.pan_tilt_stream import PanTiltStep, PanTiltStreamConfig
-from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig, CONSISTENT
 from tskf_ros.led.two_axis.pan_tilt_session import PanTiltSessionConfig
 from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
 from tskf_ros.messages.pan_tilt_messages import (check_joints, JOINTS, pan_tilt_command_to_msg,
@@ -58,6 +58,16 @@ def method(values: dict) -> str:
                                      'false')
         return 'conical_lqg'
     return 'conical_ekf_pat' if values['pat.enabled'] else 'conical_ekf'
+
+
+def filter_config(name: str) -> ConicalEKFConfig:
+    """
+    Return the conical-scan EKF that pan_tilt.filter names (the noise is pan_tilt.noise).
+
+    first_order: the closed loop's tuned filter (ConicalEKFConfig()); consistent: the one
+    whose NEES is in its band at every noise level (conical_ekf.CONSISTENT).
+    """
+    return CONSISTENT if name == 'consistent' else ConicalEKFConfig()
 
 
 def supervisor_config(values: dict) -> PanTiltSupervisorConfig:
@@ -86,7 +96,7 @@ def pan_tilt_config(values: dict) -> NodeConfig:
         joints0=tuple(values['pan_tilt.initial']), max_step=values['max_step'],
         tilt_limits=tuple(values['pan_tilt.tilt_limits']),
         max_backward=values['max_backward'], state_limit=values['state_limit'],
-        ekf=replace(ConicalEKFConfig(), gain=values['gain']),
+        ekf=replace(filter_config(values['pan_tilt.filter']), gain=values['gain']),
         supervisor=supervisor_config(values))
     session.make_aligner()      # a method the core does not provide yet fails here, at once
     stream = PanTiltStreamConfig(session, values['algorithm'], values['negative_is_missing'],
