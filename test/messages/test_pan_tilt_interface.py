@@ -27,6 +27,7 @@ from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig, CONSISTENT
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_session import pan_tilt_closed_loop, PanTiltSession
 from tskf_ros.led.two_axis.pan_tilt_supervisor_config import PanTiltSupervisorConfig
+from tskf_ros.led.two_axis.pointing_geometry import closed_scan_turn
 from tskf_ros.messages.alignment_interface import default_parameters, parameters_to_config
 from tskf_ros.messages.pan_tilt_interface import pan_tilt_outcome_messages
 
@@ -113,14 +114,16 @@ def test_gain_and_the_shared_pat_parameters_reach_the_two_axis_configs():
 
 @pytest.mark.parametrize('gain', [0.25, 0.5, 1.5])
 def test_gain_is_the_p_law_of_eq_21_in_two_axes(gain):
-    """The first turn less the scan's step is -G dhat (d has no drift yet: b stays 0)."""
+    """The first turn is -G dhat and the scan's step (d has no drift yet: b stays 0)."""
     session = PanTiltSession(two_axis(**{'pat.enabled': False, 'gain': gain}).session.session)
     s0 = session.tracker.scan_offset.copy()
     out = session.add(NS, 0.5)
     s1 = session.tracker.scan_offset
     d = np.array(out.estimate.error)
     assert np.all(out.estimate.x[3:5] == 0.0) and np.linalg.norm(d) > 1e-4
-    np.testing.assert_allclose(np.array(out.turn) - (s1 - s0), -gain * d, rtol=0, atol=1e-12)
+    tilt = default_parameters()['pan_tilt.initial'][1]
+    np.testing.assert_allclose(out.turn, closed_scan_turn(-gain * d, s0, s1, tilt), rtol=0,
+                               atol=1e-12)
 
 
 @pytest.mark.parametrize('hold, steering', [(0, False), (200, True)])

@@ -26,9 +26,9 @@ import scipy.stats
 from tskf_ros.led.intensity_model import AlignmentError, IncidenceResponse
 from tskf_ros.led.scanning_ekf import StampClock
 from tskf_ros.led.two_axis.conical_ekf import (ConicalEKFConfig, ConicalScanEKF, CONSISTENT,
-                                               scan_loss, SIGMA_POINTS, transition)
+                                               scan_loss, transition)
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLink, PanTiltLinkConfig
-from tskf_ros.led.two_axis.pointing_geometry import joint_turn, tangent_error
+from tskf_ros.led.two_axis.pointing_geometry import closed_scan_turn, joint_turn, tangent_error
 from tskf_ros.led.two_axis.radial_response import RadialResponse
 
 NOISE_LEVELS = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5)
@@ -171,7 +171,7 @@ def test_nees_is_in_its_band(noise, seed):
     CONSISTENT (the Gauss-Hermite regression, 5 points per axis, two passes, the link's
     noise and walks); seed 0 chose it, seed 5 was held out.  The runs' interval (from the
     runs' spread, not the chi^2 assumption) holds 3 too, from 0.5 V: at 0 V it is
-    3.03-3.26 and 3.06-3.29, a little overconfident (doc/design/two_axis.md).
+    3.00-3.24 and 3.00-3.22, a little overconfident (doc/design/two_axis.md).
     """
     c = _nees_nis(noise, seed=seed)
     assert c.band[0] < c.anees < c.band[1], c
@@ -179,12 +179,25 @@ def test_nees_is_in_its_band(noise, seed):
         assert c.interval[0] < 3.0 < c.interval[1], c
 
 
+@pytest.mark.parametrize('noise', NOISE_LEVELS)
+@pytest.mark.parametrize('seed', [9, 13, 17])
+def test_nees_is_in_its_band_on_seeds_not_tuned_on(noise, seed):
+    """
+    The ANEES in its band at every level on seeds 9, 13 and 17, held out.
+
+    The runs' interval does not always hold 3 there (seed 9 at 2 V: 3.05-3.59; seeds 13
+    and 17 from 1.5 V: 3.01 to 3.05 at its foot): a little overconfident, within the band.
+    """
+    c = _nees_nis(noise, seed=seed)
+    assert c.band[0] < c.anees < c.band[1], c
+
+
 @pytest.mark.parametrize('noise', [
     1.0,
     *(pytest.param(v, marks=pytest.mark.xfail(strict=True, reason=reason)) for v, reason in (
         (0.0, 'measured 1.35 under [2.67, 3.35]'), (0.5, 'measured 2.51 under [2.67, 3.35]'),
-        (1.5, 'measured 3.96 over [2.66, 3.36]'), (2.0, 'measured 4.69 over [2.64, 3.39]'),
-        (2.5, 'measured 4.83 over [2.59, 3.44]')))])
+        (1.5, 'measured 3.87 over [2.66, 3.36]'), (2.0, 'measured 4.57 over [2.64, 3.38]'),
+        (2.5, 'measured 4.85 over [2.60, 3.42]')))])
 def test_the_closed_loop_filter_is_consistent_at_1_volt_only(noise):
     """
     The default (closed-loop) filter: the first-order update, R with a 0.2 V floor, Q 0.02.
@@ -204,12 +217,13 @@ def test_nees_with_jittered_stamps_and_dropouts_at_1_volt():
 
 _NIS_OUT = {     # (seed, noise): the mean NIS measured out of its band
     (0, 0.0): 'measured 0.966 under [0.988, 1.012]',
-    (0, 1.0): 'measured 0.986 under [0.988, 1.012]',
+    (0, 0.5): 'measured 0.9878 under [0.988, 1.012]',
+    (0, 1.0): 'measured 0.985 under [0.988, 1.012]',
     (0, 1.5): 'measured 0.982 under [0.988, 1.012]',
-    (0, 2.0): 'measured 0.977 under [0.987, 1.013]',
-    (0, 2.5): 'measured 0.967 under [0.986, 1.014]',
+    (0, 2.0): 'measured 0.975 under [0.987, 1.013]',
+    (0, 2.5): 'measured 0.965 under [0.986, 1.014]',
     (5, 0.0): 'measured 0.968 under [0.988, 1.012]',
-    (5, 2.5): 'measured 0.985 under [0.986, 1.014]'}
+    (5, 2.5): 'measured 0.9855 under [0.986, 1.014]'}
 
 
 @pytest.mark.parametrize('seed, noise', [
@@ -220,11 +234,12 @@ def test_nis_in_band(seed, noise):
     """
     The mean NIS of CONSISTENT in the 95 % band of its chi^2, seeds 0 and 5.
 
-    Met from 0.5 to 2 V on seed 5 (and on seed 9, not tuned on), at 0.5 V on seed 0,
-    whose noise draws are 1.2 % under their variance at every level (the levels share
-    them).  At 0 and 2.5 V the prior's errors are skewed along H, and with the curvature
-    of h this third moment (0 for the Gaussian the filter assumes) makes S 3.3 and 1.1 %
-    too large (doc/design/two_axis.md, "Consistency").
+    Met from 0.5 to 2 V on seed 5 (and on seeds 9, 13 and 17, not tuned on), on seed 0
+    at no level: its noise draws are 1.2 % under their variance at every level (the
+    levels share them; at 0.5 V it misses the band by 0.0003).  At 0 and 2.5 V the
+    prior's errors are skewed along H, and with the curvature of h this third moment (0
+    for the Gaussian the filter assumes) makes S 3.3 and 1.1 % too large
+    (doc/design/two_axis.md, "Consistency").
     """
     c = _nees_nis(noise, seed=seed)
     assert c.nis_band[0] < c.nis < c.nis_band[1], c
@@ -265,29 +280,6 @@ def test_hessian_matches_finite_differences():
             down[:, i] -= 1e-6
             fd = (ekf.jacobian(up, offset) - ekf.jacobian(down, offset))[:, 0, :] / 2e-6
             np.testing.assert_allclose(Hxx[:, :, i], fd, rtol=1e-5, atol=1e-8)
-
-
-def test_gauss_hermite_points_integrate_the_gaussian_moments():
-    """
-    The sigma-point rules against the moments of N(0, I_3) in closed form.
-
-    Gauss-Hermite: E x_i^2 = 1, E x_i^4 = 3, E x_i^2 x_j^2 = 1, odd moments 0 (and with 5
-    points E x_i^6 = 15, E x_i^8 = 105, E x_i^4 x_j^2 = 3).  The
-    cubature rule gets E x_i^4 = 3 but E x_i^2 x_j^2 = 0: the variance of a product term
-    such as x1 d of h, which is why it is not CONSISTENT's.
-    """
-    for rule, cross in (('gauss_hermite', 1.0), ('gauss_hermite_5', 1.0), ('cubature', 0.0)):
-        X, w = SIGMA_POINTS[rule]
-        assert w.sum() == pytest.approx(1.0, abs=1e-15)
-        np.testing.assert_allclose(w @ X, 0.0, atol=1e-15)
-        np.testing.assert_allclose(np.einsum('p,pi,pj->ij', w, X, X), np.eye(3), atol=1e-14)
-        np.testing.assert_allclose(w @ X ** 4, 3.0, rtol=1e-14)
-        assert float(w @ (X[:, 0] ** 2 * X[:, 1] ** 2)) == pytest.approx(cross, abs=1e-14)
-        np.testing.assert_allclose(w @ (X[:, 0] * X[:, 1] ** 2), 0.0, atol=1e-14)
-    X, w = SIGMA_POINTS['gauss_hermite_5']     # 5 points: exact to degree 9 per axis
-    np.testing.assert_allclose(w @ X ** 6, 15.0, rtol=1e-13)
-    np.testing.assert_allclose(w @ X ** 8, 105.0, rtol=1e-13)
-    assert float(w @ (X[:, 0] ** 4 * X[:, 1] ** 2)) == pytest.approx(3.0, rel=1e-13)
 
 
 def test_cubature_update_is_filterpys_unscented_update():
@@ -502,8 +494,27 @@ def test_the_scan_widens_per_run_as_the_estimated_peak_falls():
     radius = dim_scan_radius(ekf.x[:, 0] * ekf.response.peak, 4.0, 6.5, 2.0)
     assert radius[0] == 4.0 and 4.0 < radius[1] < 6.5 and radius[2] == 6.5
     np.testing.assert_allclose(ekf.scan_offset, radius[:, None] * ekf.unit_scan[1], rtol=1e-12)
-    # the mount is sent u + s_{k+1} - s_k, each run with its own radius
-    np.testing.assert_allclose(turn, ekf.u + ekf.scan_offset - s_now, rtol=1e-12)
+    # the mount is sent u and the scan's step from s_k to s_{k+1}, each run with its own
+    # radius, closed in joints at the mount's tilt (20 deg at the start)
+    np.testing.assert_allclose(turn, closed_scan_turn(ekf.u, s_now, ekf.scan_offset, 20.0),
+                               rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize('closed', [False, True])
+def test_the_turn_sent_is_u_and_the_scan_step_and_the_tilt_follows_it(closed):
+    """closed_scan False: u + s_{k+1} - s_k; True: closed_scan_turn; tilt += the tilt turn."""
+    ekf = ConicalScanEKF(ConicalEKFConfig(closed_scan=closed), runs=2, tilt0=35.0)
+    tilt = ekf.tilt.copy()
+    for k in range(25):
+        s_now = ekf.scan_offset.copy()
+        turn = ekf.step(0.05 * k, np.array([2.0, 1.5]))
+        expected = (closed_scan_turn(ekf.u, s_now, ekf.scan_offset, tilt) if closed
+                    else ekf.u + ekf.scan_offset - s_now)
+        np.testing.assert_allclose(turn, expected, rtol=0, atol=1e-12)
+        tilt = tilt + turn[:, 1]
+        np.testing.assert_allclose(ekf.tilt, tilt, rtol=0, atol=1e-12)
+    ekf.correct_last_turn(np.array([[0.0, -0.5], [1.0, 0.25]]))
+    np.testing.assert_allclose(ekf.tilt, tilt + [-0.5, 0.25], rtol=0, atol=1e-12)
 
 
 def test_a_dim_scan_keeps_the_boresight_within_the_mean_error_plus_its_radius():

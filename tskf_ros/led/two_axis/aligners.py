@@ -63,10 +63,10 @@ def make_two_axis_aligner(method: str, *, runs: int = 1, noise: float = 0.2,
     if method == 'conical_ekf_pat':
         sup = replace(supervisor if supervisor is not None else PanTiltSupervisorConfig(),
                       start=start, noise=math.hypot(config.noise, config.model_noise))
-        return PanTiltSupervisor(ConicalScanEKF(config, response, runs=runs), sup, response,
-                                 joints0=joints0)
+        return PanTiltSupervisor(ConicalScanEKF(config, response, runs=runs, tilt0=joints0[1]),
+                                 sup, response, joints0=joints0)
     if start != 'tracking':
         raise AlignmentError("only 'conical_ekf_pat' can start by acquiring")
     if method == 'conical_lqg':
         config = replace(config, controller='lqr')
-    return ConicalScanEKF(config, response, runs=runs)
+    return ConicalScanEKF(config, response, runs=runs, tilt0=joints0[1])

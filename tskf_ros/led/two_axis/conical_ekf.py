@@ -40,7 +40,8 @@ with u the turn of the mean pointing commanded at the previous sample.  The cont
 per axis: 'p', the paper's P law (21) u_k = -G dhat_k, plus (not in the paper) the
 estimated drift of one step, - bhat_k; or 'lqr', lqg_alignment's time-scale LQR
 (Bohner & Wintz 2013, eq. (8)) u_k = mu (-L(mu) dhat_k - bhat_k) (lqg_alignment.lqr_turn).
-The receiver is sent u_k + s_{k+1} - s_k.  Predict and update are tskf_ros.core.kalman's,
+The receiver is sent u_k and the scan's step to s_{k+1}, closed in joints at the mount's
+tilt (pointing_geometry.closed_scan_turn).  Predict and update are tskf_ros.core.kalman's,
 batched over independent runs; the update is that linear one with h linearised
 (`linearise`): by its Jacobian (the EKF, the closed loop's), with its curvature (the
 Gaussian second-order filter), or by a regression over sigma points (the unscented /
@@ -67,44 +68,13 @@ from tskf_ros.core.lqr import TimeScaleLQR
 from tskf_ros.led.intensity_model import AlignmentError, FloatArray
 from tskf_ros.led.lqg_alignment import lqr_turn
 from tskf_ros.led.scanning_ekf import as_measurement, Measurement, PAPER_DT, StampClock
-from tskf_ros.led.two_axis.pointing_geometry import conical_scan
+from tskf_ros.led.two_axis.pointing_geometry import closed_scan_turn, conical_scan
 from tskf_ros.led.two_axis.radial_response import RadialResponse
 from tskf_ros.led.two_axis.scan_radius import dim_scan_radius
+from tskf_ros.led.two_axis.sigma_points import SIGMA_POINTS
 
 CONTROLLERS = ('p', 'lqr')
 LINEARISATIONS = ('taylor', 'cubature', 'gauss_hermite', 'gauss_hermite_5')
-
-
-def _sigma_points() -> dict[str, tuple[FloatArray, FloatArray]]:
-    """
-    Return the unit points and weights of N(0, I_3) of each sigma-point rule.
-
-    'cubature': the third-degree spherical-radial rule, +-sqrt(3) e_i, weights 1/6
-    (Arasaratnam & Haykin, IEEE TAC 2009); exact for polynomials of degree 3, so not
-    for the variance of h's quadratic terms.  'gauss_hermite': the tensor product of the
-    3-point Gauss-Hermite rule, nodes 0, +-sqrt(3) with weights 2/3, 1/6 (Ito & Xiong,
-    IEEE TAC 2000): 27 points, exact for degree 5 per coordinate, so for that variance.
-    'gauss_hermite_5': the 5-point rule's product (the same paper), nodes the roots of
-    He_5, 0 and +-sqrt(5 -+ sqrt(10)), weights 5!/(5 He_4(x_i))^2 = 8/15 and
-    (7 +- 2 sqrt(10))/60: 125 points, exact for degree 9 per coordinate (CONSISTENT's).
-    """
-    cubature = math.sqrt(3.0) * np.vstack([np.eye(3), -np.eye(3)])
-    rules = {'cubature': (cubature, np.full(6, 1.0 / 6.0))}
-    root10 = math.sqrt(10.0)
-    for name, node, weight in (
-            ('gauss_hermite', np.array([-math.sqrt(3.0), 0.0, math.sqrt(3.0)]),
-             np.array([1, 4, 1]) / 6.0),
-            ('gauss_hermite_5',
-             np.array([-math.sqrt(5.0 + root10), -math.sqrt(5.0 - root10), 0.0,
-                       math.sqrt(5.0 - root10), math.sqrt(5.0 + root10)]),
-             np.array([7.0 - 2.0 * root10, 7.0 + 2.0 * root10, 32.0,
-                       7.0 + 2.0 * root10, 7.0 - 2.0 * root10]) / 60.0)):
-        grid = np.stack(np.meshgrid(node, node, node, indexing='ij'), axis=-1).reshape(-1, 3)
-        rules[name] = (grid, np.einsum('i,j,k->ijk', weight, weight, weight).reshape(-1))
-    return rules
-
-
-SIGMA_POINTS = _sigma_points()
 STATES = ('x1', 'd_c', 'd_e', 'b_c', 'b_e')
 
 
@@ -147,6 +117,11 @@ class ConicalEKFConfig:
     input_weight: float = 2.0
     dt: float = PAPER_DT
     x1_floor: float = 0.05            # x1hat is kept >= this (Section IV assumes x1 > 0)
+    # send each turn so that the scan's circle closes in joints at the mount's tilt
+    # (pointing_geometry.closed_scan_turn); False: u + s_{k+1} - s_k, whose circle creeps
+    # by pi r^2 tan e per turn, which bhat absorbs, worse at high elevation
+    # (doc/design/two_axis.md, "The scan closed in joints")
+    closed_scan: bool = True
 
     def __post_init__(self) -> None:
         """Check every parameter; raise AlignmentError with the reason."""
@@ -225,7 +200,8 @@ class ConicalScanEKF:
     states = STATES
 
     def __init__(self, config: ConicalEKFConfig = ConicalEKFConfig(),
-                 response: Optional[RadialResponse] = None, *, runs: int = 1) -> None:
+                 response: Optional[RadialResponse] = None, *, runs: int = 1,
+                 tilt0: float = 20.0) -> None:
         self.config = config
         self.response = response if response is not None else RadialResponse()
         self.runs = int(runs)
@@ -248,6 +224,8 @@ class ConicalScanEKF:
         self.y = np.zeros(n)                         # innovation of the last update
         self.S = np.full(n, np.nan)                  # its variance
         self.updated: NDArray[np.bool_] = np.zeros(n, dtype=bool)
+        # the mount's tilt (deg), kept from the turns sent (a supervisor sets it from its joints)
+        self.tilt = np.full(n, float(tilt0))
 
     @property
     def scan_offset(self) -> FloatArray:
@@ -389,7 +367,11 @@ class ConicalScanEKF:
             self.radius = dim_scan_radius(self.x[:, 0] * self.response.peak,
                                           self.config.radius, self.config.dim_radius,
                                           self.config.dim_peak)
-        return u + self.scan_offset - s_now
+        s_next = self.scan_offset
+        turn = closed_scan_turn(u, s_now, s_next, self.tilt) if self.config.closed_scan \
+            else u + s_next - s_now
+        self.tilt = self.tilt + turn[:, 1]
+        return turn
 
     @property
     def nis(self) -> FloatArray:
@@ -399,6 +381,7 @@ class ConicalScanEKF:
     def correct_last_turn(self, delta: FloatArray) -> None:
         """Account for a mount that turned delta (runs, 2) more than commanded (clamped)."""
         self.u = self.u + np.asarray(delta, dtype=float)
+        self.tilt = self.tilt + np.asarray(delta, dtype=float)[:, 1]
 
     def restart_runs(self, mask: NDArray[np.bool_], x: FloatArray, P: FloatArray) -> None:
         """Start the runs in mask afresh from x (m, 5) and P (m, 5, 5); their next turn is 0."""

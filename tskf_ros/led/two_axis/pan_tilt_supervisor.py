@@ -157,6 +157,7 @@ class PanTiltSupervisor:
         holding = self.held > 0
         steering = self.steering
         s_now = self.tracker.scan_offset
+        self.tracker.tilt = self.joints[:, 1].copy()     # the mount's, which the search moves
         inner = self.tracker.step(stamp, np.where(steering, z, np.nan))
         nis = np.where(steering, self.tracker.nis, np.nan)
         self.verdict = verdict = self.lock.update(z, nis, steering)
