@@ -130,3 +130,49 @@ def test_without_threadpoolctl_the_node_warns_unless_blas_is_told(monkeypatch):
     assert 'threadpoolctl is not installed' in warning and 'tskf_ros[threads]' in warning
     monkeypatch.setenv('OPENBLAS_NUM_THREADS', '1')
     assert node_runner.limit_blas_threads() == ''
+
+
+# A SIGINT whose KeyboardInterrupt is lost: SIGUSR1 in the child runs what the runner's
+# handler does (SigintFlag: the event set, then `first`) without the raise, as a weakref
+# callback's report swallows it.  The unconfigured driver's wait set has nothing else to
+# wake it, so only the context's shutdown can end its spin.
+LOSE_AN_INTERRUPT = """
+import signal
+def lose(signum, frame):
+    owner = signal.getsignal(signal.SIGINT).__self__
+    owner.event.set()
+    if owner.first is not None:
+        owner.first()
+signal.signal(signal.SIGUSR1, lose)
+from tskf_ros.tools.console import power_meter_driver
+power_meter_driver()
+"""
+
+
+def test_a_sigint_whose_interrupt_is_lost_still_ends_the_node(tmp_path):
+    """The context is shut down SIGINT_GRACE after the SIGINT: the spin returns, exit 0."""
+    import os
+    from pathlib import Path
+    import signal
+    import subprocess
+    import time
+    repo = Path(__file__).resolve().parents[2]
+    log = tmp_path / 'driver.log'
+    with open(log, 'w') as out:
+        proc = subprocess.Popen(
+            [sys.executable, '-c', LOSE_AN_INTERRUPT, '--ros-args', '-p',
+             f'backend:={repo}/config/pm100_sim.yaml@sim', '-p', 'autostart:=false',
+             '-p', 'status_period:=0.0'],
+            cwd=repo, env=dict(os.environ), stdout=out, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        while 'driver of' not in log.read_text() and proc.poll() is None:
+            assert time.monotonic() < deadline, log.read_text()
+            time.sleep(0.05)        # polling the log for the start line, not a synchronisation
+        proc.send_signal(signal.SIGUSR1)
+        status = proc.wait(timeout=30.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert status == 0, log.read_text()

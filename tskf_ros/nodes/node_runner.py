@@ -75,6 +75,10 @@ EXIT_USAGE = 2
 # s the clean-up after the spin (executor, node, context) may take before the process
 # ends anyway: a node ends within a bound of SIGINT or SIGTERM whatever rcl does meanwhile
 CLEANUP_BOUND = 3.0
+# s a SIGINT's KeyboardInterrupt has to reach run_node's clean-up before the context is
+# shut down under the spin instead (_shut_down_on_sigint); set once the clean-up begins
+SIGINT_GRACE = 1.0
+_CLEANING = threading.Event()
 # rcl's source locations in its error strings (", at /project/src/parse.c:935")
 RCL_LOCATION = re.compile(r',? at \S+:\d+')
 
@@ -195,6 +199,8 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
         print(f'{name}: cannot start: {jit.MODE_VARIABLE}: {exc}', file=sys.stderr)
         sys.exit(1)
     rclpy.init(args=args)
+    if args is None:
+        _shut_down_on_sigint()
     node = executor = None
     status = 0
     try:
@@ -227,6 +233,7 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
             raise           # a failure of the node itself: its traceback
         _quiet_unraisable()
     finally:
+        _CLEANING.set()
         # the bound and the immediate exit are the process's (argv its own); a caller that
         # passes args (a test, in-process) gets SystemExit and keeps its interpreter
         watchdog = threading.Timer(CLEANUP_BOUND, _cleanup_overran, args=(name, status))
@@ -242,6 +249,35 @@ def run_node(factory: Callable[[], Node], *, name: str, description: str,
     if args is not None:
         sys.exit(status)
     _exit(status)
+
+
+def _shut_down_on_sigint() -> None:
+    """
+    Make a SIGINT also shut the default context down, as rclpy's own SIGTERM handler does.
+
+    rclpy's SIGINT handler only wakes the executors and leaves the ending to the Python
+    handler's KeyboardInterrupt (the console scripts' runner's SigintFlag).  An interrupt
+    raised where Python can only report it (a weakref callback while a module loads in a
+    callback) is lost, or delivered again by the runner with `_thread.interrupt_main`,
+    which no rcl_wait wakes for: a node whose wait set has nothing else to wake it (the
+    driver waiting to be configured) then spins on.  The flag's `first` runs in the handler
+    before the interrupt and starts a thread that shuts the context down unless the
+    clean-up has begun within SIGINT_GRACE seconds (the usual end: the interrupt reached
+    the spin); the executor's spin then returns however the interrupt fared.  A thread,
+    not the handler itself: the handler may run while this thread holds the context's
+    lock (in `ok()`).  Only for the process's own runner.
+    """
+    owner = getattr(signal.getsignal(signal.SIGINT), '__self__', None)
+    if owner is not None and callable(getattr(owner, 'is_set', None)) \
+            and getattr(owner, 'first', False) is None:
+        owner.first = lambda: threading.Thread(target=_end_unless_cleaning,
+                                               daemon=True).start()
+
+
+def _end_unless_cleaning() -> None:
+    """Shut the default context down unless run_node's clean-up begins within the grace."""
+    if not _CLEANING.wait(SIGINT_GRACE):
+        end_context()
 
 
 def _interrupted_before() -> bool:
