@@ -164,6 +164,23 @@ def publish_input(stop: threading.Event) -> None:
 
 def storm(nodes: list, signals: int, *, seed: int = 0, parallel: int = 3) -> Storm:
     """Send `signals` signals to each node (`parallel` processes at a time) under input."""
+    # A child inherits an ignored SIGINT (a test before this one may leave this process's
+    # SIGINT ignored: the console runner ignores it once its tool has ended), and a node
+    # started so ignores a SIGINT until its runner's handler is in place: it runs on.  The
+    # children are started with Python's own handler in place here, so theirs is SIG_DFL.
+    restore = None
+    if (threading.current_thread() is threading.main_thread()
+            and signal.getsignal(signal.SIGINT) is signal.SIG_IGN):
+        restore = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return _storm(nodes, signals, seed, parallel)
+    finally:
+        if restore is not None:
+            signal.signal(signal.SIGINT, restore)
+
+
+def _storm(nodes: list, signals: int, seed: int, parallel: int) -> Storm:
+    """Run storm() with this process's SIGINT as it is."""
     rng = random.Random(seed)
     jobs = [node for node in nodes for _ in range(signals)]
     rng.shuffle(jobs)
