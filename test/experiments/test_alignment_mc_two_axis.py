@@ -89,6 +89,37 @@ def test_a_cold_start_is_recorded_and_the_acquisition_counted(tmp_path, capsys):
         list(wilson(round(within * 5), 5)), abs=1e-12)
 
 
+def test_jittered_stamps_and_dropouts_reach_the_link(tmp_path):
+    # a method's numbers on jittered stamps with dropouts are those of the closed loop on
+    # the link with the same jitter and dropout, written out here; exact stamps differ
+    out = tmp_path / 'a.json'
+    assert alignment_mc.main(['--axes', '2', '--runs', '4', '--steps', '60', '--workers', '1',
+                              '--noise-levels', '1', '--jitter', '0.02', '--dropout', '0.1',
+                              '--methods', 'four_point', '--json', str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data['config']['jitter_s'] == 0.02 and data['config']['dropout'] == 0.1
+    got = data['results']['four_point']['angular']['mean'][0]
+    runs = {}
+    for jitter in (0.02, 0.0):
+        link = PanTiltLinkConfig(beta=1.2, steps=60, noise=1.0, offset0=5.0, jitter=jitter,
+                                 dropout=0.1)
+        traj = simulate_pan_tilt(FourPointAveraging(runs=4), link, np.random.default_rng(0))
+        runs[jitter] = traj
+    assert got == pytest.approx(100.0 * (runs[0.02].theta <= 15.0).mean(), abs=1e-9)
+    steps = np.diff(runs[0.02].t)
+    assert steps.min() < 0.05 - 0.005 and steps.max() > 0.05 + 0.005 and steps.min() > 0.0
+    assert np.isnan(runs[0.02].z).mean() == pytest.approx(0.1, abs=0.05)
+    assert not np.allclose(runs[0.02].theta, runs[0.0].theta)
+
+
+def test_a_jitter_of_half_a_step_is_one_line_and_exit_2(capsys):
+    # stamps k dt + U(-S, S) would reorder from S = dt/2 on: refused before the run
+    assert alignment_mc.main(['--axes', '2', '--runs', '2', '--steps', '10',
+                              '--noise-levels', '1', '--jitter', '0.025']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == 'alignment_mc: jitter must be in [0, dt/2), got 0.025', err
+
+
 def test_one_axis_is_the_default(tmp_path, capsys):
     out = tmp_path / 'a.json'
     assert alignment_mc.main(['--runs', '2', '--steps', '20', '--noise-levels', '0.5',

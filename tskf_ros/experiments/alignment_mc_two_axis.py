@@ -275,6 +275,9 @@ def parser() -> argparse.ArgumentParser:
     arguments.add_scheduler(p)
     p.add_argument('--dropout', type=arguments.number(0.0, 0.99), default=0.0,
                    help='probability that a sample is missing (0)')
+    p.add_argument('--jitter', type=arguments.number(0.0, 1.0), default=0.0, metavar='S',
+                   help='stamps k dt + U(-S, S), S < dt/2: the filter takes mu from them, the '
+                        'plant moves by the elapsed time (0)')
     p.add_argument('--offset0', type=arguments.number(0.0, 90.0), default=5.0, metavar='DEG',
                    help='off-axis angle of the mean pointing at the start, random direction '
                         '(5)')
@@ -308,6 +311,7 @@ def config_record(args: argparse.Namespace) -> dict[str, Any]:
     """Return the JSON's config: the settings and the definitions of the numbers."""
     return {'axes': 2, 'runs': args.runs, 'beta_deg_per_s': args.beta, 'steps': args.steps,
             'dt_s': args.dt, 'seed': args.seed, 'dropout': args.dropout,
+            'jitter_s': args.jitter,
             'offset0_deg': args.offset0, 'cold_start_deg': args.cold_start,
             'clip_four_point': args.clip_four_point, 'max_intensity_v': led.MAX_INTENSITY,
             'dim_radius_deg': args.dim_radius, 'dim_peak_v': args.dim_peak,
@@ -356,8 +360,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         response = RadialResponse()
         link = PanTiltLinkConfig(beta=args.beta, dt=args.dt, steps=args.steps,
-                                 dropout=args.dropout, offset0=args.offset0,
-                                 cone=args.cold_start)
+                                 dropout=args.dropout, jitter=args.jitter,
+                                 offset0=args.offset0, cone=args.cold_start)
     except led.AlignmentError as exc:
         print(f'alignment_mc: {exc}', file=sys.stderr)
         return 2

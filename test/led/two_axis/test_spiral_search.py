@@ -123,3 +123,35 @@ def test_a_spiral_left_and_resumed_goes_back_to_where_it_stopped():
     np.testing.assert_allclose(joints[0], search.point()[0], atol=1e-9)
     radius = np.hypot(*log_offset(0.0, 20.0, joints[0, 0], joints[0, 1]))
     assert radius >= c.pitch / (2 * np.pi) * phi
+
+
+def _state(search):
+    return [np.copy(getattr(search, name)) for name in
+            ('center', 'rate', 'reach', 'phi', 'phase', 'spirals')]
+
+
+def test_a_run_outside_the_mask_keeps_its_spiral_and_gets_no_turn():
+    # two runs started, then each sample only run 0 searches: run 1's spiral stays where it
+    # was, mid-travel or not, and its turn is zero; with no run in the mask (the tracking
+    # node's case, which skips the work) nothing changes and every turn is zero
+    search = SpiralSearch(SpiralConfig(), 2)
+    joints = np.array([[0.0, 20.0], [40.0, -30.0]])
+    search.start(np.ones(2, bool), joints)
+    search.rate[:] = [[0.05, -0.02], [0.03, 0.01]]      # a centre that follows a drift
+    for _ in range(5):
+        joints = joints + joint_turn(search.turn(joints, np.ones(2, bool)), joints[:, 1])
+    before = _state(search)
+    only0 = np.array([True, False])
+    for _ in range(300):        # past the reach: run 0 starts new spirals meanwhile
+        turn = search.turn(joints, only0)
+        assert np.all(turn[1] == 0.0)
+        joints = joints + joint_turn(turn, joints[:, 1])
+    after = _state(search)
+    for old, new in zip(before, after):
+        np.testing.assert_array_equal(old[1], new[1])
+    assert search.spirals[0] > before[5][0]
+    none = np.zeros(2, bool)
+    before = _state(search)
+    np.testing.assert_array_equal(search.turn(joints, none), np.zeros((2, 2)))
+    for old, new in zip(before, _state(search)):
+        np.testing.assert_array_equal(old, new)

@@ -109,6 +109,8 @@ class SpiralSearch:
 
     def turn(self, joints: FloatArray, mask: Mask) -> FloatArray:
         """Advance the runs in mask; return their turns (runs, 2) to their next points."""
+        if not np.any(mask):    # no run searching (a tracking node's every sample): no change
+            return np.zeros_like(self.center)
         c = self.config
         a = c.pitch / (2.0 * math.pi)
         # d phi = speed / |dp/dphi|, |dp/dphi| = a sqrt(1 + phi^2)
