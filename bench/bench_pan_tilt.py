@@ -120,7 +120,7 @@ def main() -> None:
     jit.set_mode(os.environ.get(jit.MODE_VARIABLE) or 'background')
     all_cases = cases(args.noise)
     cold = run(all_cases[0], PanTiltLinkConfig(noise=args.noise, beta=1.2), 2, seed=0)
-    print(f'kernels: {jit.mode()}; the process\'s first sample: {cold.first / 1e3:.1f} ms')
+    print(f"kernels: {jit.mode()}; the process's first sample: {cold.first / 1e3:.1f} ms")
     print(f'two-axis session, {args.samples} samples per loop, noise {args.noise:g} V, '
           f'{args.repeats} rounds; us per sample (thread CPU): min / median, ratio of '
           'the medians to default; first: the first sample of a new session')

@@ -164,10 +164,12 @@ def publish_input(stop: threading.Event) -> None:
 
 def storm(nodes: list, signals: int, *, seed: int = 0, parallel: int = 3) -> Storm:
     """Send `signals` signals to each node (`parallel` processes at a time) under input."""
-    # A child inherits an ignored SIGINT (a test before this one may leave this process's
-    # SIGINT ignored: the console runner ignores it once its tool has ended), and a node
-    # started so ignores a SIGINT until its runner's handler is in place: it runs on.  The
-    # children are started with Python's own handler in place here, so theirs is SIG_DFL.
+    # A child inherits an ignored SIGINT, and a node started so ignores a SIGINT until its
+    # runner's handler is in place: it runs on.  This process's SIGINT is ignored when the
+    # suite runs as a background job of a shell without job control (`.ci/run &`, nohup,
+    # a CI runner's script: POSIX has the shell ignore SIGINT there, and Python keeps an
+    # ignored SIGINT).  The children are started with Python's own handler in place here,
+    # so theirs is SIG_DFL.
     restore = None
     if (threading.current_thread() is threading.main_thread()
             and signal.getsignal(signal.SIGINT) is signal.SIG_IGN):

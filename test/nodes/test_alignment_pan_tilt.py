@@ -74,7 +74,8 @@ def loop_parameters(node, **extra):
 
 # (simulator overrides, alignment overrides, samples after which the light is tracked):
 # the P law from a known prior, with dropouts and noise 1 V, the LQR per axis, the consistent
-# filter (pan_tilt.filter), and the supervisor's cold search from 20 deg off the boresight
+# filter (pan_tilt.filter), the supervisor's cold search from 20 deg off the boresight, and
+# the supervisor on stamps jittered by +-20 ms (pan_tilt.jitter)
 @pytest.mark.parametrize('link, aligner, converged', [
     ({'seed': 3, 'blockage': 'none'}, {}, CONVERGED),
     ({'seed': 5, 'blockage': 'bernoulli', 'drop_probability': 0.3, 'noise': 1.0}, {},
@@ -83,7 +84,9 @@ def loop_parameters(node, **extra):
     ({'seed': 5, 'blockage': 'bernoulli', 'drop_probability': 0.3, 'noise': 1.0},
      {'pan_tilt.filter': 'consistent'}, CONVERGED),
     ({'seed': 3, 'phi0': 20.0}, {'pat.enabled': True}, 100),
-], ids=['p', 'p_dropouts_noise_1V', 'lqg', 'consistent_filter', 'supervisor_cold_start'])
+    ({'seed': 6, 'noise': 1.0, 'pan_tilt.jitter': 0.02}, {'pat.enabled': True}, CONVERGED),
+], ids=['p', 'p_dropouts_noise_1V', 'lqg', 'consistent_filter', 'supervisor_cold_start',
+        'supervisor_jittered_stamps'])
 def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_kind, link,
                                                          aligner, converged):
     steps = 300
@@ -127,7 +130,13 @@ def test_two_axis_loop_over_dds_equals_the_ros_free_loop(ros_context, executor_k
         for n in (sim, node, client):
             n.destroy_node()
     read = [msg_to_pan_tilt_truth(m) for m in truth]
-    assert [stamp for stamp, _ in read] == [NS + k * int(DT * NS) for k in range(steps)]
+    stamps = [stamp for stamp, _ in read]
+    assert stamps == [NS + int(round(s.t * NS)) for s in ref.samples]
+    if link.get('pan_tilt.jitter'):     # k dt + U(-jitter, jitter): mu from the stamps
+        offsets = np.array(stamps) - NS - np.arange(steps) * int(DT * NS)
+        assert 0.015 * NS < np.abs(offsets).max() <= 0.02 * NS
+    else:
+        assert stamps == [NS + k * int(DT * NS) for k in range(steps)]
     assert list(truth[0].name) == ['pan', 'tilt', 'source_azimuth', 'source_elevation',
                                    'off_axis']
     theta = np.array([angles['off_axis'] for _, angles in read])
@@ -215,6 +224,8 @@ def test_a_two_axis_alignment_config_that_cannot_run_is_refused(ros_context, ext
     ({'blockage': 'gilbert_elliott'}, 'axes 2 takes blockage none or bernoulli'),
     ({'max_speed': 10.0}, 'max_speed must be 0'),
     ({'phi0': 120.0}, 'phi0'),
+    # stamps k dt + U(-jitter, jitter) would reorder from dt/2 on
+    ({'pan_tilt.jitter': 0.025}, 'jitter must be in [0, dt/2), got 0.025'),
 ])
 def test_a_two_axis_link_that_cannot_be_simulated_is_refused(ros_context, extra, why):
     with pytest.raises(ValueError) as info:

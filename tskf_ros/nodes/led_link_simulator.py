@@ -73,7 +73,7 @@ def pan_tilt_link_config(link: LedLinkConfig, values: dict) -> PanTiltLinkConfig
             beta=link.beta, dt=link.dt, noise=link.noise,
             q_sys=(link.intensity_walk ** 2, link.angle_noise ** 2),
             max_intensity=link.max_intensity, offset0=abs(link.phi0),
-            elevation0=values['pan_tilt.elevation0'],
+            elevation0=values['pan_tilt.elevation0'], jitter=values['pan_tilt.jitter'],
             dropout=link.drop_probability if link.blockage == 'bernoulli' else 0.0)
     except led.AlignmentError as exc:
         raise LedLinkError(f'bad simulator parameters: {exc}') from None
@@ -215,12 +215,13 @@ class LedLinkSimulator(LinkSimulatorNode):
     def _publish(self, s: Union[LedSample, PanTiltSample], now: int) -> None:
         """Publish one sample: the truth always, the intensity unless it was dropped."""
         cfg = self.config
-        stamp = self.stamp0_ns + sample_offset_ns(s.index, cfg.link.dt)
-        if isinstance(s, PanTiltSample):
+        if isinstance(s, PanTiltSample):    # its own time: k dt, or jittered (pan_tilt.jitter)
+            stamp = self.stamp0_ns + int(round(s.t * NS))
             self.truth_pub.publish(pan_tilt_truth_to_msg(stamp, s.joints[0], s.source[0],
                                                          float(s.theta[0]), cfg.joints))
             dropped, reading = bool(s.missing[0]), float(s.reading[0])
         else:
+            stamp = self.stamp0_ns + sample_offset_ns(s.index, cfg.link.dt)
             self.truth_pub.publish(conversions.led_truth_to_msg(stamp, s.phi, s.base,
                                                                 s.bearing))
             dropped, reading = s.blocked, s.reading
