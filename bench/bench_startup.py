@@ -18,13 +18,16 @@ Benchmark: start-up and peak memory of the nodes against a minimal rclpy relay.
     python bench/bench_startup.py [--repeats 3] [--rss-seconds 60] [--rate 1000]
                                   [--jitter 0.01] [--plot docs/startup_rss.png]
                                   [--discovery fast|default]
+                                  [--nodes estimator alignment alignment2]
 
 A driver in this process publishes sensor_msgs/msg/Illuminance at `--rate` Hz (stamps on a
 grid of 1 / rate, each moved by up to +-`--jitter` of the period with `--jitter`, or
 exact) on the estimator's `measurement` and the alignment node's `intensity` topics, and
 takes the first `estimate/predicted` of each process it starts.  Start-up is the wall
 time from spawning the console script (`tskf_timescale_estimator`, `tskf_alignment`) or
-the relay (bench/minimal_relay.py) to that first message, for each of:
+the relay (bench/minimal_relay.py) to that first message (the alignment node's first
+base command; `alignment2` is the alignment node with `-p axes:=2`, its two-axis
+session), for each of:
 
 - cache warm: numba's cache next to the sources holds the kernels (what ./run compiles);
 - cache empty: NUMBA_CACHE_DIR is a new empty directory;
@@ -88,11 +91,13 @@ DISCOVERY_PROFILE = Path(__file__).resolve().parent / 'fastdds_discovery.xml'
 PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
 PACKAGE = REPO / 'tskf_ros'
 OUTPUT = 'estimate/predicted'
-NODES = {'relay': 'measurement', 'estimator': 'measurement', 'alignment': 'intensity'}
+NODES = {'relay': 'measurement', 'estimator': 'measurement', 'alignment': 'intensity',
+         'alignment2': 'intensity'}     # alignment2: the alignment node with axes 2
 # the output whose first message ends the start-up: the estimator's first estimate; the
 # alignment node publishes its estimates once tracking, its base command from the first
 # sample (while acquiring) on
-FIRST_OUTPUT = {'estimator': OUTPUT, 'alignment': 'base_position_controller/commands'}
+FIRST_OUTPUT = {'estimator': OUTPUT, 'alignment': 'base_position_controller/commands',
+                'alignment2': 'base_position_controller/commands'}
 DEADLINE = 60.0         # s: the longest wait for a first estimate (the kernels compile after it)
 
 
@@ -106,11 +111,13 @@ def command(node: str, output: str, marks: bool = False) -> list[str]:
     if node == 'relay':
         cmd = [str(RELAY), NODES[node], output]
     else:
-        name = {'estimator': 'timescale_estimator', 'alignment': 'alignment'}[node]
+        name = {'estimator': 'timescale_estimator', 'alignment': 'alignment',
+                'alignment2': 'alignment'}[node]
         script = shutil.which(f'tskf_{name}') or str(Path(sys.prefix) / 'lib' / 'tskf_ros'
                                                      / name)
         cmd = [script, '--ros-args', '-r', f'__node:=bench_{node}', '-r',
-               f'{FIRST_OUTPUT[node]}:={output}']
+               f'{FIRST_OUTPUT[node]}:={output}'] + (['-p', 'axes:=2'] if node == 'alignment2'
+                                                     else [])
     if marks:
         return [sys.executable, str(MARKS)] + cmd
     return [sys.executable] + cmd if node == 'relay' else cmd
@@ -313,7 +320,8 @@ def plot(path: Path, times: dict, peaks: dict, title_note: str) -> None:
     cases = list(times)
     for i, node in enumerate(nodes):
         med = [statistics.median(times[c][node]) for c in cases]
-        ax1.bar(np.arange(len(cases)) + (i - 1) * width, med, width, label=node)
+        ax1.bar(np.arange(len(cases)) + (i - (len(nodes) - 1) / 2) * width, med, width,
+                label=node)
     relay = [statistics.median(times[c]['relay']) for c in cases]
     ax1.scatter(np.arange(len(cases)), [1.5 * r for r in relay], marker='_', s=900,
                 color='k', label='goal: 1.5 x relay', zorder=3)
@@ -326,8 +334,8 @@ def plot(path: Path, times: dict, peaks: dict, title_note: str) -> None:
     ax1.legend(fontsize=8, ncol=2, loc='upper left')
     stamps = list(peaks)
     for i, node in enumerate(nodes):
-        ax2.bar(np.arange(len(stamps)) + (i - 1) * width, [peaks[s][node] for s in stamps],
-                width, label=node)
+        ax2.bar(np.arange(len(stamps)) + (i - (len(nodes) - 1) / 2) * width,
+                [peaks[s][node] for s in stamps], width, label=node)
     ax2.scatter(np.arange(len(stamps)), [2 * peaks[s]['relay'] for s in stamps], marker='_',
                 s=900, color='k', label='goal: 2 x relay', zorder=3)
     ax2.set_xticks(np.arange(len(stamps)), [f'{s} stamps' for s in stamps])

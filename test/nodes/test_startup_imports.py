@@ -75,12 +75,13 @@ def test_the_alignment_configuration_needs_no_scipy_optimize():
 # periods (the estimator's sampling-interval check runs on each new interval)
 RUN_NODE = """
 import rclpy
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import Illuminance
 from tskf_ros.core import jit
 from {module} import {cls}
 jit.set_mode('background')
 rclpy.init()
-node = {cls}()
+node = {cls}(parameter_overrides=[Parameter(k, value=v) for k, v in {parameters!r}.items()])
 msg = Illuminance()
 t = 1000.0
 for k in range(40):
@@ -93,11 +94,14 @@ rclpy.try_shutdown()
 """
 
 
-@pytest.mark.parametrize('module, cls, period, never', [
-    ('tskf_ros.nodes.timescale_estimator', 'TimescaleEstimator', 1.0, ESTIMATOR_NEVER),
-    ('tskf_ros.nodes.alignment', 'Alignment', 0.05, ALIGNMENT_NEVER),
-])
-def test_a_node_built_and_fed_imports_no_scipy(module, cls, period, never):
+@pytest.mark.parametrize('module, cls, period, parameters, never', [
+    ('tskf_ros.nodes.timescale_estimator', 'TimescaleEstimator', 1.0, {}, ESTIMATOR_NEVER),
+    ('tskf_ros.nodes.alignment', 'Alignment', 0.05, {}, ALIGNMENT_NEVER),
+    # two axes, the supervised conical-scan EKF: its kernels are in the compiled module too
+    ('tskf_ros.nodes.alignment', 'Alignment', 0.05, {'axes': 2, 'pat.enabled': True},
+     NEVER + ON_DEMAND + ('geometry_msgs',)),
+], ids=['estimator', 'alignment', 'alignment_two_axes'])
+def test_a_node_built_and_fed_imports_no_scipy(module, cls, period, parameters, never):
     # neither node's start nor its first inputs import scipy (the lock detector's NIS band
     # is tskf_ros.core.chi_square's, the interval check's eigenvalues numpy's), numba or
     # anything in NEVER
@@ -105,7 +109,7 @@ def test_a_node_built_and_fed_imports_no_scipy(module, cls, period, never):
     if aot.load() is None:      # e.g. a colcon workspace's source copy, built without it
         pytest.skip('the kernels are not compiled ahead of time for this tree: a node '
                     'runs numba in the background (python -m tskf_ros.core.aot builds them)')
-    then = RUN_NODE.format(module=module, cls=cls, period=period)
+    then = RUN_NODE.format(module=module, cls=cls, period=period, parameters=parameters)
     modules = _imported(module, then=f'exec({then!r})')
     assert _offending(modules, never + ('scipy',)) == []
 

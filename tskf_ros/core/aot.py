@@ -69,6 +69,9 @@ EXPORTS: tuple[tuple[str, str, str], ...] = (
     ('transitions', 'euler', 'mmmf'),
     # the alignment node: the EKF's update over a stack of one
     ('kalman', 'update_batch', 'msmssm'),
+    # the alignment node with axes 2: the conical-scan EKF's predict and (iterated) update
+    ('kalman', 'predict_batch', 'msmmm'),
+    ('kalman', 'update_runs', 'msmssm'),
 )
 
 _FLOAT64 = np.dtype(np.float64)
