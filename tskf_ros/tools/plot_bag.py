@@ -38,6 +38,8 @@ from tskf_ros.messages.estimator_interface import (BAG_OUTPUT_TOPICS, BAG_TRUTH_
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402, I100, I202
+from tskf_ros.tools.plot_estimator import (columns, estimate_row,  # noqa: E402, I100
+                                           estimator_figure, power_row, stream, truth_row)
 from tskf_ros.tools.plot_pan_tilt import (is_pan_tilt_estimate,  # noqa: E402, I100
                                           pan_tilt_figure)
 
@@ -80,94 +82,11 @@ def _decode(reader: BagReader, topics: set) -> dict:
 
 def _require(reader: BagReader, data: dict, topics) -> None:
     """Raise PlotDamageError or BagError unless every topic of `topics` has messages."""
-    empty = [t for t in topics if not data.get(t)]
+    empty = [t for t in topics if not len(data.get(t, ()))]
     if empty:
         if reader.damage is not None:
             raise PlotDamageError(reader.damage)
         raise BagError(f'{reader.path}: no messages on {", ".join(empty)}: nothing to plot')
-
-
-def _series(msgs: list) -> tuple:
-    """Turn estimate messages into arrays: t (s), x_0, P_00, mu (s)."""
-    rows = [conversions.msg_to_state_estimate(m) for _, m in msgs]
-    t = np.array([r.stamp_ns for r in rows], dtype=float) / NS
-    x = np.array([r.x[0] for r in rows], dtype=float)
-    var = np.array([r.P[0, 0] for r in rows], dtype=float)
-    return t, x, var, np.array([r.mu for r in rows], dtype=float)
-
-
-def estimator_figure(data: dict, measurement: list, C: float, D: float, title: str):
-    """Draw Cai Fig. 2's two styles of an estimator run; return the figure."""
-    tp, xp, vp, mu_p = _series(data[PREDICTED])
-    tc, xc, vc, _ = _series(data[CORRECTED])
-    # mu_k of each step t_k -> t_{k+1}: carried by the prediction into t_{k+1}
-    steps = mu_p > 0
-    tm, mu = tp[steps] - mu_p[steps], mu_p[steps]
-    # replay_offline --smooth: the RTS estimates x(t|T), drawn beside the filter's
-    series = [(tp, xp, vp, 'C0', 'predictor xhat(t)', 'predictor'),
-              (tc, xc, vc, 'C3', 'corrected x(t|t)', 'corrected')]
-    if data.get(SMOOTHED_TOPIC):
-        ts, xs, vs, _ = _series(data[SMOOTHED_TOPIC])
-        series.append((ts, xs, vs, 'C4', 'smoothed x(t|T)', 'smoothed'))
-    ty = np.array([conversions.msg_to_power(m)[0] for _, m in measurement], float) / NS
-    y = np.array([conversions.msg_to_power(m)[1] for _, m in measurement])
-    truth = data.get(BAG_TRUTH_TOPIC) or []
-    t_true = np.array([conversions.stamp_to_ns(m.header.stamp) for _, m in truth]) / NS
-    x_true = np.array([m.position[0] for _, m in truth]) if truth else np.zeros(0)
-    t0 = min(tp.min(), ty.min()) if ty.size else tp.min()
-    fig, axes = plt.subplots(4, 2, figsize=(14, 12.5), sharex='col')
-    beside = {'fontsize': 7, 'loc': 'upper left', 'bbox_to_anchor': (1.01, 1.0)}
-    for col, style in enumerate(('iteration', 'time scale')):
-        def pos(t, stamps=tc):
-            if style == 'time scale':
-                return t - t0
-            return np.searchsorted(stamps, t, side='left')
-        # the estimates after the measurement (top), the predictor (its band spans
-        # radians after a gap) in a panel of its own, so that neither squeezes the other
-        for row, shown in ((0, series[1:]), (1, series[:1])):
-            ax = axes[row, col]
-            if t_true.size:
-                keep = (t_true >= tc.min()) & (t_true <= tc.max()) if style == 'iteration' \
-                    else np.ones(t_true.size, bool)
-                ax.plot(pos(t_true[keep]), x_true[keep], 'k-', lw=1, label='true angle')
-            if row == 0:    # on top of every line and band: none hides them
-                ax.plot(pos(ty), (y - D) / C, 'o', color='0.3', ms=2.5, zorder=5,
-                        label='implied by measurement (y - D) / C')
-            for t, x, v, color, name, _ in shown:
-                s = 2 * np.sqrt(np.maximum(v, 0))
-                ax.fill_between(pos(t), x - s, x + s, color=color, alpha=0.2,
-                                label=f'{name} +-2 sigma')
-                ax.plot(pos(t), x, '-', color=color, lw=1, label=name)
-            # the estimates and the truth in full (none runs off the axis); the band may
-            top = np.concatenate([x for _, x, _, _, _, _ in shown] + [x_true])
-            lo, hi = np.nanmin(top), np.nanmax(top)
-            pad = max(0.1 * (hi - lo), 1e-3)
-            ax.set_ylim(lo - pad, hi + pad)
-            ax.set_ylabel('angle (rad)')
-            if col == 1:    # beside the panels, over no data
-                ax.legend(**beside)
-        axes[0, col].set_title(f'plot in {style}')
-        ax = axes[2, col]
-        if t_true.size:
-            for t, x, v, color, _, name in series:
-                err = x - np.interp(t, t_true, x_true)
-                ax.plot(pos(t), err, '.-', color=color, lw=0.6, ms=2,
-                        label=f'{name}: RMS {np.sqrt(np.mean(err ** 2)):.3g} rad')
-            if col == 1:
-                ax.legend(**beside)
-        else:
-            ax.text(0.5, 0.5, 'no true angle in the bag', ha='center',
-                    transform=ax.transAxes)
-        ax.set_ylabel('estimation error (rad)')
-        ax = axes[3, col]
-        ax.step(pos(tm), mu, where='post', color='C2', label='mu: the time to the next point')
-        if col == 1:
-            ax.legend(**beside)
-        ax.set_ylabel('mu (s)')
-        ax.set_xlabel('iteration k' if style == 'iteration' else 'time t - t0 (s)')
-    fig.suptitle(title)
-    fig.tight_layout()
-    return fig
 
 
 def _alignment_series(msgs: list) -> tuple:
@@ -288,37 +207,41 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
     config = load_config(params_file)
     model = config.session.model
     C, D = float(model.C[0, 0]), float(model.D[0]) if model.D is not None else 0.0
+    # one row of floats per message, streamed (a bag of 1e7 estimates is 320 MB of rows)
     if CORRECTED in reader.topics:
         meas_topic = topic or '/received_power'
-        wanted = {PREDICTED, CORRECTED, meas_topic, SMOOTHED_TOPIC}
-        data = _decode(reader, (wanted | {BAG_TRUTH_TOPIC}) & set(reader.topics))
-        measurement = data.get(meas_topic, [])
+        rows = {PREDICTED: estimate_row, CORRECTED: estimate_row, SMOOTHED_TOPIC: estimate_row,
+                meas_topic: power_row, BAG_TRUTH_TOPIC: truth_row}
+        data = stream(reader, {t: row for t, row in rows.items() if t in reader.topics})
         _require(reader, data, [PREDICTED, CORRECTED])
+        measurement = data.get(meas_topic, np.zeros((0, 2)))
         written.damage = reader.damage
     else:
         log(f'{bag}: no estimates in the bag: running the estimator offline first')
         res = replay(bag, None, params_file=params_file, topic=topic, diagnostics=False,
                      log=log)
-        data = {}
-        measurement = []
-        for t, log_ns, msg in res.outputs:
+        by_topic: dict = {}
+        for t, _, msg in res.outputs:
             if t == res.topic or t == BAG_TRUTH_TOPIC:
                 msg = deserialize_message(msg.data, message_class(msg.msgtype))
-            if t == res.topic:
-                measurement.append((log_ns, msg))
-            else:
-                data.setdefault(t, []).append((log_ns, msg))
-        if res.msgtype != 'sensor_msgs/msg/Illuminance':
-            measurement = []
+            by_topic.setdefault(t, []).append(msg)
+        data = {t: columns(map(estimate_row, by_topic[t]), 4)
+                for t in (PREDICTED, CORRECTED, SMOOTHED_TOPIC) if by_topic.get(t)}
+        if by_topic.get(BAG_TRUTH_TOPIC):
+            data[BAG_TRUTH_TOPIC] = columns(map(truth_row, by_topic[BAG_TRUTH_TOPIC]), 2)
+        measurement = (columns(map(power_row, by_topic.get(res.topic, [])), 2)
+                       if res.msgtype == 'sensor_msgs/msg/Illuminance' else np.zeros((0, 2)))
         written.damage = res.damage
-        if not data.get(CORRECTED) or not data.get(PREDICTED):
+        if not len(data.get(CORRECTED, ())) or not len(data.get(PREDICTED, ())):
             if res.damage is not None:
                 raise PlotDamageError(res.damage)
             raise BagError(f'{bag}: too few samples on {res.topic} for an estimate: '
                            'nothing to plot')
     out.mkdir(parents=True, exist_ok=True)
-    fig = estimator_figure(data, measurement, C, D,
-                           f'{bag.name}: time-scale filter, {model.name} model')
+    names = (('predictor', PREDICTED), ('corrected', CORRECTED), ('smoothed', SMOOTHED_TOPIC))
+    series = {name: data[t] for name, t in names if len(data.get(t, ()))}
+    fig = estimator_figure(series, measurement, data.get(BAG_TRUTH_TOPIC, np.zeros((0, 2))),
+                           C, D, f'{bag.name}: time-scale filter, {model.name} model')
     written.append(_save(fig, out / 'estimator.png'))
     return written
 
