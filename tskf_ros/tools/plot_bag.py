@@ -19,6 +19,7 @@ import argparse
 import os
 from pathlib import Path
 import sys
+import tempfile
 from typing import Optional
 
 import matplotlib
@@ -38,8 +39,8 @@ from tskf_ros.messages.estimator_interface import (BAG_OUTPUT_TOPICS, BAG_TRUTH_
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402, I100, I202
-from tskf_ros.tools.plot_estimator import (columns, estimate_row,  # noqa: E402, I100
-                                           estimator_figure, power_row, stream, truth_row)
+from tskf_ros.tools.plot_estimator import (estimate_row, estimator_figure,  # noqa: E402, I100
+                                           power_row, stream, truth_row)
 from tskf_ros.tools.plot_pan_tilt import (is_pan_tilt_estimate,  # noqa: E402, I100
                                           pan_tilt_figure)
 
@@ -210,33 +211,25 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
     # one row of floats per message, streamed (a bag of 1e7 estimates is 320 MB of rows)
     if CORRECTED in reader.topics:
         meas_topic = topic or '/received_power'
-        rows = {PREDICTED: estimate_row, CORRECTED: estimate_row, SMOOTHED_TOPIC: estimate_row,
-                meas_topic: power_row, BAG_TRUTH_TOPIC: truth_row}
-        data = stream(reader, {t: row for t, row in rows.items() if t in reader.topics})
+        data = stream(reader, _rows(reader, meas_topic))
         _require(reader, data, [PREDICTED, CORRECTED])
-        measurement = data.get(meas_topic, np.zeros((0, 2)))
         written.damage = reader.damage
     else:
         log(f'{bag}: no estimates in the bag: running the estimator offline first')
-        res = replay(bag, None, params_file=params_file, topic=topic, diagnostics=False,
-                     log=log)
-        by_topic: dict = {}
-        for t, _, msg in res.outputs:
-            if t == res.topic or t == BAG_TRUTH_TOPIC:
-                msg = deserialize_message(msg.data, message_class(msg.msgtype))
-            by_topic.setdefault(t, []).append(msg)
-        data = {t: columns(map(estimate_row, by_topic[t]), 4)
-                for t in (PREDICTED, CORRECTED, SMOOTHED_TOPIC) if by_topic.get(t)}
-        if by_topic.get(BAG_TRUTH_TOPIC):
-            data[BAG_TRUTH_TOPIC] = columns(map(truth_row, by_topic[BAG_TRUTH_TOPIC]), 2)
-        measurement = (columns(map(power_row, by_topic.get(res.topic, [])), 2)
-                       if res.msgtype == 'sensor_msgs/msg/Illuminance' else np.zeros((0, 2)))
+        # into a bag of its own, then read as one (memory bounded at any length)
+        with tempfile.TemporaryDirectory(prefix='tskf_plot_bag_') as scratch:
+            res = replay(bag, Path(scratch) / 'estimated', params_file=params_file,
+                         topic=topic, diagnostics=False, log=log)
+            estimated = BagReader(Path(scratch) / 'estimated')
+            meas_topic = res.topic if res.msgtype == 'sensor_msgs/msg/Illuminance' else ''
+            data = stream(estimated, _rows(estimated, meas_topic))
         written.damage = res.damage
         if not len(data.get(CORRECTED, ())) or not len(data.get(PREDICTED, ())):
             if res.damage is not None:
                 raise PlotDamageError(res.damage)
             raise BagError(f'{bag}: too few samples on {res.topic} for an estimate: '
                            'nothing to plot')
+    measurement = data.get(meas_topic, np.zeros((0, 2)))
     out.mkdir(parents=True, exist_ok=True)
     names = (('predictor', PREDICTED), ('corrected', CORRECTED), ('smoothed', SMOOTHED_TOPIC))
     series = {name: data[t] for name, t in names if len(data.get(t, ()))}
@@ -244,6 +237,13 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
                            C, D, f'{bag.name}: time-scale filter, {model.name} model')
     written.append(_save(fig, out / 'estimator.png'))
     return written
+
+
+def _rows(reader: BagReader, measurement: str) -> dict:
+    """Return the estimator figure's rows for the topics the bag has."""
+    rows = {PREDICTED: estimate_row, CORRECTED: estimate_row, SMOOTHED_TOPIC: estimate_row,
+            measurement: power_row, BAG_TRUTH_TOPIC: truth_row}
+    return {t: row for t, row in rows.items() if t in reader.topics}
 
 
 def _save(fig, path: Path) -> Path:

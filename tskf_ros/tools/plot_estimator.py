@@ -25,7 +25,7 @@ sight); the errors' RMS are taken over every point.
 """
 
 from array import array
-from typing import Any, Callable, Iterable
+from typing import Any, Callable
 
 from matplotlib.figure import Figure
 import matplotlib.pyplot as plt
@@ -60,14 +60,6 @@ def truth_row(msg: Any) -> tuple:
 
 # the length of each kind of row (an empty topic is an array of 0 rows of it)
 WIDTH: dict[Row, int] = {estimate_row: 4, power_row: 2, truth_row: 2}
-
-
-def columns(rows: Iterable[tuple], width: int) -> np.ndarray:
-    """Return rows of `width` floats as an (N, width) array, kept flat while they come."""
-    flat = array('d')
-    for row in rows:
-        flat.extend(row)
-    return np.frombuffer(flat, dtype=float).reshape(-1, width)
 
 
 def stream(reader: BagReader, rows: dict[str, Row]) -> dict[str, np.ndarray]:
