@@ -19,14 +19,16 @@ from bag.helpers import BAGS
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
+from std_msgs.msg import Float64MultiArray
 
 from tskf_ros.bag.message_types import message_class
 from tskf_ros.bag.reader import BagReader
 from tskf_ros.bag.replay.cli import main as replay_main
+from tskf_ros.bag.writer import BagWriter
 from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import BAG_OUTPUT_TOPICS
-from tskf_ros.tools import plot_estimator
+from tskf_ros.tools import plot_bag, plot_estimator
 from tskf_ros.tools.plot_estimator import band, DRAWN, envelope, estimate_row, stream
 
 
@@ -96,3 +98,18 @@ def test_a_long_run_draws_at_most_drawn_points_and_its_rms_over_every_point(monk
         assert 'the least and the greatest' in fig.get_suptitle()
     finally:
         plt.close(fig)
+
+
+def test_an_estimate_topic_that_holds_no_estimate_is_one_line(tmp_path, capsys):
+    # a Float64MultiArray of another layout on estimate/corrected: not plotted, one line
+    bag = tmp_path / 'bag'
+    with BagWriter(bag) as w:
+        for topic in (BAG_OUTPUT_TOPICS['predicted'], BAG_OUTPUT_TOPICS['corrected']):
+            w.add_topic(topic, 'std_msgs/msg/Float64MultiArray')
+        for k in range(3):
+            for topic in (BAG_OUTPUT_TOPICS['predicted'], BAG_OUTPUT_TOPICS['corrected']):
+                w.write(topic, 10 ** 18 + k, serialize_message(Float64MultiArray(data=[1.0])))
+    assert plot_bag.main([str(bag), '--out', str(tmp_path / 'png')]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith('plot_bag: error: ') and 'not an estimate' in err[0]
+    assert not (tmp_path / 'png' / 'estimator.png').exists()
