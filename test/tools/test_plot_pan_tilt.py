@@ -22,11 +22,14 @@ from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.message_types import message_class
 from tskf_ros.bag.reader import BagReader
+from tskf_ros.bag.writer import BagWriter
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
 from tskf_ros.messages.pan_tilt_messages import msg_to_pan_tilt_state
 from tskf_ros.tools import plot_bag
-from tskf_ros.tools.plot_pan_tilt import is_pan_tilt_estimate, pan_tilt_figure
+from tskf_ros.tools.plot_estimator import POWER
+from tskf_ros.tools.plot_pan_tilt import ESTIMATE, is_pan_tilt_estimate, pan_tilt_figure, TRUTH
+from tskf_ros.tools.plot_rows import stream
 
 BAG = Path(__file__).resolve().parents[2] / 'bags' / 'led_pan_tilt'
 
@@ -50,12 +53,16 @@ def test_plot_bag_draws_a_two_axis_bag(tmp_path, capsys):
 def test_the_figure_draws_the_estimates_and_the_true_pointing_error():
     data = read(BAG)
     estimates, truth = data['/pan_tilt/estimate'], data['/pan_tilt/truth']
-    fig = pan_tilt_figure(estimates, truth, data['/photodiode'], 'test')
+    rows = stream(BagReader(BAG), {'/pan_tilt/estimate': ESTIMATE, '/pan_tilt/truth': TRUTH,
+                                   '/photodiode': POWER})
+    fig = pan_tilt_figure(rows['/pan_tilt/estimate'], rows['/pan_tilt/truth'],
+                          rows['/photodiode'], 'test')
     x1, pointing, off_axis, intensity = fig.axes[:4]
     # the EKF's lines: the estimates in V and deg, against time from the first estimate
     states = [msg_to_pan_tilt_state(m) for _, m in estimates]
     t = np.array([s.stamp_ns for s in states]) / NS
-    np.testing.assert_allclose(x1.lines[0].get_xdata(), t - t[0], rtol=0, atol=1e-9)
+    # (seconds since 1970 as float64 resolve 0.24 us: the rows and this differ by an ulp)
+    np.testing.assert_allclose(x1.lines[0].get_xdata(), t - t[0], rtol=0, atol=1e-6)
     np.testing.assert_allclose(x1.lines[0].get_ydata(), [s.x[0] for s in states], rtol=1e-12)
     np.testing.assert_allclose(pointing.lines[0].get_ydata(), [s.x[1] for s in states],
                                rtol=1e-12)
@@ -74,6 +81,17 @@ def test_the_figure_draws_the_estimates_and_the_true_pointing_error():
 
 def test_a_one_axis_estimate_is_not_taken_for_a_two_axis_one():
     one_axis = read(BAG.parent / 'led_alignment')['/alignment/estimate']
-    assert not is_pan_tilt_estimate(one_axis)
-    assert not is_pan_tilt_estimate([])
-    assert is_pan_tilt_estimate(read(BAG)['/pan_tilt/estimate'])
+    assert not is_pan_tilt_estimate(one_axis[0][1])
+    assert is_pan_tilt_estimate(read(BAG)['/pan_tilt/estimate'][0][1])
+
+
+def test_a_one_axis_estimate_on_the_two_axis_topic_is_one_line(tmp_path, capsys):
+    bag = tmp_path / 'bag'
+    with BagWriter(bag) as w:
+        w.add_topic('/pan_tilt/estimate', 'std_msgs/msg/Float64MultiArray')
+        for raw in BagReader(BAG.parent / 'led_alignment').messages({'/alignment/estimate'}):
+            w.write('/pan_tilt/estimate', raw.log_time_ns, raw.data)
+    assert plot_bag.main([str(bag), '--out', str(tmp_path / 'png')]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'is not a two-axis alignment estimate' in err[0], err
+    assert not (tmp_path / 'png' / 'alignment.png').exists()

@@ -39,10 +39,11 @@ from tskf_ros.messages.estimator_interface import (BAG_OUTPUT_TOPICS, BAG_TRUTH_
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402, I100, I202
-from tskf_ros.tools.plot_estimator import (estimate_row, estimator_figure,  # noqa: E402, I100
-                                           power_row, stream, truth_row)
-from tskf_ros.tools.plot_pan_tilt import (is_pan_tilt_estimate,  # noqa: E402, I100
-                                          pan_tilt_figure)
+from tskf_ros.tools.plot_estimator import (ESTIMATE, estimator_figure,  # noqa: E402, I100
+                                           POWER, TRUTH)
+from tskf_ros.tools.plot_rows import stream  # noqa: E402, I100
+from tskf_ros.tools import plot_pan_tilt as pan_tilt  # noqa: E402, I100
+from tskf_ros.tools.plot_pan_tilt import is_pan_tilt_estimate  # noqa: E402, I100
 
 PROG = 'plot_bag'
 PREDICTED, CORRECTED = BAG_OUTPUT_TOPICS['predicted'], BAG_OUTPUT_TOPICS['corrected']
@@ -64,11 +65,13 @@ class Plotted(list):
     damage = None
 
 
-def _decode(reader: BagReader, topics: set) -> dict:
-    """Return {topic: [(log ns, message)]} for the wanted topics."""
+def _decode(reader: BagReader, topics: set, limit: Optional[int] = None) -> dict:
+    """Return {topic: [(log ns, message)]} for the wanted topics (the first `limit`)."""
     out: dict = {t: [] for t in topics}
     classes = {}
-    for raw in reader.messages(topics):
+    for count, raw in enumerate(reader.messages(topics)):
+        if limit is not None and count >= limit:
+            break
         cls = classes.get(raw.msgtype) or classes.setdefault(raw.msgtype,
                                                              message_class(raw.msgtype))
         try:
@@ -183,17 +186,20 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
         return written
     if PAN_TILT_ESTIMATE in reader.topics:
         intensity = topic or '/photodiode'
-        data = _decode(reader, {PAN_TILT_ESTIMATE, PAN_TILT_TRUTH, intensity}
-                       & set(reader.topics))
-        _require(reader, data, [PAN_TILT_ESTIMATE])
-        if not is_pan_tilt_estimate(data[PAN_TILT_ESTIMATE]):
+        first = _decode(reader, {PAN_TILT_ESTIMATE}, limit=1)[PAN_TILT_ESTIMATE]
+        if first and not is_pan_tilt_estimate(first[0][1]):
             raise BagError(f'{bag}: {PAN_TILT_ESTIMATE} is not a two-axis alignment estimate '
                            '(the states [x1, d_c, d_e, b_c, b_e]): nothing to plot')
+        kinds = {PAN_TILT_ESTIMATE: pan_tilt.ESTIMATE, PAN_TILT_TRUTH: pan_tilt.TRUTH,
+                 intensity: POWER}
+        data = stream(reader, {t: k for t, k in kinds.items() if t in reader.topics})
+        _require(reader, data, [PAN_TILT_ESTIMATE])
         written.damage = reader.damage
         out.mkdir(parents=True, exist_ok=True)
-        fig = pan_tilt_figure(data[PAN_TILT_ESTIMATE], data.get(PAN_TILT_TRUTH, []),
-                              data.get(intensity, []),
-                              f'{bag.name}: two-axis (pan-tilt) conical-scan EKF alignment')
+        fig = pan_tilt.pan_tilt_figure(
+            data[PAN_TILT_ESTIMATE], data.get(PAN_TILT_TRUTH, np.zeros((0, 4))),
+            data.get(intensity, np.zeros((0, 2))),
+            f'{bag.name}: two-axis (pan-tilt) conical-scan EKF alignment')
         written.append(_save(fig, out / 'alignment.png'))
         return written
     if '/alignment/estimate' in reader.topics:
@@ -241,8 +247,8 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
 
 def _rows(reader: BagReader, measurement: str) -> dict:
     """Return the estimator figure's rows for the topics the bag has."""
-    rows = {PREDICTED: estimate_row, CORRECTED: estimate_row, SMOOTHED_TOPIC: estimate_row,
-            measurement: power_row, BAG_TRUTH_TOPIC: truth_row}
+    rows = {PREDICTED: ESTIMATE, CORRECTED: ESTIMATE, SMOOTHED_TOPIC: ESTIMATE,
+            measurement: POWER, BAG_TRUTH_TOPIC: TRUTH}
     return {t: row for t, row in rows.items() if t in reader.topics}
 
 

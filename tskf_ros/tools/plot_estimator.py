@@ -16,96 +16,42 @@
 """
 plot_bag's estimator figure (Cai et al. Fig. 2's two styles), from rows streamed off a bag.
 
-Each message is turned into a row of floats as it is read (`ROWS`: an estimate's t, x_0,
-P_00 and mu; a measurement's t and y; the truth's t and angle) and the message dropped, so
-that a bag of 1e7 messages costs 8 bytes a number, not a deserialized message each.  A
-series longer than DRAWN points is drawn as the least and the greatest value of each of
-DRAWN / 2 spans of consecutive points (its envelope, which keeps every excursion in
-sight); the errors' RMS are taken over every point.
+An estimate is read as its t, x_0, P_00 and mu; a measurement as its t and y; the truth as
+its t and angle (plot_rows.stream).  The errors' RMS are taken over every point; a series
+longer than plot_rows.DRAWN points is drawn as its envelope.
 """
 
-from array import array
 from typing import Any, Callable
 
 from matplotlib.figure import Figure
 import matplotlib.pyplot as plt
 import numpy as np
-from rclpy.serialization import deserialize_message
 
-from tskf_ros.bag.message_types import DESERIALIZE_ERRORS, message_class
-from tskf_ros.bag.reader import BagError, BagReader
 from tskf_ros.core.units import NS
 from tskf_ros.messages import conversions
-
-DRAWN = 8000        # points of a series drawn at most (about 5 per pixel of a panel)
-Row = Callable[[Any], tuple]
+from tskf_ros.tools.plot_rows import band, drawn_note, envelope, RowKind
 
 
-def estimate_row(msg: Any) -> tuple:
+def _estimate(msg: Any) -> tuple:
     """Return an estimate message's row: (t s, x_0, P_00, mu s)."""
     e = conversions.msg_to_state_estimate(msg)
     return e.stamp_ns / NS, float(e.x[0]), float(e.P[0, 0]), float(e.mu)
 
 
-def power_row(msg: Any) -> tuple:
+def _power(msg: Any) -> tuple:
     """Return an Illuminance measurement's row: (t s, y)."""
     stamp, y, _ = conversions.msg_to_power(msg)
     return stamp / NS, y
 
 
-def truth_row(msg: Any) -> tuple:
+def _truth(msg: Any) -> tuple:
     """Return a true-angle JointState's row: (t s, its first position, rad)."""
     return conversions.stamp_to_ns(msg.header.stamp) / NS, float(msg.position[0])
 
 
-# the length of each kind of row (an empty topic is an array of 0 rows of it)
-WIDTH: dict[Row, int] = {estimate_row: 4, power_row: 2, truth_row: 2}
-
-
-def stream(reader: BagReader, rows: dict[str, Row]) -> dict[str, np.ndarray]:
-    """Return {topic: (N, k) array} of the wanted topics, one row per message (rows: WIDTH's)."""
-    flat = {topic: array('d') for topic in rows}
-    classes: dict[str, Any] = {}
-    for raw in reader.messages(set(rows)):
-        cls = classes.get(raw.msgtype) or classes.setdefault(raw.msgtype,
-                                                             message_class(raw.msgtype))
-        try:
-            row = rows[raw.topic](deserialize_message(raw.data, cls))
-        except DESERIALIZE_ERRORS + (ValueError, IndexError) as exc:
-            raise BagError(f'{reader.path}: a message on {raw.topic} is not a {raw.msgtype} '
-                           f'this plot reads ({str(exc).splitlines()[0] if str(exc) else exc!r})'
-                           ) from None
-        flat[raw.topic].extend(row)
-    return {topic: np.frombuffer(values, dtype=float).reshape(-1, WIDTH[rows[topic]])
-            for topic, values in flat.items()}
-
-
-def envelope(t: np.ndarray, *ys: np.ndarray, lower: bool = True) -> tuple:
-    """
-    Return (t, y...) to draw: as given up to DRAWN points, else each span's least and greatest.
-
-    Spans of consecutive points, DRAWN / 2 of them; each gives two points at its first t,
-    its minimum then its maximum (lower False: the maximum only, for a band's upper edge).
-    """
-    if t.size <= DRAWN:
-        return (t,) + ys
-    spans = DRAWN // 2
-    edges = np.linspace(0, t.size, spans + 1).astype(int)[:-1]
-    starts = t[edges]
-    out = []
-    for y in ys:
-        lo, hi = np.minimum.reduceat(y, edges), np.maximum.reduceat(y, edges)
-        out.append(np.column_stack([lo, hi]).ravel() if lower else hi)
-    return ((np.repeat(starts, 2) if lower else starts),) + tuple(out)
-
-
-def band(t: np.ndarray, x: np.ndarray, s: np.ndarray) -> tuple:
-    """Return (t, x - s, x + s) to fill: each span's lowest lower and highest upper edge."""
-    if t.size <= DRAWN:
-        return t, x - s, x + s
-    spans = DRAWN // 2
-    edges = np.linspace(0, t.size, spans + 1).astype(int)[:-1]
-    return t[edges], np.minimum.reduceat(x - s, edges), np.maximum.reduceat(x + s, edges)
+ESTIMATE = RowKind(_estimate, 4)      # (t s, x_0, P_00, mu s)
+POWER = RowKind(_power, 2)            # (t s, y)
+TRUTH = RowKind(_truth, 2)            # (t s, the true angle, rad)
 
 
 def estimator_figure(series: dict[str, np.ndarray], measurement: np.ndarray,
@@ -113,8 +59,8 @@ def estimator_figure(series: dict[str, np.ndarray], measurement: np.ndarray,
     """
     Draw an estimator run in iteration and in time scale; return the figure.
 
-    series: {'predictor' | 'corrected' | 'smoothed': (N, 4) rows of estimate_row}, the
-    first two required; measurement (N, 2) of power_row; truth (N, 2) of truth_row.
+    series: {'predictor' | 'corrected' | 'smoothed': (N, 4) rows of ESTIMATE}, the
+    first two required; measurement (N, 2) of POWER; truth (N, 2) of TRUTH.
     """
     tp, xp, vp, mu_p = series['predictor'].T
     tc = series['corrected'][:, 0]
@@ -180,10 +126,7 @@ def estimator_figure(series: dict[str, np.ndarray], measurement: np.ndarray,
             ax.legend(**beside)
         ax.set_ylabel('mu (s)')
         ax.set_xlabel('iteration k' if style == 'iteration' else 'time t - t0 (s)')
-    longest = max(len(tp), len(ty))
-    if longest > DRAWN:
-        title += (f'\n{longest} points in the longest series: each series drawn as the least '
-                  f'and the greatest of each of {DRAWN // 2} spans (RMS over every point)')
+    title += drawn_note(max(len(tp), len(ty)))
     fig.suptitle(title)
     fig.tight_layout()
     return fig
