@@ -31,9 +31,7 @@ from tskf_ros.bag.message_types import BagTypeError, DESERIALIZE_ERRORS, message
 from tskf_ros.bag.reader import BagError, BagReader, error_exit, exit_status
 from tskf_ros.bag.replay.loop import replay
 from tskf_ros.bag.replay.sinks import SMOOTHED_TOPIC
-from tskf_ros.core.units import NS
 from tskf_ros.messages import alignment_interface as aligner
-from tskf_ros.messages import conversions
 from tskf_ros.messages.estimator_interface import (BAG_OUTPUT_TOPICS, BAG_TRUTH_TOPIC,
                                                    load_config, ParamsError)
 
@@ -42,6 +40,7 @@ import matplotlib.pyplot as plt  # noqa: E402, I100, I202
 from tskf_ros.tools.plot_estimator import (ESTIMATE, estimator_figure,  # noqa: E402, I100
                                            POWER, TRUTH)
 from tskf_ros.tools.plot_rows import stream  # noqa: E402, I100
+from tskf_ros.tools import plot_alignment  # noqa: E402, I100
 from tskf_ros.tools import plot_pan_tilt as pan_tilt  # noqa: E402, I100
 from tskf_ros.tools.plot_pan_tilt import is_pan_tilt_estimate  # noqa: E402, I100
 
@@ -49,6 +48,8 @@ PROG = 'plot_bag'
 PREDICTED, CORRECTED = BAG_OUTPUT_TOPICS['predicted'], BAG_OUTPUT_TOPICS['corrected']
 # a two-axis run as tskf_make_sample_bags and the simulator's default namespace write it
 PAN_TILT_ESTIMATE, PAN_TILT_TRUTH = '/pan_tilt/estimate', '/pan_tilt/truth'
+# a one-axis run as tskf_make_sample_bags writes it
+ALIGNMENT_ESTIMATE, ALIGNMENT_TRUTH = '/alignment/estimate', '/alignment/truth'
 
 
 class PlotDamageError(BagError):
@@ -93,69 +94,6 @@ def _require(reader: BagReader, data: dict, topics) -> None:
         raise BagError(f'{reader.path}: no messages on {", ".join(empty)}: nothing to plot')
 
 
-def _alignment_series(msgs: list) -> tuple:
-    """Turn the node's EKF estimate messages (x2 in rad) into (t in s, x, sd) in [V, deg]."""
-    rows = [conversions.msg_to_alignment_state(m) for _, m in msgs]
-    t = np.array([r.stamp_ns for r in rows], float) / NS
-    x = np.array([r.x for r in rows]).reshape(-1, 2)
-    sd = np.sqrt(np.array([[r.P[0, 0], r.P[1, 1]] for r in rows]).clip(0)).reshape(-1, 2)
-    return t, x, sd
-
-
-def alignment_figure(data: dict, title: str, *, replayed: bool = False,
-                     intensity_topic: str = '/photodiode'):
-    """
-    Draw Solanki et al. Fig. 8 from an alignment bag; return the figure.
-
-    replayed: the estimates are the alignment node's (estimate/corrected) of an offline
-    replay; the recorded /alignment/estimate is then dashed.  Both are in the node's units
-    (x2 in rad), as are the truth's angles; all angles are drawn in degrees.
-    """
-    recorded = data.get('/alignment/estimate') or []
-    if replayed:
-        t, x, sd = _alignment_series(data[aligner.BAG_OUTPUT_TOPICS['corrected']])
-        label = 'x(t|t) of the replay (open loop)'
-    else:
-        t, x, sd = _alignment_series(recorded)
-        label = 'EKF'
-    truth = data.get('/alignment/truth') or []
-    tt = np.array([conversions.stamp_to_ns(m.header.stamp) for _, m in truth], float) / NS
-    pos = {n: i for i, n in enumerate(truth[0][1].name)} if truth else {}
-    tv = np.array([m.position for _, m in truth]) if truth else np.zeros((0, 3))
-    z = data.get(intensity_topic) or []
-    tz = np.array([conversions.msg_to_power(m)[0] for _, m in z], float) / NS
-    vz = np.array([conversions.msg_to_power(m)[1] for _, m in z])
-    t0 = t.min()
-    fig, axes = plt.subplots(4, 1, figsize=(10, 11), sharex=True)
-    # the truth's angles are in rad (REP 103), drawn in deg; the intensity factor is in V
-    for ax, i, name, key, unit, scale in (
-            (axes[0], 0, 'x1hat', 'intensity_factor', 'V', 1.0),
-            (axes[1], 1, 'x2hat', 'scan_mean', 'deg', np.rad2deg(1.0))):
-        ax.plot(t - t0, x[:, i], 'C3-', lw=1, label=f'{name} ({label})')
-        if replayed and recorded:
-            tr, xr, _ = _alignment_series(recorded)
-            ax.plot(tr - t0, xr[:, i], 'C0--', lw=0.8, label=f'{name} of the recorded run')
-        ax.fill_between(t - t0, x[:, i] - 2 * sd[:, i], x[:, i] + 2 * sd[:, i], color='C3',
-                        alpha=0.2, label='+-2 sigma')
-        if key in pos:
-            ax.plot(tt - t0, tv[:, pos[key]] * scale, 'k-', lw=1, label=f'true {key}')
-        ax.set_ylabel(f'{name} ({unit})')
-        ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))
-    if 'incidence' in pos:
-        axes[2].plot(tt - t0, np.rad2deg(tv[:, pos['incidence']]), 'k-', lw=1,
-                     label='true angle of incidence')
-    axes[2].axhspan(-15, 15, color='C2', alpha=0.1, label='tracking zone +-15 deg')
-    axes[2].set_ylabel('true angle of incidence (deg)')
-    axes[2].legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))
-    axes[3].plot(tz - t0, vz, '.', color='C0', ms=3, label='measured intensity V_d')
-    axes[3].set_ylabel('intensity (V)')
-    axes[3].set_xlabel('time (s)')
-    axes[3].legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))
-    fig.suptitle(title)
-    fig.tight_layout()
-    return fig
-
-
 def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
          topic: Optional[str] = None, log=print) -> list:
     """
@@ -169,19 +107,20 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
     if aligner.BAG_OUTPUT_TOPICS['command'] in reader.topics:
         intensity = topic or next((t for t in (aligner.BAG_INPUT_TOPIC, '/photodiode')
                                    if t in reader.topics), aligner.BAG_INPUT_TOPIC)
-        wanted = {aligner.BAG_OUTPUT_TOPICS['corrected'], intensity, '/alignment/truth',
-                  '/alignment/estimate'}
-        data = _decode(reader, wanted & set(reader.topics))
-        if not data.get(aligner.BAG_OUTPUT_TOPICS['corrected']):
+        corrected = aligner.BAG_OUTPUT_TOPICS['corrected']
+        data, names = _alignment_rows(reader, corrected, intensity)
+        if not len(data.get(corrected, ())):
             if reader.damage is not None:
                 raise PlotDamageError(reader.damage)
-            raise BagError(f'{bag}: no EKF estimates on {aligner.BAG_OUTPUT_TOPICS["corrected"]}'
-                           ' (algorithm is not ekf?): nothing to plot')
+            raise BagError(f'{bag}: no EKF estimates on {corrected} (algorithm is not ekf?): '
+                           'nothing to plot')
         written.damage = reader.damage
         out.mkdir(parents=True, exist_ok=True)
-        fig = alignment_figure(data, f'{bag.name}: alignment node replayed offline (open '
-                               'loop: the commands did not move the recorded receiver)',
-                               replayed=True, intensity_topic=intensity)
+        fig = plot_alignment.alignment_figure(
+            data[corrected], f'{bag.name}: alignment node replayed offline (open loop: the '
+            'commands did not move the recorded receiver)', truth=data[ALIGNMENT_TRUTH],
+            names=names, intensity=data[intensity], recorded=data[ALIGNMENT_ESTIMATE],
+            label='x(t|t) of the replay (open loop)')
         written.append(_save(fig, out / 'alignment.png'))
         return written
     if PAN_TILT_ESTIMATE in reader.topics:
@@ -202,13 +141,14 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
             f'{bag.name}: two-axis (pan-tilt) conical-scan EKF alignment')
         written.append(_save(fig, out / 'alignment.png'))
         return written
-    if '/alignment/estimate' in reader.topics:
-        data = _decode(reader, {t for t in reader.topics if t.startswith('/alignment/')}
-                       | ({'/photodiode'} & set(reader.topics)))
-        _require(reader, data, ['/alignment/estimate'])
+    if ALIGNMENT_ESTIMATE in reader.topics:
+        data, names = _alignment_rows(reader, ALIGNMENT_ESTIMATE, '/photodiode')
+        _require(reader, data, [ALIGNMENT_ESTIMATE])
         written.damage = reader.damage
         out.mkdir(parents=True, exist_ok=True)
-        fig = alignment_figure(data, f'{bag.name}: scanning-EKF alignment (Fig. 8 style)')
+        fig = plot_alignment.alignment_figure(
+            data[ALIGNMENT_ESTIMATE], f'{bag.name}: scanning-EKF alignment (Fig. 8 style)',
+            truth=data[ALIGNMENT_TRUTH], names=names, intensity=data['/photodiode'])
         written.append(_save(fig, out / 'alignment.png'))
         return written
     config = load_config(params_file)
@@ -243,6 +183,18 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
                            C, D, f'{bag.name}: time-scale filter, {model.name} model')
     written.append(_save(fig, out / 'estimator.png'))
     return written
+
+
+def _alignment_rows(reader: BagReader, estimates: str, intensity: str) -> tuple:
+    """Return a one-axis bag's rows ({topic: array}, every topic present) and truth names."""
+    first = _decode(reader, {ALIGNMENT_TRUTH} & set(reader.topics), limit=1)
+    names = list(first[ALIGNMENT_TRUTH][0][1].name) if first.get(ALIGNMENT_TRUTH) else []
+    kinds = {estimates: plot_alignment.ESTIMATE, ALIGNMENT_ESTIMATE: plot_alignment.ESTIMATE,
+             ALIGNMENT_TRUTH: plot_alignment.truth_kind(names), intensity: POWER}
+    data = stream(reader, {t: k for t, k in kinds.items() if t in reader.topics})
+    for topic, kind in kinds.items():
+        data.setdefault(topic, np.zeros((0, kind.width)))
+    return data, names
 
 
 def _rows(reader: BagReader, measurement: str) -> dict:
