@@ -24,10 +24,9 @@ from typing import Optional
 
 import matplotlib
 import numpy as np
-from rclpy.serialization import deserialize_message
 
 from tskf_ros.bag.bag_errors import check_exists, run_main
-from tskf_ros.bag.message_types import BagTypeError, DESERIALIZE_ERRORS, message_class
+from tskf_ros.bag.message_types import BagTypeError
 from tskf_ros.bag.reader import BagError, BagReader, error_exit, exit_status
 from tskf_ros.bag.replay.loop import replay
 from tskf_ros.bag.replay.sinks import SMOOTHED_TOPIC
@@ -39,7 +38,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402, I100, I202
 from tskf_ros.tools.plot_estimator import (ESTIMATE, estimator_figure,  # noqa: E402, I100
                                            POWER, TRUTH)
-from tskf_ros.tools.plot_rows import stream  # noqa: E402, I100
+from tskf_ros.tools.plot_rows import first, stream  # noqa: E402, I100
 from tskf_ros.tools import plot_alignment  # noqa: E402, I100
 from tskf_ros.tools import plot_pan_tilt as pan_tilt  # noqa: E402, I100
 from tskf_ros.tools.plot_pan_tilt import is_pan_tilt_estimate  # noqa: E402, I100
@@ -64,25 +63,6 @@ class Plotted(list):
     """The PNGs written (a list of paths) and the damage met while reading, if any."""
 
     damage = None
-
-
-def _decode(reader: BagReader, topics: set, limit: Optional[int] = None) -> dict:
-    """Return {topic: [(log ns, message)]} for the wanted topics (the first `limit`)."""
-    out: dict = {t: [] for t in topics}
-    classes = {}
-    for count, raw in enumerate(reader.messages(topics)):
-        if limit is not None and count >= limit:
-            break
-        cls = classes.get(raw.msgtype) or classes.setdefault(raw.msgtype,
-                                                             message_class(raw.msgtype))
-        try:
-            msg = deserialize_message(raw.data, cls)
-        except DESERIALIZE_ERRORS as exc:
-            raise BagError(f'{reader.path}: a message on {raw.topic} does not deserialize as '
-                           f'{raw.msgtype} ({str(exc).splitlines()[0] if str(exc) else exc!r})'
-                           ) from None
-        out[raw.topic].append((raw.log_time_ns, msg))
-    return out
 
 
 def _require(reader: BagReader, data: dict, topics) -> None:
@@ -125,8 +105,8 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
         return written
     if PAN_TILT_ESTIMATE in reader.topics:
         intensity = topic or '/photodiode'
-        first = _decode(reader, {PAN_TILT_ESTIMATE}, limit=1)[PAN_TILT_ESTIMATE]
-        if first and not is_pan_tilt_estimate(first[0][1]):
+        head = first(reader, PAN_TILT_ESTIMATE)
+        if head is not None and not is_pan_tilt_estimate(head):
             raise BagError(f'{bag}: {PAN_TILT_ESTIMATE} is not a two-axis alignment estimate '
                            '(the states [x1, d_c, d_e, b_c, b_e]): nothing to plot')
         kinds = {PAN_TILT_ESTIMATE: pan_tilt.ESTIMATE, PAN_TILT_TRUTH: pan_tilt.TRUTH,
@@ -177,8 +157,8 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
                            'nothing to plot')
     measurement = data.get(meas_topic, np.zeros((0, 2)))
     out.mkdir(parents=True, exist_ok=True)
-    names = (('predictor', PREDICTED), ('corrected', CORRECTED), ('smoothed', SMOOTHED_TOPIC))
-    series = {name: data[t] for name, t in names if len(data.get(t, ()))}
+    kinds = (('predictor', PREDICTED), ('corrected', CORRECTED), ('smoothed', SMOOTHED_TOPIC))
+    series = {kind: data[t] for kind, t in kinds if len(data.get(t, ()))}
     fig = estimator_figure(series, measurement, data.get(BAG_TRUTH_TOPIC, np.zeros((0, 2))),
                            C, D, f'{bag.name}: time-scale filter, {model.name} model')
     written.append(_save(fig, out / 'estimator.png'))
@@ -187,8 +167,8 @@ def plot(bag: Path, out: Path, *, params_file: Optional[Path] = None,
 
 def _alignment_rows(reader: BagReader, estimates: str, intensity: str) -> tuple:
     """Return a one-axis bag's rows ({topic: array}, every topic present) and truth names."""
-    first = _decode(reader, {ALIGNMENT_TRUTH} & set(reader.topics), limit=1)
-    names = list(first[ALIGNMENT_TRUTH][0][1].name) if first.get(ALIGNMENT_TRUTH) else []
+    head = first(reader, ALIGNMENT_TRUTH)
+    names = list(head.name) if head is not None else []
     kinds = {estimates: plot_alignment.ESTIMATE, ALIGNMENT_ESTIMATE: plot_alignment.ESTIMATE,
              ALIGNMENT_TRUTH: plot_alignment.truth_kind(names), intensity: POWER}
     data = stream(reader, {t: k for t, k in kinds.items() if t in reader.topics})

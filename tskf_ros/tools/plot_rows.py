@@ -25,7 +25,7 @@ as the least and the greatest value of each of DRAWN / 2 spans of consecutive po
 
 from array import array
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Iterator, Optional
 
 import numpy as np
 from rclpy.serialization import deserialize_message
@@ -44,22 +44,44 @@ class RowKind:
     width: int
 
 
-def stream(reader: BagReader, kinds: dict[str, RowKind]) -> dict[str, np.ndarray]:
-    """Return {topic: (N, width) array} of the wanted topics, one row per message read."""
-    flat = {topic: array('d') for topic in kinds}
+def messages(reader: BagReader, topics: set) -> Iterator[tuple[str, Any]]:
+    """Yield (topic, message) of the wanted topics, deserialized; BagError (one line) if not."""
     classes: dict[str, Any] = {}
-    for raw in reader.messages(set(kinds)):
+    for raw in reader.messages(topics):
         cls = classes.get(raw.msgtype) or classes.setdefault(raw.msgtype,
                                                              message_class(raw.msgtype))
         try:
-            row = kinds[raw.topic].read(deserialize_message(raw.data, cls))
-        except DESERIALIZE_ERRORS + (ValueError, IndexError, KeyError) as exc:
-            raise BagError(f'{reader.path}: a message on {raw.topic} is not a {raw.msgtype} '
-                           f'this plot reads ({str(exc).splitlines()[0] if str(exc) else exc!r})'
-                           ) from None
-        flat[raw.topic].extend(row)
+            msg = deserialize_message(raw.data, cls)
+        except DESERIALIZE_ERRORS as exc:
+            raise BagError(f'{reader.path}: a message on {raw.topic} does not deserialize as '
+                           f'{raw.msgtype} ({_first_line(exc)})') from None
+        yield raw.topic, msg
+
+
+def first(reader: BagReader, topic: str) -> Optional[Any]:
+    """Return the first message on `topic`, or None if the bag has none."""
+    if topic not in reader.topics:
+        return None
+    return next((msg for _, msg in messages(reader, {topic})), None)
+
+
+def stream(reader: BagReader, kinds: dict[str, RowKind]) -> dict[str, np.ndarray]:
+    """Return {topic: (N, width) array} of the wanted topics, one row per message read."""
+    flat = {topic: array('d') for topic in kinds}
+    for topic, msg in messages(reader, set(kinds)):
+        try:
+            row = kinds[topic].read(msg)
+        except (ValueError, IndexError, KeyError) as exc:
+            raise BagError(f'{reader.path}: a message on {topic} is not one this plot reads '
+                           f'({_first_line(exc)})') from None
+        flat[topic].extend(row)
     return {topic: np.frombuffer(values, dtype=float).reshape(-1, kinds[topic].width)
             for topic, values in flat.items()}
+
+
+def _first_line(exc: BaseException) -> str:
+    """Return the first line of an error's text, or its repr if it has none."""
+    return str(exc).splitlines()[0] if str(exc) else repr(exc)
 
 
 def _edges(n: int) -> np.ndarray:
