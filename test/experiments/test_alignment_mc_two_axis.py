@@ -204,10 +204,11 @@ def test_a_scheduler_not_reached_is_one_line_and_exit_1(capsys):
 
 
 def test_the_dim_radius_reaches_the_ekf_and_the_json(tmp_path, capsys):
-    # --dim-radius 6.5 changes the supervised EKF's runs (the scan widens when dim) and is
-    # recorded; the baselines do not scan a circle and are the same
+    # --dim-radius (6.5 by default; 0 turns it off) changes the supervised EKF's runs (the
+    # scan widens when dim) and is recorded; the baselines do not scan a circle and are
+    # the same
     data = []
-    for extra in ([], ['--dim-radius', '6.5', '--dim-peak', '2.5']):
+    for extra in (['--dim-radius', '0'], ['--dim-peak', '2.5']):
         out = tmp_path / f'{len(data)}.json'
         assert alignment_mc.main(['--axes', '2', '--runs', '20', '--steps', '80', '--workers',
                                   '1', '--noise-levels', '1.5', '--methods',

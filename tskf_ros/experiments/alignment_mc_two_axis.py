@@ -290,13 +290,15 @@ def parser() -> argparse.ArgumentParser:
                    help='comma list of the methods compared (default: '
                         + ','.join(DEFAULT_METHODS) + '), of: ' + ', '.join(
                        f'{k} ({v})' for k, v in METHODS.items()))
-    p.add_argument('--dim-radius', type=arguments.number(0.0, 14.9), default=0.0,
-                   metavar='DEG',
+    p.add_argument('--dim-radius', type=arguments.number(0.0, 14.9),
+                   default=ConicalEKFConfig.dim_radius, metavar='DEG',
                    help='the conical scan widens to DEG as the estimated peak x1hat g_r(0) '
-                        'falls from --dim-peak to half of it (0: off, the default)')
+                        'falls from --dim-peak to half of it (0: off, r stays 4 deg; '
+                        f'default {ConicalEKFConfig.dim_radius:g})')
     p.add_argument('--dim-peak', type=arguments.number(0.0, 100.0, open_low=True),
-                   default=2.0, metavar='V',
-                   help='the estimated peak under which the scan widens, V (2.0)')
+                   default=ConicalEKFConfig.dim_peak, metavar='V',
+                   help='the estimated peak under which the scan widens, V '
+                        f'({ConicalEKFConfig.dim_peak:g})')
     p.add_argument('--clip-four-point', action='store_true',
                    help='clip gamma_p of eq. (26) to [-gamma, gamma] (as --clip-three-point)')
     p.add_argument('--run-noise', type=arguments.noise_volts, default=1.0,

@@ -196,8 +196,8 @@ def test_nees_is_in_its_band_on_seeds_not_tuned_on(noise, seed):
     1.0,
     *(pytest.param(v, marks=pytest.mark.xfail(strict=True, reason=reason)) for v, reason in (
         (0.0, 'measured 1.35 under [2.67, 3.35]'), (0.5, 'measured 2.51 under [2.67, 3.35]'),
-        (1.5, 'measured 3.87 over [2.66, 3.36]'), (2.0, 'measured 4.57 over [2.64, 3.38]'),
-        (2.5, 'measured 4.85 over [2.60, 3.42]')))])
+        (1.5, 'measured 3.69 over [2.66, 3.36]'), (2.0, 'measured 4.24 over [2.63, 3.39]'),
+        (2.5, 'measured 4.52 over [2.60, 3.43]')))])
 def test_the_closed_loop_filter_is_consistent_at_1_volt_only(noise):
     """
     The default (closed-loop) filter: the first-order update, R with a 0.2 V floor, Q 0.02.
@@ -216,14 +216,13 @@ def test_nees_with_jittered_stamps_and_dropouts_at_1_volt():
 
 
 _NIS_OUT = {     # (seed, noise): the mean NIS measured out of its band
-    (0, 0.0): 'measured 0.966 under [0.988, 1.012]',
+    (0, 0.0): 'measured 0.967 under [0.988, 1.012]',
     (0, 0.5): 'measured 0.9878 under [0.988, 1.012]',
     (0, 1.0): 'measured 0.985 under [0.988, 1.012]',
     (0, 1.5): 'measured 0.982 under [0.988, 1.012]',
     (0, 2.0): 'measured 0.975 under [0.987, 1.013]',
     (0, 2.5): 'measured 0.965 under [0.986, 1.014]',
-    (5, 0.0): 'measured 0.968 under [0.988, 1.012]',
-    (5, 2.5): 'measured 0.9855 under [0.986, 1.014]'}
+    (5, 0.0): 'measured 0.968 under [0.988, 1.012]'}
 
 
 @pytest.mark.parametrize('seed, noise', [
@@ -416,7 +415,8 @@ def test_reduces_to_the_one_axis_filter():
     lqg = LQGAligner(LQGConfig(acquisition=(), x2_starts=(), min_motion=0.0, scan=scan,
                                P0=(1.0, 4.0, 0.1)), _SignedRadial(radial), runs=3)
     ekf = ConicalScanEKF(ConicalEKFConfig(
-        controller='lqr', noise=1.0, model_noise=0.0, x0=(2.0, 0.0, 0.0, 0.0, 0.0),
+        controller='lqr', noise=1.0, model_noise=0.0, dim_radius=0.0,
+        x0=(2.0, 0.0, 0.0, 0.0, 0.0),
         P0=(1.0, 4.0, 0.0, 0.1, 0.0), Q=(0.0025, 0.01, 0.0, 1e-5, 0.0)), radial, runs=3)
     ekf.scan = np.column_stack([scan, np.zeros(len(scan))])
     rng = np.random.default_rng(5)
@@ -463,7 +463,8 @@ def test_closed_loop_boresight_within_mean_error_plus_radius():
     small-angle construction: the triangle inequality holds to 0.2 deg (measured 0.14).
     """
     from tskf_ros.led.two_axis.pan_tilt_simulation import simulate_pan_tilt
-    traj = simulate_pan_tilt(ConicalScanEKF(runs=50), PanTiltLinkConfig(noise=0.5, steps=200), 3)
+    ekf = ConicalScanEKF(ConicalEKFConfig(dim_radius=0.0), runs=50)
+    traj = simulate_pan_tilt(ekf, PanTiltLinkConfig(noise=0.5, steps=200), 3)
     inside = traj.theta_mean <= 15.0
     assert np.all((traj.theta <= traj.theta_mean + 4.0 + 0.2)[inside])
 
@@ -483,16 +484,17 @@ def test_bad_configs_say_why(bad):
 def test_the_scan_widens_per_run_as_the_estimated_peak_falls():
     """dim_radius: each run's r follows dim_scan_radius of its x1hat g_r(0); off: r fixed."""
     from tskf_ros.led.two_axis.scan_radius import dim_scan_radius
-    off = ConicalScanEKF(runs=3)
+    off = ConicalScanEKF(ConicalEKFConfig(dim_radius=0.0), runs=3)
     assert off.scan_offset.shape == (2,)
+    assert ConicalEKFConfig().dim_radius == 6.5          # on by default
     config = ConicalEKFConfig(dim_radius=6.5, dim_peak=2.0)
-    ekf = ConicalScanEKF(config, runs=3)
-    ekf.x[:, 0] = [3.0, 1.5, 0.5]
+    ekf = ConicalScanEKF(config, runs=4)
+    ekf.x[:, 0] = np.array([3.0, 1.5, 0.9, 0.3]) / ekf.response.peak
     np.testing.assert_allclose(np.hypot(*ekf.scan_offset.T), 4.0, rtol=1e-12)
     s_now = ekf.scan_offset.copy()
-    turn = ekf.step(0.0, np.array([np.nan, np.nan, np.nan]))
+    turn = ekf.step(0.0, np.full(4, np.nan))
     radius = dim_scan_radius(ekf.x[:, 0] * ekf.response.peak, 4.0, 6.5, 2.0)
-    assert radius[0] == 4.0 and 4.0 < radius[1] < 6.5 and radius[2] == 6.5
+    np.testing.assert_allclose(radius, [4.0, 5.25, 6.0, 4.0], rtol=1e-9)
     np.testing.assert_allclose(ekf.scan_offset, radius[:, None] * ekf.unit_scan[1], rtol=1e-12)
     # the mount is sent u and the scan's step from s_k to s_{k+1}, each run with its own
     # radius, closed in joints at the mount's tilt (20 deg at the start)

@@ -21,7 +21,7 @@ import pytest
 from tskf_ros.led.intensity_model import AlignmentError
 from tskf_ros.led.supervisor import LOST, TRACKING
 from tskf_ros.led.two_axis.aligners import make_two_axis_aligner, METHODS
-from tskf_ros.led.two_axis.conical_ekf import ConicalScanEKF
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig, ConicalScanEKF
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_simulation import simulate_pan_tilt, tracking_fraction
 from tskf_ros.led.two_axis.pan_tilt_supervisor import PanTiltSupervisor
@@ -142,7 +142,10 @@ def test_a_fade_hold_looks_around_and_comes_back_to_the_held_pointing():
     config = PanTiltSupervisorConfig(start='tracking', hold_samples=20, fade_peak=10.0,
                                      fade_hold=40, fade_seen=False, fade_look=20.0,
                                      hold_after=0)
-    watch = _Watch(PanTiltSupervisor(ConicalScanEKF(runs=10), config))
+    # the reach is read on the mean pointing, the spiral's boresight less the scan offset:
+    # 20 deg less r = 4 (the dim scan's 6.5 deg off, so that r is fixed)
+    ekf = ConicalScanEKF(ConicalEKFConfig(dim_radius=0.0), runs=10)
+    watch = _Watch(PanTiltSupervisor(ekf, config))
     simulate_pan_tilt(watch, PanTiltLinkConfig(noise=0.5, steps=300, blocked=(2.0, 15.0)), 7)
     looking, steering = np.array(watch.looking), np.array(watch.steering)
     mean, center = np.array(watch.mean), np.array(watch.center)

@@ -71,11 +71,14 @@ def test_off_the_source_with_x1_unknown_a_wider_scan_gains_more():
     assert known[1] < known[0]
 
 
-def test_the_dim_radius_is_a_ramp_between_the_peaks():
-    peak = np.array([3.0, 2.0, 1.5, 1.0, 0.2])
+def test_the_dim_radius_is_a_tent_between_the_peaks():
+    # radius from dim_peak up, dim_radius at dim_peak / 2, radius again from dim_peak / 4 down
+    peak = np.array([3.0, 2.0, 1.5, 1.0, 0.75, 0.5, 0.2, 0.0])
     np.testing.assert_allclose(dim_scan_radius(peak, 4.0, 6.5, 2.0),
-                               [4.0, 4.0, 5.25, 6.5, 6.5], rtol=1e-12)
-    np.testing.assert_array_equal(dim_scan_radius(peak, 4.0, 0.0, 2.0), np.full(5, 4.0))
+                               [4.0, 4.0, 5.25, 6.5, 5.25, 4.0, 4.0, 4.0], rtol=1e-12)
+    np.testing.assert_allclose(dim_scan_radius(2.0 * peak, 4.0, 6.5, 4.0),
+                               [4.0, 4.0, 5.25, 6.5, 5.25, 4.0, 4.0, 4.0], rtol=1e-12)
+    np.testing.assert_array_equal(dim_scan_radius(peak, 4.0, 0.0, 2.0), np.full(8, 4.0))
 
 
 def test_information_scales_as_x1_squared_over_r():

@@ -51,9 +51,10 @@ is the configuration whose NEES is in its band at every noise level from 0 to 2.
 The scan's own loss: with the mean pointing on the source the boresight is r off it, so
 the scan costs 1 - g_r(r)/g_r(0) of the received intensity (`scan_loss`; 15 % at the
 default r = 4 deg); with a mean error |d| the boresight is at most |d| + r off, so it
-stays in the 15 deg tracking cone while |d| <= 15 - r.  With dim_radius > 0 (off by
-default) each run's r widens towards dim_radius as its x1hat g_r(0) falls below dim_peak
-(`scan_radius.dim_scan_radius`: more information about d per sample, at a larger loss).
+stays in the 15 deg tracking cone while |d| <= 15 - r.  With dim_radius > 0 (6.5 deg by
+default, 34 % of the light on the source) each run's r widens towards dim_radius as its
+x1hat g_r(0) falls below dim_peak (`scan_radius.dim_scan_radius`: more information about d
+per sample, at a larger loss).
 """
 
 from dataclasses import dataclass
@@ -85,8 +86,9 @@ class ConicalEKFConfig:
     radius: float = 4.0               # r of the scan circle (deg)
     points: int = 20                  # samples per scan turn (1 s at 50 ms, as Psi)
     # the radius when the light is dim (deg; 0: off, r stays `radius`): r widens linearly
-    # from `radius` at x1hat g_r(0) = dim_peak to dim_radius at dim_peak / 2 (scan_radius)
-    dim_radius: float = 0.0
+    # from `radius` at x1hat g_r(0) = dim_peak to dim_radius at dim_peak / 2 (scan_radius;
+    # 6.5 deg, where |g_r'| peaks: fewer runs lost at 1 V and above, doc/design/two_axis.md)
+    dim_radius: float = 6.5
     dim_peak: float = 2.0             # V
     x0: tuple[float, ...] = (2.0, 0.0, 0.0, 0.0, 0.0)
     # P0: x1 as ekf_pat's clipped prior (2 V), d 5 deg, drift 0.063 deg per step (1.26

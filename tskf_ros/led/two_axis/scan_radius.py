@@ -16,8 +16,8 @@
 """
 The conical scan's radius: what a sample tells about the pointing, and a dim-light radius.
 
-A radius that widens when the light is dim is `ConicalEKFConfig.dim_radius` (off by
-default).
+A radius that widens when the light is dim is `ConicalEKFConfig.dim_radius` (6.5 deg by
+default; 0 turns it off).
 
 A sample taken at the scan offset s of a mean pointing error d is z = x1 g_r(|d + s|) + v,
 v of variance R (conical_ekf).  Its Fisher information about x = [x1, d_c, d_e] is
@@ -81,12 +81,16 @@ def dim_scan_radius(peak: FloatArray, radius: float, dim_radius: float,
     """
     Return the scan radius per run for the estimated peak x1hat g_r(0) (V).
 
-    radius at a peak of dim_peak or more, dim_radius at dim_peak / 2 or less, linear in
-    between (no switching back and forth at one level); radius everywhere if dim_radius
-    is 0 (off).
+    A tent: radius at a peak of dim_peak or more, dim_radius at dim_peak / 2, radius again
+    at dim_peak / 4 or less, linear in between (no switching back and forth at one level);
+    radius everywhere if dim_radius is 0 (off).  Under dim_peak / 4 the light tells little
+    about the pointing at any radius (the information goes as x1^2), and the wider circle
+    would only put the boresight further from a mean pointing it cannot correct
+    (doc/design/two_axis.md, "A scan that widens when the light is dim").
     """
     peak = np.asarray(peak, dtype=float)
     if dim_radius <= 0.0:
         return np.full(peak.shape, radius)
-    dim = np.clip((dim_peak - peak) / (0.5 * dim_peak), 0.0, 1.0)
-    return radius + (dim_radius - radius) * dim
+    up = np.clip((dim_peak - peak) / (0.5 * dim_peak), 0.0, 1.0)          # 0 -> 1 to dim_peak/2
+    down = np.clip((0.5 * dim_peak - peak) / (0.25 * dim_peak), 0.0, 1.0)  # 0 -> 1 to dim_peak/4
+    return radius + (dim_radius - radius) * (up - down)
