@@ -25,6 +25,7 @@ only session.add is timed, by the thread's CPU time (time.thread_time_ns).  The 
 - default: the supervised conical-scan EKF (pat.enabled, pan_tilt.filter first_order)
   with the scan closed in the mount's joints (ConicalEKFConfig.closed_scan, the default);
 - open_scan: the same with the scan of before (closed_scan False: no closed_scan_turn);
+- fixed_radius: the same with the fixed 4 deg circle (dim_radius 0: no per-run radius);
 - consistent: pan_tilt.filter consistent (Gauss-Hermite, two passes);
 - no_supervisor: the conical-scan EKF alone (pat.enabled false).
 
@@ -81,6 +82,8 @@ def cases(noise: float) -> list[Case]:
     return [Case('default', base),
             Case('open_scan', replace(base, ekf=replace(ConicalEKFConfig(),
                                                         closed_scan=False))),
+            Case('fixed_radius', replace(base, ekf=replace(ConicalEKFConfig(),
+                                                           dim_radius=0.0))),
             Case('consistent', replace(base, ekf=CONSISTENT)),
             Case('no_supervisor', replace(base, method='conical_ekf'))]
 
