@@ -112,6 +112,18 @@ def test_gain_and_the_shared_pat_parameters_reach_the_two_axis_configs():
     assert aligner.tracker.config.gain == 1.2 and aligner.config.lock == lock
 
 
+def test_the_scan_circle_parameters_reach_the_filter_and_its_radius():
+    """pan_tilt.scan_radius, dim_radius and dim_peak: the EKF's circle, per run as it dims."""
+    s = two_axis(**{'pat.enabled': False, 'pan_tilt.scan_radius': 3.0,
+                    'pan_tilt.dim_radius': 8.0, 'pan_tilt.dim_peak': 2.5}).session.session
+    assert (s.ekf.radius, s.ekf.dim_radius, s.ekf.dim_peak) == (3.0, 8.0, 2.5)
+    tracker = PanTiltSession(s).tracker
+    np.testing.assert_allclose(np.hypot(*np.reshape(tracker.scan_offset, (-1, 2)).T), 3.0,
+                               rtol=1e-12)
+    fixed = two_axis(**{'pan_tilt.dim_radius': 0.0}).session.session.ekf
+    assert fixed == replace(ConicalEKFConfig(), dim_radius=0.0)
+
+
 @pytest.mark.parametrize('gain', [0.25, 0.5, 1.5])
 def test_gain_is_the_p_law_of_eq_21_in_two_axes(gain):
     """The first turn is -G dhat and the scan's step (d has no drift yet: b stays 0)."""
@@ -122,7 +134,9 @@ def test_gain_is_the_p_law_of_eq_21_in_two_axes(gain):
     d = np.array(out.estimate.error)
     assert np.all(out.estimate.x[3:5] == 0.0) and np.linalg.norm(d) > 1e-4
     tilt = default_parameters()['pan_tilt.initial'][1]
-    np.testing.assert_allclose(out.turn, closed_scan_turn(-gain * d, s0, s1, tilt), rtol=0,
+    # (the offsets are per run, (1, 2), with the circle that widens when dim)
+    expected = closed_scan_turn(-gain * d, s0, s1, tilt)
+    np.testing.assert_allclose(out.turn, np.reshape(expected, 2), rtol=0,
                                atol=1e-12)
 
 

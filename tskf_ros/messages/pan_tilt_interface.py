@@ -96,7 +96,10 @@ def pan_tilt_config(values: dict) -> NodeConfig:
         joints0=tuple(values['pan_tilt.initial']), max_step=values['max_step'],
         tilt_limits=tuple(values['pan_tilt.tilt_limits']),
         max_backward=values['max_backward'], state_limit=values['state_limit'],
-        ekf=replace(filter_config(values['pan_tilt.filter']), gain=values['gain']),
+        ekf=replace(filter_config(values['pan_tilt.filter']), gain=values['gain'],
+                    radius=values['pan_tilt.scan_radius'],
+                    dim_radius=values['pan_tilt.dim_radius'],
+                    dim_peak=values['pan_tilt.dim_peak']),
         supervisor=supervisor_config(values))
     session.make_aligner()      # a method the core does not provide yet fails here, at once
     stream = PanTiltStreamConfig(session, values['algorithm'], values['negative_is_missing'],

@@ -474,6 +474,7 @@ def test_closed_loop_boresight_within_mean_error_plus_radius():
                                  {'noise': 0.0, 'model_noise': 0.0}, {'radius': math.inf},
                                  {'order': 3}, {'linearisation': 'ukf'}, {'iterations': 0},
                                  {'dim_radius': -1.0}, {'dim_radius': 15.0},
+                                 {'radius': 0.0}, {'radius': 15.0},
                                  {'dim_peak': 0.0}])
 def test_bad_configs_say_why(bad):
     """Each bad setting is one AlignmentError."""

@@ -86,8 +86,9 @@ class ConicalEKFConfig:
     radius: float = 4.0               # r of the scan circle (deg)
     points: int = 20                  # samples per scan turn (1 s at 50 ms, as Psi)
     # the radius when the light is dim (deg; 0: off, r stays `radius`): r widens linearly
-    # from `radius` at x1hat g_r(0) = dim_peak to dim_radius at dim_peak / 2 (scan_radius;
-    # 6.5 deg, where |g_r'| peaks: fewer runs lost at 1 V and above, doc/design/two_axis.md)
+    # from `radius` at x1hat g_r(0) = dim_peak to dim_radius at dim_peak / 2 and narrows
+    # back to `radius` at dim_peak / 4 (scan_radius; 6.5 deg, where |g_r'| peaks: fewer
+    # runs lost at 1 V and above, doc/design/two_axis.md)
     dim_radius: float = 6.5
     dim_peak: float = 2.0             # V
     x0: tuple[float, ...] = (2.0, 0.0, 0.0, 0.0, 0.0)
@@ -148,6 +149,8 @@ class ConicalEKFConfig:
                                  f'got {self.controller!r}')
         if not (self.state_weight > 0.0 and self.input_weight > 0.0):
             raise AlignmentError('the LQR weights must be > 0')
+        if not 0.0 < self.radius < 15.0:
+            raise AlignmentError(f'radius must be in (0, 15) deg, got {self.radius}')
         if self.dim_radius < 0.0 or self.dim_radius >= 15.0 or not self.dim_peak > 0.0:
             raise AlignmentError(f'dim_radius must be in [0, 15) deg (0: off) and dim_peak '
                                  f'> 0 V, got {self.dim_radius}, {self.dim_peak}')
