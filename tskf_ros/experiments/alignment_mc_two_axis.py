@@ -293,7 +293,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--dim-radius', type=arguments.number(0.0, 14.9),
                    default=ConicalEKFConfig.dim_radius, metavar='DEG',
                    help='the conical scan widens to DEG as the estimated peak x1hat g_r(0) '
-                        'falls from --dim-peak to half of it (0: off, r stays 4 deg; '
+                        'falls from --dim-peak to half of it, and narrows back to 4 deg at a '
+                        'quarter of it (0: off, r stays 4 deg; '
                         f'default {ConicalEKFConfig.dim_radius:g})')
     p.add_argument('--dim-peak', type=arguments.number(0.0, 100.0, open_low=True),
                    default=ConicalEKFConfig.dim_peak, metavar='V',

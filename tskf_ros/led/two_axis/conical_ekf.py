@@ -53,8 +53,9 @@ the scan costs 1 - g_r(r)/g_r(0) of the received intensity (`scan_loss`; 15 % at
 default r = 4 deg); with a mean error |d| the boresight is at most |d| + r off, so it
 stays in the 15 deg tracking cone while |d| <= 15 - r.  With dim_radius > 0 (6.5 deg by
 default, 34 % of the light on the source) each run's r widens towards dim_radius as its
-x1hat g_r(0) falls below dim_peak (`scan_radius.dim_scan_radius`: more information about d
-per sample, at a larger loss).
+x1hat g_r(0) falls from dim_peak to dim_peak / 2, and narrows back to `radius` at
+dim_peak / 4 (`scan_radius.dim_scan_radius`: more information about d per sample, at a
+larger loss).
 """
 
 from dataclasses import dataclass
