@@ -89,6 +89,40 @@ def test_a_loss_of_a_dim_light_is_held_for_fade_hold():
     assert np.all(sup.hold_limit == 300)
 
 
+def _through_the_dark(drift_walk: float) -> tuple[float, float]:
+    """10 s of lock at 0.5 V, then 10 s with no light held as a fade (200 runs, seed 7).
+
+    Return the fraction of runs with the boresight in the 15 deg cone at the end and the
+    median error |bhat - b| of the drift estimate there (deg per step).
+    """
+    ekf = ConicalEKFConfig(noise=0.5, Q=(0.0025, 0.02, 0.02, drift_walk, drift_walk))
+    sup = PanTiltSupervisor(ConicalScanEKF(ekf, runs=200),
+                            PanTiltSupervisorConfig(start='tracking', noise=np.hypot(0.5, 0.2),
+                                                    fade_peak=10.0, fade_hold=400,
+                                                    fade_seen=False, hold_after=0))
+    traj = simulate_pan_tilt(sup, PanTiltLinkConfig(noise=0.5, blocked=(10.0, 20.0)), 7)
+    assert np.all(sup.steering)
+    # the EKF's b is the drift of d, the source's drift with its sign turned
+    error = np.linalg.norm(sup.x[:, 3:5] + traj.drift[-1], axis=1)
+    return float(np.mean(traj.theta[-1] <= 15.0)), float(np.median(error))
+
+
+def test_a_fade_hold_steers_through_the_dark_on_the_drift_of_the_lock():
+    """
+    The drift's walk at the link's size (the default Q): 10 s without light stay in the cone.
+
+    With the default 1e-8 per step, bhat is the drift of the whole lock and stays it while
+    the samples are noise alone: 96 % of the runs in the cone after 10 s in the dark,
+    median |bhat - b| 0.020 deg per step; with a walk of 1e-5 per step the noise carries
+    bhat off (0.062) and 34 % are in the cone.
+    """
+    assert ConicalEKFConfig().Q[3:] == (1e-8, 1e-8)
+    kept, drift_error = _through_the_dark(1e-8)
+    assert kept >= 0.9 and drift_error < 0.03
+    kept_fast, drift_error_fast = _through_the_dark(1e-5)
+    assert kept_fast < kept - 0.3 and drift_error_fast > 2.0 * drift_error
+
+
 def test_a_light_never_seen_at_fade_peak_in_lock_has_not_faded():
     """fade_seen: x1_lock never reached fade_peak since the start, so hold_samples only."""
     sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
