@@ -71,10 +71,39 @@ def test_a_loss_held_longer_than_hold_samples_becomes_a_search():
     """Light blocked for 10 s: after hold_samples the runs search (lost, not steering)."""
     sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
                             PanTiltSupervisorConfig(start='tracking', hold_samples=40,
-                                                    fade_peak=0.0))
+                                                    fade_peak=0.0, hold_dark=False))
     link = PanTiltLinkConfig(noise=0.5, steps=200, blocked=(2.0, 12.0))
     simulate_pan_tilt(sup, link, 7)
     assert np.all(sup.state == LOST) and not np.any(sup.steering)
+
+
+def _hold_in_the_dark(hold_dark: bool, noise: float = 1.0) -> PanTiltSupervisor:
+    """Return the supervisor after a loss held 40 samples with no light from 2 s (6 s run)."""
+    config = PanTiltSupervisorConfig(start='tracking', hold_samples=40, fade_peak=0.0,
+                                     fade_hold=300, hold_after=0, hold_dark=hold_dark,
+                                     noise=noise)
+    sup = PanTiltSupervisor(ConicalScanEKF(runs=20), config)
+    simulate_pan_tilt(sup, PanTiltLinkConfig(noise=0.5, steps=120, blocked=(2.0, 12.0)), 7)
+    return sup
+
+
+def test_a_hold_that_runs_out_in_the_dark_is_held_on_as_a_fade():
+    """
+    hold_dark: a hold that runs out with x1hat g_r(0) under the detector's reference.
+
+    The light blocked: the EKF's x1hat g_r(0) falls under k_ref (0.8 V) within the 40
+    samples of the hold, which is then held on as a fade (fade_hold samples, steering)
+    instead of a search.  With hold_dark False, or a noise of at least 2 k_ref (the light
+    the CUSUM is set for), the runs search.
+    """
+    sup = _hold_in_the_dark(True)
+    assert sup.config.holds_dark
+    assert np.all(sup.x[:, 0] * sup.response.peak < sup.config.detector.reference)
+    assert np.all(sup.state == LOST) and np.all(sup.steering)
+    assert np.all(sup.fading) and np.all(sup.hold_limit == 300)
+    for searching in (_hold_in_the_dark(False), _hold_in_the_dark(True, noise=1.6)):
+        assert not searching.config.holds_dark
+        assert np.all(searching.state == LOST) and not np.any(searching.steering)
 
 
 def test_a_loss_of_a_dim_light_is_held_for_fade_hold():
@@ -90,7 +119,8 @@ def test_a_loss_of_a_dim_light_is_held_for_fade_hold():
 
 
 def _through_the_dark(drift_walk: float) -> tuple[float, float]:
-    """10 s of lock at 0.5 V, then 10 s with no light held as a fade (200 runs, seed 7).
+    """
+    Run 10 s of lock at 0.5 V, then 10 s with no light held as a fade (200 runs, seed 7).
 
     Return the fraction of runs with the boresight in the 15 deg cone at the end and the
     median error |bhat - b| of the drift estimate there (deg per step).
@@ -128,7 +158,7 @@ def test_a_light_never_seen_at_fade_peak_in_lock_has_not_faded():
     sup = PanTiltSupervisor(ConicalScanEKF(runs=20),
                             PanTiltSupervisorConfig(start='tracking', hold_samples=40,
                                                     fade_peak=10.0, fade_hold=300,
-                                                    hold_after=0))
+                                                    hold_after=0, hold_dark=False))
     link = PanTiltLinkConfig(noise=0.5, steps=200, blocked=(2.0, 12.0))
     simulate_pan_tilt(sup, link, 7)
     assert np.all(sup.x1_best * sup.response.peak < 10.0)

@@ -30,7 +30,9 @@ after a full window with few low samples), then the spiral again, centred on the
 mean pointing seen in good lock (a hand-over that never came into good lock resumes the
 spiral where it stopped); a lock younger than hold_after is not held, and a light
 that faded in lock (dim now, seen bright since the hand-over) is held fade_hold samples,
-then, with fade_look, looked for by one spiral pass that follows the drift model.  The
+then, with fade_look, looked for by one spiral pass that follows the drift model; a hold
+that runs out with the EKF's light under the detector's reference (hold_dark: too dim
+for the search to find) is held on as a fade.  The
 supervisor follows the mount's joints [pan, tilt] from `joints0` as the mount does
 (joint_turn of each turn at the tilt it is made at): a
 search is a pattern of directions on the sphere, and tangent-plane turns do not add up to
@@ -209,6 +211,14 @@ class PanTiltSupervisor:
             self.state[self.resumed] = TRACKING
             self.held[self.resumed] = 0
             timeout = holding & ~steady & (self.held > self.hold_limit)
+            if cfg.holds_dark:
+                # a light too dim for the search to find: held on as a fade
+                dark = timeout & ~self.fading & (self.tracker.x[:, 0] * self.response.peak
+                                                 < cfg.detector.reference)
+                self.hold_limit = np.where(dark, max(cfg.fade_hold, cfg.hold_samples),
+                                           self.hold_limit)
+                self.fading |= dark
+                timeout &= ~dark
             look = timeout & self.fading & (cfg.fade_look > 0)
             self._look(look, turn, mean)
             self._search(timeout & ~look, turn)

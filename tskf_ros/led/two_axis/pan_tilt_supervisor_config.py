@@ -84,6 +84,19 @@ class PanTiltSupervisorConfig:
     # spiral has already crossed the inner part, and a light near the fit is there too
     # (False: the centre again; at 1 V, 61 runs of 7000 not acquired within 10 s, 53 so)
     resume: bool = True
+    # a hold that runs out while the EKF's peak x1hat g_r(0) is under the detector's
+    # reference (k_ref: a light the spiral's CUSUM would not find) is held on as a fade,
+    # fade_hold samples, instead of searching: a search in the dark only carries the
+    # pointing away from where the drift model holds it (False: search; at 1 V, 149 runs
+    # of 350 000 lost at the end against 109).  Only while the noise is under 2 k_ref, the
+    # light the CUSUM is set for (`holds_dark`): at 2 V and 2.5 V, where a dark hold is
+    # more often a lost pointing, it lost more runs (doc/design/two_axis.md)
+    hold_dark: bool = True
+
+    @property
+    def holds_dark(self) -> bool:
+        """Tell whether a hold that runs out in the dark is held on (hold_dark, the noise)."""
+        return self.hold_dark and self.noise < 2.0 * self.detector.reference
 
     def __post_init__(self) -> None:
         """Check the supervisor's settings; raise AlignmentError with the reason."""
