@@ -98,11 +98,11 @@ class ConicalEKFConfig:
     # pull on d leak into a drift of the wrong sign, which the feedforward then steered)
     P0: tuple[float, ...] = (4.0, 25.0, 25.0, 0.004, 0.004)
     # Q per nominal step: Table I's Q_sys for x1; twice its 0.01 per pointing axis; the
-    # drift's walk at the link's size (1e-8, as CONSISTENT: the link's drift changes by
-    # about 2e-9 per step), so that bhat is the drift of the whole lock and a fade hold
-    # steers on it (1e-5 let the dim samples before a fade carry bhat off: 140 runs of
-    # 250 000 lost at the end at 1 V against 106).  The defaults are the closed loop's
-    # (see CONSISTENT for the filter whose NEES is in its band, and
+    # drift's walk at the link's size (1e-8, as CONSISTENT: the link's drift walks by a
+    # variance of about 2e-9 per step), so that bhat is the drift of the whole lock and
+    # a fade hold steers on it (1e-5 let the dim samples before a fade carry bhat off:
+    # 140 runs of 250 000 lost at the end at 1 V against 106).  The defaults are the
+    # closed loop's (see CONSISTENT for the filter whose NEES is in its band, and
     # doc/design/two_axis.md for why the closed loop keeps these)
     Q: tuple[float, ...] = (0.0025, 0.02, 0.02, 1e-8, 1e-8)
     noise: float = 0.2                # sigma of v (V)
