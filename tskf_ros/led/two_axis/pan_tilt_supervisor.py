@@ -215,7 +215,7 @@ class PanTiltSupervisor:
                 # a light too dim for the search to find: held on as a fade
                 dark = timeout & ~self.fading & (self.tracker.x[:, 0] * self.response.peak
                                                  < cfg.detector.reference)
-                self.hold_limit = np.where(dark, max(cfg.fade_hold, cfg.hold_samples),
+                self.hold_limit = np.where(dark, cfg.fade_limit,
                                            self.hold_limit)
                 self.fading |= dark
                 timeout &= ~dark
@@ -239,7 +239,7 @@ class PanTiltSupervisor:
             peak = self.response.peak
             faded = ((self.x1_lock * peak < cfg.fade_peak)
                      & ((self.x1_best * peak >= cfg.fade_peak) | (not cfg.fade_seen)))
-            self.hold_limit = np.where(hold & faded, max(cfg.fade_hold, cfg.hold_samples),
+            self.hold_limit = np.where(hold & faded, cfg.fade_limit,
                                        np.where(hold, cfg.hold_samples, self.hold_limit))
             self.fading = np.where(lost, hold & faded, self.fading)
             self.held[hold] = 1
@@ -300,7 +300,7 @@ class PanTiltSupervisor:
         self.tracker.restart_runs(back, self.look_x[back], self.look_P[back] + grown)
         self.looking[back] = False
         self.held[back] = 1
-        self.hold_limit[back] = max(cfg.fade_hold, cfg.hold_samples)
+        self.hold_limit[back] = cfg.fade_limit
         self.tracked[back] = 0
         self.lock.reset(back)
         return turn

@@ -94,6 +94,11 @@ class PanTiltSupervisorConfig:
     hold_dark: bool = True
 
     @property
+    def fade_limit(self) -> int:
+        """Return the samples a fade hold lasts from the declaration (never under a hold's)."""
+        return max(self.fade_hold, self.hold_samples)
+
+    @property
     def holds_dark(self) -> bool:
         """Tell whether a hold that runs out in the dark is held on (hold_dark, the noise)."""
         return self.hold_dark and self.noise < 2.0 * self.detector.reference
