@@ -26,6 +26,8 @@ only session.add is timed, by the thread's CPU time (time.thread_time_ns).  The 
   with the scan closed in the mount's joints (ConicalEKFConfig.closed_scan, the default);
 - open_scan: the same with the scan of before (closed_scan False: no closed_scan_turn);
 - fixed_radius: the same with the fixed 4 deg circle (dim_radius 0: no per-run radius);
+- wide_sigma: the same with the Gauss-Hermite regression while a pointing prior is wider
+  than 2.5 deg (ConicalEKFConfig.wide, off by default);
 - consistent: pan_tilt.filter consistent (Gauss-Hermite, two passes);
 - no_supervisor: the conical-scan EKF alone (pat.enabled false).
 
@@ -84,6 +86,7 @@ def cases(noise: float) -> list[Case]:
                                                         closed_scan=False))),
             Case('fixed_radius', replace(base, ekf=replace(ConicalEKFConfig(),
                                                            dim_radius=0.0))),
+            Case('wide_sigma', replace(base, ekf=replace(ConicalEKFConfig(), wide=2.5))),
             Case('consistent', replace(base, ekf=CONSISTENT)),
             Case('no_supervisor', replace(base, method='conical_ekf'))]
 

@@ -16,11 +16,13 @@
 """
 The sigma-point rules of N(0, I_3) for the conical-scan EKF's regression (`conical_ekf`).
 
-Points and weights of a standard normal in [x1, d_c, d_e]; the filter maps them through the
-Cholesky factor of its covariance (`ConicalScanEKF.linearise`).
+Points and weights of a standard normal in [x1, d_c, d_e], and the statistical linear
+regression of the scanned sample h = x1 g_r(|d + s|) over them (`regression`), mapped
+through the Cholesky factor of the filter's covariance (`ConicalScanEKF.linearise`).
 """
 
 import math
+from typing import Callable
 
 import numpy as np
 
@@ -57,3 +59,30 @@ def _sigma_points() -> dict[str, tuple[FloatArray, FloatArray]]:
 
 
 SIGMA_POINTS = _sigma_points()
+
+
+def regression(rule: str, g: Callable[[FloatArray], FloatArray], x: FloatArray, P: FloatArray,
+               offset: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """
+    Return (H, hx, R_h) of h = x1 g(|d + s|) regressed over N(x, P) on a rule's points.
+
+    The statistical linear regression (Lefebvre, Bruyninckx & De Schutter, IEEE TAC
+    2002; Sarkka, Bayesian Filtering and Smoothing, 2013, Sec. 5.6) on the points
+    x + L xi_p of [x1, d] (L L^T = P[:3, :3]; h does not depend on b), xi_p and w_p the
+    rule's (SIGMA_POINTS): hx = sum w_p h_p, P_xz = sum w_p L xi_p (h_p - hx),
+    H = P_xz^T P^-1 and R_h = sum w_p (h_p - hx)^2 - H P_xz >= 0, what the line leaves
+    out.  x (n, 5), P (n, 5, 5), offset s (2,) or (n, 2); H (n, 1, 5), hx and R_h (n,).
+    """
+    nodes, weights = SIGMA_POINTS[rule]
+    L = np.linalg.cholesky(P[:, :3, :3])
+    spread = nodes @ L.transpose(0, 2, 1)                    # L xi_p, (n, p, 3)
+    X = x[:, None, :3] + spread
+    e = X[:, :, 1:3] + np.reshape(offset, (-1, 1, 2))
+    Z = X[:, :, 0] * g(np.hypot(e[..., 0], e[..., 1]))
+    hx = Z @ weights
+    Pxz = (((Z - hx[:, None]) * weights)[:, None, :] @ spread)[:, 0, :]
+    H3 = np.linalg.solve(P[:, :3, :3], Pxz[:, :, None])[:, :, 0]
+    H = np.zeros((x.shape[0], 1, 5))
+    H[:, 0, :3] = H3
+    R_h = np.maximum(((Z - hx[:, None]) ** 2) @ weights - np.einsum('ri,ri->r', H3, Pxz), 0.0)
+    return H, hx, R_h
