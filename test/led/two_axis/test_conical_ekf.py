@@ -250,6 +250,9 @@ def test_a_wide_pointing_prior_is_linearised_by_the_sigma_point_rule():
     rule_1 = ConicalScanEKF(replace(base, linearisation='gauss_hermite_5'),
                             runs=1).linearise(x[1:2], P[1:2], offset)
     np.testing.assert_allclose(at_1[0], rule_1[0], rtol=1e-12)        # sd 2 > 1 deg: wide
+    P[0, 1, 2] = P[0, 2, 1] = 10.0                     # wide, but not positive definite
+    np.testing.assert_allclose(ekf.linearise(x[:1], P[:1], offset)[0], by_jacobian[0][:1],
+                               rtol=1e-12)                  # the Jacobian, no LinAlgError
 
 
 def test_nees_with_jittered_stamps_and_dropouts_at_1_volt():

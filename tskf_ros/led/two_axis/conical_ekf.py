@@ -304,7 +304,8 @@ class ConicalScanEKF:
         (`sigma_points.regression`); the linear update with them is the cubature
         (unscented) Kalman filter's, or the Gauss-Hermite filter's.  With 'taylor' and
         wide > 0, the runs whose pointing prior is wider than `wide` (the larger of the
-        sd of d_c and d_e) take `wide_linearisation`'s regression instead.
+        sd of d_c and d_e) take `wide_linearisation`'s regression instead (a prior with
+        a pinned state, or not positive definite, keeps the Jacobian).
         """
         c = self.config
         if c.linearisation != 'taylor':
@@ -316,9 +317,12 @@ class ConicalScanEKF:
                     & (np.min(np.diagonal(P[:, :3, :3], axis1=1, axis2=2), axis=1) > 0.0))
             if np.any(wide):
                 s = offset[wide] if np.ndim(offset) == 2 else offset
-                H[wide], hx[wide], R_h[wide] = regression(c.wide_linearisation,
-                                                          self.response.g, x[wide],
-                                                          P[wide], s)
+                try:
+                    H[wide], hx[wide], R_h[wide] = regression(c.wide_linearisation,
+                                                              self.response.g, x[wide],
+                                                              P[wide], s)
+                except np.linalg.LinAlgError:
+                    pass            # a prior not positive definite: the Jacobian's, as set
         return H, hx, R_h
 
     def taylor(self, x: FloatArray, P: FloatArray, offset: FloatArray
