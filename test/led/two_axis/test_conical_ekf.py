@@ -521,7 +521,8 @@ def test_closed_loop_boresight_within_mean_error_plus_radius():
                                  {'order': 3}, {'linearisation': 'ukf'}, {'iterations': 0},
                                  {'dim_radius': -1.0}, {'dim_radius': 15.0},
                                  {'radius': 0.0}, {'radius': 15.0},
-                                 {'dim_peak': 0.0}])
+                                 {'dim_peak': 0.0}, {'wide': -1.0}, {'wide': math.nan},
+                                 {'wide': math.inf}, {'wide_linearisation': 'taylor'}])
 def test_bad_configs_say_why(bad):
     """Each bad setting is one AlignmentError."""
     with pytest.raises(AlignmentError):

@@ -174,9 +174,10 @@ class ConicalEKFConfig:
         if self.linearisation not in LINEARISATIONS:
             raise AlignmentError(f'linearisation must be one of {LINEARISATIONS}, '
                                  f'got {self.linearisation!r}')
-        if self.wide_linearisation not in LINEARISATIONS or not self.wide >= 0.0:
-            raise AlignmentError(f'wide_linearisation must be one of {LINEARISATIONS} and '
-                                 f'wide >= 0 deg, got {self.wide_linearisation!r}, {self.wide}')
+        if self.wide_linearisation not in LINEARISATIONS[1:] or not self.wide >= 0.0:
+            raise AlignmentError(f'wide_linearisation must be one of {LINEARISATIONS[1:]} '
+                                 f'and wide >= 0 deg, got {self.wide_linearisation!r}, '
+                                 f'{self.wide}')
         if not 1 <= self.iterations <= 20:
             raise AlignmentError(f'iterations must be in [1, 20], got {self.iterations}')
 
