@@ -118,11 +118,11 @@ class ConicalEKFConfig:
     linearisation: str = 'taylor'
     # deg (0: off, the default): with 'taylor', the runs whose pointing prior is wider than
     # this (the larger sd of d_c, d_e) are linearised by `wide_linearisation` instead, as
-    # after a start or a hand-over, where the Jacobian at dhat misses what h does over a
-    # prior several degrees wide (`linearise`).  At 2.5 deg: 115 runs of 450 000 lost at
-    # the end at 1 V against 141, and the NEES in its band from 1 to 2.5 V, but 30 % more
-    # runs lost at 1.5 and 2 V, so off (doc/design/two_axis.md, "Sigma points while the
-    # pointing prior is wide")
+    # after a start or a hand-over, or in a long hold, where the Jacobian at dhat misses
+    # what h does over a prior several degrees wide (`linearise`).  At 2.5 deg: 115 runs
+    # of 450 000 lost at the end at 1 V against 141, and the ANEES in its band from 1 to
+    # 2.5 V, but more runs lost above 1 V (30 against 19 at 1.5 V, 225 against 173 at
+    # 2 V), so off (doc/design/two_axis.md, "Sigma points while the pointing prior is wide")
     wide: float = 0.0
     wide_linearisation: str = 'gauss_hermite_5'
     iterations: int = 1               # passes of the update (> 1: iterated, `update`)
