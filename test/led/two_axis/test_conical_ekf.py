@@ -227,7 +227,8 @@ def test_a_wide_pointing_prior_is_linearised_by_the_sigma_point_rule():
     Per run: the prior wider than `wide` takes the regression, a narrower one the Jacobian.
 
     Against the same filter configured wholly one way or the other; a pinned state
-    (variance 0) keeps the Jacobian, and wide 0 is the plain EKF.
+    (variance 0) or a prior not positive definite keeps the Jacobian, run by run, and
+    wide 0 is the plain EKF.
     """
     base = replace(ConicalEKFConfig(), noise=1.0, wide=2.5)
     ekf = ConicalScanEKF(base, runs=4)
@@ -251,8 +252,10 @@ def test_a_wide_pointing_prior_is_linearised_by_the_sigma_point_rule():
                             runs=1).linearise(x[1:2], P[1:2], offset)
     np.testing.assert_allclose(at_1[0], rule_1[0], rtol=1e-12)        # sd 2 > 1 deg: wide
     P[0, 1, 2] = P[0, 2, 1] = 10.0                     # wide, but not positive definite
-    np.testing.assert_allclose(ekf.linearise(x[:1], P[:1], offset)[0], by_jacobian[0][:1],
-                               rtol=1e-12)                  # the Jacobian, no LinAlgError
+    mixed = ekf.linearise(x, P, offset)            # the others as before, per run
+    np.testing.assert_allclose(mixed[0][0], by_jacobian[0][0], rtol=1e-12)  # no LinAlgError
+    np.testing.assert_allclose(mixed[0][2], by_rule[0][1], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(mixed[0][narrow], by_jacobian[0][narrow], rtol=1e-12, atol=1e-15)
 
 
 def test_nees_with_jittered_stamps_and_dropouts_at_1_volt():

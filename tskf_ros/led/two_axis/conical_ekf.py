@@ -313,17 +313,18 @@ class ConicalScanEKF:
             return regression(c.linearisation, self.response.g, x, P, offset)
         H, hx, R_h = self.taylor(x, P, offset)
         if c.wide > 0.0:
-            # a pinned state (variance 0, as the one-axis reduction's) keeps the Jacobian
-            wide = ((np.maximum(P[:, 1, 1], P[:, 2, 2]) > c.wide * c.wide)
-                    & (np.min(np.diagonal(P[:, :3, :3], axis1=1, axis2=2), axis=1) > 0.0))
+            wide = np.maximum(P[:, 1, 1], P[:, 2, 2]) > c.wide * c.wide
+            if np.any(wide):
+                # only a positive definite [x1, d] block has the rule's Cholesky factor: a
+                # pinned state (variance 0, as the one-axis reduction's) keeps the Jacobian
+                block = P[wide, :3, :3]
+                floor = 1e-12 * np.trace(block, axis1=1, axis2=2)
+                wide[wide] = np.linalg.eigvalsh(block)[:, 0] > floor
             if np.any(wide):
                 s = offset[wide] if np.ndim(offset) == 2 else offset
-                try:
-                    H[wide], hx[wide], R_h[wide] = regression(c.wide_linearisation,
-                                                              self.response.g, x[wide],
-                                                              P[wide], s)
-                except np.linalg.LinAlgError:
-                    pass            # a prior not positive definite: the Jacobian's, as set
+                H[wide], hx[wide], R_h[wide] = regression(c.wide_linearisation,
+                                                          self.response.g, x[wide],
+                                                          P[wide], s)
         return H, hx, R_h
 
     def taylor(self, x: FloatArray, P: FloatArray, offset: FloatArray
