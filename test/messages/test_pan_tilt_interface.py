@@ -124,6 +124,15 @@ def test_the_scan_circle_parameters_reach_the_filter_and_its_radius():
     assert fixed == replace(ConicalEKFConfig(), dim_radius=0.0)
 
 
+def test_the_wide_prior_reaches_the_filter():
+    """pan_tilt.wide_prior: 0 (off) by default; a width turns the regression on per run."""
+    assert two_axis().session.session.ekf == ConicalEKFConfig()
+    ekf = two_axis(**{'pan_tilt.wide_prior': 2.5}).session.session.ekf
+    assert ekf == replace(ConicalEKFConfig(), wide=2.5)
+    assert PanTiltSession(two_axis(**{'pan_tilt.wide_prior': 2.5}).session.session
+                          ).tracker.config.wide == 2.5
+
+
 @pytest.mark.parametrize('gain', [0.25, 0.5, 1.5])
 def test_gain_is_the_p_law_of_eq_21_in_two_axes(gain):
     """The first turn is -G dhat and the scan's step (d has no drift yet: b stays 0)."""

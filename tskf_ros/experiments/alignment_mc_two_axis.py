@@ -300,6 +300,11 @@ def parser() -> argparse.ArgumentParser:
                    default=ConicalEKFConfig.dim_peak, metavar='V',
                    help='the estimated peak under which the scan widens, V '
                         f'({ConicalEKFConfig.dim_peak:g})')
+    p.add_argument('--wide', type=arguments.number(0.0, 90.0), default=ConicalEKFConfig.wide,
+                   metavar='DEG',
+                   help="the EKF's runs whose pointing prior is wider than DEG take the "
+                        'Gauss-Hermite regression instead of the Jacobian (0: off, the '
+                        'default; 2.5: fewer lost at 1 V, more at 1.5 and 2 V)')
     p.add_argument('--clip-four-point', action='store_true',
                    help='clip gamma_p of eq. (26) to [-gamma, gamma] (as --clip-three-point)')
     p.add_argument('--run-noise', type=arguments.noise_volts, default=1.0,
@@ -310,6 +315,11 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+def ekf_config(args: argparse.Namespace) -> ConicalEKFConfig:
+    """Return the conical-scan EKF the arguments set (its scan circle and wide prior)."""
+    return ConicalEKFConfig(dim_radius=args.dim_radius, dim_peak=args.dim_peak, wide=args.wide)
+
+
 def config_record(args: argparse.Namespace) -> dict[str, Any]:
     """Return the JSON's config: the settings and the definitions of the numbers."""
     return {'axes': 2, 'runs': args.runs, 'beta_deg_per_s': args.beta, 'steps': args.steps,
@@ -318,6 +328,7 @@ def config_record(args: argparse.Namespace) -> dict[str, Any]:
             'offset0_deg': args.offset0, 'cold_start_deg': args.cold_start,
             'clip_four_point': args.clip_four_point, 'max_intensity_v': led.MAX_INTENSITY,
             'dim_radius_deg': args.dim_radius, 'dim_peak_v': args.dim_peak,
+            'wide_deg': args.wide,
             'methods': {name: METHODS[name] for name in args.methods},
             'tracking': {'angle_deg': led.TRACKING_ANGLE,
                          'level_v': led.TRACKING_LEVEL * led.MAX_INTENSITY},
@@ -374,7 +385,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         out = sweep(args.noise_levels, args.methods, runs=args.runs, link=link, seed=args.seed,
                     response=response, clip=args.clip_four_point, progress=progress,
                     workers=args.workers, scheduler=args.scheduler,
-                    ekf=ConicalEKFConfig(dim_radius=args.dim_radius, dim_peak=args.dim_peak))
+                    ekf=ekf_config(args))
     except monte_carlo.SchedulerError as exc:
         print(f'alignment_mc: {exc}', file=sys.stderr)
         return 1
@@ -387,7 +398,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         progress(f'wrote {args.json}')
     if args.png:
         run_link = dataclasses.replace(link, noise=args.run_noise)
-        ekf = ConicalEKFConfig(dim_radius=args.dim_radius, dim_peak=args.dim_peak)
+        ekf = ekf_config(args)
         runs = {name: simulate(Point(name, 1, run_link, args.seed, response,
                                      args.clip_four_point, ekf))[0] for name in args.methods}
         start = (f'cold start in a {args.cold_start:g} deg cone' if args.cold_start
