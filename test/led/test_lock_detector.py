@@ -78,6 +78,18 @@ def test_m_of_n_low_intensity():
     assert not any(v[1] for v in verdicts)
 
 
+def test_counted_is_the_nis_values_in_the_window():
+    # a missing sample, or one without a NIS, or one outside the mask is not counted;
+    # the oldest leaves the window
+    lock = LockDetector(LockConfig(window=3, low_count=2, corroborate=0), runs=2)
+    seen = []
+    for z, nis, on in ((1.0, 0.5, True), (np.nan, 0.5, True), (1.0, np.nan, True),
+                       (1.0, 0.5, False), (1.0, 0.5, True), (1.0, 0.5, True)):
+        lock.update(np.array([z, 1.0]), np.array([nis, 0.5]), np.array([on, True]))
+        seen.append(lock.counted.tolist())
+    assert seen == [[1, 1], [1, 2], [1, 3], [0, 3], [1, 3], [2, 3]]
+
+
 def test_sweep_covers_the_range_in_its_worst_case_travel():
     config = ScanConfig(speed=3.0, first=15.0, pitch=25.0, half_width=90.0)
     sweep = ExpandingSweep(config, runs=1)

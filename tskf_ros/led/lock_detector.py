@@ -34,6 +34,7 @@ import math
 from typing import NamedTuple, Optional
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tskf_ros.core import chi_square
 from tskf_ros.led.acquisition_scan import Mask
@@ -133,6 +134,11 @@ class LockDetector:
             self.bands = np.array([nis_band(k, config.nis_alpha, config.gate)
                                    for k in range(config.window + 1)])
         self.config = config
+
+    @property
+    def counted(self) -> NDArray[np.int_]:
+        """Per run: the NIS values in the window (the samples the filter took, gated)."""
+        return self.kept.sum(axis=0)
 
     def reset(self, mask: Mask) -> None:
         """Empty the windows of the runs in mask (after a hand-over or a reset)."""

@@ -21,23 +21,22 @@ prior), with its states and tests: acquiring, the spiral search of spiral_search
 the CUSUM of spot_detector sees light; hand-over, the EKF starts from the least-squares
 fit of what the spiral saw (x1 and d from it, the variances from its Fisher bound,
 inflated and clipped), the boresight turned onto the fitted source plus the next scan
-offset; tracking, the EKF steers, watched by lock_detector (the windowed NIS of the
-EKF's own innovations and M of N intensities below lock.level, reused unchanged; not
-the one-axis supervisor's level that follows the light in lock, which a hand-over onto
-the wrong side of the light teaches to take the dark for the light); lost, the EKF holds
-a declared loss for hold_samples (it keeps steering on its drift model; tracking again
-after a full window with few low samples), then the spiral again, centred on the last
-mean pointing seen in good lock (a hand-over that never came into good lock resumes the
-spiral where it stopped); a lock younger than hold_after is not held, and a light
-that faded in lock (dim now, seen bright since the hand-over) is held fade_hold samples,
-then, with fade_look, looked for by one spiral pass that follows the drift model; a hold
-that runs out with the EKF's light under the detector's reference (hold_dark: too dim
-for the search to find) is held on as a fade.  The
-supervisor follows the mount's joints [pan, tilt] from `joints0` as the mount does
-(joint_turn of each turn at the tilt it is made at): a
-search is a pattern of directions on the sphere, and tangent-plane turns do not add up to
-one (over a 30 deg spiral they would miss its centre by tens of degrees).  Vectorised
-over runs.
+offset; tracking, the EKF steers, watched by lock_detector (the windowed NIS of the EKF's
+own innovations and M of N intensities below lock.level, reused unchanged; not the
+one-axis supervisor's level that follows the light in lock, which a hand-over onto the
+wrong side of the light teaches to take the dark for the light); lost, the EKF holds a
+declared loss for hold_samples (it keeps steering on its drift model; tracking again
+after a full window with few low samples, half of it or more arrived), then the spiral
+again, centred on the last mean pointing seen in good lock (a hand-over that never came
+into good lock resumes the spiral where it stopped); a lock younger than hold_after is
+not held, and a light that faded in lock (dim now, seen bright since the hand-over) is
+held fade_hold samples, then, with fade_look, looked for by one spiral pass that follows
+the drift model; a hold that runs out with the EKF's light under the detector's reference
+(hold_dark: too dim for the search to find) is held on as a fade. The supervisor follows
+the mount's joints [pan, tilt] from `joints0` as the mount does (joint_turn of each turn
+at the tilt it is made at): a search is a pattern of directions on the sphere, and
+tangent-plane turns do not add up to one (over a 30 deg spiral they would miss its centre
+by tens of degrees). Vectorised over runs.
 """
 
 from typing import Optional
@@ -164,7 +163,12 @@ class PanTiltSupervisor:
         nis = np.where(steering, self.tracker.nis, np.nan)
         self.verdict = verdict = self.lock.update(z, nis, steering)
         self.tracked = np.where(steering, self.tracked + 1, 0)
-        steady = (self.tracked >= cfg.lock.window) & (verdict.low < max(cfg.lock.corroborate, 1))
+        # few low samples of a window at least half full (the NIS test's rule): a blocked
+        # beam whose dark readings arrive as missing (a node's negative_is_missing) leaves
+        # a few low samples, which are not few of many
+        steady = ((self.tracked >= cfg.lock.window)
+                  & (verdict.low < max(cfg.lock.corroborate, 1))
+                  & (self.lock.counted >= (cfg.lock.window + 1) // 2))
         good = tracking & steady
         mean = self.joints - joint_turn(s_now, self.joints[:, 1])
         self.last_good = np.where(good[:, None], mean, self.last_good)
