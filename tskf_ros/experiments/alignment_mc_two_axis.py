@@ -406,7 +406,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         fig = plot_two_axis(args.noise_levels, out['results'], runs, title=(
             f'Two axes: beta = {args.beta:g} deg/s per axis, {start}, {args.runs} runs, '
             f'seed {args.seed}'), run_title=f'one run (seed {args.seed}), noise '
-                                            f'{args.run_noise:g} V')
+                                            f'{args.run_noise:g} V',
+                            acquisition=bool(args.cold_start))
         output.save_figure(fig, args.png, dpi=120)
         progress(f'wrote {args.png}')
     return 0

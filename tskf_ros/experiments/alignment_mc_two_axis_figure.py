@@ -36,29 +36,40 @@ ZOOM = 5.0          # deg: the half-width of the inset around the LED
 
 def plot_two_axis(noise_levels: Sequence[float], results: dict,
                   runs: Mapping[str, PanTiltTrajectory], *, title: str,
-                  run_title: str) -> 'Figure':
+                  run_title: str, acquisition: bool = False) -> 'Figure':
     """
     Left: tracking % by angle against noise, 95 % intervals as error bars; right: one run.
 
-    The run is the error of the mean pointing in the tangent plane at the source (azimuth
-    on the sky, elevation) of run 0 of each trajectory, with the 15 deg tracking cone.
+    acquisition (a cold start): the left panel is the % of runs acquired within 10 s
+    instead, with their Wilson intervals.  The run is the error of the mean pointing in
+    the tangent plane at the source (azimuth on the sky, elevation) of run 0 of each
+    trajectory, with the 15 deg tracking cone.
     """
     from matplotlib.figure import Figure  # here: 0.7 s to import
     fig = Figure(figsize=(12.0, 5.2))
     left, right = fig.subplots(1, 2, gridspec_kw={'width_ratios': [1.25, 1.0]})
     x = np.asarray(noise_levels, dtype=float)
     for name, res in results.items():
-        mean = np.asarray(res['angular']['mean'])
-        ci = np.asarray(res['angular']['ci95'], dtype=float).reshape(-1, 2)
+        if acquisition:
+            mean = 100.0 * np.asarray(res['acquired_within_10s'], dtype=float)
+            ci = 100.0 * np.asarray(res['acquired_within_10s_ci95'], dtype=float).reshape(-1, 2)
+        else:
+            mean = np.asarray(res['angular']['mean'])
+            ci = np.asarray(res['angular']['ci95'], dtype=float).reshape(-1, 2)
         yerr = np.vstack([mean - ci[:, 0], ci[:, 1] - mean])
         left.errorbar(x, mean, yerr=np.maximum(yerr, 0.0), fmt='-o', ms=3.5, capsize=3,
                       lw=1.2, color=COLORS.get(name), label=LABELS.get(name, name))
     left.set_xlabel('noise level (std of v, V)')
-    left.set_ylabel('samples tracked: off-axis angle <= 15 deg (%)')
+    if acquisition:
+        left.set_ylabel('runs acquired within 10 s (%)')
+        left.set_title('acquisition from a cold start against noise\n(error bars: 95 % Wilson '
+                       'interval; acquired: 1 s in a row within 15 deg)', fontsize=10)
+    else:
+        left.set_ylabel('samples tracked: off-axis angle <= 15 deg (%)')
+        left.set_title('tracking against noise (error bars: 95 % bootstrap interval)',
+                       fontsize=10)
     left.set_ylim(0, 102)
     left.grid(alpha=0.3)
-    left.set_title('tracking against noise (error bars: 95 % bootstrap interval)',
-                   fontsize=10)
     left.legend(fontsize=8, loc='lower left')
     for name, traj in runs.items():
         d = traj.error[:, 0, :]
@@ -71,7 +82,7 @@ def plot_two_axis(noise_levels: Sequence[float], results: dict,
     cone = led.TRACKING_ANGLE
     right.plot(cone * np.cos(phase), cone * np.sin(phase), color='tab:red', ls=':', lw=1.0,
                label=f'{cone:g} deg tracking cone')
-    right.plot(0.0, 0.0, 'r+', ms=10)
+    right.plot(0.0, 0.0, 'r+', ms=10, label='the LED (the source)')
     # a zoom on the LED: the EKFs' paths are within a few degrees of it
     zoom = right.inset_axes((0.04, 0.04, 0.3, 0.3))
     for name, traj in runs.items():
@@ -82,6 +93,8 @@ def plot_two_axis(noise_levels: Sequence[float], results: dict,
     zoom.set_ylim(-ZOOM, ZOOM)
     zoom.set_aspect('equal')
     zoom.tick_params(labelsize=7)
+    zoom.set_xlabel('azimuth (deg)', fontsize=6, labelpad=1)
+    zoom.set_ylabel('elevation (deg)', fontsize=6, labelpad=1)
     zoom.set_title(f'zoom on the LED, +-{ZOOM:g} deg', fontsize=7)
     right.set_aspect('equal', adjustable='datalim')
     right.set_xlabel('azimuth error on the sky, (a - a_s) cos e_s (deg)')
