@@ -16,6 +16,7 @@
 """The alignment node's two-axis parameters: which core aligner the shared choices name."""
 
 from dataclasses import replace
+import math
 
 import numpy as np
 import pytest
@@ -63,6 +64,11 @@ def test_the_shared_limits_reach_the_session():
     ({'controller': 'lqg', 'pat.enabled': True}, 'pat.enabled needs controller p'),
     ({'pan_tilt.joints': ['pan', '']}, 'pan_tilt.joints must be two non-empty joint names'),
     ({'axes': 3}, 'axes must be one of 1, 2, got 3'),
+    ({'intensity_range': [1.0]},
+     'intensity_range must be [lo, hi] with finite lo < hi (or empty), got [1.0]'),
+    ({'intensity_range': [5.0, 1.0]}, 'intensity_range must be [lo, hi]'),
+    ({'state_limit': 5.0}, 'P0 + Q (one step) has sqrt(trace) 7.35 beyond state_limit 5'),
+    ({'intensity_range': [math.nan, 1.0]}, 'intensity_range must be [lo, hi]'),
     ({'pan_tilt.filter': 'unscented'},
      "pan_tilt.filter must be one of first_order, consistent, got 'unscented'"),
 ])

@@ -209,8 +209,10 @@ def test_an_empty_joint_name_is_refused_in_one_line(ros_context, node, joints):
 @pytest.mark.parametrize('extra, why', [
     ({'algorithm': 'hill_climbing'}, 'axes 2 runs the conical-scan EKF: algorithm must be '
      "'ekf', got 'hill_climbing'"),
-    ({'pan_tilt.initial': [0.0, 85.0]}, 'tilt_limits must be within +-80 deg and hold '
-     'joints0'),
+    ({'pan_tilt.initial': [0.0, 85.0]}, "the start tilt 85 deg (joints0, the node's "
+     'pan_tilt.initial) is outside tilt_limits [-80.0, 80.0]'),
+    ({'intensity_range': [1.0]}, 'intensity_range must be [lo, hi] with finite lo < hi (or '
+     'empty), got [1.0]'),
     ({'controller': 'lqg', 'pat.enabled': True}, 'pat.enabled needs controller p'),
 ])
 def test_a_two_axis_alignment_config_that_cannot_run_is_refused(ros_context, extra, why):

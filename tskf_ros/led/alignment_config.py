@@ -55,6 +55,15 @@ def _matrix(values: Sequence[float], name: str, *, definite: bool) -> FloatArray
     return m
 
 
+def check_range(name: str, values: Sequence[float], *, empty: bool = False) -> None:
+    """Raise AlignmentError unless values is [lo, hi] with finite lo < hi (or, if empty, [])."""
+    r = tuple(values)
+    if (r or not empty) and (len(r) != 2 or not all(math.isfinite(v) for v in r)
+                             or not r[0] < r[1]):
+        raise led.AlignmentError(f'{name} must be [lo, hi] with finite lo < hi'
+                                 f'{" (or empty)" if empty else ""}, got {list(r)}')
+
+
 @dataclass(frozen=True)
 class AlignmentConfig:
     """The session's settings (Table I defaults); angles in degrees, intensities in volts."""
@@ -108,12 +117,9 @@ class AlignmentConfig:
                 raise led.AlignmentError(f'{name} must be >= 0, got {getattr(self, name)}')
         if not self.state_limit > 0:
             raise led.AlignmentError('state_limit must be > 0')
-        for name in ('intensity_range', 'base_limits'):
-            r = tuple(getattr(self, name))
-            if r and (len(r) != 2 or not all(math.isfinite(v) for v in r) or not r[0] < r[1]):
-                raise led.AlignmentError(f'{name} must be [lo, hi] with finite lo < hi'
-                                         f'{" (or empty)" if name == "intensity_range" else ""}'
-                                         f', got {list(r)}')
+        check_range('intensity_range', self.intensity_range, empty=True)
+        if tuple(self.base_limits):
+            check_range('base_limits', self.base_limits)
         if len(tuple(self.base_limits)) != 2:
             raise led.AlignmentError(f'base_limits must be [lo, hi], got {list(self.base_limits)}')
         lo, hi = self.base_limits

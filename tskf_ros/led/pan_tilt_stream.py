@@ -35,6 +35,7 @@ import numpy as np
 
 from tskf_ros.core.diagnostic_status import expected_frequency, InputStream, Status
 from tskf_ros.core.units import NS
+from tskf_ros.led.alignment_config import check_range
 from tskf_ros.led.alignment_diagnostics import aligner_status, pointing_status, time_scale
 from tskf_ros.led.alignment_session import (AlignStats, MISSING_REASONS, REJECT_REASONS,
                                             RESET_REASONS)
@@ -58,6 +59,10 @@ class PanTiltStreamConfig:
     max_gap: float = 1.0                    # s: a longer gap warns in 'time scale'
     expected_rate: float = 0.0              # Hz the input frequency expects; 0: 1 / dt
     rate_tolerance: float = 0.5
+
+    def __post_init__(self) -> None:
+        """Check the node's checks (as one axis does); raise AlignmentError with the reason."""
+        check_range('intensity_range', self.intensity_range, empty=True)
 
     @property
     def dt(self) -> float:

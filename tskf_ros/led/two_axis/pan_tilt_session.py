@@ -75,10 +75,23 @@ class PanTiltSessionConfig:
             raise AlignmentError('dt, noise and state_limit must be > 0')
         if self.max_step < 0 or self.max_backward < 0:
             raise AlignmentError('max_step and max_backward must be >= 0')
+        # as one axis: the filter's start, and one nominal step from it, within state_limit
+        # (else every sample would restart it)
+        if max(abs(v) for v in self.ekf.x0) > self.state_limit:
+            raise AlignmentError(f'x0 {list(self.ekf.x0)} is beyond state_limit '
+                                 f'{self.state_limit:g}')
+        spread = math.sqrt(sum(self.ekf.P0) + sum(self.ekf.Q))
+        if spread > self.state_limit:
+            raise AlignmentError(f'P0 + Q (one step) has sqrt(trace) {spread:.3g} beyond '
+                                 f'state_limit {self.state_limit:g}')
         lo, hi = self.tilt_limits
-        if not -MAX_ELEVATION <= lo < hi <= MAX_ELEVATION or not lo <= self.joints0[1] <= hi:
-            raise AlignmentError(f'tilt_limits must be within +-{MAX_ELEVATION:g} deg and '
-                                 f'hold joints0, got {list(self.tilt_limits)}')
+        if not -MAX_ELEVATION <= lo < hi <= MAX_ELEVATION:
+            raise AlignmentError(f'tilt_limits must be [lo, hi] with lo < hi within '
+                                 f'+-{MAX_ELEVATION:g} deg, got {list(self.tilt_limits)}')
+        if not lo <= self.joints0[1] <= hi:
+            raise AlignmentError(f"the start tilt {self.joints0[1]:g} deg (joints0, the node's "
+                                 f'pan_tilt.initial) is outside tilt_limits '
+                                 f'{list(self.tilt_limits)}')
 
     def make_aligner(self, joints: Optional[tuple[float, float]] = None) -> object:
         """Build the configured aligner for one run, its mount at joints (None: joints0)."""
