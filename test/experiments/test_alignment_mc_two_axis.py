@@ -16,6 +16,7 @@
 """alignment_mc --axes 2 (tskf_ros.experiments.alignment_mc_two_axis): its JSON and its CLI."""
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -139,16 +140,47 @@ def test_one_axis_is_the_default(tmp_path, capsys):
     (['--axes', '2', '--wide', 'nan'], 'argument --wide: must be a finite number in [0, 90]'),
     (['--axes', '2', '--json', '/'], '--json /: / is a folder'),
     (['--axes', '2', '--png', 'FILE/a.png'], 'is not a folder'),
+    # a FIFO (or a device) is not replaced by a plain file; a name too long for the file
+    # system is found before the run, not after it
+    (['--axes', '2', '--json', 'FIFO'], 'fifo is not a plain file'),
+    (['--axes', '2', '--json', 'DIR/' + 'x' * 300 + '.json'], 'cannot write in'),
 ])
 def test_a_bad_argument_is_one_line_and_exit_2(argv, message, capsys, tmp_path):
-    # FILE: a file where a folder should be
+    # FILE: a file where a folder should be; FIFO: a named pipe; DIR: a folder
     (tmp_path / 'file').write_text('')
-    argv = [a.replace('FILE', str(tmp_path / 'file')) for a in argv]
+    os.mkfifo(tmp_path / 'fifo')
+    argv = [a.replace('FILE', str(tmp_path / 'file')).replace('FIFO', str(tmp_path / 'fifo'))
+            .replace('DIR', str(tmp_path)) for a in argv]
     with pytest.raises(SystemExit) as info:
         alignment_mc.main(argv)
     assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert message in err[-1] and 'Traceback' not in '\n'.join(err), err
+
+
+def test_an_output_that_cannot_be_written_after_the_run_is_one_line(tmp_path, capsys,
+                                                                    monkeypatch):
+    # the folder checked before the run, then gone read-only (a disk that filled): one
+    # line, exit 1, and nothing left half-written
+    out = tmp_path / 'a.json'
+
+    def refuse(path, data):
+        raise OSError(28, 'No space left on device')
+    monkeypatch.setattr(alignment_mc_two_axis.output, 'write_json', refuse)
+    assert alignment_mc.main(['--axes', '2', '--runs', '2', '--steps', '20', '--noise-levels',
+                              '0.5', '--methods', 'four_point', '--json', str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == ('alignment_mc: cannot write the output: [Errno 28] No space left on '
+                       'device') and 'Traceback' not in '\n'.join(err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_fifo_is_not_replaced_by_an_output(tmp_path):
+    fifo = tmp_path / 'f.json'
+    os.mkfifo(fifo)
+    with pytest.raises(OSError, match='is not a plain file'):
+        alignment_mc_two_axis.output.write_json(fifo, {'a': 1})
+    assert fifo.is_fifo() and sorted(p.name for p in tmp_path.iterdir()) == ['f.json']
 
 
 def test_the_numbers_do_not_depend_on_the_workers(tmp_path, capsys):

@@ -29,7 +29,6 @@ wrap(a - a_s) cos e_s) and elevation (e - e_s), in degrees.
 import argparse
 from concurrent.futures import ProcessPoolExecutor
 import dataclasses
-import os
 from pathlib import Path
 import sys
 import time
@@ -338,18 +337,9 @@ def config_record(args: argparse.Namespace) -> dict[str, Any]:
                              'cross-elevation angle wrap(a - a_s) cos e_s, elevation e - e_s'}
 
 
-def unwritable(path: Path) -> Optional[str]:
-    """Return why `path` cannot be written (before the long run), or None."""
-    if path.is_dir():
-        return f'{path} is a folder'
-    parent = path.parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        return f'{parent} is not a folder'
-    if not os.access(parent, os.W_OK):
-        return f'cannot write in {parent}'
-    return None
+def progress(line: str) -> None:
+    """Say how the run goes, on stderr."""
+    print(f'[alignment_mc] {line}', file=sys.stderr, flush=True)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -357,6 +347,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parser().parse_args(argv)
     if args.methods is None:
         args.methods = default_methods()
+    args.methods = list(dict.fromkeys(args.methods))      # a method named twice runs once
     unknown = [name for name in args.methods if name not in METHODS]
     if unknown or not args.methods:
         parser().error(f'--methods: unknown {unknown} (known: {", ".join(METHODS)})')
@@ -364,12 +355,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if missing:
         parser().error(f'--methods: {", ".join(missing)} cannot be built in this version')
     for option, path in (('--json', args.json), ('--png', args.png)):
-        why = unwritable(path) if path is not None else None
+        why = output.unwritable(path) if path is not None else None
         if why:
             parser().error(f'{option} {path}: {why}')
-
-    def progress(line: str) -> None:
-        print(f'[alignment_mc] {line}', file=sys.stderr, flush=True)
 
     try:
         response = RadialResponse()
@@ -393,6 +381,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     print(table(args.noise_levels, out['results']))
     data = {'noise_levels': list(args.noise_levels), 'results': out['results'],
             'config': config_record(args), 'elapsed_s': out['elapsed_s']}
+    try:
+        write_outputs(args, data, out['results'], link, response)
+    except OSError as exc:
+        # checked before the run; a disk that filled or a folder that went meanwhile
+        print(f'alignment_mc: cannot write the output: {exc}', file=sys.stderr)
+        return 1
+    return 0
+
+
+def write_outputs(args: argparse.Namespace, data: dict, results: dict,
+                  link: PanTiltLinkConfig, response: RadialResponse) -> None:
+    """Write the JSON and the figure that the arguments ask for, each whole or not at all."""
     if args.json:
         output.write_json(args.json, data)
         progress(f'wrote {args.json}')
@@ -403,14 +403,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                      args.clip_four_point, ekf))[0] for name in args.methods}
         start = (f'cold start in a {args.cold_start:g} deg cone' if args.cold_start
                  else f'start {args.offset0:g} deg off')
-        fig = plot_two_axis(args.noise_levels, out['results'], runs, title=(
+        fig = plot_two_axis(args.noise_levels, results, runs, title=(
             f'Two axes: beta = {args.beta:g} deg/s per axis, {start}, {args.runs} runs, '
             f'seed {args.seed}'), run_title=f'one run (seed {args.seed}), noise '
                                             f'{args.run_noise:g} V',
                             acquisition=bool(args.cold_start))
         output.save_figure(fig, args.png, dpi=120)
         progress(f'wrote {args.png}')
-    return 0
 
 
 if __name__ == '__main__':

@@ -24,8 +24,39 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 
+def unwritable(path: Path) -> Optional[str]:
+    """
+    Return why `path` cannot be written as an output (before a long run), or None.
+
+    By trying: a folder, or something there that is not a plain file (a FIFO, a device),
+    is refused; the nearest existing folder above it must take a temporary file of the
+    name this module writes through (a read-only or virtual file system, a name too
+    long, no permission: say so).
+    """
+    path = Path(path)
+    try:
+        if path.is_dir():
+            return f'{path} is a folder'
+        if path.exists() and not path.is_file():
+            return f'{path} is not a plain file'
+        parent = path.parent
+        while not parent.exists():
+            parent = parent.parent
+        if not parent.is_dir():
+            return f'{parent} is not a folder'
+        fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.part', dir=parent)
+    except OSError as exc:
+        return f'cannot write in {path.parent}: {exc.strerror or exc}'
+    os.close(fd)
+    os.unlink(tmp)
+    return None
+
+
 def _replace_from_temp(path: Path, write) -> Path:
     path = Path(path)
+    if path.exists() and not path.is_file() and not path.is_dir():
+        # a FIFO or a device is not replaced by a plain file
+        raise OSError(f'{path} is not a plain file')
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.part', dir=path.parent)
     try:
