@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 import pytest
+from sample_filter import SampleFilter
 import scipy.stats
 
 from tskf_ros.led.intensity_model import AlignmentError, IncidenceResponse
@@ -553,18 +554,9 @@ def test_one_spike_of_30_volts_does_not_lose_the_light(clip, inside):
     """
     from tskf_ros.led.two_axis.pan_tilt_simulation import simulate_pan_tilt
     ekf = ConicalScanEKF(ConicalEKFConfig(noise=0.2, innovation_clip=clip), runs=200)
-
-    class Spiked:
-        runs = 200
-
-        @property
-        def scan_offset(self):
-            return ekf.scan_offset
-
-        def step(self, stamp, z):
-            return ekf.step(stamp, np.full_like(z, 30.0) if abs(stamp - 4.0) < 1e-9 else z)
-
-    traj = simulate_pan_tilt(Spiked(), PanTiltLinkConfig(noise=0.2, steps=400), 3)
+    spiked = SampleFilter(ekf, lambda stamp, z: np.full_like(z, 30.0)
+                          if abs(stamp - 4.0) < 1e-9 else z)
+    traj = simulate_pan_tilt(spiked, PanTiltLinkConfig(noise=0.2, steps=400), 3)
     assert (np.mean(traj.theta[-1] <= 15.0) >= inside) == (clip > 0)
 
 

@@ -17,6 +17,7 @@
 
 import numpy as np
 import pytest
+from sample_filter import SampleFilter
 
 from tskf_ros.led.intensity_model import AlignmentError
 from tskf_ros.led.supervisor import LOST, TRACKING
@@ -79,21 +80,14 @@ def test_a_dark_read_as_missing_samples_is_not_taken_for_the_light_back():
     sup = make_two_axis_aligner('conical_ekf_pat', runs=200, noise=0.2)
     back_in_the_dark = np.zeros(200, dtype=bool)
 
-    class NegativeIsMissing:
-        runs = 200
+    def watch(stamp):
+        if 2.5 < stamp < 12.0:
+            back_in_the_dark[:] |= sup.changed & (sup.state == TRACKING)
 
-        @property
-        def scan_offset(self):
-            return sup.scan_offset
-
-        def step(self, stamp, z):
-            turn = sup.step(stamp, np.where(z < 0.0, np.nan, z))
-            if 2.5 < stamp < 12.0:
-                back_in_the_dark[:] |= sup.changed & (sup.state == TRACKING)
-            return turn
-
+    negative_is_missing = SampleFilter(sup, lambda stamp, z: np.where(z < 0.0, np.nan, z),
+                                       watch)
     link = PanTiltLinkConfig(noise=0.2, steps=400, blocked=(2.0, 12.0))
-    traj = simulate_pan_tilt(NegativeIsMissing(), link, 3)
+    traj = simulate_pan_tilt(negative_is_missing, link, 3)
     assert np.mean(traj.z[100:200] < 0.0) > 0.4               # the dark: about half missing
     assert np.all(sup.losses >= 1) and not np.any(back_in_the_dark)
     assert np.mean(sup.state == TRACKING) >= 0.95
