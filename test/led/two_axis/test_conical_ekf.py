@@ -71,6 +71,38 @@ def test_transition_moves_the_error_by_mu_drifts():
     np.testing.assert_allclose(transition(2.5) @ x, [2.0, 1.25, -1.5, 0.1, -0.2])
 
 
+def _drift_bias_at_8_s(ekf: ConicalScanEKF, seed: int) -> np.ndarray:
+    """Return the mean over runs of bhat - b after 8 s of closed loop on a noiseless link."""
+    plant = PanTiltLink(PanTiltLinkConfig(noise=0.0), runs=ekf.runs, seed=seed)
+    for _ in range(161):
+        s = plant.sample()
+        plant.command_turn(ekf.step(s.t, s.z))
+    # the EKF's b is the drift of d, the source's drift with its sign turned
+    return np.mean(ekf.x[:, 3:5] + plant.drift(), axis=0)
+
+
+def test_the_mean_pointing_starts_the_first_scan_offset_behind_the_boresight():
+    """
+    x0's d is the boresight's error at the first sample; the filter's d starts s_0 behind.
+
+    The mean pointing is the boresight less the scan offset, so a receiver pointed at the
+    source (x0's d = 0) has its mean pointing -s_0 off it.  Started at d = 0 instead,
+    every run began r = 4 deg off along s_0 (whatever the source's direction), and the
+    first seconds' pull left the drift biased: on a noiseless link from 5 deg off, 200
+    runs, the mean of bhat_c - b_c at 8 s was -0.0065 to -0.0076 deg per step (seeds 1
+    to 3, standard error 0.0007); started s_0 behind, -0.0014 to -0.0024.
+    """
+    ekf = ConicalScanEKF(ConicalEKFConfig(x0=(2.0, 1.0, -0.5, 0.0, 0.0)), runs=3)
+    np.testing.assert_allclose(ekf.scan_offset, np.tile([4.0, 0.0], (3, 1)), atol=1e-12)
+    np.testing.assert_allclose(ekf.x[:, 1:3], np.tile([1.0 - 4.0, -0.5], (3, 1)), atol=1e-12)
+    np.testing.assert_allclose(ekf.x_prior, ekf.x, atol=0.0)
+    for seed in (1, 2, 3):
+        assert np.all(np.abs(_drift_bias_at_8_s(ConicalScanEKF(runs=200), seed)) < 0.004)
+    at_zero = ConicalScanEKF(runs=200)
+    at_zero.x[:, 1:3] = 0.0                 # the start of before
+    assert _drift_bias_at_8_s(at_zero, 1)[0] < -0.006
+
+
 def test_mu_comes_from_the_stamps_with_jitter():
     """The graininess mu = elapsed / dt per call, for jittered stamps; P grows by mu Q."""
     rng = np.random.default_rng(1)
@@ -172,7 +204,8 @@ def test_nees_is_in_its_band(noise, seed):
     CONSISTENT (the Gauss-Hermite regression, 5 points per axis, two passes, the link's
     noise and walks); seed 0 chose it, seed 5 was held out.  The runs' interval (from the
     runs' spread, not the chi^2 assumption) holds 3 too, from 0.5 V: at 0 V it is
-    3.00-3.24 and 3.00-3.22, a little overconfident (doc/design/two_axis.md).
+    3.04-3.28 on seed 0, a little overconfident, and 2.99-3.21 on seed 5
+    (doc/design/two_axis.md).
     """
     c = _nees_nis(noise, seed=seed)
     assert c.band[0] < c.anees < c.band[1], c
@@ -196,9 +229,9 @@ def test_nees_is_in_its_band_on_seeds_not_tuned_on(noise, seed):
 @pytest.mark.parametrize('noise', [
     1.0,
     *(pytest.param(v, marks=pytest.mark.xfail(strict=True, reason=reason)) for v, reason in (
-        (0.0, 'measured 1.52 under [2.67, 3.35]'), (0.5, 'measured 2.66 under [2.67, 3.35]'),
-        (1.5, 'measured 3.96 over [2.66, 3.36]'), (2.0, 'measured 4.39 over [2.64, 3.38]'),
-        (2.5, 'measured 4.69 over [2.61, 3.42]')))])
+        (0.0, 'measured 1.32 under [2.67, 3.35]'), (0.5, 'measured 2.53 under [2.67, 3.35]'),
+        (1.5, 'measured 3.82 over [2.67, 3.35]'), (2.0, 'measured 4.40 over [2.65, 3.37]'),
+        (2.5, 'measured 4.47 over [2.62, 3.40]')))])
 def test_the_closed_loop_filter_is_consistent_at_1_volt_only(noise):
     """
     The default (closed-loop) filter: the first-order update, R with a 0.2 V floor, Q 0.02.
@@ -215,9 +248,9 @@ def test_with_sigma_points_while_the_prior_is_wide_it_is_consistent_from_1_volt(
     """
     With wide 2.5 deg: the same filter, its runs with a pointing prior over 2.5 deg regressed.
 
-    In its band from 1 to 2.5 V (seed 0: 3.06, 3.21, 2.84, 2.70), where the Jacobian
-    alone is overconfident from 1.5 V (3.96, 4.39, 4.69: the test above); still
-    conservative at 0 and 0.5 V (1.32 and 2.51: the R floor).
+    In its band from 1 to 2.5 V (seed 0: 3.01, 3.19, 2.86, 2.63), where the Jacobian
+    alone is overconfident from 1.5 V (3.82, 4.40, 4.47: the test above); still
+    conservative at 0 and 0.5 V (1.34 and 2.51: the R floor).
     """
     c = _nees_nis(noise, config=ConicalEKFConfig(wide=2.5))
     assert c.band[0] < c.anees < c.band[1], c
@@ -266,29 +299,38 @@ def test_nees_with_jittered_stamps_and_dropouts_at_1_volt():
 
 
 _NIS_OUT = {     # (seed, noise): the mean NIS measured out of its band
-    (0, 0.0): 'measured 0.967 under [0.988, 1.012]',
-    (0, 0.5): 'measured 0.9878 under [0.988, 1.012]',
-    (0, 1.0): 'measured 0.985 under [0.988, 1.012]',
-    (0, 1.5): 'measured 0.982 under [0.988, 1.012]',
-    (0, 2.0): 'measured 0.975 under [0.987, 1.013]',
-    (0, 2.5): 'measured 0.965 under [0.986, 1.014]',
-    (5, 0.0): 'measured 0.968 under [0.988, 1.012]'}
+    (0, 0.0): 'measured 0.968 under [0.988, 1.012]',
+    (0, 1.0): 'measured 0.986 under [0.988, 1.012]',
+    (0, 1.5): 'measured 0.983 under [0.988, 1.012]',
+    (0, 2.0): 'measured 0.976 under [0.987, 1.013]',
+    (0, 2.5): 'measured 0.961 under [0.987, 1.013]',
+    (5, 0.0): 'measured 0.967 under [0.988, 1.012]',
+    (5, 2.5): 'measured 0.9856 under [0.9868, 1.0133]'}
+# on its band's foot, either way by less than a rounding of the sums may move it
+_NIS_EDGE = {(0, 0.5): 'measured 0.98790 at the foot of its band, 0.98788'}
+
+
+def _nis_marks(seed: int, noise: float) -> list:
+    """Return the xfail marks of (seed, noise): strict out of the band, lenient on its edge."""
+    if (seed, noise) in _NIS_OUT:
+        return [pytest.mark.xfail(strict=True, reason=_NIS_OUT[seed, noise])]
+    if (seed, noise) in _NIS_EDGE:
+        return [pytest.mark.xfail(strict=False, reason=_NIS_EDGE[seed, noise])]
+    return []
 
 
 @pytest.mark.parametrize('seed, noise', [
-    pytest.param(seed, v, marks=[pytest.mark.xfail(strict=True, reason=_NIS_OUT[seed, v])]
-                 if (seed, v) in _NIS_OUT else [])
-    for seed in (0, 5) for v in NOISE_LEVELS])
+    pytest.param(seed, v, marks=_nis_marks(seed, v)) for seed in (0, 5) for v in NOISE_LEVELS])
 def test_nis_in_band(seed, noise):
     """
     The mean NIS of CONSISTENT in the 95 % band of its chi^2, seeds 0 and 5.
 
-    Met from 0.5 to 2 V on seed 5 (and on seeds 9, 13 and 17, not tuned on), on seed 0
-    at no level: its noise draws are 1.2 % under their variance at every level (the
-    levels share them; at 0.5 V it misses the band by 0.0003).  At 0 and 2.5 V the
-    prior's errors are skewed along H, and with the curvature of h this third moment (0
-    for the Gaussian the filter assumes) makes S 3.3 and 1.1 % too large
-    (doc/design/two_axis.md, "Consistency").
+    Met from 0.5 to 2 V on seed 5 (and on seed 9, not tuned on), on seed 0 at no level
+    but 0.5 V, where it sits on the band's foot: its noise draws are 1.2 % under their
+    variance at every level (the levels share them).  At 0 and 2.5 V the prior's errors
+    are skewed along H, and with the curvature of h this third moment (0 for the
+    Gaussian the filter assumes) makes S 3.3 and 1.1 % too large (doc/design/two_axis.md,
+    "Consistency"); seed 5 at 2.5 V misses by 0.001.
     """
     c = _nees_nis(noise, seed=seed)
     assert c.nis_band[0] < c.nis < c.nis_band[1], c
@@ -469,6 +511,9 @@ def test_reduces_to_the_one_axis_filter():
         x0=(2.0, 0.0, 0.0, 0.0, 0.0),
         P0=(1.0, 4.0, 0.0, 0.1, 0.0), Q=(0.0025, 0.01, 0.0, 1e-5, 0.0)), radial, runs=3)
     ekf.scan = np.column_stack([scan, np.zeros(len(scan))])
+    # the one-axis filter's prior: its x2 starts at 0 whatever its scan's first point
+    # (the conical EKF's d starts at x0's less s_0, test_the_start_prior_...)
+    ekf.x[:, 1:3] = 0.0
     rng = np.random.default_rng(5)
     t = 0.0
     for k in range(120):

@@ -92,6 +92,8 @@ class ConicalEKFConfig:
     # runs lost at 1 V and above, doc/design/two_axis.md)
     dim_radius: float = 6.5
     dim_peak: float = 2.0             # V
+    # x0: x1, the boresight's error at the first sample (the filter's d, the mean
+    # pointing's, starts the scan's first offset behind it), the drift
     x0: tuple[float, ...] = (2.0, 0.0, 0.0, 0.0, 0.0)
     # P0: x1 as ekf_pat's clipped prior (2 V), d 5 deg, drift 0.063 deg per step (1.26
     # deg/s: the link's 1.2 deg/s per joint axis; a wider prior let the first seconds'
@@ -122,7 +124,9 @@ class ConicalEKFConfig:
     # what h does over a prior several degrees wide (`linearise`).  At 2.5 deg: 115 runs
     # of 450 000 lost at the end at 1 V against 141, and the ANEES in its band from 1 to
     # 2.5 V, but more runs lost above 1 V (30 against 19 at 1.5 V, 225 against 173 at
-    # 2 V), so off (doc/design/two_axis.md, "Sigma points while the pointing prior is wide")
+    # 2 V; with the start behind the boresight, 7 against 8 over 50 seeds at 1 V, 53
+    # against 46 at 1.5 V and 345 against 304 at 2 V), so off (doc/design/two_axis.md,
+    # "Sigma points while the pointing prior is wide")
     wide: float = 0.0
     wide_linearisation: str = 'gauss_hermite_5'
     iterations: int = 1               # passes of the update (> 1: iterated, `update`)
@@ -245,8 +249,14 @@ class ConicalScanEKF:
         n = self.runs
         self.x = np.tile(np.asarray(config.x0, dtype=float), (n, 1))
         self.P = np.tile(np.diag(np.asarray(config.P0, dtype=float)), (n, 1, 1))
-        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
         self.index = 0                               # s_k = scan[index]
+        # x0's d is the boresight's error at the first sample (0: the receiver pointed at
+        # the source); d is the mean pointing's, which is the scan's first offset s_0
+        # behind the boresight.  With d from x0 alone, every run would start with the same
+        # error of r along s_0, and the first seconds' pull would leave the drift biased
+        # (-0.007 deg per step at 8 s on a noiseless link, doc/design/two_axis.md)
+        self.x[:, 1:3] -= self.scan_offset
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
         self.clock = StampClock(config.dt)
         self.mu = 1.0                                # the last graininess seen
         self.regulator = TimeScaleLQR(0.0, 1.0, config.state_weight, config.input_weight)
