@@ -87,7 +87,7 @@ def test_the_mean_pointing_starts_the_first_scan_offset_behind_the_boresight():
 
     The mean pointing is the boresight less the scan offset, so a receiver pointed at the
     source (x0's d = 0) has its mean pointing -s_0 off it.  Started at d = 0 instead,
-    every run began r = 4 deg off along s_0 (whatever the source's direction), and the
+    every run's estimate began r = 4 deg wrong along s_0 (whatever the source's direction), and the
     first seconds' pull left the drift biased: on a noiseless link from 5 deg off, 200
     runs, the mean of bhat_c - b_c at 8 s was -0.0065 to -0.0076 deg per step (seeds 1
     to 3, standard error 0.0007); started s_0 behind, -0.0014 to -0.0024.
@@ -203,8 +203,8 @@ def test_nees_is_in_its_band(noise, seed):
 
     CONSISTENT (the Gauss-Hermite regression, 5 points per axis, two passes, the link's
     noise and walks); seed 0 chose it, seed 5 was held out.  The runs' interval (from the
-    runs' spread, not the chi^2 assumption) holds 3 too, from 0.5 V: at 0 V it is
-    3.04-3.28 on seed 0, a little overconfident, and 2.99-3.21 on seed 5
+    runs' spread, not the chi^2 assumption) holds 3 too, from 0.5 V on seed 0 (at 0 V
+    3.04-3.28, a little overconfident) and at every level on seed 5
     (doc/design/two_axis.md).
     """
     c = _nees_nis(noise, seed=seed)
@@ -325,7 +325,7 @@ def test_nis_in_band(seed, noise):
     """
     The mean NIS of CONSISTENT in the 95 % band of its chi^2, seeds 0 and 5.
 
-    Met from 0.5 to 2 V on seed 5 (and on seed 9, not tuned on), on seed 0 at no level
+    Met from 0.5 to 2 V on seed 5 (and on seeds 9, 13 and 17, not tuned on), on seed 0 at no level
     but 0.5 V, where it sits on the band's foot: its noise draws are 1.2 % under their
     variance at every level (the levels share them).  At 0 and 2.5 V the prior's errors
     are skewed along H, and with the curvature of h this third moment (0 for the
@@ -512,7 +512,7 @@ def test_reduces_to_the_one_axis_filter():
         P0=(1.0, 4.0, 0.0, 0.1, 0.0), Q=(0.0025, 0.01, 0.0, 1e-5, 0.0)), radial, runs=3)
     ekf.scan = np.column_stack([scan, np.zeros(len(scan))])
     # the one-axis filter's prior: its x2 starts at 0 whatever its scan's first point
-    # (the conical EKF's d starts at x0's less s_0, test_the_start_prior_...)
+    # (the conical EKF's d starts at x0's less s_0: the test of the mean pointing's start)
     ekf.x[:, 1:3] = 0.0
     rng = np.random.default_rng(5)
     t = 0.0

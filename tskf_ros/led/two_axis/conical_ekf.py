@@ -92,8 +92,8 @@ class ConicalEKFConfig:
     # runs lost at 1 V and above, doc/design/two_axis.md)
     dim_radius: float = 6.5
     dim_peak: float = 2.0             # V
-    # x0: x1, the boresight's error at the first sample (the filter's d, the mean
-    # pointing's, starts the scan's first offset behind it), the drift
+    # x0 = (x1, d_c, d_e, b_c, b_e), d being the boresight's error at the first sample
+    # (the filter's d, the mean pointing's, starts at it less the scan's first offset)
     x0: tuple[float, ...] = (2.0, 0.0, 0.0, 0.0, 0.0)
     # P0: x1 as ekf_pat's clipped prior (2 V), d 5 deg, drift 0.063 deg per step (1.26
     # deg/s: the link's 1.2 deg/s per joint axis; a wider prior let the first seconds'
@@ -122,11 +122,11 @@ class ConicalEKFConfig:
     # this (the larger sd of d_c, d_e) are linearised by `wide_linearisation` instead, as
     # after a start or a hand-over, or in a long hold, where the Jacobian at dhat misses
     # what h does over a prior several degrees wide (`linearise`).  At 2.5 deg: 115 runs
-    # of 450 000 lost at the end at 1 V against 141, and the ANEES in its band from 1 to
-    # 2.5 V, but more runs lost above 1 V (30 against 19 at 1.5 V, 225 against 173 at
-    # 2 V; with the start behind the boresight, 7 against 8 over 50 seeds at 1 V, 53
-    # against 46 at 1.5 V and 345 against 304 at 2 V), so off (doc/design/two_axis.md,
-    # "Sigma points while the pointing prior is wide")
+    # of 450 000 lost at the end at 1 V against 141 (with the start of before), and the
+    # ANEES in its band from 1 to 2.5 V, but more runs lost above 1 V (30 against 19 at
+    # 1.5 V, 225 against 173 at 2 V; with the start behind the boresight, 7 against 8 over
+    # 50 seeds at 1 V, 53 against 46 at 1.5 V and 345 against 304 at 2 V over seeds 0 to
+    # 9), so off (doc/design/two_axis.md, "Sigma points while the pointing prior is wide")
     wide: float = 0.0
     wide_linearisation: str = 'gauss_hermite_5'
     iterations: int = 1               # passes of the update (> 1: iterated, `update`)
