@@ -164,3 +164,20 @@ def test_gap_prediction_uses_the_stamps():
     # the next measurement is paired with the last one, shifted by the control since
     assert a.since[0] == pytest.approx(sum(applied))
     assert not a.updated.any()
+
+
+@pytest.mark.parametrize('make', [led.ScanningEKF, led.LQGAligner])
+def test_a_gap_beyond_max_mu_is_refused_whole(make):
+    """A gap over MAX_MU steps: AlignmentError, the clock and filter as they were; then on."""
+    from tskf_ros.led.scanning_ekf import MAX_MU
+    ekf = make()
+    ekf.step(0.0, 2.0)
+    ekf.step(0.05, 2.6)
+    x, P = ekf.x.copy(), ekf.P.copy()
+    with pytest.raises(led.AlignmentError, match='nominal steps, beyond'):
+        ekf.step(0.05 + 1.01 * MAX_MU * 0.05, 2.0)
+    assert ekf.clock.stamp == 0.05
+    np.testing.assert_array_equal(ekf.x, x)
+    np.testing.assert_array_equal(ekf.P, P)
+    ekf.step(0.10, 2.0)
+    assert np.all(np.isfinite(ekf.x)) and np.all(np.isfinite(ekf.P))

@@ -83,6 +83,11 @@ def as_measurement(z: Measurement, runs: int) -> FloatArray:
     return arr
 
 
+# nominal steps: the longest gap a filter predicts over (1600 years at 50 ms).  Its state
+# and covariance stay finite to about 1e150 steps; beyond, mu^2 P overflows into NaN
+MAX_MU = 1e12
+
+
 class StampClock:
     """Stamps of the calls: rejects stale ones and gives mu = elapsed / dt."""
 
@@ -104,6 +109,9 @@ class StampClock:
             raise AlignmentError(f'stale stamp {stamp!r}: not after the previous one '
                                  f'{self.stamp!r}')
         mu = (stamp - self.stamp) / self.dt
+        if mu > MAX_MU:
+            raise AlignmentError(f'a gap of {stamp - self.stamp:.3g} s is {mu:.3g} nominal '
+                                 f'steps, beyond the {MAX_MU:.0e} a filter predicts over')
         self.stamp = stamp
         return mu
 

@@ -670,3 +670,24 @@ def test_a_dim_scan_keeps_the_boresight_within_the_mean_error_plus_its_radius():
     inside = traj.theta_mean <= 15.0
     assert np.all((traj.theta <= traj.theta_mean + 6.5 + 0.2)[inside])
     assert np.mean(traj.theta[-20:] <= 15.0) > 0.8
+
+
+@pytest.mark.parametrize('controller', ['p', 'lqr'])
+def test_a_gap_beyond_max_mu_is_refused_and_one_of_years_is_predicted_over(controller):
+    """A stamp 1e300 s on: AlignmentError, the filter as it was; 5e7 s on: finite."""
+    ekf = ConicalScanEKF(ConicalEKFConfig(controller=controller), runs=3)
+    for k in range(10):
+        ekf.step(0.05 * k, np.array([2.0, 1.0, np.nan]))
+    x, P, stamp = ekf.x.copy(), ekf.P.copy(), ekf.clock.stamp
+    with pytest.raises(AlignmentError, match='nominal steps, beyond'):
+        ekf.step(1e300, np.array([2.0, 1.0, 0.5]))
+    np.testing.assert_array_equal(ekf.x, x)
+    np.testing.assert_array_equal(ekf.P, P)
+    assert ekf.clock.stamp == stamp
+    # 1.6 years (mu = 1e9): the estimate is carried thousands of degrees off, where the
+    # response reads no light (not 0 inf = NaN), and every number stays finite
+    for gap in (5e7, 5e7 + 0.05):
+        turn = ekf.step(stamp + gap, np.array([2.0, 1.0, 0.5]))
+        assert np.all(np.isfinite(turn)) and np.all(np.isfinite(ekf.x))
+        assert np.all(np.isfinite(ekf.P))
+    assert ekf.mu == pytest.approx(1.0, rel=1e-6)

@@ -18,7 +18,7 @@
 import numpy as np
 
 from tskf_ros.led.intensity_model import IncidenceResponse
-from tskf_ros.led.two_axis.radial_response import RadialResponse
+from tskf_ros.led.two_axis.radial_response import ANGLE_LIMIT, RadialResponse
 
 
 def test_is_the_mean_of_both_sides_of_the_one_axis_fit():
@@ -76,3 +76,18 @@ def test_hessian_at_zero_is_g_r_second_derivative_times_identity():
     h = 1e-3
     second = (r.g(np.array([h]))[0] - 2 * r.peak + r.g(np.array([-h]))[0]) / h ** 2
     np.testing.assert_allclose(r.hessian(np.zeros(2)), second * np.eye(2), rtol=1e-5)
+
+
+def test_no_light_and_no_nan_however_far_off():
+    """Past ANGLE_LIMIT (and at 1e300 deg, inf): g_r, its gradient and Hessian are 0, not NaN."""
+    r = RadialResponse()
+    theta = np.array([ANGLE_LIMIT, 6e4, 1e300, np.inf])
+    with np.errstate(over='raise', invalid='raise'):   # underflow to 0 is the answer
+        assert np.all(r.g(theta) == 0.0)
+        error = np.array([[1e5, -3e4], [0.0, 1e300]])
+        assert np.all(r.gradient(error) == 0.0)
+        assert np.all(r.hessian(error[:1]) == 0.0)
+    # up to the limit the response is the fit's (still 2e-167 of its peak at 360 deg)
+    np.testing.assert_allclose(r.g(np.array([360.0])),
+                               (IncidenceResponse().g(np.array([360.0]))
+                                + IncidenceResponse().g(np.array([-360.0]))) / 2, rtol=1e-9)

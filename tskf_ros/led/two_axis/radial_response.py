@@ -41,6 +41,9 @@ import numpy as np
 from tskf_ros.led.intensity_model import FloatArray, IncidenceResponse, TRACKING_ANGLE
 
 
+ANGLE_LIMIT = 1e4                        # deg: |theta| is taken as at most this
+
+
 def _sinhc(x: FloatArray) -> FloatArray:
     """Return sinh(x) / x, 1 at x = 0 (a Taylor series below |x| = 1e-3)."""
     small = np.abs(x) < 1e-3
@@ -74,7 +77,10 @@ class RadialResponse:
         a = np.array([a1, a2])
         b = np.array([b1, b2])
         c = np.array([c1, c2])
-        th = np.asarray(theta, dtype=float)[..., None]
+        # beyond +-1e4 deg every term is 0 in double precision (e^{-s^2 th^2/c^2} underflows
+        # from about 3000 deg), but cosh(kappa th) overflows from about 5.7e4 deg, and 0 inf
+        # would be NaN: an estimate carried far off (a long gap) reads no light, not NaN
+        th = np.clip(np.asarray(theta, dtype=float), -ANGLE_LIMIT, ANGLE_LIMIT)[..., None]
         weight = a * np.exp(-(s * s * th * th + b * b) / (c * c))
         return weight, s * s / (c * c), 2.0 * s * b / (c * c), th
 
