@@ -36,6 +36,7 @@ from tskf_ros.messages import conversions
 from tskf_ros.messages.names import OUTPUT_FREQUENCY, RESET_SERVICE, TRUTH_TOPIC
 from tskf_ros.messages.parameter_schema import load_schema, ParameterSchema
 from tskf_ros.messages.qos import DEFAULT_DEPTH, DIAGNOSTICS_TOPIC, SENSOR_OUTPUT_QOS, TRUTH_QOS
+from tskf_ros.nodes.clock_watch import ClockWatch
 from tskf_ros.nodes.status_line import StatusLine
 
 # a simulator takes at most this many samples per callback when catching up
@@ -118,6 +119,7 @@ class ReconfigurableNode(Node):
         self.session = self.SESSION(self.config.session)
         # the node clock's time in ns (see watch_clock_jumps)
         self.now_ns: Callable[[], int] = self.clock_ns
+        self.clock_watch = ClockWatch(self)
 
     def own_process(self) -> None:
         """
@@ -389,6 +391,7 @@ class LinkSimulatorNode(Node):
         self.truth_pub = self.create_publisher(JointState, TRUTH_TOPIC, TRUTH_QOS)
         self.start_ns: Optional[int] = None
         self.stamp0_ns = int(round(self.config.start_time * NS))
+        self.clock_watch = ClockWatch(self)
 
     def _read(self, values: dict) -> SimulatorSettings:
         """Build the node's config from its parameter values (subclasses)."""
