@@ -198,7 +198,7 @@ class ConicalEKFConfig:
 # pass, and R and Q from what the plant does.  One pass, not two (the update relinearised
 # at its first posterior): over 40 seeds not looked at before (30 to 69), the ANEES of two
 # passes was 2 to 9 % over 3 and out of its band at some level on 11 seeds, the intensity
-# overconfident where the light is dim; one pass's is within 3 % of 3 up to 2 V (2.85 at
+# overconfident where the light is dim; one pass's is within 4 % of 3 up to 2 V (2.86 at
 # 2.5 V, conservative) and out on 1 seed (doc/design/two_axis.md, "Consistency").  The rule
 # has 5 points per axis: over the priors of 2 to 2.5 V (the pointing 5 to 7 deg wide) the
 # 3-point rule, its nodes at +-sqrt(3) sd, overstates Var h by 8 and 33 % and so S (at
