@@ -25,46 +25,36 @@ does.
 
 from typing import Optional
 
-from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+
+from tskf_ros.nodes.startup_watch import StartupWatch
 
 # s (steady clock) after which a node on use_sim_time whose clock still reads 0 says so
 NO_CLOCK_DELAY = 5.0
 CLOCK_TOPIC = '/clock'
 
 
-class ClockWatch:
+class ClockWatch(StartupWatch):
     """Warn once if use_sim_time is true and the clock still reads 0 after the delay."""
 
     def __init__(self, node: Node, delay: Optional[float] = None) -> None:
         self.node = node
-        self.delay = NO_CLOCK_DELAY if delay is None else delay
-        self.warnings: list[str] = []
-        self.checked = False
-        self.timer = (node.create_timer(self.delay, self.check,
-                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
-                      if self.sim_time else None)
+        super().__init__(node, NO_CLOCK_DELAY if delay is None else delay,
+                         armed=self.sim_time)
 
     @property
     def sim_time(self) -> bool:
         """Return whether the node runs on use_sim_time now."""
         return bool(self.node.get_parameter('use_sim_time').value)
 
-    def check(self) -> None:
-        """Say, once, that the clock has not started, and the likely reason."""
-        if self.checked:
-            return
-        self.checked = True
-        if self.timer is not None:
-            self.node.destroy_timer(self.timer)
+    def problems(self) -> list[str]:
+        """Return that the clock has not started, and the likely reason (or nothing)."""
         if not self.sim_time or self.node.get_clock().now().nanoseconds > 0:
-            return
+            return []
         why = (f'{CLOCK_TOPIC} has a publisher, but no message has come'
                if self.node.count_publishers(CLOCK_TOPIC) > 0
                else f'nobody publishes {CLOCK_TOPIC}')
-        warning = (f'use_sim_time is true and the clock still reads 0 after {self.delay:g} s '
-                   f'({why}): timers do not fire and nothing is stamped; play a bag with '
-                   "'ros2 bag play --clock', run a simulator that publishes "
-                   f'{CLOCK_TOPIC}, or set use_sim_time:=false')
-        self.warnings.append(warning)
-        self.node.get_logger().warning(warning)
+        return [f'use_sim_time is true and the clock still reads 0 after {self.delay:g} s '
+                f'({why}): timers do not fire and nothing is stamped; play a bag with '
+                "'ros2 bag play --clock', run a simulator that publishes "
+                f'{CLOCK_TOPIC}, or set use_sim_time:=false']

@@ -23,7 +23,7 @@ from typing import Any, Callable, Optional, Protocol, Sequence, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold, TimeJump
+from rclpy.clock import ClockChange, JumpThreshold, TimeJump
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -43,8 +43,6 @@ from tskf_ros.nodes.status_line import StatusLine
 MAX_BATCH = 10_000
 # its output frequency is WARN outside rate * (1 -/+ this): it catches up in batches
 SIMULATOR_RATE_TOLERANCE = 0.5
-# s (steady clock) after which an input topic with no publisher is named in one warning
-NO_PUBLISHER_DELAY = 5.0
 # the parameter of diagnostic_updater's Updater: status names '<fully qualified name>: task'
 USE_FQN = 'diagnostic_updater.use_fqn'
 # a link config dataclass of the core (OwcLinkConfig, LedLinkConfig)
@@ -310,50 +308,6 @@ def diagnostic_name(node: Node) -> str:
     """
     use_fqn = node.has_parameter(USE_FQN) and node.get_parameter(USE_FQN).value
     return node.get_fully_qualified_name() if use_fqn else node.get_name()
-
-
-class InputWatch:
-    """
-    Warn once if an input topic still has no publisher NO_PUBLISHER_DELAY s after start.
-
-    The warning names the topic and its type and, if another topic of that type has a
-    publisher, that topic as the remap to try.  The delay runs on the steady clock, so a
-    node on use_sim_time with no /clock still says it.  `warnings` keeps what was said.
-    """
-
-    def __init__(self, node: Node, subscriptions: Sequence[Any],
-                 delay: Optional[float] = None) -> None:
-        self.node, self.subscriptions = node, list(subscriptions)
-        self.warnings: list = []
-        self.checked = False
-        self.delay = NO_PUBLISHER_DELAY if delay is None else delay
-        self.timer = node.create_timer(self.delay, self.check,
-                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
-
-    def check(self) -> None:
-        """Say, once, which input topics nobody publishes (and the likely remap)."""
-        if self.checked:
-            return
-        self.node.destroy_timer(self.timer)
-        self.checked = True
-        topics = self.node.get_topic_names_and_types()
-        for sub in self.subscriptions:
-            if self.node.count_publishers(sub.topic_name) > 0:
-                continue
-            kind = type_name(sub.msg_type)
-            others = [name for name, types in topics if kind in types and
-                      name != sub.topic_name and self.node.count_publishers(name) > 0]
-            hint = (f'; {others[0]} has a publisher of that type: try '
-                    f'--ros-args -r {sub.topic_name}:={others[0]}' if others else '')
-            warning = (f'no publisher on {sub.topic_name} ({kind}) after '
-                       f'{self.delay:g} s: nothing to filter yet{hint}')
-            self.warnings.append(warning)
-            self.node.get_logger().warning(warning)
-
-
-def type_name(msg_type: type) -> str:
-    """Return a message class's ROS type name, 'sensor_msgs/msg/Illuminance'."""
-    return f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
 
 
 def link_config(config_cls: type[LinkConfig], values: dict,

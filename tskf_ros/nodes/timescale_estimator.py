@@ -31,7 +31,8 @@ from tskf_ros.messages.estimator_interface import (ConfigError, diagnostics_mess
                                                    OutcomeMessages, output_qos, OUTPUT_TOPICS,
                                                    parameters_to_config, raw_reader)
 from tskf_ros.messages.qos import overridable, sensor_input_qos
-from tskf_ros.nodes.node_base import diagnostic_name, InputWatch, ReconfigurableNode
+from tskf_ros.nodes.input_watch import InputWatch
+from tskf_ros.nodes.node_base import diagnostic_name, ReconfigurableNode
 from tskf_ros.nodes.node_runner import run_node
 from tskf_ros.owc.session import EstimatorSession, Outcome
 from tskf_ros.owc.session.diagnostics import status_line
