@@ -303,7 +303,8 @@ def parser() -> argparse.ArgumentParser:
                    metavar='DEG',
                    help="the EKF's runs whose pointing prior is wider than DEG take the "
                         'Gauss-Hermite regression instead of the Jacobian (0: off, the '
-                        'default; 2.5: fewer lost at 1 V, more at 1.5 and 2 V)')
+                        'default; 2.5: a consistent covariance from 1 V, as many lost at 1 V, '
+                        'more at 1.5 and 2 V)')
     p.add_argument('--clip-four-point', action='store_true',
                    help='clip gamma_p of eq. (26) to [-gamma, gamma] (as --clip-three-point)')
     p.add_argument('--run-noise', type=arguments.noise_volts, default=1.0,

@@ -126,7 +126,8 @@ class ConicalEKFConfig:
     # ANEES in its band from 1 to 2.5 V, but more runs lost above 1 V (30 against 19 at
     # 1.5 V, 225 against 173 at 2 V; with the start behind the boresight, 7 against 8 over
     # 50 seeds at 1 V, 53 against 46 at 1.5 V and 345 against 304 at 2 V over seeds 0 to
-    # 9), so off (doc/design/two_axis.md, "Sigma points while the pointing prior is wide")
+    # 9; 52 against 50 over seeds 100 to 299 at 1 V), so off (doc/design/two_axis.md,
+    # "Sigma points while the pointing prior is wide")
     wide: float = 0.0
     wide_linearisation: str = 'gauss_hermite_5'
     iterations: int = 1               # passes of the update (> 1: iterated, `update`)
