@@ -72,3 +72,11 @@ def call(executor, client, request):
         assert time.monotonic() < deadline, f'{client.srv_name} never answered'
         executor.spin_once(timeout_sec=0.05)
     return future.result()
+
+
+def spin_until(executor, condition, what):
+    """Spin until condition(); fail, saying what never happened, after TIMEOUT."""
+    deadline = time.monotonic() + TIMEOUT
+    while not condition():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        executor.spin_once(timeout_sec=0.05)

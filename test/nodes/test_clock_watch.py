@@ -15,9 +15,8 @@
 
 """A node on use_sim_time with no /clock says so once; with a clock, or without sim time, not."""
 
-import time
-
 from builtin_interfaces.msg import Time
+from node_helpers import spin_until
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
@@ -28,16 +27,7 @@ from tskf_ros.nodes.led_link_simulator import LedLinkSimulator
 from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 
-TIMEOUT = 60.0      # s: only a bound on waiting for DDS; no timed assertion
 SIM_TIME = [Parameter('use_sim_time', value=True)]
-
-
-def spin_until(executor, condition, what):
-    """Spin until condition(); fail, saying what never happened, after TIMEOUT."""
-    deadline = time.monotonic() + TIMEOUT
-    while not condition():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        executor.spin_once(timeout_sec=0.05)
 
 
 @pytest.fixture

@@ -15,23 +15,12 @@
 
 """An input nobody publishes is named once, with the remap to try; one with a publisher not."""
 
-import time
-
+from node_helpers import spin_until
 import rclpy
 
 from tskf_ros.nodes import input_watch
 from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
-
-TIMEOUT = 60.0      # s: only a bound on waiting for DDS; no timed assertion
-
-
-def spin_until(executor, condition, what):
-    """Spin until condition(); fail, saying what never happened, after TIMEOUT."""
-    deadline = time.monotonic() + TIMEOUT
-    while not condition():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        executor.spin_once(timeout_sec=0.05)
 
 
 def input_watch_harness(ros_context, monkeypatch, publish_on, delay=3600.0):

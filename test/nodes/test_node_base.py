@@ -31,7 +31,7 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from node_helpers import run_node, stop
+from node_helpers import run_node, spin_until, stop
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
@@ -46,14 +46,6 @@ from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / 'config'
 TIMEOUT = 60.0      # s: only a bound on waiting for DDS or a process; no timed assertion
-
-
-def spin_until(executor, condition, what):
-    """Spin until condition(); fail, saying what never happened, after TIMEOUT."""
-    deadline = time.monotonic() + TIMEOUT
-    while not condition():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        executor.spin_once(timeout_sec=0.05)
 
 
 def from_estimator(diagnostics):

@@ -15,14 +15,11 @@
 
 """A StartupWatch looks once, on its own after the delay or when called, and keeps what it said."""
 
-import time
-
+from node_helpers import spin_until
 import rclpy
 
 from tskf_ros.nodes.node_runner import make_executor
 from tskf_ros.nodes.startup_watch import StartupWatch
-
-TIMEOUT = 60.0      # s: only a bound on waiting for the timer; no timed assertion
 
 
 class Counting(StartupWatch):
@@ -56,10 +53,7 @@ def test_it_looks_on_its_own_after_the_delay_on_the_steady_clock(ros_context):
     executor.add_node(node)
     try:
         watch = Counting(node, 0.1, [])
-        deadline = time.monotonic() + TIMEOUT
-        while not watch.checked:
-            assert time.monotonic() < deadline, 'the watch never looked'
-            executor.spin_once(timeout_sec=0.05)
+        spin_until(executor, lambda: watch.checked, 'the watch to look')
         assert watch.looks == 1 and watch.warnings == []
     finally:
         executor.remove_node(node)

@@ -38,9 +38,8 @@ class ClockWatch(StartupWatch):
     """Warn once if use_sim_time is true and the clock still reads 0 after the delay."""
 
     def __init__(self, node: Node, delay: Optional[float] = None) -> None:
-        self.node = node
         super().__init__(node, NO_CLOCK_DELAY if delay is None else delay,
-                         armed=self.sim_time)
+                         armed=bool(node.get_parameter('use_sim_time').value))
 
     @property
     def sim_time(self) -> bool:
