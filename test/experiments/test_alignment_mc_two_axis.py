@@ -138,6 +138,7 @@ def test_one_axis_is_the_default(tmp_path, capsys):
     (['--axes', '2', '--dim-radius', '15'],
      'argument --dim-radius: must be a finite number in [0, 14.9]'),
     (['--axes', '2', '--wide', 'nan'], 'argument --wide: must be a finite number in [0, 90]'),
+    (['--axes', '2', '--smooth-after', '401'], 'argument --smooth-after: must be'),
     (['--axes', '2', '--json', '/'], '--json /: / is a folder'),
     (['--axes', '2', '--png', 'FILE/a.png'], 'is not a folder'),
     # a FIFO (or a device) is not replaced by a plain file; a name too long for the file
@@ -236,12 +237,14 @@ def test_a_scheduler_not_reached_is_one_line_and_exit_1(capsys):
     assert err[0].startswith('alignment_mc: cannot use the Dask scheduler at tcp://127.0.0.1:9')
 
 
-def test_the_scan_circle_and_the_wide_prior_reach_the_ekf_and_the_json(tmp_path, capsys):
+def test_the_scan_circle_wide_prior_and_smoother_reach_the_ekf_and_the_json(tmp_path, capsys):
     # --dim-radius (6.5 by default; 0 turns it off) changes the supervised EKF's runs (the
     # scan widens when dim) and is recorded; the baselines do not scan a circle and are
-    # the same; so does --wide (0 by default), the runs with a wide prior regressed
+    # the same; so do --wide (0 by default), the runs with a wide prior regressed, and
+    # --smooth-after (100 by default, past these 80 steps; 40 smooths within them)
     data = []
-    for extra in (['--dim-radius', '0'], ['--dim-peak', '2.5'], ['--wide', '2.5']):
+    for extra in (['--dim-radius', '0'], ['--dim-peak', '2.5'], ['--wide', '2.5'],
+                  ['--smooth-after', '40']):
         out = tmp_path / f'{len(data)}.json'
         assert alignment_mc.main(['--axes', '2', '--runs', '20', '--steps', '80', '--workers',
                                   '1', '--noise-levels', '1.5', '--methods',
@@ -251,8 +254,10 @@ def test_the_scan_circle_and_the_wide_prior_reach_the_ekf_and_the_json(tmp_path,
     assert data[0]['config']['dim_radius_deg'] == 0.0
     assert data[1]['config']['dim_radius_deg'] == 6.5
     assert data[1]['config']['dim_peak_v'] == 2.5
-    assert [d['config']['wide_deg'] for d in data] == [0.0, 0.0, 2.5]
-    a, b, c = (d['results'] for d in data)
-    assert a['four_point'] == b['four_point'] == c['four_point']
+    assert [d['config']['wide_deg'] for d in data] == [0.0, 0.0, 2.5, 0.0]
+    assert [d['config']['smooth_after'] for d in data] == [100, 100, 100, 40]
+    a, b, c, e = (d['results'] for d in data)
+    assert a['four_point'] == b['four_point'] == c['four_point'] == e['four_point']
+    assert e['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']
     assert a['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']
     assert c['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']

@@ -94,12 +94,16 @@ def test_at_the_defaults_the_two_axis_filter_and_supervisor_are_the_core_default
 
 @pytest.mark.parametrize('pat', [False, True])
 def test_pan_tilt_filter_consistent_is_the_consistent_filter_with_the_node_noise(pat):
-    """pan_tilt.filter: consistent runs CONSISTENT, with pan_tilt.noise and gain as given."""
+    """
+    pan_tilt.filter: consistent runs CONSISTENT, with pan_tilt.noise and gain as given.
+
+    pan_tilt.smooth_after applies to it as to first_order (100 by default).
+    """
     s = two_axis(**{'pan_tilt.filter': 'consistent', 'pan_tilt.noise': 0.7, 'gain': 0.4,
                     'pat.enabled': pat}).session.session
-    assert s.ekf == replace(CONSISTENT, gain=0.4)
+    assert s.ekf == replace(CONSISTENT, gain=0.4, smooth_after=100)
     tracker = PanTiltSession(s).tracker
-    assert tracker.config == replace(CONSISTENT, gain=0.4, noise=0.7)
+    assert tracker.config == replace(CONSISTENT, gain=0.4, noise=0.7, smooth_after=100)
     np.testing.assert_allclose(tracker.R[0, 0, 0], 0.7 ** 2 + CONSISTENT.model_noise ** 2,
                                rtol=1e-12)
 
@@ -137,6 +141,14 @@ def test_the_wide_prior_reaches_the_filter():
     assert ekf == replace(ConicalEKFConfig(), wide=2.5)
     assert PanTiltSession(two_axis(**{'pan_tilt.wide_prior': 2.5}).session.session
                           ).tracker.config.wide == 2.5
+
+
+def test_the_smoother_reaches_the_filter():
+    """pan_tilt.smooth_after: 100 samples by default, 0 turns the smoother off."""
+    assert two_axis().session.session.ekf.smooth_after == 100
+    off = two_axis(**{'pan_tilt.smooth_after': 0}).session.session
+    assert off.ekf == replace(ConicalEKFConfig(), smooth_after=0)
+    assert PanTiltSession(off).tracker.window is None
 
 
 @pytest.mark.parametrize('gain', [0.25, 0.5, 1.5])

@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tskf_ros.core import kalman
 from tskf_ros.core.jit import kernel
-from tskf_ros.core.kalman import predict
+from tskf_ros.core.kalman import _mm_runs, _mv_runs, _symmetric_runs, _t, predict
 from tskf_ros.core.matrices import FilterError
 from tskf_ros.core.timescale_kalman import TimeScaleKalmanFilter
 
@@ -54,7 +54,7 @@ Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
 
 __all__ = ['backward_pass', 'Smoothed', 'rts_smooth', 'smooth_at', 'smoother_gain',
-           'smoothed_step', 'warm_up']
+           'smoother_gain_runs', 'smoothed_step', 'smoothed_step_runs', 'warm_up']
 
 
 class Smoothed(NamedTuple):
@@ -95,15 +95,37 @@ def smoother_gain(P_f: Matrix, F: Matrix, P_p: Matrix) -> Matrix:
 
 
 @_jit
+def smoother_gain_runs(P_f: NDArray[np.float64], F: NDArray[np.float64],
+                       P_p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Return each run's RTS gain (`smoother_gain`): P_f, P_p (runs, n, n), F (n, n)."""
+    G = np.empty_like(P_f)
+    for r in range(P_f.shape[0]):
+        G[r] = smoother_gain(P_f[r], F, P_p[r])
+    return G
+
+
+@_jit
+def smoothed_step_runs(x_f: NDArray[np.float64], P_f: NDArray[np.float64],
+                       x_p: NDArray[np.float64], P_p: NDArray[np.float64],
+                       G: NDArray[np.float64], x_next: NDArray[np.float64],
+                       P_next: NDArray[np.float64]
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """One backward step of each run: x(t_k|T), P(t_k|T) from the smoothed ones at t_{k+1}."""
+    # x(t_k|T) = x(t_k|t_k) + G_k (x(t_{k+1}|T) - x(t_{k+1}|t_k))      (RTS 1965; Sarkka 8.2)
+    x = x_f + _mv_runs(G, x_next - x_p)
+    # P(t_k|T) = P(t_k|t_k) + G_k (P(t_{k+1}|T) - P(t_{k+1}|t_k)) G_k^T  (RTS 1965; Sarkka 8.2)
+    P = P_f + _mm_runs(_mm_runs(G, P_next - P_p), _t(G))
+    # symmetrised, as halves (as kalman.predict)
+    return x, _symmetric_runs(P)
+
+
+@_jit
 def smoothed_step(x_f: Vector, P_f: Matrix, x_p: Vector, P_p: Matrix, G: Matrix,
                   x_next: Vector, P_next: Matrix) -> tuple[Vector, Matrix]:
-    """One backward step: x(t_k|T), P(t_k|T) from the smoothed estimate at t_{k+1}."""
-    # x(t_k|T) = x(t_k|t_k) + G_k (x(t_{k+1}|T) - x(t_{k+1}|t_k))      (RTS 1965; Sarkka 8.2)
-    x = x_f + G @ (x_next - x_p)
-    # P(t_k|T) = P(t_k|t_k) + G_k (P(t_{k+1}|T) - P(t_{k+1}|t_k)) G_k^T  (RTS 1965; Sarkka 8.2)
-    P = P_f + G @ (P_next - P_p) @ np.ascontiguousarray(G.T)
-    # symmetrised, as halves (as kalman.predict)
-    return x, P / 2 + P.T / 2
+    """One backward step of one run (a stack of one for `smoothed_step_runs`)."""
+    x, P = smoothed_step_runs(x_f[None], P_f[None], x_p[None], P_p[None], G[None],
+                              x_next[None], P_next[None])
+    return x[0], P[0]
 
 
 @_jit

@@ -305,6 +305,11 @@ def parser() -> argparse.ArgumentParser:
                         'Gauss-Hermite regression instead of the Jacobian (0: off, the '
                         'default; 2.5: a consistent covariance from 1 V, as many lost at 1 V, '
                         'more at 1.5 and 2 V)')
+    p.add_argument('--smooth-after', type=arguments.count(0, 400),
+                   default=ConicalEKFConfig.smooth_after, metavar='N',
+                   help="at the EKF's N-th sample, the runs not handed over since the start "
+                        "take the iterated smoother's estimate over those samples (0: off; "
+                        f'default {ConicalEKFConfig.smooth_after})')
     p.add_argument('--clip-four-point', action='store_true',
                    help='clip gamma_p of eq. (26) to [-gamma, gamma] (as --clip-three-point)')
     p.add_argument('--run-noise', type=arguments.noise_volts, default=1.0,
@@ -316,8 +321,9 @@ def parser() -> argparse.ArgumentParser:
 
 
 def ekf_config(args: argparse.Namespace) -> ConicalEKFConfig:
-    """Return the conical-scan EKF the arguments set (its scan circle and wide prior)."""
-    return ConicalEKFConfig(dim_radius=args.dim_radius, dim_peak=args.dim_peak, wide=args.wide)
+    """Return the conical-scan EKF the arguments set (scan circle, wide prior, smoother)."""
+    return ConicalEKFConfig(dim_radius=args.dim_radius, dim_peak=args.dim_peak, wide=args.wide,
+                            smooth_after=args.smooth_after)
 
 
 def config_record(args: argparse.Namespace) -> dict[str, Any]:
@@ -328,7 +334,7 @@ def config_record(args: argparse.Namespace) -> dict[str, Any]:
             'offset0_deg': args.offset0, 'cold_start_deg': args.cold_start,
             'clip_four_point': args.clip_four_point, 'max_intensity_v': led.MAX_INTENSITY,
             'dim_radius_deg': args.dim_radius, 'dim_peak_v': args.dim_peak,
-            'wide_deg': args.wide,
+            'wide_deg': args.wide, 'smooth_after': args.smooth_after,
             'methods': {name: METHODS[name] for name in args.methods},
             'tracking': {'angle_deg': led.TRACKING_ANGLE,
                          'level_v': led.TRACKING_LEVEL * led.MAX_INTENSITY},

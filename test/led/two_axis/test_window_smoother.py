@@ -1,0 +1,138 @@
+# Copyright 2026 The tskf_ros authors
+# SPDX-License-Identifier: Apache-2.0
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The iterated smoother of the conical-scan EKF's first samples, against the batch MAP."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import scipy.optimize
+
+from tskf_ros.led.intensity_model import AlignmentError
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig, ConicalScanEKF, transition
+from tskf_ros.led.two_axis.window_smoother import smooth_window
+
+# a link 5 deg off with a drift, jittered stamps (mu from them), one sample in 7 missing
+CONFIG = ConicalEKFConfig(noise=0.3, model_noise=0.0, innovation_clip=0.0, dim_radius=0.0)
+TRUE = np.array([2.5, 3.0, -4.0, -0.05, 0.04])
+
+
+def _feed(ekf, samples, seed=4, start=None):
+    """Run ekf on a link of the filter's own model (d <- d + mu b + u); return (t, x)."""
+    rng = np.random.default_rng(seed)
+    if start is None:
+        x = np.tile(TRUE, (ekf.runs, 1))
+        x[:, 1:3] -= ekf.scan_offset
+        t = None
+    else:
+        t, x = start
+    for k in range(samples):
+        if t is None:
+            t = 0.0
+        else:
+            mu = rng.uniform(0.7, 1.3)              # jittered stamps
+            t += ekf.config.dt * mu
+            x[:, 1:3] += mu * x[:, 3:5] + ekf.u     # ekf.u: the turn of the mean pointing
+        z = ekf.h(x, ekf.scan_offset) + CONFIG.noise * rng.standard_normal(ekf.runs)
+        if k % 7 == 3:
+            z[:] = np.nan                           # a missing sample
+        ekf.step(t, z)
+    return t, x
+
+
+def _map_trajectory(ekf, record):
+    """Return the MAP trajectory x_0..x_{K-1} of the record, by scipy's least squares."""
+    K = record.count
+    Q = np.diag(ekf.config.Q)
+    Lp = np.linalg.cholesky(np.linalg.inv(record.P0[0]))
+    R = ekf.R[0, 0, 0]
+
+    def residuals(flat):
+        X = flat.reshape(K, 5)
+        out = [Lp.T @ (X[0] - record.x0[0])]
+        for k in range(K):
+            if k and record.mu[k] is not None:
+                mu = record.mu[k]
+                pred = transition(mu) @ X[k - 1] + record.Bu[k][0]
+                Lq = np.linalg.cholesky(np.linalg.inv(mu * Q))
+                out.append(Lq.T @ (X[k] - pred))
+            z = record.z[k][0]
+            if np.isfinite(z):
+                h = ekf.h(X[k][None], record.offset[k][0])[0]
+                out.append(np.array([(z - h) / np.sqrt(R)]))
+        return np.concatenate(out)
+
+    start = np.tile(record.x0[0], K)
+    fit = scipy.optimize.least_squares(residuals, start, xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    return fit.x.reshape(K, 5)
+
+
+def test_the_smoother_converges_to_the_map_trajectory():
+    """
+    Many passes: the iterated smoother's fixed point is the batch MAP (Bell, SIAM J. Opt. 1994).
+
+    The MAP is found independently by scipy's least squares over the whole trajectory:
+    the prior, each step's process noise (Q mu over the stamps' mu, the turns as inputs)
+    and each sample's noise, h the filter's own.
+    """
+    ekf = ConicalScanEKF(replace(CONFIG, smooth_after=400), runs=1)
+    _feed(ekf, samples=30)
+    record = ekf.window
+    x, P = smooth_window(ekf, record, passes=40)
+    X = _map_trajectory(ekf, record)
+    np.testing.assert_allclose(x[0], X[-1], rtol=1e-5, atol=1e-7)
+    assert np.all(np.linalg.eigvalsh(P[0]) > 0.0)
+
+
+def test_one_pass_is_the_filter_itself():
+    """With passes 1 the record is filtered again at the priors: the EKF's own x and P."""
+    ekf = ConicalScanEKF(replace(CONFIG, smooth_after=400), runs=3)
+    _feed(ekf, samples=25)
+    x, P = smooth_window(ekf, ekf.window, passes=1)
+    np.testing.assert_allclose(x, ekf.x, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(P, ekf.P, rtol=1e-12, atol=1e-16)
+
+
+def test_at_smooth_after_the_runs_take_the_smoothed_estimate_but_restarted_ones():
+    """At sample smooth_after: the smoother's (x, P), except runs restarted since the start."""
+    plain = ConicalScanEKF(replace(CONFIG, smooth_after=400), runs=4)
+    _feed(plain, samples=20)
+    x_s, P_s = smooth_window(plain, plain.window)
+    ekf = ConicalScanEKF(replace(CONFIG, smooth_after=20), runs=4)
+    _feed(ekf, samples=20)
+    assert ekf.window is None                       # the record is dropped once used
+    np.testing.assert_allclose(ekf.x, x_s, rtol=1e-12)
+    np.testing.assert_allclose(ekf.P, P_s, rtol=1e-12)
+    assert not np.allclose(x_s, plain.x, atol=1e-3)     # the smoother moved them
+
+
+def test_a_run_restarted_in_the_window_keeps_its_filter_estimate():
+    mask = np.array([False, True, False])
+    runs = []
+    for after in (0, 12):
+        ekf = ConicalScanEKF(replace(CONFIG, smooth_after=after), runs=3)
+        end = _feed(ekf, samples=6)
+        ekf.restart_runs(mask, np.array([[2.0, 1.0, 1.0, 0.0, 0.0]]), np.diag(CONFIG.P0)[None])
+        _feed(ekf, samples=6, seed=5, start=end)
+        runs.append(ekf)
+    np.testing.assert_allclose(runs[1].x[mask], runs[0].x[mask], rtol=1e-12)
+    assert not np.allclose(runs[1].x[~mask], runs[0].x[~mask], atol=1e-6)
+
+
+@pytest.mark.parametrize('bad', [-1, 401])
+def test_smooth_after_out_of_range_says_why(bad):
+    with pytest.raises(AlignmentError, match='smooth_after'):
+        ConicalEKFConfig(smooth_after=bad)
