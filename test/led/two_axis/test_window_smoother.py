@@ -16,7 +16,9 @@
 """The iterated smoother of the conical-scan EKF's first samples, against the batch MAP."""
 
 from dataclasses import replace
+import math
 
+from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 import scipy.optimize
@@ -136,3 +138,31 @@ def test_a_run_restarted_in_the_window_keeps_its_filter_estimate():
 def test_smooth_after_out_of_range_says_why(bad):
     with pytest.raises(AlignmentError, match='smooth_after'):
         ConicalEKFConfig(smooth_after=bad)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(gaps=st.lists(st.sampled_from([1.0, 0.3, 1.7, 40.0, 12000.0]), min_size=11, max_size=11),
+       readings=st.lists(st.one_of(st.floats(-1e6, 1e6), st.just(math.nan), st.just(1e300)),
+                         min_size=12, max_size=12))
+def test_the_smoother_of_any_stamps_and_samples_is_finite_and_positive_definite(gaps, readings):
+    """
+    Hostile records: gaps up to 600 s, readings of +-1e6 V or 1e300 V, samples missing.
+
+    The smoothed x is finite and P symmetric positive definite, and the runs carry on.
+    """
+    ekf = ConicalScanEKF(replace(ConicalEKFConfig(noise=1.0), smooth_after=12), runs=2)
+    t = 0.0
+    for k, z in enumerate(readings):
+        if k:
+            t += ekf.config.dt * gaps[k - 1]
+        ekf.step(t, np.array([z, 1.0]))
+        if k == 10:
+            record = ekf.window
+    assert ekf.window is None
+    x, P = smooth_window(ekf, record)
+    for est in ((x, P), (ekf.x, ekf.P)):
+        assert np.all(np.isfinite(est[0])) and np.all(np.isfinite(est[1]))
+        np.testing.assert_allclose(est[1], np.swapaxes(est[1], 1, 2), rtol=1e-9, atol=1e-12)
+        assert np.all(np.linalg.eigvalsh(est[1]) > 0.0)
+    ekf.step(t + ekf.config.dt, np.array([1.0, 1.0]))
+    assert np.all(np.isfinite(ekf.x))
