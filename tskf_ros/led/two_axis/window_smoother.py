@@ -43,7 +43,8 @@ from tskf_ros.core.smoother import smoothed_step_runs, smoother_gain_runs
 FloatArray = NDArray[np.float64]
 
 # passes of the smoother: the first linearises at the EKF's priors, each further one at
-# the last pass's smoothed states (3 and 5 lost the same runs at 1 V, seeds 100 to 149)
+# the last pass's smoothed states (2, 3 and 5 passes: 16 runs lost at the end each at 1 V,
+# seeds 100 to 199; doc/design/two_axis.md)
 PASSES = 3
 
 
