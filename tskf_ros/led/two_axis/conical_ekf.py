@@ -129,8 +129,10 @@ class ConicalScanEKF:
         # (-0.007 deg per step at 8 s on a noiseless link, doc/design/two_axis.md)
         self.x[:, 1:3] -= self.scan_offset
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
-        # what the filter sees until its smooth_after-th sample (`window_smoother`)
-        self.window = WindowRecord(self.x, self.P) if config.smooth_after > 0 else None
+        # what the filter sees from its first sample to its smooth_after-th (`window_smoother`):
+        # begun at the first update, from the prior as it is then (whatever set it)
+        self.window: Optional[WindowRecord] = None
+        self.to_smooth = config.smooth_after > 0
         self.clock = StampClock(config.dt)
         self.mu = 1.0                                # the last graininess seen
         self.regulator = TimeScaleLQR(0.0, 1.0, config.state_weight, config.input_weight)
@@ -257,17 +259,20 @@ class ConicalScanEKF:
         (`window_smoother.smooth_window`); y and S stay the update's.
         """
         offset = self.scan_offset
+        if self.to_smooth and self.window is None:
+            self.window = WindowRecord(self.x, self.P)
         if self.window is not None:
             self.window.updated(z, offset)
         post = self.posterior(self.x, self.P, z, offset)
         self.x, self.P, self.y, self.S = post
         self.updated = np.isfinite(z)
         window = self.window
-        if window is not None and window.count == self.config.smooth_after:
+        if window is not None and window.count >= self.config.smooth_after:
+            # once, whatever happens: a smoothing that raises leaves the filter's estimate
+            self.window, self.to_smooth = None, False
             x, P = smooth_window(self, window)
             keep = ~window.restarted
             self.x[keep], self.P[keep] = x[keep], P[keep]
-            self.window = None
 
     def posterior(self, x_prior: FloatArray, P_prior: FloatArray, z: FloatArray,
                   offset: FloatArray, nominal: Optional[tuple[FloatArray, FloatArray]] = None

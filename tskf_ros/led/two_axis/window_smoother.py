@@ -23,9 +23,10 @@ smoothed").  The iterated extended Kalman smoother (Bell, "The iterated Kalman s
 a Gauss-Newton method", SIAM J. Optimization, 1994) filters the same samples again,
 linearising each one at the previous pass's smoothed state (Rauch, Tung & Striebel, AIAA
 J., 1965) instead of at the prior; its fixed point is the maximum a posteriori trajectory
-of the samples.  The first pass linearises at the priors, as the EKF did.  The estimate
-at the last sample of the last pass (filtered, which is also smoothed there) replaces the
-EKF's.
+of the samples (where the innovation clip does not act and the x1 floor does not bind:
+both are the filter's own, kept in every pass).  The first pass linearises at the priors,
+as the EKF did.  The estimate at the last sample of the last pass (filtered, which is also
+smoothed there) replaces the EKF's.
 
 `WindowRecord` keeps what the filter saw (each step's graininess mu and input B u, each
 sample and its scan offset); `smooth_window` runs the passes with the filter's own
@@ -166,5 +167,6 @@ def smooth_window(filt: Smoothable, record: WindowRecord, passes: int = PASSES
     fw = _forward(filt, record, None)
     for _ in range(passes - 1):
         nominal = _backward(fw)
+        del fw                  # one forward pass and the smoothed states at a time
         fw = _forward(filt, record, nominal)
     return fw.x_f[-1].copy(), fw.P_f[-1].copy()
