@@ -28,8 +28,10 @@ only session.add is timed, by the thread's CPU time (time.thread_time_ns).  The 
 - fixed_radius: the same with the fixed 4 deg circle (dim_radius 0: no per-run radius);
 - wide_sigma: the same with the Gauss-Hermite regression while a pointing prior is wider
   than 2.5 deg (ConicalEKFConfig.wide, off by default);
-- no_smoother: the same without the smoother of the first 100 samples (smooth_after 0;
-  with it, the 100th sample runs the smoother's passes: the `worst` column);
+- no_smoother: the same without the smoother (smooth_after 0; with it, the 100th sample
+  runs the smoother's passes over the first 100 samples, the `worst` column, and every
+  50th after it over the last 50);
+- smooth_once: the same with the first 100 samples smoothed only (smooth_every 0);
 - consistent: pan_tilt.filter consistent (Gauss-Hermite, one pass);
 - no_supervisor: the conical-scan EKF alone (pat.enabled false).
 
@@ -92,6 +94,8 @@ def cases(noise: float) -> list[Case]:
             Case('wide_sigma', replace(base, ekf=replace(ConicalEKFConfig(), wide=2.5))),
             Case('no_smoother', replace(base, ekf=replace(ConicalEKFConfig(),
                                                           smooth_after=0))),
+            Case('smooth_once', replace(base, ekf=replace(ConicalEKFConfig(),
+                                                          smooth_every=0))),
             Case('consistent', replace(base, ekf=CONSISTENT)),
             Case('no_supervisor', replace(base, method='conical_ekf'))]
 

@@ -139,6 +139,7 @@ def test_one_axis_is_the_default(tmp_path, capsys):
      'argument --dim-radius: must be a finite number in [0, 14.9]'),
     (['--axes', '2', '--wide', 'nan'], 'argument --wide: must be a finite number in [0, 90]'),
     (['--axes', '2', '--smooth-after', '401'], 'argument --smooth-after: must be'),
+    (['--axes', '2', '--smooth-every', '-1'], 'argument --smooth-every: must be'),
     (['--axes', '2', '--json', '/'], '--json /: / is a folder'),
     (['--axes', '2', '--png', 'FILE/a.png'], 'is not a folder'),
     # a FIFO (or a device) is not replaced by a plain file; a name too long for the file
@@ -241,10 +242,11 @@ def test_the_scan_circle_wide_prior_and_smoother_reach_the_ekf_and_the_json(tmp_
     # --dim-radius (6.5 by default; 0 turns it off) changes the supervised EKF's runs (the
     # scan widens when dim) and is recorded; the baselines do not scan a circle and are
     # the same; so do --wide (0 by default), the runs with a wide prior regressed, and
-    # --smooth-after (100 by default, past these 80 steps; 40 smooths within them)
+    # --smooth-after (100 by default, past these 80 steps; 40 smooths within them) and
+    # --smooth-every (50 by default, past them after 40; 20 smooths again at 60 and 80)
     data = []
     for extra in (['--dim-radius', '0'], ['--dim-peak', '2.5'], ['--wide', '2.5'],
-                  ['--smooth-after', '40']):
+                  ['--smooth-after', '40'], ['--smooth-after', '40', '--smooth-every', '20']):
         out = tmp_path / f'{len(data)}.json'
         assert alignment_mc.main(['--axes', '2', '--runs', '20', '--steps', '80', '--workers',
                                   '1', '--noise-levels', '1.5', '--methods',
@@ -254,10 +256,13 @@ def test_the_scan_circle_wide_prior_and_smoother_reach_the_ekf_and_the_json(tmp_
     assert data[0]['config']['dim_radius_deg'] == 0.0
     assert data[1]['config']['dim_radius_deg'] == 6.5
     assert data[1]['config']['dim_peak_v'] == 2.5
-    assert [d['config']['wide_deg'] for d in data] == [0.0, 0.0, 2.5, 0.0]
-    assert [d['config']['smooth_after'] for d in data] == [100, 100, 100, 40]
-    a, b, c, e = (d['results'] for d in data)
+    assert [d['config']['wide_deg'] for d in data] == [0.0, 0.0, 2.5, 0.0, 0.0]
+    assert [d['config']['smooth_after'] for d in data] == [100, 100, 100, 40, 40]
+    assert [d['config']['smooth_every'] for d in data] == [50, 50, 50, 50, 20]
+    a, b, c, e, f = (d['results'] for d in data)
     assert a['four_point'] == b['four_point'] == c['four_point'] == e['four_point']
+    assert f['four_point'] == e['four_point']
+    assert f['conical_ekf_pat']['rms_error_deg'] != e['conical_ekf_pat']['rms_error_deg']
     assert e['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']
     assert a['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']
     assert c['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']

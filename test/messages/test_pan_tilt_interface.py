@@ -97,7 +97,7 @@ def test_pan_tilt_filter_consistent_is_the_consistent_filter_with_the_node_noise
     """
     pan_tilt.filter: consistent runs CONSISTENT, with pan_tilt.noise and gain as given.
 
-    pan_tilt.smooth_after applies to it as to first_order (100 by default).
+    pan_tilt.smooth_after and smooth_every apply to it as to first_order (100 and 50 by default).
     """
     s = two_axis(**{'pan_tilt.filter': 'consistent', 'pan_tilt.noise': 0.7, 'gain': 0.4,
                     'pat.enabled': pat}).session.session
@@ -149,6 +149,13 @@ def test_the_smoother_reaches_the_filter():
     off = two_axis(**{'pan_tilt.smooth_after': 0}).session.session
     assert off.ekf == replace(ConicalEKFConfig(), smooth_after=0)
     assert PanTiltSession(off).tracker.window is None
+
+
+def test_the_smoothing_again_reaches_the_filter():
+    """pan_tilt.smooth_every: 50 samples by default, 0 smooths once only."""
+    assert two_axis().session.session.ekf.smooth_every == 50
+    once = two_axis(**{'pan_tilt.smooth_every': 0}).session.session
+    assert once.ekf == replace(ConicalEKFConfig(), smooth_every=0)
 
 
 @pytest.mark.parametrize('gain', [0.25, 0.5, 1.5])

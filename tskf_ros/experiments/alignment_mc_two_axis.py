@@ -310,6 +310,11 @@ def parser() -> argparse.ArgumentParser:
                    help="at the EKF's N-th sample, the runs not handed over since the start "
                         "take the iterated smoother's estimate over those samples (0: off; "
                         f'default {ConicalEKFConfig.smooth_after})')
+    p.add_argument('--smooth-every', type=arguments.count(0, 400),
+                   default=ConicalEKFConfig.smooth_every, metavar='N',
+                   help='after that, the smoother goes over each N samples again, from the '
+                        "EKF's estimate where they begin (0: once only; "
+                        f'default {ConicalEKFConfig.smooth_every})')
     p.add_argument('--clip-four-point', action='store_true',
                    help='clip gamma_p of eq. (26) to [-gamma, gamma] (as --clip-three-point)')
     p.add_argument('--run-noise', type=arguments.noise_volts, default=1.0,
@@ -323,7 +328,7 @@ def parser() -> argparse.ArgumentParser:
 def ekf_config(args: argparse.Namespace) -> ConicalEKFConfig:
     """Return the conical-scan EKF the arguments set (scan circle, wide prior, smoother)."""
     return ConicalEKFConfig(dim_radius=args.dim_radius, dim_peak=args.dim_peak, wide=args.wide,
-                            smooth_after=args.smooth_after)
+                            smooth_after=args.smooth_after, smooth_every=args.smooth_every)
 
 
 def config_record(args: argparse.Namespace) -> dict[str, Any]:
@@ -335,6 +340,7 @@ def config_record(args: argparse.Namespace) -> dict[str, Any]:
             'clip_four_point': args.clip_four_point, 'max_intensity_v': led.MAX_INTENSITY,
             'dim_radius_deg': args.dim_radius, 'dim_peak_v': args.dim_peak,
             'wide_deg': args.wide, 'smooth_after': args.smooth_after,
+            'smooth_every': args.smooth_every,
             'methods': {name: METHODS[name] for name in args.methods},
             'tracking': {'angle_deg': led.TRACKING_ANGLE,
                          'level_v': led.TRACKING_LEVEL * led.MAX_INTENSITY},

@@ -101,7 +101,8 @@ def pan_tilt_config(values: dict) -> NodeConfig:
                     dim_radius=values['pan_tilt.dim_radius'],
                     dim_peak=values['pan_tilt.dim_peak'],
                     wide=values['pan_tilt.wide_prior'],
-                    smooth_after=values['pan_tilt.smooth_after']),
+                    smooth_after=values['pan_tilt.smooth_after'],
+                    smooth_every=values['pan_tilt.smooth_every']),
         supervisor=supervisor_config(values))
     session.make_aligner()      # a method the core does not provide yet fails here, at once
     stream = PanTiltStreamConfig(session, values['algorithm'], values['negative_is_missing'],

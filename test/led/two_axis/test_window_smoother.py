@@ -108,6 +108,18 @@ def test_one_pass_is_the_filter_itself():
     np.testing.assert_allclose(P, ekf.P, rtol=1e-12, atol=1e-16)
 
 
+def test_the_recorded_pass_is_the_record_filtered_again():
+    """The filter's own pass, kept as the smoother's first, is its samples filtered anew."""
+    from tskf_ros.led.two_axis.window_smoother import _forward, _recorded
+    ekf = ConicalScanEKF(replace(CONFIG, smooth_after=400), runs=3)
+    _feed(ekf, samples=25)
+    kept, anew = _recorded(ekf.window), _forward(ekf, ekf.window, None)
+    for name in ('x_f', 'P_f', 'x_p', 'P_p'):
+        np.testing.assert_allclose(getattr(kept, name), getattr(anew, name), rtol=1e-12,
+                                   atol=1e-14, err_msg=name)
+    np.testing.assert_allclose(np.stack(kept.F[1:]), np.stack(anew.F[1:]), rtol=1e-15)
+
+
 def test_at_smooth_after_the_runs_take_the_smoothed_estimate_but_restarted_ones():
     """At sample smooth_after: the smoother's (x, P), except runs restarted since the start."""
     plain = ConicalScanEKF(replace(CONFIG, smooth_after=400), runs=4)
@@ -134,10 +146,42 @@ def test_a_run_restarted_in_the_window_keeps_its_filter_estimate():
     assert not np.allclose(runs[1].x[~mask], runs[0].x[~mask], atol=1e-6)
 
 
+def test_each_later_window_is_smoothed_from_the_estimate_where_it_begins():
+    """
+    After smooth_after, each smooth_every samples are smoothed over again (smooth_every 10).
+
+    The reference records the same samples without smoothing them (smooth_every 400): its
+    window, begun after the first smoothing, smoothed by `smooth_window` is the estimate
+    the filter takes at its 30th sample.  A run restarted in the first window is kept out
+    of that one, and smoothed in the next, whose record is its filter's alone.
+    """
+    mask = np.array([False, True, False])
+    ekfs = []
+    for every in (10, 400):
+        ekf = ConicalScanEKF(replace(CONFIG, smooth_after=20, smooth_every=every), runs=3)
+        end = _feed(ekf, samples=6)
+        ekf.restart_runs(mask, np.array([[2.0, 1.0, 1.0, 0.0, 0.0]]), np.diag(CONFIG.P0)[None])
+        _feed(ekf, samples=24, seed=5, start=end)
+        ekfs.append(ekf)
+    smoothed, reference = ekfs
+    assert smoothed.window is None and reference.window.count == 10
+    x_s, P_s = smooth_window(reference, reference.window)
+    np.testing.assert_allclose(smoothed.x, x_s, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(smoothed.P, P_s, rtol=1e-12, atol=1e-16)
+    assert not np.allclose(x_s[mask], reference.x[mask], atol=1e-4)   # the restarted run too
+
+
+def test_with_smooth_every_0_the_samples_are_smoothed_once():
+    ekf = ConicalScanEKF(replace(CONFIG, smooth_after=10, smooth_every=0), runs=2)
+    _feed(ekf, samples=30)
+    assert ekf.window is None and not ekf.to_smooth
+
+
+@pytest.mark.parametrize('name', ['smooth_after', 'smooth_every'])
 @pytest.mark.parametrize('bad', [-1, 401])
-def test_smooth_after_out_of_range_says_why(bad):
-    with pytest.raises(AlignmentError, match='smooth_after'):
-        ConicalEKFConfig(smooth_after=bad)
+def test_smoothing_windows_out_of_range_say_why(name, bad):
+    with pytest.raises(AlignmentError, match=name):
+        ConicalEKFConfig(**{name: bad})
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])

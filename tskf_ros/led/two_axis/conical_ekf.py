@@ -129,9 +129,11 @@ class ConicalScanEKF:
         # (-0.007 deg per step at 8 s on a noiseless link, doc/design/two_axis.md)
         self.x[:, 1:3] -= self.scan_offset
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
-        # what the filter sees from its first sample to its smooth_after-th (`window_smoother`):
-        # begun at the first update, from the prior as it is then (whatever set it)
+        # what the filter sees from its first sample to its smooth_after-th, then over each
+        # smooth_every samples (`window_smoother`): begun at a window's first update, from
+        # the prior as it is then (whatever set it)
         self.window: Optional[WindowRecord] = None
+        self.window_length = config.smooth_after
         self.to_smooth = config.smooth_after > 0
         self.clock = StampClock(config.dt)
         self.mu = 1.0                                # the last graininess seen
@@ -161,9 +163,9 @@ class ConicalScanEKF:
         """Predict over mu nominal steps: x <- F x + B u_{k-1}, P <- F P F^T + mu Q."""
         Bu = np.zeros((self.runs, 5))
         Bu[:, 1:3] = self.u
+        self.x, self.P, F = self.propagate(self.x, self.P, mu, Bu)
         if self.window is not None:
-            self.window.predicted(mu, Bu)
-        self.x, self.P, _ = self.propagate(self.x, self.P, mu, Bu)
+            self.window.predicted(mu, Bu, F)
         self.u = np.zeros((self.runs, 2))
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
 
@@ -256,23 +258,27 @@ class ConicalScanEKF:
         robust filters (Masreliez & Martin, IEEE TAC 1977), bounding what one sample does.
         At the config's smooth_after-th sample, the runs not restarted since the start then
         take the estimate of the iterated smoother over the samples so far
-        (`window_smoother.smooth_window`); y and S stay the update's.
+        (`window_smoother.smooth_window`), and again at the end of each window of
+        smooth_every samples after it, over that window; y and S stay the update's.
         """
         offset = self.scan_offset
         if self.to_smooth and self.window is None:
             self.window = WindowRecord(self.x, self.P)
-        if self.window is not None:
-            self.window.updated(z, offset)
         post = self.posterior(self.x, self.P, z, offset)
+        if self.window is not None:
+            self.window.updated(z, offset, (self.x, self.P), (post.x, post.P))
         self.x, self.P, self.y, self.S = post
         self.updated = np.isfinite(z)
         window = self.window
-        if window is not None and window.count >= self.config.smooth_after:
-            # once, whatever happens: a smoothing that raises leaves the filter's estimate
+        if window is not None and window.count >= self.window_length:
+            # a smoothing that raises leaves the filter's estimate, and none is tried again
             self.window, self.to_smooth = None, False
             x, P = smooth_window(self, window)
             keep = ~window.restarted
             self.x[keep], self.P[keep] = x[keep], P[keep]
+            # the next window begins at the next sample, from the estimate there
+            self.window_length = self.config.smooth_every
+            self.to_smooth = self.window_length > 0
 
     def posterior(self, x_prior: FloatArray, P_prior: FloatArray, z: FloatArray,
                   offset: FloatArray, nominal: Optional[tuple[FloatArray, FloatArray]] = None

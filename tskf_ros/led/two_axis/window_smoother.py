@@ -14,13 +14,16 @@
 # limitations under the License.
 
 """
-The conical-scan EKF's first samples filtered again, linearised where the smoother puts them.
+Windows of the conical-scan EKF's samples filtered again, linearised where the smoother puts them.
 
 The EKF linearises h at each prior.  In the first seconds the prior is several degrees
 wide and often several degrees off, and what the Jacobian there misses leaks into the
 drift estimate, which the lock then keeps (doc/design/two_axis.md, "The first samples
-smoothed").  The iterated extended Kalman smoother (Bell, "The iterated Kalman smoother as
-a Gauss-Newton method", SIAM J. Optimization, 1994) filters the same samples again,
+smoothed"); later updates move a right drift estimate off as well ("Smoothed again while
+locked").  So the filter smooths its first smooth_after samples, then each later window of
+smooth_every samples, from its estimate where the window begins (`ConicalEKFConfig`).
+The iterated extended Kalman smoother (Bell, "The iterated Kalman smoother as a
+Gauss-Newton method", SIAM J. Optimization, 1994) filters a window's samples again,
 linearising each one at the previous pass's smoothed state (Rauch, Tung & Striebel, AIAA
 J., 1965) instead of at the prior; its fixed point is the maximum a posteriori trajectory
 of the samples (where the innovation clip does not act and the x1 floor does not bind:
@@ -28,8 +31,9 @@ both are the filter's own, kept in every pass).  The first pass linearises at th
 as the EKF did.  The estimate at the last sample of the last pass (filtered, which is also
 smoothed there) replaces the EKF's.
 
-`WindowRecord` keeps what the filter saw (each step's graininess mu and input B u, each
-sample and its scan offset); `smooth_window` runs the passes with the filter's own
+`WindowRecord` keeps what the filter saw in a window (its prior at the window's first
+sample; each step's graininess mu and input B u, each sample and its scan offset);
+`smooth_window` takes the filter's own pass as the first, and runs the others with its
 predict (`propagate`) and update (`posterior`), and `core.smoother`'s backward step.
 """
 
@@ -72,17 +76,28 @@ class Smoothable(Protocol):
 
 @dataclass
 class WindowRecord:
-    """What a filter saw from its start: its prior, and every step's mu, B u, z and offset."""
+    """
+    What a filter saw in a window, and its own pass over it.
+
+    Its prior at the first sample; every step's mu, B u and jump F, each sample z and its
+    scan offset; and the filter's priors x(k|k-1), P(k|k-1) and posteriors x(k|k), P(k|k),
+    which are the smoother's first pass as they stand (the filter linearised at its priors).
+    """
 
     x0: FloatArray                                  # the prior at the first sample (runs, n)
     P0: FloatArray                                  # (runs, n, n)
     mu: list[Optional[float]] = field(default_factory=list)   # None: no predict before z
     Bu: list[Optional[FloatArray]] = field(default_factory=list)
+    F: list[FloatArray] = field(default_factory=list)         # the jump into sample k
     z: list[FloatArray] = field(default_factory=list)         # NaN: missing
     offset: list[FloatArray] = field(default_factory=list)    # (runs, 2)
-    # runs started afresh since (a hand-over): their record is not one filter's history
+    x_p: list[FloatArray] = field(default_factory=list)       # the filter's x(k|k-1)
+    P_p: list[FloatArray] = field(default_factory=list)
+    x_f: list[FloatArray] = field(default_factory=list)       # the filter's x(k|k)
+    P_f: list[FloatArray] = field(default_factory=list)
+    # runs started afresh in the window (a hand-over): their record is not one filter's
     restarted: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    _pending: Optional[tuple[float, FloatArray]] = None
+    _pending: Optional[tuple[float, FloatArray, FloatArray]] = None
 
     def __post_init__(self) -> None:
         """Copy the prior; no run has been restarted."""
@@ -95,19 +110,27 @@ class WindowRecord:
         """Return the number of samples recorded."""
         return len(self.z)
 
-    def predicted(self, mu: float, Bu: FloatArray) -> None:
-        """Note a predict over mu nominal steps with the input B u (runs, n)."""
-        self._pending = (float(mu), np.array(Bu, dtype=float))
+    def predicted(self, mu: float, Bu: FloatArray, F: FloatArray) -> None:
+        """Note a predict over mu nominal steps with the input B u (runs, n) and jump F."""
+        self._pending = (float(mu), np.array(Bu, dtype=float), np.array(F, dtype=float))
 
-    def updated(self, z: FloatArray, offset: FloatArray) -> None:
-        """Note a sample z (runs,) taken at the scan offset (2,) or (runs, 2)."""
-        mu, Bu = self._pending if self._pending is not None else (None, None)
+    def updated(self, z: FloatArray, offset: FloatArray, prior: tuple[FloatArray, FloatArray],
+                posterior: tuple[FloatArray, FloatArray]) -> None:
+        """Note a sample z (runs,) taken at the scan offset (2,) or (runs, 2), and the update."""
+        n = self.x0.shape[1]
+        if self._pending is None:
+            mu, Bu, F = None, None, np.eye(n)
+        else:
+            mu, Bu, F = self._pending
         self._pending = None
         self.mu.append(mu)
         self.Bu.append(Bu)
+        self.F.append(F)
         self.z.append(np.array(z, dtype=float))
         self.offset.append(np.array(np.broadcast_to(offset, (self.x0.shape[0], 2)),
                                     dtype=float))
+        for into, value in zip((self.x_p, self.P_p, self.x_f, self.P_f), (*prior, *posterior)):
+            into.append(np.array(value, dtype=float))
 
 
 class _Forward(NamedTuple):
@@ -118,9 +141,20 @@ class _Forward(NamedTuple):
     F: list[FloatArray]  # the jump into point k; F[0] unused
 
 
+def _recorded(record: WindowRecord) -> _Forward:
+    """Return the filter's own pass over the record: the smoother's first."""
+    return _Forward(np.stack(record.x_f), np.stack(record.P_f), np.stack(record.x_p),
+                    np.stack(record.P_p), record.F)
+
+
 def _forward(filt: Smoothable, record: WindowRecord,
              nominal: Optional[tuple[FloatArray, FloatArray]]) -> _Forward:
-    """Filter the record again, sample k linearised at nominal[k] (None: at the prior)."""
+    """
+    Filter the record again, sample k linearised at nominal[k] (None: at the prior).
+
+    With nominal None it is the filter's own pass computed anew (a test's check of
+    `_recorded`).
+    """
     K, (runs, n) = record.count, record.x0.shape
     x_f, x_p = np.empty((K, runs, n)), np.empty((K, runs, n))
     P_f, P_p = np.empty((K, runs, n, n)), np.empty((K, runs, n, n))
@@ -157,14 +191,14 @@ def smooth_window(filt: Smoothable, record: WindowRecord, passes: int = PASSES
     """
     Return (x, P) at the record's last sample after `passes` passes of the smoother.
 
-    Pass 1 is the EKF again (h linearised at each prior); pass i > 1 linearises sample k
-    at pass i - 1's smoothed x(k|K), P(k|K).  With passes 1 it returns the filter's own
-    estimate.
+    Pass 1 is the EKF's own, as recorded (h linearised at each prior); pass i > 1 filters
+    the record again, sample k linearised at pass i - 1's smoothed x(k|K), P(k|K).  With
+    passes 1 it returns the filter's own estimate.
     """
     if record.count == 0:
         return record.x0.copy(), record.P0.copy()
     nominal: Optional[tuple[FloatArray, FloatArray]] = None
-    fw = _forward(filt, record, None)
+    fw = _recorded(record)
     for _ in range(passes - 1):
         nominal = _backward(fw)
         del fw                  # one forward pass and the smoothed states at a time
