@@ -222,19 +222,75 @@ def test_the_record_starts_from_the_prior_at_the_first_sample():
     np.testing.assert_allclose(ekf.window.P0[:, 1, 1], 9.0, rtol=1e-15)
 
 
-def test_a_smoothing_that_fails_is_not_tried_again(monkeypatch):
-    """The record is dropped before the smoother runs: one error, then the filter runs on."""
+def test_a_smoothing_that_fails_leaves_the_filter_estimate_and_the_next_window_is_tried(
+        monkeypatch):
+    """A linear algebra error in the smoother: the filter's estimate stands, counted."""
     from tskf_ros.led.two_axis import conical_ekf
+    calls = []
 
     def broken(filt, record):
+        calls.append(record.count)
         raise np.linalg.LinAlgError('not positive definite')
     monkeypatch.setattr(conical_ekf, 'smooth_window', broken)
+    plain = ConicalScanEKF(replace(CONFIG, smooth_after=0), runs=2)
+    ekf = ConicalScanEKF(replace(CONFIG, smooth_after=5, smooth_every=4), runs=2)
+    for filt in (plain, ekf):
+        _feed(filt, samples=9)
+    assert calls == [5, 4] and ekf.smoothing_failures == 2 and ekf.window is None
+    np.testing.assert_allclose(ekf.x, plain.x, rtol=1e-12)
+    np.testing.assert_allclose(ekf.P, plain.P, rtol=1e-12)
+
+
+def test_a_smoothed_estimate_that_is_not_finite_leaves_that_run_the_filter_estimate(
+        monkeypatch):
+    from tskf_ros.led.two_axis import conical_ekf
+    given = {}
+
+    def half_broken(filt, record):
+        x, P = record.x0.copy(), record.P0.copy()
+        x[0, 1] = np.nan
+        given['x'], given['P'] = x, P
+        return x, P
+    monkeypatch.setattr(conical_ekf, 'smooth_window', half_broken)
+    plain = ConicalScanEKF(replace(CONFIG, smooth_after=0), runs=2)
     ekf = ConicalScanEKF(replace(CONFIG, smooth_after=5), runs=2)
-    with pytest.raises(np.linalg.LinAlgError):
-        _feed(ekf, samples=5)
-    assert ekf.window is None and not ekf.to_smooth
-    ekf.step(10.0, np.array([1.0, 1.0]))
-    assert ekf.window is None and np.all(np.isfinite(ekf.x))
+    for filt in (plain, ekf):
+        _feed(filt, samples=5)
+    np.testing.assert_allclose(ekf.x[0], plain.x[0], rtol=1e-12)
+    np.testing.assert_allclose(ekf.x[1], given['x'][1], rtol=0.0)
+    assert np.all(np.isfinite(ekf.x))
+
+
+@pytest.mark.parametrize('at', [6, 16])
+def test_a_run_handed_over_in_a_window_of_the_consistent_filter_is_smoothed_without_error(at):
+    """
+    The consistent filter (sigma points: a Cholesky factor of each run's P), restarted.
+
+    A run that sees no light (its prior widening, as in a search) is handed over with a
+    tight prior in the first window or in the second: its recorded pass jumps there, so
+    the window is filtered again from its prior.  Every window is smoothed without error,
+    the other runs take the smoothed estimate, and the restarted one keeps the filter's.
+    """
+    from tskf_ros.led.two_axis.conical_ekf import CONSISTENT
+    mask = np.array([True, False, False])
+    cfg = replace(CONSISTENT, noise=0.3, smooth_after=10, smooth_every=10)
+    ekfs = [ConicalScanEKF(replace(cfg, smooth_after=after), runs=3) for after in (10, 0)]
+    for ekf in ekfs:
+        rng = np.random.default_rng(0)
+        x = np.tile([1.0, 0.5, -0.3, 0.0, 0.0], (3, 1))
+        for k in range(30):
+            if k == at:
+                tight = np.diag([0.01, 0.05, 0.05, *CONSISTENT.P0[3:]])[None]
+                offset = np.broadcast_to(ekf.scan_offset, (3, 2))[0]
+                ekf.restart_runs(mask, (x[0] - np.r_[0.0, offset, 0.0, 0.0])[None], tight)
+            z = ekf.h(x, ekf.scan_offset) + 0.3 * rng.standard_normal(3)
+            if k < at:
+                z[0] = np.nan
+            ekf.step(0.05 * k, z)
+    smoothed, plain = ekfs
+    assert smoothed.smoothing_failures == 0
+    assert np.all(np.isfinite(smoothed.x)) and np.all(np.linalg.eigvalsh(smoothed.P) > 0.0)
+    assert not np.allclose(smoothed.x[~mask], plain.x[~mask], atol=1e-6)
 
 
 def test_the_smoother_takes_the_first_seconds_drift_bias_away():

@@ -135,6 +135,7 @@ class ConicalScanEKF:
         self.window: Optional[WindowRecord] = None
         self.window_length = config.smooth_after
         self.to_smooth = config.smooth_after > 0
+        self.smoothing_failures = 0                  # windows whose smoothing was not solvable
         self.clock = StampClock(config.dt)
         self.mu = 1.0                                # the last graininess seen
         self.regulator = TimeScaleLQR(0.0, 1.0, config.state_weight, config.input_weight)
@@ -259,7 +260,10 @@ class ConicalScanEKF:
         At the config's smooth_after-th sample, the runs not restarted since the start then
         take the estimate of the iterated smoother over the samples so far
         (`window_smoother.smooth_window`), and again at the end of each window of
-        smooth_every samples after it, over that window; y and S stay the update's.
+        smooth_every samples after it, over that window, the runs not restarted within it;
+        y and S stay the update's.  A smoothing that is not solvable (a linear algebra
+        error) leaves the filter's estimate, counted in smoothing_failures; so does a
+        smoothed estimate that is not finite, run by run.
         """
         offset = self.scan_offset
         if self.to_smooth and self.window is None:
@@ -271,14 +275,19 @@ class ConicalScanEKF:
         self.updated = np.isfinite(z)
         window = self.window
         if window is not None and window.count >= self.window_length:
-            # a smoothing that raises leaves the filter's estimate, and none is tried again
-            self.window, self.to_smooth = None, False
-            x, P = smooth_window(self, window)
-            keep = ~window.restarted
-            self.x[keep], self.P[keep] = x[keep], P[keep]
             # the next window begins at the next sample, from the estimate there
-            self.window_length = self.config.smooth_every
+            self.window, self.window_length = None, self.config.smooth_every
             self.to_smooth = self.window_length > 0
+            keep = ~window.restarted
+            if keep.any():
+                try:
+                    x, P = smooth_window(self, window)
+                except np.linalg.LinAlgError:
+                    # the filter's estimate stands; the next window is smoothed as usual
+                    self.smoothing_failures += 1
+                else:
+                    keep &= np.isfinite(x).all(axis=1) & np.isfinite(P).all(axis=(1, 2))
+                    self.x[keep], self.P[keep] = x[keep], P[keep]
 
     def posterior(self, x_prior: FloatArray, P_prior: FloatArray, z: FloatArray,
                   offset: FloatArray, nominal: Optional[tuple[FloatArray, FloatArray]] = None

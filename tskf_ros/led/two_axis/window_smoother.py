@@ -152,8 +152,8 @@ def _forward(filt: Smoothable, record: WindowRecord,
     """
     Filter the record again, sample k linearised at nominal[k] (None: at the prior).
 
-    With nominal None it is the filter's own pass computed anew (a test's check of
-    `_recorded`).
+    With nominal None it is the filter's own pass computed anew: the first pass of a window
+    in which a run was restarted.
     """
     K, (runs, n) = record.count, record.x0.shape
     x_f, x_p = np.empty((K, runs, n)), np.empty((K, runs, n))
@@ -191,14 +191,19 @@ def smooth_window(filt: Smoothable, record: WindowRecord, passes: int = PASSES
     """
     Return (x, P) at the record's last sample after `passes` passes of the smoother.
 
-    Pass 1 is the EKF's own, as recorded (h linearised at each prior); pass i > 1 filters
-    the record again, sample k linearised at pass i - 1's smoothed x(k|K), P(k|K).  With
-    passes 1 it returns the filter's own estimate.
+    Pass 1 is the EKF's own, as recorded (h linearised at each prior; filtered again from
+    the record's prior if a run was restarted in it); pass i > 1 filters the record again,
+    sample k linearised at pass i - 1's smoothed x(k|K), P(k|K).  With passes 1 it returns
+    the filter's own estimate.
     """
     if record.count == 0:
         return record.x0.copy(), record.P0.copy()
     nominal: Optional[tuple[FloatArray, FloatArray]] = None
-    fw = _recorded(record)
+    # a run restarted in the window has a recorded pass that jumps at the restart, which
+    # the backward pass cannot take (its covariances are then not positive definite, and
+    # a sigma-point linearisation's Cholesky factor fails): the window is then filtered
+    # again from its prior, one history per run
+    fw = _forward(filt, record, None) if record.restarted.any() else _recorded(record)
     for _ in range(passes - 1):
         nominal = _backward(fw)
         del fw                  # one forward pass and the smoothed states at a time
