@@ -215,6 +215,26 @@ def test_no_process_noise_and_an_exact_prior_give_no_nan():
     close(Ps, np.zeros((3, 2, 2)))
 
 
+@pytest.mark.parametrize('bad', [np.nan, np.inf])
+def test_a_gain_of_a_covariance_that_is_not_finite_is_not_finite_and_raises_nothing(bad):
+    """
+    smoother_gain of a P(t_{k+1}|t_k) with a NaN or an infinity: a NaN gain, no exception.
+
+    Compiled, the solve and the least squares both raise on such a matrix, and a raise
+    inside the fallback was not caught (numba's internals); a sound and a singular one
+    are against numpy's solve and pseudo-inverse.
+    """
+    P_f, F = np.diag([2.0, 1.0, 0.5]), np.eye(3) + np.diag([0.1, 0.1], 1)
+    bad_P = np.eye(3)
+    bad_P[0, 0] = bad
+    assert np.all(np.isnan(smoother.smoother_gain(P_f, F, bad_P)))
+    sound = np.array([[2.0, 0.3, 0.0], [0.3, 1.0, 0.1], [0.0, 0.1, 0.5]])
+    close(smoother.smoother_gain(P_f, F, sound), np.linalg.solve(sound, F @ P_f).T, 1e-12)
+    singular = np.diag([2.0, 1.0, 0.0])
+    close(smoother.smoother_gain(P_f, F, singular), (np.linalg.pinv(singular) @ F @ P_f).T,
+          1e-12)
+
+
 def augmented(m, mu, y, u, kind, k, mu1):
     """textbook_rts with a point without measurement inserted at t_k + mu1 (index k + 1)."""
     jumps = [discrete(m, h, kind) for h in mu]

@@ -87,9 +87,14 @@ def smoother_gain(P_f: Matrix, F: Matrix, P_p: Matrix) -> Matrix:
     """Return the RTS gain G = P(t_k|t_k) F^T P(t_{k+1}|t_k)^-1, by a solve (not an inverse)."""
     # G^T = P(t_{k+1}|t_k)^-1 F P(t_k|t_k), as P(t_{k+1}|t_k) and P(t_k|t_k) are symmetric
     FP = np.ascontiguousarray(F) @ np.ascontiguousarray(P_f)
+    solved = True
     try:
         Gt = np.linalg.solve(P_p, FP)
-    except Exception:       # singular P(t_{k+1}|t_k): the least-squares (pseudo-inverse) gain
+    except Exception:
+        solved = False      # (nothing raised in here: compiled, a raise there is not caught)
+        Gt = np.full(FP.shape, np.nan)      # a run that is not finite: nor is its gain
+    if not solved and np.all(np.isfinite(P_p)) and np.all(np.isfinite(FP)):
+        # singular P(t_{k+1}|t_k): the least-squares (pseudo-inverse) gain
         Gt = np.linalg.lstsq(P_p, FP)[0]
     return np.ascontiguousarray(Gt.T)
 

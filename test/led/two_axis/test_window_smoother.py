@@ -261,6 +261,31 @@ def test_a_smoothed_estimate_that_is_not_finite_leaves_that_run_the_filter_estim
     assert np.all(np.isfinite(ekf.x))
 
 
+@pytest.mark.filterwarnings('ignore::RuntimeWarning')     # the filter's own, at infinity
+def test_a_run_gone_to_infinity_keeps_its_filter_estimate_and_the_others_are_smoothed():
+    """
+    Without the innovation clip, a reading of 1.7e308 V takes a run's estimate to infinity.
+
+    The window's smoothing of that run gives no finite estimate (its gains are NaN, and
+    nothing raises); it keeps the filter's, and the other run takes the smoother's.
+    """
+    cfg = replace(CONFIG, innovation_clip=0.0, smooth_after=10, smooth_every=10)
+    ekfs = [ConicalScanEKF(replace(cfg, smooth_after=after), runs=2) for after in (10, 0)]
+    for ekf in ekfs:
+        rng = np.random.default_rng(1)
+        x = np.tile(TRUE, (2, 1))
+        for k in range(20):
+            z = ekf.h(x, ekf.scan_offset) + CONFIG.noise * rng.standard_normal(2)
+            if k == 3:
+                z[0] = 1.7e308
+            ekf.step(0.05 * k, z)
+    smoothed, plain = ekfs
+    assert not np.all(np.isfinite(plain.x[0]))
+    assert smoothed.smoothing_failures == 0
+    np.testing.assert_array_equal(smoothed.x[0], plain.x[0])
+    assert np.all(np.isfinite(smoothed.x[1])) and not np.allclose(smoothed.x[1], plain.x[1])
+
+
 @pytest.mark.parametrize('at', [6, 16])
 def test_a_run_handed_over_in_a_window_of_the_consistent_filter_is_smoothed_without_error(at):
     """

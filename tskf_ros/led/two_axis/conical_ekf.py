@@ -262,8 +262,8 @@ class ConicalScanEKF:
         (`window_smoother.smooth_window`), and again at the end of each window of
         smooth_every samples after it, over that window, the runs not restarted within it;
         y and S stay the update's.  A smoothing that is not solvable (a linear algebra
-        error) leaves the filter's estimate, counted in smoothing_failures; so does a
-        smoothed estimate that is not finite, run by run.
+        error) leaves every run the filter's estimate, counted in smoothing_failures; a run
+        whose smoothed estimate is not finite keeps the filter's (not counted).
         """
         offset = self.scan_offset
         if self.to_smooth and self.window is None:

@@ -30,7 +30,7 @@ CONTROLLERS = ('p', 'lqr')
 LINEARISATIONS = ('taylor', 'cubature', 'gauss_hermite', 'gauss_hermite_5')
 # the bound of smooth_after and smooth_every: a window's record (the filter's own pass)
 # keeps about 0.5 KiB a sample and run, and the smoother's passes peak at about 1 KiB more
-# (0.8 MiB for one run over 400 samples, about 0.6 GiB for 1000 runs); 0.07 to 0.13 s for
+# (0.6 MiB for one run over 400 samples, about 0.6 GiB for 1000 runs); 0.07 to 0.13 s for
 # one run
 MAX_SMOOTH_AFTER = 400
 STATES = ('x1', 'd_c', 'd_e', 'b_c', 'b_e')

@@ -32,9 +32,11 @@ as the EKF did.  The estimate at the last sample of the last pass (filtered, whi
 smoothed there) replaces the EKF's.
 
 `WindowRecord` keeps what the filter saw in a window (its prior at the window's first
-sample; each step's graininess mu and input B u, each sample and its scan offset);
-`smooth_window` takes the filter's own pass as the first, and runs the others with its
-predict (`propagate`) and update (`posterior`), and `core.smoother`'s backward step.
+sample; each step's graininess mu, input B u and jump F, each sample and its scan offset)
+and the filter's own pass (its priors and posteriors); `smooth_window` takes that pass as
+the first (or filters the window again from its prior, if a run was restarted in it), and
+runs the others with the filter's predict (`propagate`) and update (`posterior`), and
+`core.smoother`'s backward step.
 """
 
 from dataclasses import dataclass, field
@@ -81,7 +83,8 @@ class WindowRecord:
 
     Its prior at the first sample; every step's mu, B u and jump F, each sample z and its
     scan offset; and the filter's priors x(k|k-1), P(k|k-1) and posteriors x(k|k), P(k|k),
-    which are the smoother's first pass as they stand (the filter linearised at its priors).
+    which are the smoother's first pass as they stand (the filter linearised at its priors)
+    unless a run was restarted in the window (`smooth_window`).
     """
 
     x0: FloatArray                                  # the prior at the first sample (runs, n)
@@ -142,7 +145,7 @@ class _Forward(NamedTuple):
 
 
 def _recorded(record: WindowRecord) -> _Forward:
-    """Return the filter's own pass over the record: the smoother's first."""
+    """Return the filter's own pass over the record: the smoother's first, if no run restarted."""
     return _Forward(np.stack(record.x_f), np.stack(record.P_f), np.stack(record.x_p),
                     np.stack(record.P_p), record.F)
 
@@ -152,8 +155,8 @@ def _forward(filt: Smoothable, record: WindowRecord,
     """
     Filter the record again, sample k linearised at nominal[k] (None: at the prior).
 
-    With nominal None it is the filter's own pass computed anew: the first pass of a window
-    in which a run was restarted.
+    With nominal None it is the filter's own pass computed anew (for a restarted run, as if
+    it had not been): the first pass of a window in which a run was restarted.
     """
     K, (runs, n) = record.count, record.x0.shape
     x_f, x_p = np.empty((K, runs, n)), np.empty((K, runs, n))
@@ -194,7 +197,8 @@ def smooth_window(filt: Smoothable, record: WindowRecord, passes: int = PASSES
     Pass 1 is the EKF's own, as recorded (h linearised at each prior; filtered again from
     the record's prior if a run was restarted in it); pass i > 1 filters the record again,
     sample k linearised at pass i - 1's smoothed x(k|K), P(k|K).  With passes 1 it returns
-    the filter's own estimate.
+    the filter's own estimate (for a run restarted in the window, what the filter would
+    have had without the restart, which `ConicalScanEKF.update` does not take).
     """
     if record.count == 0:
         return record.x0.copy(), record.P0.copy()
