@@ -23,9 +23,11 @@ import pytest
 
 from tskf_ros.experiments import alignment_mc, alignment_mc_two_axis, alignment_pat
 from tskf_ros.experiments.alignment_ablation_report import wilson
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig
 from tskf_ros.led.two_axis.pan_tilt_baselines import FourPointAveraging, TwoAxisHillClimbing
 from tskf_ros.led.two_axis.pan_tilt_link import PanTiltLinkConfig
 from tskf_ros.led.two_axis.pan_tilt_simulation import simulate_pan_tilt
+from tskf_ros.led.two_axis.radial_response import RadialResponse
 
 ONE_AXIS_KEYS = {'angular', 'measure'} | set(alignment_pat.empty_record())
 
@@ -52,6 +54,9 @@ def test_two_axes_write_the_one_axis_keys_and_per_axis_errors(tmp_path, capsys):
     if 'conical_ekf_pat' in data['results']:
         assert data['results']['conical_ekf_pat']['false_alarms_per_1000s'][0] is not None
     assert data['results']['hill_climbing']['false_alarms_per_1000s'] == [None, None]
+    # no window ends within 40 samples; the baselines have no smoother
+    assert data['results']['conical_ekf_pat']['smoothing_failures'] == [0, 0]
+    assert data['results']['hill_climbing']['smoothing_failures'] == [None, None]
     # the baselines' numbers, from the closed loop written out here: seed 0 at each level
     for i, noise in enumerate((0.5, 1.5)):
         link = PanTiltLinkConfig(beta=1.2, steps=40, noise=noise, offset0=5.0)
@@ -266,3 +271,16 @@ def test_the_scan_circle_wide_prior_and_smoother_reach_the_ekf_and_the_json(tmp_
     assert e['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']
     assert a['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']
     assert c['conical_ekf_pat']['rms_error_deg'] != b['conical_ekf_pat']['rms_error_deg']
+
+
+def test_a_failed_smoothing_is_counted_in_the_point_result(monkeypatch):
+    """Each window whose smoothing raises is one failure of the point (all runs at once)."""
+    from tskf_ros.led.two_axis import conical_ekf
+
+    def broken(filt, record):
+        raise np.linalg.LinAlgError('not positive definite')
+    monkeypatch.setattr(conical_ekf, 'smooth_window', broken)
+    link = PanTiltLinkConfig(beta=1.2, steps=23, noise=1.0, offset0=5.0)
+    ekf = ConicalEKFConfig(smooth_after=5, smooth_every=6)      # windows end at 5, 11, 17, 23
+    point = alignment_mc_two_axis.Point('conical_ekf', 4, link, 0, RadialResponse(), True, ekf)
+    assert alignment_mc_two_axis.run_point(point).smoothing_failures == 4

@@ -15,12 +15,15 @@
 
 """The two-axis stream: the one-axis session's checks and counters around the pan-tilt session."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from tskf_ros.core.diagnostic_status import OK, WARN
 from tskf_ros.core.units import NS
 from tskf_ros.led.pan_tilt_stream import PanTiltStream, PanTiltStreamConfig
-from tskf_ros.led.two_axis.conical_ekf import transition
+from tskf_ros.led.two_axis.conical_ekf import ConicalEKFConfig, transition
 from tskf_ros.led.two_axis.pan_tilt_session import PanTiltSession, PanTiltSessionConfig
 
 DT_NS = 50_000_000
@@ -89,3 +92,27 @@ def test_the_prior_is_the_prediction_from_the_last_posterior():
             np.testing.assert_allclose(x_prior[[0, 3, 4]], prev.x[[0, 3, 4]], rtol=0,
                                        atol=1e-12)
         prev = step.outcome.estimate
+
+
+def test_a_failed_smoothing_warns_once_and_is_counted_across_restarts(monkeypatch):
+    """The window's smoothing raising: the aligner warns on the next report, not after."""
+    from tskf_ros.led.two_axis import conical_ekf
+
+    def broken(filt, record):
+        raise np.linalg.LinAlgError('not positive definite')
+    monkeypatch.setattr(conical_ekf, 'smooth_window', broken)
+    ekf = replace(ConicalEKFConfig(), smooth_after=5, smooth_every=4)
+    s = PanTiltStream(PanTiltStreamConfig(PanTiltSessionConfig(ekf=ekf)))
+    k = 0
+    for k in range(9):                     # windows end at the 5th and the 9th sample
+        s.add(NS + k * DT_NS, 2.5)
+    first = {d.name: d for d in s.diagnostics()}['aligner']
+    assert first.as_dict()['Smoothing failures'] == '2'
+    assert first.level == WARN and '2 smoothing(s)' in first.message
+    again = {d.name: d for d in s.diagnostics()}['aligner']
+    assert again.level == OK and again.as_dict()['Smoothing failures'] == '2'
+    s.reset('clock_jump')                  # a new aligner: its count adds to the earlier
+    for j in range(1, 6):
+        s.add(NS + (k + j) * DT_NS, 2.5)
+    after = {d.name: d for d in s.diagnostics()}['aligner']
+    assert after.as_dict()['Smoothing failures'] == '3' and '1 smoothing(s)' in after.message

@@ -143,6 +143,8 @@ class PointResult:
     measure: np.ndarray
     rms: np.ndarray
     metrics: dict
+    # windows whose smoothing failed (the filter's estimate kept); None: no smoother
+    smoothing_failures: Optional[int] = None
 
 
 def simulate(p: Point) -> tuple[PanTiltTrajectory, Recording]:
@@ -163,7 +165,9 @@ def run_point(p: Point) -> PointResult:
                                     np.array(rec.states) if supervised else None,
                                     np.array(rec.declared) if supervised else None,
                                     blocked=p.link.blocked)
-    return PointResult(angular, measure, rms, m)
+    failures = getattr(getattr(rec.aligner, 'tracker', rec.aligner), 'smoothing_failures', None)
+    return PointResult(angular, measure, rms, m,
+                       None if failures is None else int(failures))
 
 
 def run_points(points: Sequence[Point], workers: int,
@@ -195,6 +199,7 @@ def empty_entry() -> dict:
             'measure': {'mean': [], 'std': [], 'ci95': []},
             **alignment_pat.empty_record(),
             'lost_at_end_ci95': [], 'acquired_within_10s_ci95': [],
+            'smoothing_failures': [],
             'rms_error_deg': {axis: mean_ci() for axis in AXES}}
 
 
@@ -208,6 +213,7 @@ def record(entry: dict, r: PointResult, index: np.ndarray) -> None:
     runs = r.angular.size
     lost = int(round(r.metrics['lost_at_end'] * runs))
     entry['lost_at_end_ci95'].append(wilson(lost, runs))
+    entry['smoothing_failures'].append(r.smoothing_failures)
     acq = r.metrics['acquisition']
     within = int(np.count_nonzero(acq.observed & (acq.times <= alignment_pat.ACQUIRED_WITHIN)))
     entry['acquired_within_10s_ci95'].append(wilson(within, acq.times.size)

@@ -33,7 +33,7 @@ from typing import Optional
 
 import numpy as np
 
-from tskf_ros.core.diagnostic_status import expected_frequency, InputStream, Status
+from tskf_ros.core.diagnostic_status import expected_frequency, InputStream, Status, WARN
 from tskf_ros.core.units import NS
 from tskf_ros.led.alignment_config import check_range
 from tskf_ros.led.alignment_diagnostics import aligner_status, pointing_status, time_scale
@@ -93,6 +93,7 @@ class PanTiltStream:
         self.pointing = PointingStats()
         self.session = PanTiltSession(config.session)
         self.health_error = ''
+        self.failures_reported = 0      # the session's smoothing failures at the last report
         self.pointing.enter(self.session.state, 'start', None)
 
     @property
@@ -219,6 +220,7 @@ class PanTiltStream:
         lo, hi = config.session.tilt_limits
         session = replace(config.session, joints0=(joints[0], min(max(joints[1], lo), hi)))
         self.session = PanTiltSession(session)
+        self.failures_reported = 0
         self.config = config
         self.stats.resets['reconfigured'] += 1
         self.pointing.enter(self.session.state, 'restarted (reconfigured)',
@@ -240,6 +242,12 @@ class PanTiltStream:
             stat.add('d_c estimate (deg)', estimate.error[0])
             stat.add('d_e estimate (deg)', estimate.error[1])
             stat.add('Covariance trace', float(np.trace(estimate.P)))
+        failures = self.session.smoothing_failures
+        stat.add('Smoothing failures', failures)
+        if failures > self.failures_reported:
+            stat.merge_summary(WARN, f'{failures - self.failures_reported} smoothing(s) of '
+                               "the filter's window failed since the last update: its "
+                               'estimate was kept')
         out += [stat, time_scale(st, self.config)]
         if self.pointing.state != 'disabled':
             out.append(pointing_status(self.pointing, getattr(self.session.aligner, 'verdict',
@@ -248,5 +256,6 @@ class PanTiltStream:
         if consume:
             st.gaps_over_bound = 0
             st.bad_since = 0
+            self.failures_reported = failures
             self.health_error = ''
         return out

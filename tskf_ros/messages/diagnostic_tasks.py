@@ -124,6 +124,9 @@ ALIGNER_TASK = DiagnosticTask(
     (LevelRow('ERROR', 'the EKF state went beyond `state_limit` since the last update',
               'aligner restarted itself: ...'),
      LevelRow('WARN', 'the EKF has lost the transmitter (x1hat <= 0)'),
+     LevelRow('WARN', "`axes` 2: a smoothing of the conical-scan EKF's window failed since "
+              "the last update (a linear-algebra error; the filter's estimate was kept)",
+              "N smoothing(s) of the filter's window failed since the last update: ..."),
      LevelRow('OK', 'otherwise; while `~/enable` is false the message says the loop is '
               'paused and how many samples came meanwhile: a paused loop is not a fault')),
     (KeyRow(('Algorithm', 'Paused'), 'the aligner, `yes` while `~/enable` is false'),
@@ -147,7 +150,9 @@ ALIGNER_TASK = DiagnosticTask(
      KeyRow(('Tilt command (deg)', 'd_c estimate (deg)', 'd_e estimate (deg)'),
             "`axes` 2: the tilt joint's last command (`Base command (deg)` is the pan "
             "joint's), the conical-scan EKF's cross-elevation and elevation errors (with "
-            '`x1 estimate (V)` and `Covariance trace`, while it steers)')))
+            '`x1 estimate (V)` and `Covariance trace`, while it steers)'),
+     KeyRow(('Smoothing failures',), '`axes` 2: windows whose smoothing failed since the '
+            'start or the last reconfiguration (`pan_tilt.smooth_after`, `smooth_every`)')))
 
 ALIGNMENT_TIME_SCALE_TASK = DiagnosticTask(
     TIME_SCALE, 'the time scale of the intensity stream: gaps and graininess',

@@ -134,9 +134,12 @@ class PanTiltSession:
         self.config = config
         self.joints = np.asarray(config.joints0, dtype=float).copy()
         self.resets = 0
+        self.earlier_failures = 0      # smoothing failures of the aligners restarted since
         self._restart()
 
     def _restart(self) -> None:
+        if hasattr(self, 'aligner'):
+            self.earlier_failures = self.smoothing_failures
         self.aligner = self.config.make_aligner((float(self.joints[0]),
                                                  float(self.joints[1])))
         self.origin_ns: Optional[int] = None
@@ -146,6 +149,11 @@ class PanTiltSession:
     def tracker(self) -> object:
         """Return the filter that tracks (inside the supervisor, if there is one)."""
         return getattr(self.aligner, 'tracker', self.aligner)
+
+    @property
+    def smoothing_failures(self) -> int:
+        """Return the windows whose smoothing failed (the filter's estimate kept), all told."""
+        return self.earlier_failures + int(getattr(self.tracker, 'smoothing_failures', 0))
 
     @property
     def state(self) -> str:
