@@ -54,8 +54,9 @@ def test_two_axes_write_the_one_axis_keys_and_per_axis_errors(tmp_path, capsys):
     if 'conical_ekf_pat' in data['results']:
         assert data['results']['conical_ekf_pat']['false_alarms_per_1000s'][0] is not None
     assert data['results']['hill_climbing']['false_alarms_per_1000s'] == [None, None]
-    # no window ends within 40 samples; the baselines have no smoother
-    assert data['results']['conical_ekf_pat']['smoothing_failures'] == [0, 0]
+    # no window ends within 40 samples (a count, not null); the baselines have no smoother
+    for name in set(data['results']) - {'hill_climbing', 'four_point'}:
+        assert data['results'][name]['smoothing_failures'] == [0, 0], name
     assert data['results']['hill_climbing']['smoothing_failures'] == [None, None]
     # the baselines' numbers, from the closed loop written out here: seed 0 at each level
     for i, noise in enumerate((0.5, 1.5)):

@@ -116,3 +116,12 @@ def test_a_failed_smoothing_warns_once_and_is_counted_across_restarts(monkeypatc
         s.add(NS + (k + j) * DT_NS, 2.5)
     after = {d.name: d for d in s.diagnostics()}['aligner']
     assert after.as_dict()['Smoothing failures'] == '3' and '1 smoothing(s)' in after.message
+    # not consumed: reported again; a reconfiguration keeps the count and the warning
+    for j in range(6, 10):                 # the new aligner's window ends at its 9th sample
+        s.add(NS + (k + j) * DT_NS, 2.5)
+    peek = {d.name: d for d in s.diagnostics(consume=False)}['aligner']
+    assert peek.as_dict()['Smoothing failures'] == '4' and '1 smoothing(s)' in peek.message
+    s.reconfigure(s.config)
+    moved = {d.name: d for d in s.diagnostics()}['aligner']
+    assert moved.as_dict()['Smoothing failures'] == '4' and '1 smoothing(s)' in moved.message
+    assert {d.name: d for d in s.diagnostics()}['aligner'].level == OK

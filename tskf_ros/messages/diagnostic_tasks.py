@@ -152,7 +152,8 @@ ALIGNER_TASK = DiagnosticTask(
             "joint's), the conical-scan EKF's cross-elevation and elevation errors (with "
             '`x1 estimate (V)` and `Covariance trace`, while it steers)'),
      KeyRow(('Smoothing failures',), '`axes` 2: windows whose smoothing failed since the '
-            'start or the last reconfiguration (`pan_tilt.smooth_after`, `smooth_every`)')))
+            'start, over restarts and reconfigurations (`pan_tilt.smooth_after`, '
+            '`smooth_every`)')))
 
 ALIGNMENT_TIME_SCALE_TASK = DiagnosticTask(
     TIME_SCALE, 'the time scale of the intensity stream: gaps and graininess',
