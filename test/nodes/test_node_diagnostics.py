@@ -22,6 +22,7 @@ logged; nothing is timed).
 """
 
 from diagnostic_msgs.msg import DiagnosticStatus
+from node_helpers import call, spin_until
 from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool
 
@@ -33,22 +34,6 @@ from tskf_ros.nodes.power_meter_simulator import PowerMeterSimulator
 from tskf_ros.nodes.timescale_estimator import TimescaleEstimator
 
 T0 = 1_700_000_000 * NS
-TIMEOUT = 60.0
-
-
-def spin_until(executor, condition, what):
-    """Spin until condition() holds (bounded by TIMEOUT, never a timing assertion)."""
-    import time
-    end = time.monotonic() + TIMEOUT
-    while not condition():
-        assert time.monotonic() < end, f'no {what}'
-        executor.spin_once(timeout_sec=0.1)
-
-
-def call(executor, client, request):
-    future = client.call_async(request)
-    spin_until(executor, future.done, 'service answer')
-    return future.result()
 
 
 def statuses(msg):

@@ -219,9 +219,9 @@ class PanTiltStream:
         joints = self.joints
         lo, hi = config.session.tilt_limits
         session = replace(config.session, joints0=(joints[0], min(max(joints[1], lo), hi)))
-        failures = self.session.smoothing_failures
-        self.session = PanTiltSession(session)
-        self.session.earlier_failures = failures      # counted (and warned of) as before
+        # the failures so far stay counted (and warned of) as before
+        self.session = PanTiltSession(session,
+                                      earlier_failures=self.session.smoothing_failures)
         self.config = config
         self.stats.resets['reconfigured'] += 1
         self.pointing.enter(self.session.state, 'restarted (reconfigured)',

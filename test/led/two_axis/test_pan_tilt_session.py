@@ -62,6 +62,27 @@ def test_missing_samples_are_predicted_over():
     assert session.estimate().covariance[1, 1] > p0
 
 
+def test_failed_smoothings_count_across_restarts_and_from_a_replaced_session(monkeypatch):
+    """smoothing_failures: the aligner's, those of aligners restarted since, and earlier ones."""
+    from dataclasses import replace
+
+    from tskf_ros.led.two_axis import conical_ekf
+
+    def broken(filt, record):
+        raise np.linalg.LinAlgError('not positive definite')
+    monkeypatch.setattr(conical_ekf, 'smooth_window', broken)
+    ekf = replace(conical_ekf.ConicalEKFConfig(), smooth_after=5, smooth_every=0)
+    session = PanTiltSession(PanTiltSessionConfig(ekf=ekf), earlier_failures=3)
+    assert session.smoothing_failures == 3
+    for k in range(5):                          # the window ends at the 5th sample
+        session.add(100 * NS + k * NS // 20, 2.5)
+    assert session.smoothing_failures == 4
+    assert session.add(10 * NS, 2.5).status == 'reset'   # far back in time: a new aligner
+    for k in range(1, 5):
+        session.add(10 * NS + k * NS // 20, 2.5)
+    assert session.smoothing_failures == 5 and session.resets == 1
+
+
 @pytest.mark.parametrize('stamp,reason', [(0, 'zero_stamp'), (NS, 'duplicate'),
                                           (NS - 1000, 'stale'), (2**63 - 1, 'stamp_range')])
 def test_bad_stamps_are_rejected_without_a_command(stamp, reason):

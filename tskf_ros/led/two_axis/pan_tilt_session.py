@@ -130,11 +130,14 @@ class PanTiltOutcome:
 class PanTiltSession:
     """One two-axis aligner fed from a stream of stamped intensities; see the module doc."""
 
-    def __init__(self, config: PanTiltSessionConfig = PanTiltSessionConfig()) -> None:
+    def __init__(self, config: PanTiltSessionConfig = PanTiltSessionConfig(), *,
+                 earlier_failures: int = 0) -> None:
+        """Start the aligner; earlier_failures: smoothing failures of a session this replaces."""
         self.config = config
         self.joints = np.asarray(config.joints0, dtype=float).copy()
         self.resets = 0
-        self.earlier_failures = 0      # smoothing failures of the aligners restarted since
+        # smoothing failures of the aligners restarted since (and of a session replaced)
+        self.earlier_failures = int(earlier_failures)
         self._restart()
 
     def _restart(self) -> None:

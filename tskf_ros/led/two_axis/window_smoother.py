@@ -87,7 +87,10 @@ class WindowRecord:
     unless a run was restarted in the window (`smooth_window`).
     """
 
-    x0: FloatArray                                  # the prior at the first sample (runs, n)
+    # the prior at the window's start (runs, n): before the first sample's predict, if one
+    # is noted; the filter begins its windows at an update, where it is x_p[0] (kept so
+    # that a record may begin before a predict, and for a window with no sample yet)
+    x0: FloatArray
     P0: FloatArray                                  # (runs, n, n)
     mu: list[Optional[float]] = field(default_factory=list)   # None: no predict before z
     Bu: list[Optional[FloatArray]] = field(default_factory=list)
@@ -99,14 +102,13 @@ class WindowRecord:
     x_f: list[FloatArray] = field(default_factory=list)       # the filter's x(k|k)
     P_f: list[FloatArray] = field(default_factory=list)
     # runs started afresh in the window (a hand-over): their record is not one filter's
-    restarted: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    restarted: NDArray[np.bool_] = field(init=False)
     _pending: Optional[tuple[float, FloatArray, FloatArray]] = None
 
     def __post_init__(self) -> None:
         """Copy the prior; no run has been restarted."""
         self.x0, self.P0 = np.array(self.x0, dtype=float), np.array(self.P0, dtype=float)
-        if self.restarted.shape != (self.x0.shape[0],):
-            self.restarted = np.zeros(self.x0.shape[0], dtype=bool)
+        self.restarted = np.zeros(self.x0.shape[0], dtype=bool)
 
     @property
     def count(self) -> int:
