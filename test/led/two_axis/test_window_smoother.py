@@ -146,6 +146,28 @@ def test_a_run_restarted_in_the_window_keeps_its_filter_estimate():
     assert not np.allclose(runs[1].x[~mask], runs[0].x[~mask], atol=1e-6)
 
 
+def test_the_kept_runs_alone_are_smoothed_as_in_the_whole_record():
+    """
+    A window with a run restarted in it: the other runs' record alone is smoothed as before.
+
+    `only` takes their rows; smoothed from their recorded pass, they give what the whole
+    record filtered again from its prior does.
+    """
+    mask = np.array([False, True, False])
+    ekf = ConicalScanEKF(replace(CONFIG, smooth_after=400), runs=3)
+    end = _feed(ekf, samples=6)
+    ekf.restart_runs(mask, np.array([[2.0, 1.0, 1.0, 0.0, 0.0]]), np.diag(CONFIG.P0)[None])
+    _feed(ekf, samples=8, seed=5, start=end)
+    record = ekf.window
+    x_all, P_all = smooth_window(ekf, record)
+    part = record.only(~mask)
+    assert part.count == record.count and not part.restarted.any()
+    x, P = smooth_window(ekf, part)
+    np.testing.assert_allclose(x, x_all[~mask], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(P, P_all[~mask], rtol=1e-10, atol=1e-14)
+    np.testing.assert_array_equal(record.x_f[-1][~mask], part.x_f[-1])   # a copy of the rows
+
+
 def test_each_later_window_is_smoothed_from_the_estimate_where_it_begins():
     """
     After smooth_after, each smooth_every samples are smoothed over again (smooth_every 10).

@@ -117,7 +117,8 @@ class ConicalScanEKF:
         self.unit_scan = conical_scan(1.0, config.points)
         self.radius = np.full(self.runs, config.radius)   # r per run (dim_radius)
         self.Q = np.diag(np.asarray(config.Q, dtype=float))
-        self.R = np.full((self.runs, 1, 1), config.noise ** 2 + config.model_noise ** 2)
+        # one R for every run (any subset of the runs can be updated: `smooth_window`)
+        self.R = np.full((1, 1, 1), config.noise ** 2 + config.model_noise ** 2)
         n = self.runs
         self.x = np.tile(np.asarray(config.x0, dtype=float), (n, 1))
         self.P = np.tile(np.diag(np.asarray(config.P0, dtype=float)), (n, 1, 1))
@@ -260,10 +261,11 @@ class ConicalScanEKF:
         At the config's smooth_after-th sample, the runs not restarted since the start then
         take the estimate of the iterated smoother over the samples so far
         (`window_smoother.smooth_window`), and again at the end of each window of
-        smooth_every samples after it, over that window, the runs not restarted within it;
-        y and S stay the update's.  A smoothing that is not solvable (a linear algebra
-        error) leaves every run the filter's estimate, counted in smoothing_failures; a run
-        whose smoothed estimate is not finite keeps the filter's (not counted).
+        smooth_every samples after it, over that window, the runs not restarted within it
+        (only their part of the record is smoothed); y and S stay the update's.  A
+        smoothing that is not solvable (a linear algebra error) leaves every run the
+        filter's estimate, counted in smoothing_failures; a run whose smoothed estimate is
+        not finite keeps the filter's (not counted).
         """
         offset = self.scan_offset
         if self.to_smooth and self.window is None:
@@ -281,13 +283,15 @@ class ConicalScanEKF:
             keep = ~window.restarted
             if keep.any():
                 try:
-                    x, P = smooth_window(self, window)
+                    # only the runs kept: their recorded pass is the smoother's first
+                    x, P = smooth_window(self, window if keep.all() else window.only(keep))
                 except np.linalg.LinAlgError:
                     # the filter's estimate stands; the next window is smoothed as usual
                     self.smoothing_failures += 1
                 else:
-                    keep &= np.isfinite(x).all(axis=1) & np.isfinite(P).all(axis=(1, 2))
-                    self.x[keep], self.P[keep] = x[keep], P[keep]
+                    ok = np.isfinite(x).all(axis=1) & np.isfinite(P).all(axis=(1, 2))
+                    runs = np.flatnonzero(keep)[ok]
+                    self.x[runs], self.P[runs] = x[ok], P[ok]
 
     def posterior(self, x_prior: FloatArray, P_prior: FloatArray, z: FloatArray,
                   offset: FloatArray, nominal: Optional[tuple[FloatArray, FloatArray]] = None

@@ -34,7 +34,8 @@ smoothed there) replaces the EKF's.
 `WindowRecord` keeps what the filter saw in a window (its prior at the window's first
 sample; each step's graininess mu, input B u and jump F, each sample and its scan offset)
 and the filter's own pass (its priors and posteriors); `smooth_window` takes that pass as
-the first (or filters the window again from its prior, if a run was restarted in it), and
+the first (or filters the window again from its prior, if a run was restarted in it: the
+filter leaves such runs out, smoothing the others' record alone, `WindowRecord.only`), and
 runs the others with the filter's predict (`propagate`) and update (`posterior`), and
 `core.smoother`'s backward step.
 """
@@ -114,6 +115,18 @@ class WindowRecord:
     def count(self) -> int:
         """Return the number of samples recorded."""
         return len(self.z)
+
+    def only(self, runs: NDArray[np.bool_]) -> 'WindowRecord':
+        """Return the record of the runs in the mask `runs` alone (a copy; none restarted)."""
+        part = WindowRecord(self.x0[runs], self.P0[runs])
+        part.mu, part.F = list(self.mu), list(self.F)
+        part.Bu = [None if Bu is None else Bu[runs] for Bu in self.Bu]
+        for name in ('z', 'offset', 'x_p', 'P_p', 'x_f', 'P_f'):
+            setattr(part, name, [value[runs] for value in getattr(self, name)])
+        if self._pending is not None:
+            mu, Bu, F = self._pending
+            part._pending = (mu, Bu[runs], F)
+        return part
 
     def predicted(self, mu: float, Bu: FloatArray, F: FloatArray) -> None:
         """Note a predict over mu nominal steps with the input B u (runs, n) and jump F."""
